@@ -1,0 +1,117 @@
+"""Write the demo cumulus density as .npy, .nvdb and .vdb (procedural and seeded; nothing large is committed).
+
+The cloud is a union of soft spheres piled on a flat base, eroded by fractal value noise: a cauliflower top and a
+flat bottom, values in [0, 1]. ``usd_scenes/cumulus.usda`` references ``data/cumulus.nvdb``.
+
+Run:  python tools/make_cumulus.py [--out data] [--seed 7] [--res 96]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+#: Cloud footprint [m] along x and z, and height [m] along y; the grid spans this box.
+EXTENT_XZ = 2400.0
+EXTENT_Y = 1600.0
+BASE_HEIGHT = 1000.0  # cloud base above the ground [m]
+
+
+def value_noise(points: np.ndarray, rng: np.random.Generator, cells: int) -> np.ndarray:
+    """Smooth periodic value noise in [0, 1] at ``points`` in [0, 1]^3 with ``cells`` lattice cells per axis."""
+    lattice = rng.random((cells, cells, cells))
+    scaled = points * cells
+    base = np.floor(scaled).astype(np.int64)
+    frac = scaled - base
+    smooth = frac * frac * (3.0 - 2.0 * frac)
+    result = np.zeros(points.shape[:-1])
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                idx = (base + np.array([dx, dy, dz])) % cells
+                w = (
+                    (smooth[..., 0] if dx else 1.0 - smooth[..., 0])
+                    * (smooth[..., 1] if dy else 1.0 - smooth[..., 1])
+                    * (smooth[..., 2] if dz else 1.0 - smooth[..., 2])
+                )
+                result += w * lattice[idx[..., 0], idx[..., 1], idx[..., 2]]
+    return result
+
+
+def cumulus_density(resolution: int = 96, seed: int = 7) -> tuple[np.ndarray, float]:
+    """Density grid indexed [x, y, z] and its voxel size [m]."""
+    rng = np.random.default_rng(seed)
+    nx = nz = resolution
+    voxel = EXTENT_XZ / resolution
+    ny = int(round(EXTENT_Y / voxel))
+    x = (np.arange(nx) + 0.5) * voxel - EXTENT_XZ / 2
+    y = (np.arange(ny) + 0.5) * voxel
+    z = (np.arange(nz) + 0.5) * voxel - EXTENT_XZ / 2
+    X, Y, Z = np.meshgrid(x, y, z, indexing="ij")
+    # Soft spheres: a big central tower, shoulders around it, all sitting on the base at y = 0.
+    shape = np.zeros_like(X)
+    blobs = [(0.0, 450.0, 0.0, 520.0)]
+    for _ in range(9):
+        angle = rng.uniform(0, 2 * np.pi)
+        dist = rng.uniform(250.0, 600.0)
+        radius = rng.uniform(220.0, 380.0)
+        blobs.append((dist * np.cos(angle), radius * 0.8, dist * np.sin(angle), radius))
+    for cx, cy, cz, r in blobs:
+        d = np.sqrt((X - cx) ** 2 + (Y - cy) ** 2 + (Z - cz) ** 2) / r
+        shape = np.maximum(shape, np.clip(1.0 - d, 0.0, None))
+    flat_base = np.clip(Y / 120.0, 0.0, 1.0)
+    points = np.stack([(X + EXTENT_XZ / 2) / EXTENT_XZ, Y / EXTENT_Y, (Z + EXTENT_XZ / 2) / EXTENT_XZ], axis=-1)
+    fbm = sum(0.5**o * value_noise(points, rng, 4 * 2**o) for o in range(4)) / sum(0.5**o for o in range(4))
+    density = np.clip((shape * 2.2 - 0.55 * fbm) * flat_base, 0.0, 1.0)
+    # Zero the outermost voxels so every format (clamped .npy, background-padded VDB) agrees at the edges.
+    density[[0, -1], :, :] = 0.0
+    density[:, [0, -1], :] = 0.0
+    density[:, :, [0, -1]] = 0.0
+    return density.astype(np.float32), voxel
+
+
+def write_all(out: Path, resolution: int, seed: int) -> list[Path]:
+    import warp as wp
+
+    from warpsky.device import init_warp
+
+    init_warp()
+    out.mkdir(parents=True, exist_ok=True)
+    density, voxel = cumulus_density(resolution, seed)
+    written = []
+    npy = out / "cumulus.npy"
+    np.save(npy, density)
+    written.append(npy)
+    min_world = (-EXTENT_XZ / 2 + voxel / 2, BASE_HEIGHT + voxel / 2, -EXTENT_XZ / 2 + voxel / 2)
+    volume = wp.Volume.load_from_numpy(density, min_world=min_world, voxel_size=voxel, bg_value=0.0, device="cpu")
+    nvdb = out / "cumulus.nvdb"
+    volume.save_to_nvdb(str(nvdb), codec="zip")
+    written.append(nvdb)
+    tool = shutil.which("nanovdb_convert")
+    if tool:
+        vdb = out / "cumulus.vdb"
+        subprocess.run([tool, "-f", str(nvdb), str(vdb)], check=True, capture_output=True)
+        written.append(vdb)
+    else:
+        print("nanovdb_convert not found (Debian package libnanovdb-tools): skipped cumulus.vdb", file=sys.stderr)
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=Path(__file__).resolve().parent.parent / "data")
+    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--res", type=int, default=96, help="voxels along x and z (default 96)")
+    args = parser.parse_args(argv)
+    for path in write_all(args.out, args.res, args.seed):
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,5 @@
+import sys
+
+from warpsky.cli import main
+
+sys.exit(main())

@@ -1,0 +1,243 @@
+"""The ``warpsky`` command: render USD stages to EXR frames, and show what a stage holds and how it will render.
+
+Exit codes: 0 success, 2 bad input or usage (the message names the culprit), 1 internal error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from warpsky.errors import WarpskyError
+
+EPILOG_RENDER = """\
+frames:
+  --frames takes usdrecord's grammar: 1 | 1:48 | 1:48x2 | 1.5:3x0.5 | 1,5,9:12
+  Without --frames: the stage's startTimeCode..endTimeCode when OUT has a #### placeholder,
+  else one frame at the earliest time sample.
+  OUT placeholders follow usdrecord: a run of # is the zero-padded frame number (####  -> 0012),
+  ###.## adds decimals for subframes (-> 012.50).
+
+technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default):
+  single_scatter: step_length [m, auto = 0.5 x smallest voxel], shadow_step_length [m, auto = 1 voxel],
+                  min_transmittance [default 1e-4: stop marching once the view is this opaque]
+
+examples:
+  warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
+  warpsky render shot.usda out/shot.####.exr --frames 1:48x2 --res 1280x720 --device cuda
+"""
+
+
+def _resolution(text: str) -> tuple[int, int | None]:
+    try:
+        if "x" in text.lower():
+            w, h = text.lower().split("x", 1)
+            width, height = int(w), int(h)
+        else:
+            width, height = int(text), None
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT or WIDTH, got {text!r}") from None
+    if width <= 0 or (height is not None and height <= 0):
+        raise argparse.ArgumentTypeError(f"resolution must be positive, got {text!r}")
+    return width, height
+
+
+def _setting(text: str) -> tuple[str, str]:
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    key, value = text.split("=", 1)
+    return key.strip(), value.strip()
+
+
+def _add_render_options(parser: argparse.ArgumentParser) -> None:
+    from warpsky.techniques.base import technique_names
+
+    parser.add_argument("--camera", metavar="PATH", help="camera prim path (default: render settings' camera, "
+                        "else the first camera)")
+    parser.add_argument("--res", type=_resolution, metavar="WxH",
+                        help="image size; WIDTH alone keeps the camera's aspect (default: the stage's "
+                        "RenderSettings resolution, else 512 wide)")
+    parser.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
+    parser.add_argument("--technique", default="single_scatter", choices=technique_names(),
+                        help="rendering technique (default: single_scatter)")
+    parser.add_argument("--set", dest="settings", type=_setting, action="append", default=[], metavar="NAME=VALUE",
+                        help="technique setting, repeatable (see below)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    import warpsky
+
+    parser = argparse.ArgumentParser(
+        prog="warpsky",
+        description="Render clouds, rain, ice, sky and fog from USD stages to EXR frames with NVIDIA Warp, "
+        "on a CUDA GPU or the CPU.",
+    )
+    parser.add_argument("--version", action="version", version=f"warpsky {warpsky.__version__}")
+    parser.add_argument("--verbose", action="store_true", help="show Warp's own log (compiles, devices)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    render = sub.add_parser(
+        "render", help="render a stage to EXR frames", description="Render STAGE to OUT, one EXR per frame "
+        "(RGBA radiance + transmittance.RGB + depth.Z, metadata in the header). Files are written to a temporary "
+        "name and renamed, so no partial EXR is ever left behind.",
+        epilog=EPILOG_RENDER, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    render.add_argument("stage", type=Path, help="USD stage (.usda, .usdc, .usd, .usdz)")
+    render.add_argument("output", help="output EXR path, with a #### placeholder for several frames")
+    render.add_argument("--frames", metavar="SPEC", help="frames to render (usdrecord grammar, see below)")
+    _add_render_options(render)
+    render.add_argument("--png", action="store_true", help="also write a tone-mapped PNG preview per frame")
+    render.add_argument("--exposure", type=float, default=0.0, metavar="EV",
+                        help="preview exposure in stops (default 0: a white surface facing the sun maps to ~0.63)")
+    render.add_argument("--float", dest="full_float", action="store_true", help="write RGBA as 32-bit float "
+                        "instead of half")
+
+    info = sub.add_parser("info", help="print what a stage holds and how it would render",
+                          description="Print the stage's units, time range, cameras, sun, media and ground, "
+                          "and the render plan (technique, settings, device, resolution, features).")
+    info.add_argument("stage", type=Path, help="USD stage")
+    info.add_argument("--time", type=float, default=None, help="time code to inspect (default: earliest)")
+    _add_render_options(info)
+    return parser
+
+
+def _render_options(args) -> object:
+    from warpsky.device import resolve_device
+    from warpsky.render import RenderOptions
+
+    return RenderOptions(
+        technique=args.technique,
+        settings=dict(args.settings),
+        resolution=args.res,
+        device=resolve_device(args.device),
+        camera=args.camera,
+        half=not getattr(args, "full_float", False),
+        png=getattr(args, "png", False),
+        exposure=getattr(args, "exposure", 0.0),
+    )
+
+
+def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
+    """Time codes to render, by the rules in ``warpsky render --help``."""
+    from warpsky.batch.frames import parse_frame_spec
+
+    if spec is not None:
+        times = parse_frame_spec(spec)
+        pattern.require_placeholder(len(times))
+        return times
+    if not pattern.has_placeholder:
+        return [None]
+    span = reader.time_range()
+    if not span.authored or span.end < span.start:
+        return [span.start]
+    count = int(span.end - span.start) + 1
+    return [span.start + i for i in range(count)]
+
+
+def cmd_render(args) -> int:
+    from tqdm import tqdm
+
+    from warpsky.batch.frames import FramePattern
+    from warpsky.render import render_frame
+    from warpsky.scene.usd import StageReader
+
+    pattern = FramePattern(args.output)
+    options = _render_options(args)
+    reader = StageReader(args.stage)
+    times = frame_list(reader, pattern, args.frames)
+    failures = []
+    started = time.perf_counter()
+    bar = tqdm(total=len(times), unit="frame", disable=len(times) < 2, file=sys.stderr, dynamic_ncols=True)
+    for time_code in times:
+        out = pattern.path_for(time_code) if time_code is not None and pattern.has_placeholder else Path(args.output)
+        try:
+            result = render_frame(reader, time_code, out, options)
+        except WarpskyError as exc:
+            failures.append((time_code, exc))
+            bar.write(f"warpsky: frame {time_code}: error: {exc}", file=sys.stderr)
+        else:
+            bar.write(str(result.exr))
+            if result.png is not None:
+                bar.write(str(result.png))
+        bar.update(1)
+    bar.close()
+    if len(times) > 1:
+        print(f"warpsky: {len(times) - len(failures)} of {len(times)} frames written in "
+              f"{time.perf_counter() - started:.1f} s", file=sys.stderr)
+    if failures:
+        if len(times) > 1:
+            print(f"warpsky: {len(failures)} frame(s) failed: {', '.join(str(t) for t, _ in failures)}",
+                  file=sys.stderr)
+        return max(getattr(exc, "exit_code", 1) for _, exc in failures)
+    return 0
+
+
+def cmd_info(args) -> int:
+    import numpy as np
+
+    from warpsky.render import plan_frame
+    from warpsky.scene.usd import StageReader
+
+    reader = StageReader(args.stage)
+    span = reader.time_range()
+    options = _render_options(args)
+    scene, plan = plan_frame(reader, args.time, options)
+    out = [
+        f"stage       {reader.path}",
+        f"units       upAxis {reader.up_axis}, metersPerUnit {reader.meters_per_unit:g}",
+        f"time        {span.start:g} .. {span.end:g} at {span.time_codes_per_second:g} codes/s"
+        + ("" if span.authored else " (not authored)"),
+        f"cameras     {', '.join(reader.camera_paths()) or 'none'}",
+    ]
+    cam = scene.camera
+    out.append(
+        f"camera      {cam.name} at {np.round(cam.position, 3).tolist()} m looking "
+        f"{np.round(cam.forward, 4).tolist()}, clip {cam.near:g}..{cam.far:g} m"
+    )
+    for medium in scene.media:
+        lo, hi = medium.world_corners().min(axis=0), medium.world_corners().max(axis=0)
+        out.append(f"volume      {medium.name}: {medium.source}")
+        out.append(
+            f"            {medium.shape[0]}x{medium.shape[1]}x{medium.shape[2]} voxels of "
+            f"{np.round(medium.voxel_size, 4).tolist()} m, bounds {np.round(lo, 2).tolist()} .. "
+            f"{np.round(hi, 2).tolist()} m"
+        )
+        out.append(
+            f"            extinction {medium.extinction_scale.tolist()} 1/m per unit, max field "
+            f"{float(medium.density.max()):g}, albedo {medium.albedo.tolist()}, {medium.phase!r}"
+        )
+    out.append("plan:")
+    out += ["  " + line for line in plan.describe().splitlines()]
+    print("\n".join(out))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    from warpsky.device import init_warp
+
+    try:
+        init_warp(verbose=args.verbose)
+        return {"render": cmd_render, "info": cmd_info}[args.command](args)
+    except WarpskyError as exc:
+        print(f"warpsky: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("warpsky: interrupted", file=sys.stderr)
+        return 130
+    except Exception:  # noqa: BLE001 - anything else is our bug: show it, exit 1
+        import traceback
+
+        traceback.print_exc()
+        print("warpsky: internal error (please report it with the traceback above)", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

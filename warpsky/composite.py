@@ -1,0 +1,44 @@
+"""Combine technique layers front to back into the frame that is written out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from warpsky.scene.model import LUMINANCE_WEIGHTS
+from warpsky.techniques.base import Layer
+
+
+@dataclass
+class Frame:
+    """Final pixels: linear scene-referred radiance with alpha, and the AOVs written next to it.
+
+    Attributes:
+        rgba: (H, W, 4) float32; alpha = 1 - luminance-weighted transmittance of everything in front of the
+            background.
+        transmittance: (H, W, 3) float32 transmittance to the background.
+        depth: (H, W) float32 camera-space depth [m] of the front-most layer that shows something.
+    """
+
+    rgba: np.ndarray
+    transmittance: np.ndarray
+    depth: np.ndarray
+
+
+def composite(layers: list[Layer], far: float) -> Frame:
+    """Composite ``layers`` ordered front to back: each is seen through the transmittance of those before it."""
+    if not layers:
+        raise ValueError("composite needs at least one layer")
+    height, width = layers[0].depth.shape
+    radiance = np.zeros((height, width, 3), dtype=np.float32)
+    transmittance = np.ones((height, width, 3), dtype=np.float32)
+    depth = np.full((height, width), far, dtype=np.float32)
+    for layer in layers:
+        radiance += transmittance * layer.radiance
+        unset = (depth >= far) & (layer.depth < far)
+        depth[unset] = layer.depth[unset]
+        transmittance *= layer.transmittance
+    alpha = 1.0 - transmittance @ LUMINANCE_WEIGHTS.astype(np.float32)
+    rgba = np.concatenate([radiance, np.clip(alpha, 0.0, 1.0)[..., None]], axis=-1).astype(np.float32)
+    return Frame(rgba, transmittance, depth)

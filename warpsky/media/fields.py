@@ -1,0 +1,213 @@
+"""Read scalar density grids from disk: dense ``.npy``, NanoVDB ``.nvdb`` and OpenVDB ``.vdb``.
+
+The format is told by the file's magic bytes, not its extension. OpenVDB files are converted once with
+``nanovdb_convert`` (Debian package ``libnanovdb-tools``) and cached by content hash under
+``$WARPSKY_CACHE/nanovdb`` (default ``~/.cache/warpsky/nanovdb``). NanoVDB grids are loaded by Warp and copied
+into a dense array over their allocated voxels, padded by one voxel of background (zero) on each side so that
+trilinear interpolation fades out at the grid's edge exactly as OpenVDB's sampler does.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import struct
+import subprocess
+import tempfile
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+from warpsky.errors import SceneError
+
+NPY_MAGIC = b"\x93NUMPY"
+NANOVDB_MAGICS = (b"NanoVDB0", b"NanoVDB1", b"NanoVDB2")
+OPENVDB_MAGIC = struct.pack("<i", 0x56444220)
+_NVDB_HEADER = struct.Struct("<QIHH")  # magic, version, grid count, codec
+_NVDB_META_SIZE = 176  # sizeof(nanovdb::io::FileMetaData), followed by the grid name
+_NVDB_CODEC_OFFSET = 168
+
+
+@dataclass(frozen=True)
+class FieldGrid:
+    """A dense scalar grid as read from a file.
+
+    Attributes:
+        values: float32 array indexed ``[x, y, z]``.
+        local_from_index: 4x4 affine from index coordinates (voxel centres at integers) to the file's own
+            space, or None for ``.npy`` grids, which are placed by the Volume's authored extent.
+        source: The file the grid came from.
+        grid_name: Name of the grid inside the file ("" when unnamed).
+    """
+
+    values: np.ndarray
+    local_from_index: np.ndarray | None
+    source: str
+    grid_name: str = ""
+
+
+def cache_dir() -> Path:
+    """Root of warpsky's on-disk cache (``$WARPSKY_CACHE``, default ``~/.cache/warpsky``)."""
+    return Path(os.environ.get("WARPSKY_CACHE") or Path.home() / ".cache" / "warpsky")
+
+
+def sniff_format(path: Path) -> str:
+    """Return ``"npy"``, ``"nvdb"`` or ``"vdb"`` from the file's first bytes."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError as exc:
+        raise SceneError(f"cannot read field file {path}: {exc.strerror or exc}") from exc
+    if head.startswith(NPY_MAGIC):
+        return "npy"
+    if head in NANOVDB_MAGICS:
+        return "nvdb"
+    if head.startswith(OPENVDB_MAGIC):
+        return "vdb"
+    raise SceneError(f"field file {path} is not a .npy, NanoVDB or OpenVDB file (unrecognised magic bytes {head!r})")
+
+
+def load_field(path: str | os.PathLike, *, grid_name: str | None = None) -> FieldGrid:
+    """Load one scalar grid from ``path``; ``grid_name`` picks a grid in a multi-grid VDB file."""
+    path = Path(path)
+    if not path.is_file():
+        raise SceneError(f"field file {path} does not exist")
+    kind = sniff_format(path)
+    if kind == "npy":
+        return _load_npy(path)
+    if kind == "vdb":
+        return _load_nanovdb(convert_vdb(path), grid_name=grid_name, source=path)
+    return _load_nanovdb(path, grid_name=grid_name, source=path)
+
+
+def _load_npy(path: Path) -> FieldGrid:
+    try:
+        values = np.load(path, allow_pickle=False)
+    except (ValueError, OSError) as exc:
+        raise SceneError(f"cannot read dense grid {path}: {exc}") from exc
+    if values.ndim != 3:
+        raise SceneError(f"dense grid {path} must be a 3-D array indexed [x, y, z], got shape {values.shape}")
+    if not np.issubdtype(values.dtype, np.floating) and not np.issubdtype(values.dtype, np.integer):
+        raise SceneError(f"dense grid {path} must hold numbers, got dtype {values.dtype}")
+    return FieldGrid(np.ascontiguousarray(values, dtype=np.float32), None, str(path))
+
+
+def convert_vdb(path: Path) -> Path:
+    """Convert an OpenVDB file to NanoVDB with ``nanovdb_convert``, cached by the file's content hash."""
+    tool = shutil.which("nanovdb_convert")
+    if tool is None:
+        raise SceneError(
+            f"reading OpenVDB file {path} needs the nanovdb_convert tool from Debian's libnanovdb-tools package "
+            "(apt-get install libnanovdb-tools); or convert it to .nvdb yourself"
+        )
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    target = cache_dir() / "nanovdb" / f"{digest}.nvdb"
+    if target.is_file():
+        return target
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".nvdb", dir=target.parent)
+    os.close(fd)
+    try:
+        proc = subprocess.run([tool, "-f", str(path), tmp], capture_output=True, text=True, timeout=600)
+        if proc.returncode != 0 or os.path.getsize(tmp) == 0:
+            detail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or ["no output"]
+            raise SceneError(f"nanovdb_convert failed on {path}: {detail[0]}")
+        os.replace(tmp, target)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return target
+
+
+def nanovdb_grids(data: bytes, source: Path) -> list[tuple[str, bytes]]:
+    """Split a NanoVDB file into (grid name, uncompressed single-grid file) pairs, in file order."""
+    grids = []
+    offset = 0
+    while offset + _NVDB_HEADER.size <= len(data):
+        magic, version, grid_count, codec = _NVDB_HEADER.unpack_from(data, offset)
+        if data[offset : offset + 8] not in NANOVDB_MAGICS:
+            break
+        offset += _NVDB_HEADER.size
+        metas = []
+        for _ in range(grid_count):
+            meta = bytearray(data[offset : offset + _NVDB_META_SIZE])
+            grid_size, file_size = struct.unpack_from("<QQ", meta, 0)
+            (name_size,) = struct.unpack_from("<I", meta, 136)
+            name = data[offset + _NVDB_META_SIZE : offset + _NVDB_META_SIZE + name_size].split(b"\0")[0]
+            metas.append((meta, name, grid_size, file_size))
+            offset += _NVDB_META_SIZE + name_size
+        for meta, name, grid_size, _file_size in metas:
+            if codec == 0:
+                payload = data[offset : offset + grid_size]
+                offset += grid_size
+            elif codec == 1:
+                # Zip chunks, each prefixed by its byte count. Writers disagree on whether the metadata's file
+                # size counts the prefixes, so read chunks until the grid is complete instead of trusting it.
+                raw = bytearray()
+                while len(raw) < grid_size and offset + 8 <= len(data):
+                    (chunk,) = struct.unpack_from("<Q", data, offset)
+                    try:
+                        raw += zlib.decompress(data[offset + 8 : offset + 8 + chunk])
+                    except zlib.error as exc:
+                        raise SceneError(f"NanoVDB file {source} is corrupt: {exc}") from exc
+                    offset += 8 + chunk
+                payload = bytes(raw)
+            else:
+                raise SceneError(
+                    f"NanoVDB file {source} uses codec {codec} (blosc); re-save it uncompressed or with zip"
+                )
+            if len(payload) != grid_size:
+                raise SceneError(f"NanoVDB file {source} is truncated or corrupt (grid {name.decode()!r})")
+            # Re-frame the grid as an uncompressed single-grid file that Warp's loader accepts.
+            struct.pack_into("<Q", meta, 8, grid_size)
+            struct.pack_into("<I", meta, 136, len(name) + 1)
+            struct.pack_into("<H", meta, _NVDB_CODEC_OFFSET, 0)
+            single = _NVDB_HEADER.pack(magic, version, 1, 0) + bytes(meta) + name + b"\0" + payload
+            grids.append((name.decode("utf-8", "replace"), single))
+    if not grids:
+        raise SceneError(f"NanoVDB file {source} holds no grids")
+    return grids
+
+
+@wp.kernel
+def _densify_kernel(volume: wp.uint64, origin: wp.vec3i, out: wp.array3d(dtype=float)):
+    i, j, k = wp.tid()
+    out[i, j, k] = wp.volume_lookup_f(volume, i + origin[0], j + origin[1], k + origin[2])
+
+
+def _load_nanovdb(path: Path, *, grid_name: str | None, source: Path) -> FieldGrid:
+    data = path.read_bytes()
+    grids = nanovdb_grids(data, source)
+    if grid_name:
+        matches = [g for g in grids if g[0] == grid_name]
+        if not matches:
+            names = ", ".join(repr(n) for n, _ in grids)
+            raise SceneError(f"field file {source} has no grid named {grid_name!r}; it holds {names}")
+        name, blob = matches[0]
+    else:
+        name, blob = grids[0]
+    try:
+        volume = wp.Volume.load_from_nvdb(blob, device="cpu")
+    except RuntimeError as exc:
+        raise SceneError(f"cannot load grid {name!r} of {source}: {exc}") from exc
+    info = volume.get_grid_info()
+    if info.type_str != "float":
+        raise SceneError(f"grid {name!r} of {source} holds {info.type_str!r} values; expected a float (fog) grid")
+    voxels = volume.get_voxels().numpy()
+    if len(voxels) == 0:
+        raise SceneError(f"grid {name!r} of {source} has no voxels")
+    lo = voxels.min(axis=0) - 1
+    shape = tuple(int(n) for n in voxels.max(axis=0) - lo + 2)
+    if np.prod(shape, dtype=np.int64) > 2**31 - 1:
+        raise SceneError(f"grid {name!r} of {source} spans {shape} voxels, too large for a dense grid")
+    dense = wp.zeros(shape, dtype=float, device="cpu")
+    wp.launch(_densify_kernel, dim=shape, inputs=[volume.id, wp.vec3i(*lo.tolist()), dense], device="cpu")
+    linear = np.array(info.transform_matrix, dtype=np.float64).reshape(3, 3)
+    local_from_index = np.eye(4)
+    local_from_index[:3, :3] = linear
+    local_from_index[:3, 3] = np.array(info.translation, dtype=np.float64) + linear @ lo
+    return FieldGrid(dense.numpy(), local_from_index, str(source), name)

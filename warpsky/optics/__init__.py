@@ -1,0 +1,1 @@
+"""Optics: phase functions and (later) per-species cross sections and tables."""

@@ -1,0 +1,312 @@
+"""What is in the world at one time code: plain dataclasses in SI units, world Y-up metres, no pxr types.
+
+Everything here can be built by hand (tests, notebooks) or read from USD by :mod:`warpsky.scene.usd`.
+Constructors validate their inputs and say what is wrong.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from warpsky.errors import SceneError
+
+#: Rec. 709 luminance weights used for alpha and for one-number summaries of RGB quantities.
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _vec3(value, name: str, *, unit: bool = False) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size == 1:
+        arr = np.repeat(arr, 3)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise SceneError(f"{name} must be 3 finite numbers, got {value!r}")
+    if unit:
+        norm = float(np.linalg.norm(arr))
+        if norm == 0.0:
+            raise SceneError(f"{name} must be a non-zero direction, got {value!r}")
+        arr = arr / norm
+    return arr
+
+
+class PhaseKind(enum.IntEnum):
+    """Analytic phase models a medium can use; values are the codes the kernels switch on."""
+
+    ISOTROPIC = 0
+    HG = 1
+    RAYLEIGH = 2
+
+
+@dataclass(frozen=True)
+class PhaseModel:
+    """A phase function, normalised so that its integral over the sphere is 1.
+
+    ============ ====== ======== ============ ====================================
+    name         unit   default  valid range  USD
+    ============ ====== ======== ============ ====================================
+    kind         --     HG       enum         ``token warpsky:phase`` on the Volume
+    g            --     0.85     (-1, 1)      ``float warpsky:phase:g`` (HG only)
+    ============ ====== ======== ============ ====================================
+    """
+
+    kind: PhaseKind = PhaseKind.HG
+    g: float = 0.85
+
+    def __post_init__(self):
+        object.__setattr__(self, "kind", PhaseKind(self.kind))
+        if not (math.isfinite(self.g) and -1.0 < self.g < 1.0):
+            raise SceneError(f"asymmetry g must lie in (-1, 1), got {self.g}")
+
+    def __repr__(self) -> str:
+        if self.kind == PhaseKind.HG:
+            return f"PhaseModel(hg, g={self.g:g})"
+        return f"PhaseModel({self.kind.name.lower()})"
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera looking down its local -Z with +Y up; image row 0 is the top.
+
+    Attributes:
+        name: Prim path or label, used in messages and metadata.
+        position: Eye position in world metres, float64 (kept exact for scenes far from the origin).
+        rotation: 3x3 world-from-camera rotation; columns are the camera's right, up and back axes.
+        focal_length: Focal length [m of film-back units; only ratios to the apertures matter].
+        horizontal_aperture: Film-back width, same units as ``focal_length``.
+        vertical_aperture: Film-back height, same units as ``focal_length``.
+        horizontal_aperture_offset: Film-back shift to the right, same units.
+        vertical_aperture_offset: Film-back shift up, same units.
+        near: Near clipping distance along the view axis [m].
+        far: Far clipping distance along the view axis [m].
+    """
+
+    name: str
+    position: np.ndarray
+    rotation: np.ndarray
+    focal_length: float
+    horizontal_aperture: float
+    vertical_aperture: float
+    horizontal_aperture_offset: float = 0.0
+    vertical_aperture_offset: float = 0.0
+    near: float = 0.1
+    far: float = 1.0e6
+
+    def __post_init__(self):
+        object.__setattr__(self, "position", _vec3(self.position, f"camera {self.name}: position"))
+        rot = np.asarray(self.rotation, dtype=np.float64)
+        if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+            raise SceneError(f"camera {self.name}: rotation must be a finite 3x3 matrix")
+        if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+            raise SceneError(f"camera {self.name}: rotation must be orthonormal and right-handed")
+        object.__setattr__(self, "rotation", rot)
+        for attr in ("focal_length", "horizontal_aperture", "vertical_aperture"):
+            value = getattr(self, attr)
+            if not (math.isfinite(value) and value > 0.0):
+                raise SceneError(f"camera {self.name}: {attr} must be positive, got {value}")
+        if not (math.isfinite(self.near) and self.near > 0.0):
+            raise SceneError(f"camera {self.name}: near clipping distance must be positive, got {self.near}")
+        if not (self.far > self.near):
+            raise SceneError(
+                f"camera {self.name}: clipping range must have near < far, got near={self.near}, far={self.far}"
+            )
+
+    @property
+    def forward(self) -> np.ndarray:
+        """Unit view direction (the camera's -Z) in world space."""
+        return -self.rotation[:, 2]
+
+    def conformed(self, width: int, height: int) -> Camera:
+        """Return this camera with its film back grown to the image aspect ratio (CameraUtil's "fit" policy).
+
+        The authored window stays entirely in view; one aperture is enlarged so that
+        ``horizontal_aperture / vertical_aperture == width / height``.
+        """
+        aspect = width / height
+        h_ap, v_ap = self.horizontal_aperture, self.vertical_aperture
+        if h_ap / v_ap > aspect:
+            v_ap = h_ap / aspect
+        else:
+            h_ap = v_ap * aspect
+        return Camera(
+            self.name, self.position, self.rotation, self.focal_length, h_ap, v_ap,
+            self.horizontal_aperture_offset, self.vertical_aperture_offset, self.near, self.far,
+        )
+
+    def pixel_direction(self, x: float, y: float, width: int, height: int) -> np.ndarray:
+        """World-space unit ray direction through image position (x, y) in pixels (row 0 at the top).
+
+        Pixel centres sit at half-integers. The camera should already be conformed to (width, height).
+        """
+        sx = (x / width - 0.5) * self.horizontal_aperture + self.horizontal_aperture_offset
+        sy = (0.5 - y / height) * self.vertical_aperture + self.vertical_aperture_offset
+        d = self.rotation @ np.array([sx, sy, -self.focal_length])
+        return d / np.linalg.norm(d)
+
+    def project(self, point, width: int, height: int) -> tuple[float, float]:
+        """Pixel coordinates (x right, y down, continuous) of a world point in front of the camera."""
+        local = self.rotation.T @ (np.asarray(point, dtype=np.float64) - self.position)
+        if local[2] >= 0.0:
+            raise ValueError("point is behind the camera")
+        sx = -local[0] / local[2] * self.focal_length
+        sy = -local[1] / local[2] * self.focal_length
+        x = ((sx - self.horizontal_aperture_offset) / self.horizontal_aperture + 0.5) * width
+        y = (0.5 - (sy - self.vertical_aperture_offset) / self.vertical_aperture) * height
+        return float(x), float(y)
+
+
+@dataclass(frozen=True)
+class Sun:
+    """A distant light source.
+
+    Attributes:
+        direction: Unit vector in world space pointing **towards** the sun.
+        irradiance: RGB irradiance at normal incidence [W/m^2 per channel, or the stage's light units].
+        angular_diameter: Angular diameter of the disk [rad] (USD ``inputs:angle`` is in degrees).
+        name: Prim path or label.
+    """
+
+    direction: np.ndarray
+    irradiance: np.ndarray
+    angular_diameter: float = math.radians(0.53)
+    name: str = "sun"
+
+    def __post_init__(self):
+        object.__setattr__(self, "direction", _vec3(self.direction, f"sun {self.name}: direction", unit=True))
+        irr = _vec3(self.irradiance, f"sun {self.name}: irradiance")
+        if np.any(irr < 0.0):
+            raise SceneError(f"sun {self.name}: irradiance must be non-negative, got {irr.tolist()}")
+        object.__setattr__(self, "irradiance", irr)
+        if not (math.isfinite(self.angular_diameter) and 0.0 <= self.angular_diameter < math.pi):
+            raise SceneError(f"sun {self.name}: angular diameter must lie in [0, pi) rad, got {self.angular_diameter}")
+
+    @property
+    def elevation(self) -> float:
+        """Angle of the sun above the horizon [rad]; negative below it."""
+        return math.asin(max(-1.0, min(1.0, float(self.direction[1]))))
+
+
+@dataclass(frozen=True)
+class VoxelMedium:
+    """A participating medium given by a dense grid of field values.
+
+    Extinction at a point is ``extinction_scale * field(p)`` [1/m], with ``field`` interpolated trilinearly
+    between voxel centres. Voxel centres sit at integer index coordinates ``0..n-1``; the medium occupies the
+    index box ``[-0.5, n-0.5]`` on each axis and is zero outside it. Inside the box, lookups beyond the outer
+    voxel centres clamp to the edge value (so a constant grid is an exactly homogeneous box).
+
+    Attributes:
+        name: Prim path of the Volume (and field) this came from.
+        density: Field values, float32 array indexed ``[x, y, z]`` [field units].
+        world_from_index: 4x4 affine matrix (float64, column vectors) from index coordinates to world metres.
+        extinction_scale: Extinction per unit field value [1/m], RGB.
+        albedo: Single-scattering albedo, RGB in [0, 1].
+        phase: Phase function of the scatterers.
+        source: File the field was read from, for messages and ``warpsky info``.
+    """
+
+    name: str
+    density: np.ndarray
+    world_from_index: np.ndarray
+    extinction_scale: np.ndarray = field(default_factory=lambda: np.ones(3))
+    albedo: np.ndarray = field(default_factory=lambda: np.ones(3))
+    phase: PhaseModel = field(default_factory=PhaseModel)
+    source: str = ""
+
+    def __post_init__(self):
+        dens = np.asarray(self.density)
+        if dens.ndim != 3 or min(dens.shape) < 1:
+            raise SceneError(f"medium {self.name}: density must be a non-empty 3-D grid, got shape {dens.shape}")
+        dens = np.ascontiguousarray(dens, dtype=np.float32)
+        bad = int(np.count_nonzero(~np.isfinite(dens)))
+        neg = int(np.count_nonzero(dens < 0.0))
+        if bad or neg:
+            raise SceneError(
+                f"medium {self.name}: field {self.source or '(in memory)'} has {bad} NaN/Inf and {neg} negative "
+                "values; expected finite values >= 0"
+            )
+        object.__setattr__(self, "density", dens)
+        xf = np.asarray(self.world_from_index, dtype=np.float64)
+        if xf.shape != (4, 4) or not np.all(np.isfinite(xf)) or abs(np.linalg.det(xf[:3, :3])) < 1e-300:
+            raise SceneError(f"medium {self.name}: world_from_index must be an invertible finite 4x4 affine matrix")
+        object.__setattr__(self, "world_from_index", xf)
+        scale = _vec3(self.extinction_scale, f"medium {self.name}: extinction scale")
+        if np.any(scale < 0.0):
+            raise SceneError(f"medium {self.name}: extinction scale must be >= 0 1/m, got {scale.tolist()}")
+        object.__setattr__(self, "extinction_scale", scale)
+        albedo = _vec3(self.albedo, f"medium {self.name}: albedo")
+        if np.any(albedo < 0.0) or np.any(albedo > 1.0):
+            raise SceneError(f"medium {self.name}: albedo must lie in [0, 1], got {albedo.tolist()}")
+        object.__setattr__(self, "albedo", albedo)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(int(n) for n in self.density.shape)
+
+    @property
+    def voxel_size(self) -> np.ndarray:
+        """Length in metres of one index step along each index axis."""
+        return np.linalg.norm(self.world_from_index[:3, :3], axis=0)
+
+    def world_corners(self) -> np.ndarray:
+        """The 8 world-space corners [m] of the index box ``[-0.5, n-0.5]^3``, shape (8, 3)."""
+        lo, hi = -0.5, np.array(self.shape) - 0.5
+        corners = np.array([[x, y, z, 1.0] for x in (lo, hi[0]) for y in (lo, hi[1]) for z in (lo, hi[2])])
+        return (corners @ self.world_from_index.T)[:, :3]
+
+    def __repr__(self) -> str:
+        return (
+            f"VoxelMedium({self.name!r}, shape={self.shape}, voxel_size={np.round(self.voxel_size, 4).tolist()} m, "
+            f"extinction_scale={self.extinction_scale.tolist()} 1/m, albedo={self.albedo.tolist()}, {self.phase!r})"
+        )
+
+
+@dataclass(frozen=True)
+class Ground:
+    """An infinite horizontal Lambertian plane.
+
+    Attributes:
+        height: World Y of the plane [m].
+        albedo: Diffuse reflectance, RGB in [0, 1].
+        name: Prim path or label.
+    """
+
+    height: float = 0.0
+    albedo: np.ndarray = field(default_factory=lambda: np.full(3, 0.3))
+    name: str = "ground"
+
+    def __post_init__(self):
+        if not math.isfinite(self.height):
+            raise SceneError(f"ground {self.name}: height must be finite, got {self.height}")
+        albedo = _vec3(self.albedo, f"ground {self.name}: albedo")
+        if np.any(albedo < 0.0) or np.any(albedo > 1.0):
+            raise SceneError(f"ground {self.name}: albedo must lie in [0, 1], got {albedo.tolist()}")
+        object.__setattr__(self, "albedo", albedo)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything a renderer needs at one time code.
+
+    Attributes:
+        camera: The camera to render from.
+        sun: The sun, or None for a scene lit by nothing (renders black).
+        media: Participating media; their extinctions add where they overlap.
+        ground: Optional ground plane.
+        time_code: USD time code this scene was read at (``nan`` for the default time).
+        source: Stage file path, for metadata.
+        resolution: Image size (width, height) authored on the stage's render settings, if any.
+    """
+
+    camera: Camera
+    sun: Sun | None = None
+    media: tuple[VoxelMedium, ...] = ()
+    ground: Ground | None = None
+    time_code: float = float("nan")
+    source: str = ""
+    resolution: tuple[int, int] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "media", tuple(self.media))

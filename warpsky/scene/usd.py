@@ -1,0 +1,398 @@
+"""Read a :class:`~warpsky.scene.model.Scene` from a USD stage at any time code.
+
+The only module that imports pxr. Stage units are converted here: ``upAxis`` Y or Z and ``metersPerUnit`` become
+warpsky's right-handed Y-up metres. Every problem is a :class:`SceneError` naming the prim, attribute or file.
+
+What is read (the README's "USD attributes" section lists the same with units and defaults):
+
+- ``UsdGeomCamera``: chosen by ``--camera``, else the render settings' camera, else the first camera.
+- ``UsdLuxDistantLight``: the sun (the first visible one).
+- ``UsdVolVolume`` with ``field:density`` -> ``OpenVDBAsset`` (``.vdb``, ``.nvdb`` or dense ``.npy``).
+- ``UsdGeomPlane``: a horizontal ground plane, albedo ``color3f warpsky:albedo``.
+- ``UsdRenderSettings``: ``resolution`` and ``camera`` as defaults for the command line.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from warpsky.errors import SceneError
+from warpsky.scene.model import Camera, Ground, PhaseKind, PhaseModel, Scene, Sun, VoxelMedium
+
+PHASE_TOKENS = {"isotropic": PhaseKind.ISOTROPIC, "hg": PhaseKind.HG, "rayleigh": PhaseKind.RAYLEIGH}
+DENSITY_FIELD = "density"
+
+
+@dataclass(frozen=True)
+class TimeRange:
+    """The stage's animation range: time codes, and their rate."""
+
+    start: float
+    end: float
+    time_codes_per_second: float
+    frames_per_second: float
+    authored: bool
+
+
+def _matrix(gf_matrix) -> np.ndarray:
+    """Gf.Matrix4d (row vectors, p' = p M) as a column-vector numpy matrix."""
+    return np.array(gf_matrix, dtype=np.float64).reshape(4, 4).T
+
+
+class StageReader:
+    """An open stage plus the caches that make reading many frames cheap.
+
+    Args:
+        path: The stage file (.usd, .usda, .usdc, .usdz).
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        from pxr import Tf, Usd, UsdGeom
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise SceneError(f"stage file {self.path} does not exist")
+        try:
+            stage = Usd.Stage.Open(str(self.path))
+        except Tf.ErrorException as exc:
+            detail = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unreadable"
+            raise SceneError(f"cannot open stage {self.path}: {detail}") from None
+        if stage is None:
+            raise SceneError(f"cannot open stage {self.path}")
+        self.stage = stage
+        self.up_axis = str(UsdGeom.GetStageUpAxis(stage))
+        self.meters_per_unit = float(UsdGeom.GetStageMetersPerUnit(stage))
+        if not (self.meters_per_unit > 0.0 and math.isfinite(self.meters_per_unit)):
+            raise SceneError(f"stage {self.path}: metersPerUnit must be positive, got {self.meters_per_unit}")
+        if self.up_axis not in ("Y", "Z"):
+            raise SceneError(f"stage {self.path}: upAxis must be Y or Z, got {self.up_axis!r}")
+        # warpsky world (Y up, metres) from stage space: Z-up (x, y, z) -> Y-up (x, z, -y), then scale.
+        rotation = np.eye(3) if self.up_axis == "Y" else np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
+        self.world_from_stage = np.eye(4)
+        self.world_from_stage[:3, :3] = self.meters_per_unit * rotation
+        self._field_cache: dict[tuple, object] = {}
+
+    # ----------------------------------------------------------------------------------------------- time
+    def time_range(self) -> TimeRange:
+        stage = self.stage
+        return TimeRange(
+            float(stage.GetStartTimeCode()),
+            float(stage.GetEndTimeCode()),
+            float(stage.GetTimeCodesPerSecond()),
+            float(stage.GetFramesPerSecond()),
+            bool(stage.HasAuthoredTimeCodeRange()),
+        )
+
+    @staticmethod
+    def _time(time):
+        from pxr import Usd
+
+        return Usd.TimeCode.EarliestTime() if time is None else Usd.TimeCode(float(time))
+
+    def _world(self, prim, time) -> np.ndarray:
+        from pxr import UsdGeom
+
+        return self.world_from_stage @ _matrix(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time))
+
+    def _visible(self, prim, time) -> bool:
+        from pxr import UsdGeom
+
+        imageable = UsdGeom.Imageable(prim)
+        return not imageable or imageable.ComputeVisibility(time) != UsdGeom.Tokens.invisible
+
+    def _prims_of(self, schema) -> list:
+        from pxr import Usd
+
+        return [p for p in Usd.PrimRange(self.stage.GetPseudoRoot()) if p.IsA(schema) and p.IsActive()]
+
+    # ---------------------------------------------------------------------------------------------- camera
+    def camera_paths(self) -> list[str]:
+        from pxr import UsdGeom
+
+        return [str(p.GetPath()) for p in self._prims_of(UsdGeom.Camera)]
+
+    def render_settings(self) -> tuple[tuple[int, int] | None, str | None]:
+        """Resolution and camera path authored on the stage's UsdRenderSettings prim, if any."""
+        from pxr import UsdRender
+
+        settings_path = self.stage.GetMetadata("renderSettingsPrimPath") or ""
+        prim = self.stage.GetPrimAtPath(settings_path) if settings_path else None
+        if not prim:
+            candidates = self._prims_of(UsdRender.Settings)
+            prim = candidates[0] if candidates else None
+        if not prim:
+            return None, None
+        settings = UsdRender.Settings(prim)
+        resolution = None
+        res_attr = settings.GetResolutionAttr()
+        if res_attr.HasAuthoredValue():
+            res = res_attr.Get()
+            if res[0] <= 0 or res[1] <= 0:
+                raise SceneError(f"{prim.GetPath()}.resolution must be positive, got {tuple(res)}")
+            resolution = (int(res[0]), int(res[1]))
+        targets = settings.GetCameraRel().GetTargets()
+        return resolution, (str(targets[0]) if targets else None)
+
+    def resolve_camera_path(self, camera_path: str | None) -> str:
+        from pxr import Sdf, UsdGeom
+
+        if camera_path is None:
+            _, camera_path = self.render_settings()
+        if camera_path is None:
+            cameras = self.camera_paths()
+            if not cameras:
+                raise SceneError(f"stage {self.path} has no camera (UsdGeomCamera prim); add one or pass --camera")
+            return cameras[0]
+        if not Sdf.Path.IsValidPathString(camera_path):
+            raise SceneError(f"--camera {camera_path!r} is not a valid prim path")
+        prim = self.stage.GetPrimAtPath(camera_path)
+        if not prim:
+            raise SceneError(f"stage {self.path} has no prim at camera path {camera_path}")
+        if not prim.IsA(UsdGeom.Camera):
+            raise SceneError(f"prim {camera_path} is a {prim.GetTypeName() or 'typeless prim'}, not a Camera")
+        return camera_path
+
+    def read_camera(self, camera_path: str | None = None, time=None) -> Camera:
+        from pxr import UsdGeom
+
+        path = self.resolve_camera_path(camera_path)
+        prim = self.stage.GetPrimAtPath(path)
+        tc = self._time(time)
+        usd_camera = UsdGeom.Camera(prim)
+        if usd_camera.GetProjectionAttr().Get(tc) != UsdGeom.Tokens.perspective:
+            raise SceneError(f"camera {path}: projection must be 'perspective'; orthographic is not supported")
+        gf = usd_camera.GetCamera(tc)
+        world = self._world(prim, tc)
+        u, _, vt = np.linalg.svd(world[:3, :3])
+        rotation = u @ vt
+        if np.linalg.det(rotation) < 0.0:
+            raise SceneError(f"camera {path}: its transform mirrors space (negative determinant)")
+        # Focal length and apertures are in tenths of a scene unit.
+        tenth = 0.1 * self.meters_per_unit
+        clip = gf.clippingRange
+        values = {
+            "focalLength": gf.focalLength, "horizontalAperture": gf.horizontalAperture,
+            "verticalAperture": gf.verticalAperture,
+        }
+        for name, value in values.items():
+            if not (value > 0.0 and math.isfinite(value)):
+                raise SceneError(f"camera {path}: {name} must be positive, got {value}")
+        if not (0.0 < clip.min < clip.max):
+            raise SceneError(
+                f"camera {path}: clippingRange must satisfy 0 < near < far, got ({clip.min:g}, {clip.max:g})"
+            )
+        return Camera(
+            path,
+            world[:3, 3],
+            rotation,
+            gf.focalLength * tenth,
+            gf.horizontalAperture * tenth,
+            gf.verticalAperture * tenth,
+            gf.horizontalApertureOffset * tenth,
+            gf.verticalApertureOffset * tenth,
+            clip.min * self.meters_per_unit,
+            clip.max * self.meters_per_unit,
+        )
+
+    # ------------------------------------------------------------------------------------------------- sun
+    def read_sun(self, time=None) -> Sun | None:
+        from pxr import UsdLux
+
+        tc = self._time(time)
+        for prim in self._prims_of(UsdLux.DistantLight):
+            if not self._visible(prim, tc):
+                continue
+            light = UsdLux.DistantLight(prim)
+            world = self._world(prim, tc)
+            # Light travels along the light's local -Z, so the sun lies along +Z.
+            direction = world[:3, :3] @ np.array([0.0, 0.0, 1.0])
+            if np.linalg.norm(direction) == 0.0:
+                raise SceneError(f"light {prim.GetPath()}: its transform collapses the light direction")
+            intensity = float(light.GetIntensityAttr().Get(tc))
+            exposure = float(light.GetExposureAttr().Get(tc))
+            color = np.array(light.GetColorAttr().Get(tc), dtype=np.float64)
+            if light.GetEnableColorTemperatureAttr().Get(tc):
+                color = color * np.array(UsdLux.BlackbodyTemperatureAsRgb(light.GetColorTemperatureAttr().Get(tc)))
+            angle = float(light.GetAngleAttr().Get(tc))
+            if not (0.0 <= angle < 180.0):
+                raise SceneError(f"light {prim.GetPath()}: inputs:angle must lie in [0, 180) degrees, got {angle}")
+            irradiance = intensity * 2.0**exposure * color
+            if not np.all(np.isfinite(irradiance)) or np.any(irradiance < 0.0):
+                raise SceneError(
+                    f"light {prim.GetPath()}: intensity x 2^exposure x color must be finite and >= 0, "
+                    f"got {irradiance.tolist()}"
+                )
+            return Sun(direction, irradiance, math.radians(angle), str(prim.GetPath()))
+        return None
+
+    # ---------------------------------------------------------------------------------------------- ground
+    def read_ground(self, time=None) -> Ground | None:
+        from pxr import UsdGeom
+
+        tc = self._time(time)
+        for prim in self._prims_of(UsdGeom.Plane):
+            if not self._visible(prim, tc):
+                continue
+            plane = UsdGeom.Plane(prim)
+            axis = {"X": 0, "Y": 1, "Z": 2}[str(plane.GetAxisAttr().Get(tc))]
+            world = self._world(prim, tc)
+            normal = world[:3, :3] @ np.eye(3)[axis]
+            normal = normal / np.linalg.norm(normal)
+            if abs(normal[1]) < 1.0 - 1e-6:
+                raise SceneError(
+                    f"ground plane {prim.GetPath()}: must be horizontal (normal along the stage's up axis), "
+                    f"its normal is {np.round(normal, 4).tolist()} in Y-up world space"
+                )
+            albedo = self._color_attr(prim, "warpsky:albedo", tc)
+            if albedo is None:
+                display = UsdGeom.Gprim(prim).GetDisplayColorAttr().Get(tc)
+                albedo = np.array(display[0], dtype=np.float64) if display else np.full(3, 0.3)
+            return Ground(float(world[1, 3]), albedo, str(prim.GetPath()))
+        return None
+
+    # ----------------------------------------------------------------------------------------------- media
+    def read_media(self, time=None) -> tuple[VoxelMedium, ...]:
+        from pxr import UsdVol
+
+        tc = self._time(time)
+        media = []
+        for prim in self._prims_of(UsdVol.Volume):
+            if self._visible(prim, tc):
+                media.append(self._read_volume(prim, tc))
+        return tuple(media)
+
+    def _read_volume(self, prim, tc) -> VoxelMedium:
+        from pxr import UsdVol
+
+        volume = UsdVol.Volume(prim)
+        path = str(prim.GetPath())
+        fields = {str(name): field_path for name, field_path in volume.GetFieldPaths().items()}
+        if not fields:
+            raise SceneError(f"Volume {path} has no fields; expected a field:{DENSITY_FIELD} relationship")
+        if DENSITY_FIELD not in fields:
+            raise SceneError(
+                f"Volume {path} has fields {', '.join(sorted(fields))} but no field:{DENSITY_FIELD}, "
+                "the field warpsky renders"
+            )
+        field_prim = self.stage.GetPrimAtPath(fields[DENSITY_FIELD])
+        if not field_prim or not field_prim.IsA(UsdVol.OpenVDBAsset):
+            raise SceneError(
+                f"Volume {path}: field:{DENSITY_FIELD} targets {fields[DENSITY_FIELD]}, which is not an OpenVDBAsset"
+            )
+        grid = self._load_field(field_prim, tc)
+        volume_world = self._world(prim, tc)
+        if grid.local_from_index is None:
+            local_from_index = self._extent_placement(prim, tc, grid.values.shape)
+        else:
+            local_from_index = grid.local_from_index
+        extinction = self._float_attr(field_prim, "warpsky:extinctionScale", tc, 1.0)
+        albedo = self._float_attr(prim, "warpsky:albedo", tc, 1.0)
+        phase_token = self._token_attr(prim, "warpsky:phase", tc, "hg")
+        if phase_token not in PHASE_TOKENS:
+            raise SceneError(
+                f"{path}.warpsky:phase must be one of {', '.join(PHASE_TOKENS)}, got {phase_token!r}"
+            )
+        g = self._float_attr(prim, "warpsky:phase:g", tc, 0.85)
+        try:
+            phase = PhaseModel(PHASE_TOKENS[phase_token], g)
+            return VoxelMedium(
+                path, grid.values, volume_world @ local_from_index, extinction, albedo, phase, grid.source
+            )
+        except SceneError as exc:
+            raise SceneError(f"Volume {path}: {exc}") from None
+
+    def _extent_placement(self, prim, tc, shape) -> np.ndarray:
+        """Index-to-local matrix of a dense grid filling the Volume's authored extent, cell-centred."""
+        from pxr import UsdGeom
+
+        extent = UsdGeom.Boundable(prim).GetExtentAttr().Get(tc)
+        if extent is None or len(extent) != 2:
+            raise SceneError(
+                f"Volume {prim.GetPath()}: a dense .npy field needs an authored extent (float3[] extent = "
+                "[(min), (max)]) to place it"
+            )
+        lo, hi = np.array(extent[0], dtype=np.float64), np.array(extent[1], dtype=np.float64)
+        if not np.all(hi > lo):
+            raise SceneError(
+                f"Volume {prim.GetPath()}.extent must have min < max on every axis, got {lo.tolist()} .. {hi.tolist()}"
+            )
+        cell = (hi - lo) / np.array(shape, dtype=np.float64)
+        local_from_index = np.diag([*cell, 1.0])
+        local_from_index[:3, 3] = lo + 0.5 * cell
+        return local_from_index
+
+    def _load_field(self, field_prim, tc):
+        from pxr import UsdVol
+
+        from warpsky.media.fields import load_field
+
+        asset = UsdVol.OpenVDBAsset(field_prim)
+        field_path = str(field_prim.GetPath())
+        asset_path = asset.GetFilePathAttr().Get(tc)
+        if asset_path is None or not asset_path.path:
+            raise SceneError(f"field {field_path}: filePath is not authored")
+        resolved = asset_path.resolvedPath
+        if not resolved:
+            layer = field_prim.GetStage().GetRootLayer().realPath
+            raise SceneError(f"field {field_path}: file {asset_path.path!r} not found (relative to {layer})")
+        grid_name = asset.GetFieldNameAttr().Get(tc)
+        grid_name = str(grid_name) if grid_name else None
+        try:
+            stat = os.stat(resolved)
+        except OSError as exc:
+            raise SceneError(f"field {field_path}: cannot read {resolved}: {exc.strerror}") from None
+        key = (resolved, grid_name, stat.st_mtime_ns, stat.st_size)
+        if key not in self._field_cache:
+            try:
+                self._field_cache[key] = load_field(resolved, grid_name=grid_name)
+            except SceneError as exc:
+                raise SceneError(f"field {field_path}: {exc}") from None
+        return self._field_cache[key]
+
+    # ------------------------------------------------------------------------------------------ attributes
+    @staticmethod
+    def _float_attr(prim, name: str, tc, default: float) -> float:
+        attr = prim.GetAttribute(name)
+        if not attr or not attr.HasAuthoredValue():
+            return default
+        value = attr.Get(tc)
+        if not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise SceneError(f"{prim.GetPath()}.{name} must be a finite float, got {value!r}")
+        return float(value)
+
+    @staticmethod
+    def _token_attr(prim, name: str, tc, default: str) -> str:
+        attr = prim.GetAttribute(name)
+        if not attr or not attr.HasAuthoredValue():
+            return default
+        return str(attr.Get(tc)).strip().lower()
+
+    @staticmethod
+    def _color_attr(prim, name: str, tc) -> np.ndarray | None:
+        attr = prim.GetAttribute(name)
+        if not attr or not attr.HasAuthoredValue():
+            return None
+        value = attr.Get(tc)
+        try:
+            return np.array(value, dtype=np.float64).reshape(3) if not isinstance(value, float) else np.full(3, value)
+        except (TypeError, ValueError):
+            raise SceneError(f"{prim.GetPath()}.{name} must be a color3f, got {value!r}") from None
+
+    # ----------------------------------------------------------------------------------------------- scene
+    def scene_at(self, time=None, *, camera_path: str | None = None) -> Scene:
+        """Everything warpsky renders, at ``time`` (None: the earliest time sample, like usdrecord)."""
+        resolution, _ = self.render_settings()
+        return Scene(
+            camera=self.read_camera(camera_path, time),
+            sun=self.read_sun(time),
+            media=self.read_media(time),
+            ground=self.read_ground(time),
+            time_code=float("nan") if time is None else float(time),
+            source=str(self.path),
+            resolution=resolution,
+        )

@@ -1,0 +1,183 @@
+"""Kernels of the single-scattering ray march (Riley et al. 2004's low-albedo comparison mode, their Fig. 13).
+
+Per pixel, the eye ray is marched through the union of the media boxes in equal steps. Inside a step the
+extinction is taken at the step's midpoint, and the total optical depth seen by light scattered there (sun to
+sample plus sample to eye) is taken as linear between the step's ends, where shadow rays are marched. The
+step's contribution is then integrated exactly (:func:`exp_lerp_mean`), which keeps a homogeneous medium exact
+and any optical depth per step from 1e-9 to 1e5 finite and non-negative.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value
+from warpsky.optics.phase import phase_eval
+from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, exp_lerp_mean3, luminance
+
+#: Shadow optical depth beyond which sunlight is below float32 resolution of the unshadowed light (e^-40).
+SHADOW_CUTOFF = 40.0
+#: Stand-in optical depth for light blocked by the ground (exp(-1e30) is exactly 0, never NaN).
+OPAQUE_DEPTH = 1.0e30
+
+
+@wp.func
+def sun_optical_depth(
+    values: wp.array(dtype=float),
+    grids: wp.array(dtype=VoxelGrid),
+    grid_count: int,
+    t: float,
+    view_dir: wp.vec3,
+    sun_dir: wp.vec3,
+    shadow_step: float,
+    min_extinction: float,
+) -> wp.vec4:
+    """Optical depth (RGB in xyz) from the point ``t`` metres along the view ray to the sun, summed over all
+    grids, and the number of grid lookups it took (w)."""
+    tau = wp.vec3(0.0)
+    lookups = float(0.0)
+    for m in range(grid_count):
+        grid = grids[m]
+        start = grid.eye_index + t * (grid.index_from_world * view_dir)
+        toward_sun = grid.index_from_world * sun_dir
+        span = grid_interval(grid, start, toward_sun, 0.0, 1.0e30)
+        if span[1] > span[0]:
+            length = span[1] - span[0]
+            count = wp.max(int(wp.ceil(length / shadow_step)), 1)
+            dt = length / float(count)
+            total = float(0.0)
+            for i in range(count):
+                total += grid_value(values, grid, start + (span[0] + (float(i) + 0.5) * dt) * toward_sun)
+                if total * dt * min_extinction > SHADOW_CUTOFF:
+                    break
+            tau += grid.extinction * (total * dt)
+            lookups += float(count)
+    return wp.vec4(tau[0], tau[1], tau[2], lookups)
+
+
+@functools.cache
+def single_scatter_kernel(has_ground: bool) -> wp.Kernel:
+    """The per-pixel march, specialised on whether the scene has a ground plane (no cost when it has none)."""
+
+    @wp.kernel(module="unique")
+    def single_scatter(
+        values: wp.array(dtype=float),
+        grids: wp.array(dtype=VoxelGrid),
+        grid_count: int,
+        cam: PinholeCamera,
+        sun_dir: wp.vec3,
+        sun_irradiance: wp.vec3,
+        ground_offset: float,
+        ground_albedo: wp.vec3,
+        step_length: float,
+        shadow_step: float,
+        min_extinction: float,
+        min_transmittance: float,
+        radiance: wp.array2d(dtype=wp.vec3),
+        transmittance: wp.array2d(dtype=wp.vec3),
+        depth: wp.array2d(dtype=float),
+        samples: wp.array2d(dtype=wp.int64),
+        row_offset: int,
+    ):
+        r, col = wp.tid()
+        row = r + row_offset
+        view = camera_ray(cam, row, col)
+        cos_axis = -wp.dot(view, wp.vec3(cam.rotation[0, 2], cam.rotation[1, 2], cam.rotation[2, 2]))
+        t_near = cam.near / cos_axis
+        t_end = cam.far / cos_axis
+        lit = wp.max(sun_irradiance) > 0.0
+        cos_theta = wp.dot(sun_dir, view)
+        hit_ground = bool(False)
+        sun_blocked = bool(False)
+        if wp.static(has_ground):
+            # The plane is opaque: it ends the ray and, with the sun below the horizon, shades every point above it.
+            if view[1] != 0.0:
+                t_ground = ground_offset / view[1]
+                if t_ground > t_near and t_ground < t_end:
+                    t_end = t_ground
+                    hit_ground = True
+            sun_blocked = sun_dir[1] < 0.0
+
+        # Union of the media boxes along the ray.
+        t0 = t_end
+        t1 = t_near
+        for m in range(grid_count):
+            grid = grids[m]
+            span = grid_interval(grid, grid.eye_index, grid.index_from_world * view, t_near, t_end)
+            if span[1] > span[0]:
+                t0 = wp.min(t0, span[0])
+                t1 = wp.max(t1, span[1])
+
+        light = wp.vec3(0.0)
+        tau_eye = wp.vec3(0.0)
+        depth_sum = float(0.0)
+        weight_sum = float(0.0)
+        lookups = wp.int64(0)
+        if t1 > t0:
+            count = wp.max(int(wp.ceil((t1 - t0) / step_length)), 1)
+            dt = (t1 - t0) / float(count)
+            tau_sun_a = wp.vec3(0.0)
+            sun_a_known = bool(False)
+            for i in range(count):
+                ta = t0 + float(i) * dt
+                tm = ta + 0.5 * dt
+                extinction = wp.vec3(0.0)
+                scatter = wp.vec3(0.0)
+                for m in range(grid_count):
+                    grid = grids[m]
+                    value = grid_value(values, grid, grid.eye_index + tm * (grid.index_from_world * view))
+                    if value > 0.0:
+                        extinction += grid.extinction * value
+                        scatter += grid.scattering * (value * phase_eval(grid.phase_kind, grid.phase_g, cos_theta))
+                lookups += wp.int64(grid_count)
+                tau_eye_b = tau_eye + extinction * dt
+                if lit and not sun_blocked and wp.max(scatter) > 0.0:
+                    if not sun_a_known:
+                        shadow = sun_optical_depth(
+                            values, grids, grid_count, ta, view, sun_dir, shadow_step, min_extinction
+                        )
+                        tau_sun_a = wp.vec3(shadow[0], shadow[1], shadow[2])
+                        lookups += wp.int64(shadow[3])
+                    shadow = sun_optical_depth(
+                        values, grids, grid_count, ta + dt, view, sun_dir, shadow_step, min_extinction
+                    )
+                    tau_sun_b = wp.vec3(shadow[0], shadow[1], shadow[2])
+                    lookups += wp.int64(shadow[3])
+                    mean = exp_lerp_mean3(tau_eye + tau_sun_a, tau_eye_b + tau_sun_b)
+                    light += wp.cw_mul(wp.cw_mul(scatter, sun_irradiance), mean) * dt
+                    tau_sun_a = tau_sun_b
+                    sun_a_known = True
+                else:
+                    sun_a_known = False
+                opacity = luminance(exp3(tau_eye)) - luminance(exp3(tau_eye_b))
+                depth_sum += opacity * tm * cos_axis
+                weight_sum += opacity
+                tau_eye = tau_eye_b
+                if luminance(exp3(tau_eye)) < min_transmittance:
+                    break
+
+        trans = exp3(tau_eye)
+        if wp.static(has_ground):
+            if hit_ground:
+                if lit and not sun_blocked and sun_dir[1] > 0.0:
+                    shadow = sun_optical_depth(
+                        values, grids, grid_count, t_end, view, sun_dir, shadow_step, min_extinction
+                    )
+                    lookups += wp.int64(shadow[3])
+                    ground = wp.cw_mul(ground_albedo, sun_irradiance) * (sun_dir[1] / wp.pi)
+                    light += wp.cw_mul(wp.cw_mul(ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
+                depth_sum += luminance(trans) * t_end * cos_axis
+                weight_sum += luminance(trans)
+                trans = wp.vec3(0.0)
+
+        radiance[row, col] = light
+        transmittance[row, col] = trans
+        if weight_sum > 1.0e-6:
+            depth[row, col] = depth_sum / weight_sum
+        else:
+            depth[row, col] = cam.far
+        samples[row, col] = lookups
+
+    return single_scatter

@@ -1,0 +1,130 @@
+"""Host side of the single-scattering ray march."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from warpsky.errors import UsageError
+from warpsky.scene.model import Scene
+from warpsky.techniques.base import Layer
+
+
+@dataclass(frozen=True)
+class SingleScatterSettings:
+    """Settings of the single-scattering ray march.
+
+    ================== ==== ================================= ========= =============================================
+    name               unit default                           range     meaning
+    ================== ==== ================================= ========= =============================================
+    step_length        m    auto: 0.5 x smallest voxel edge   > 0       eye-ray step
+    shadow_step_length m    auto: 1 x smallest voxel edge     > 0       shadow-ray step toward the sun
+    min_transmittance  --   1e-4                              [0, 1)    stop the eye march once luminance
+                                                                        transmittance falls below this
+    ================== ==== ================================= ========= =============================================
+    """
+
+    technique = "single_scatter"
+    step_length: float | None = None
+    shadow_step_length: float | None = None
+    min_transmittance: float = 1.0e-4
+
+    def __post_init__(self):
+        for name in ("step_length", "shadow_step_length"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0.0):
+                raise UsageError(f"setting {name} must be a positive length in metres, got {value}")
+        if not (0.0 <= self.min_transmittance < 1.0):
+            raise UsageError(f"setting min_transmittance must lie in [0, 1), got {self.min_transmittance}")
+
+    def resolved(self, min_voxel_size: float) -> SingleScatterSettings:
+        """These settings with the automatic step lengths filled in from the smallest voxel edge [m]."""
+        return dataclasses.replace(
+            self,
+            step_length=self.step_length or 0.5 * min_voxel_size,
+            shadow_step_length=self.shadow_step_length or 1.0 * min_voxel_size,
+        )
+
+
+class SingleScatter:
+    """Single scattering of sunlight with exact per-step transmittance (Riley 2004, low-albedo mode, Fig. 13).
+
+    Light scatters once: sun -> shadow march -> one scattering event (phase of the media at that point, weighted
+    by their scattering coefficients, Riley Eq. 6) -> attenuated along the eye ray. A ground plane, if present,
+    is lit by the sun through the media and hides what lies below it. No light bounces between the ground and
+    the media, and no multiple scattering: clouds come out darker than in reality, which is the point of this
+    mode as a reference for the faster multiple-scattering techniques.
+    """
+
+    name = "single_scatter"
+    Settings = SingleScatterSettings
+
+    def __init__(self, settings: SingleScatterSettings | None = None, *, device: str = "cpu"):
+        self.settings = settings or SingleScatterSettings()
+        self.device = device
+
+    def resolved_settings(self, scene: Scene) -> SingleScatterSettings:
+        sizes = [float(m.voxel_size.min()) for m in scene.media]
+        return self.settings.resolved(min(sizes) if sizes else 1.0)
+
+    def render(self, scene: Scene, width: int, height: int) -> Layer:
+        """Render ``scene`` at ``width`` x ``height``; the camera is conformed to that aspect ratio here."""
+        import warp as wp
+
+        from warpsky.device import launch_rows
+        from warpsky.media.voxel import VoxelMediaBuffers
+        from warpsky.techniques.common import pinhole_camera
+        from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
+
+        camera = scene.camera.conformed(width, height)
+        settings = self.resolved_settings(scene)
+        device = self.device
+        started = time.perf_counter()
+        with wp.ScopedDevice(device):
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device)
+            radiance = wp.zeros((height, width), dtype=wp.vec3)
+            transmittance = wp.zeros((height, width), dtype=wp.vec3)
+            depth = wp.zeros((height, width), dtype=float)
+            lookups = wp.zeros((height, width), dtype=wp.int64)
+            sun = scene.sun
+            sun_dir = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
+            sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
+            ground = scene.ground
+            extinctions = [float(m.extinction_scale.min()) for m in scene.media]
+            kernel = single_scatter_kernel(ground is not None)
+            inputs = [
+                media.values,
+                media.grids,
+                media.count,
+                pinhole_camera(camera, width, height),
+                wp.vec3(*sun_dir.tolist()),
+                wp.vec3(*sun_irradiance.tolist()),
+                float(ground.height - camera.position[1]) if ground is not None else 0.0,
+                wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist()),
+                float(settings.step_length),
+                float(settings.shadow_step_length),
+                min(extinctions) if extinctions else 0.0,
+                float(settings.min_transmittance),
+                radiance,
+                transmittance,
+                depth,
+                lookups,
+            ]
+            launch_rows(kernel, height, width, inputs, device)
+            wp.synchronize_device(device)
+            seconds = time.perf_counter() - started
+            layer = Layer(
+                radiance.numpy(),
+                transmittance.numpy(),
+                depth.numpy(),
+                stats={
+                    "seconds": seconds,
+                    "lookups": int(lookups.numpy().sum()),
+                    "settings": dataclasses.asdict(settings),
+                },
+            )
+        return layer
