@@ -17,8 +17,6 @@ from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value
 from warpsky.optics.phase import phase_eval
 from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, exp_lerp_mean3, luminance
 
-#: Shadow optical depth beyond which sunlight is below float32 resolution of the unshadowed light (e^-40).
-SHADOW_CUTOFF = 40.0
 #: Stand-in optical depth for light blocked by the ground (exp(-1e30) is exactly 0, never NaN).
 OPAQUE_DEPTH = 1.0e30
 
@@ -32,7 +30,6 @@ def sun_optical_depth(
     view_dir: wp.vec3,
     sun_dir: wp.vec3,
     shadow_step: float,
-    min_extinction: float,
 ) -> wp.vec4:
     """Optical depth (RGB in xyz) from the point ``t`` metres along the view ray to the sun, summed over all
     grids, and the number of grid lookups it took (w)."""
@@ -48,10 +45,10 @@ def sun_optical_depth(
             count = wp.max(int(wp.ceil(length / shadow_step)), 1)
             dt = length / float(count)
             total = float(0.0)
+            # No early exit at large depth: a step's integral depends on the true depth at its far end through
+            # (exp(-a) - exp(-b)) / (b - a), so a truncated b would brighten optically thick steps.
             for i in range(count):
                 total += grid_value(values, grid, start + (span[0] + (float(i) + 0.5) * dt) * toward_sun)
-                if total * dt * min_extinction > SHADOW_CUTOFF:
-                    break
             tau += grid.extinction * (total * dt)
             lookups += float(count)
     return wp.vec4(tau[0], tau[1], tau[2], lookups)
@@ -73,7 +70,6 @@ def single_scatter_kernel(has_ground: bool) -> wp.Kernel:
         ground_albedo: wp.vec3,
         step_length: float,
         shadow_step: float,
-        min_extinction: float,
         min_transmittance: float,
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
@@ -136,12 +132,12 @@ def single_scatter_kernel(has_ground: bool) -> wp.Kernel:
                 if lit and not sun_blocked and wp.max(scatter) > 0.0:
                     if not sun_a_known:
                         shadow = sun_optical_depth(
-                            values, grids, grid_count, ta, view, sun_dir, shadow_step, min_extinction
+                            values, grids, grid_count, ta, view, sun_dir, shadow_step
                         )
                         tau_sun_a = wp.vec3(shadow[0], shadow[1], shadow[2])
                         lookups += wp.int64(shadow[3])
                     shadow = sun_optical_depth(
-                        values, grids, grid_count, ta + dt, view, sun_dir, shadow_step, min_extinction
+                        values, grids, grid_count, ta + dt, view, sun_dir, shadow_step
                     )
                     tau_sun_b = wp.vec3(shadow[0], shadow[1], shadow[2])
                     lookups += wp.int64(shadow[3])
@@ -163,7 +159,7 @@ def single_scatter_kernel(has_ground: bool) -> wp.Kernel:
             if hit_ground:
                 if lit and not sun_blocked and sun_dir[1] > 0.0:
                     shadow = sun_optical_depth(
-                        values, grids, grid_count, t_end, view, sun_dir, shadow_step, min_extinction
+                        values, grids, grid_count, t_end, view, sun_dir, shadow_step
                     )
                     lookups += wp.int64(shadow[3])
                     ground = wp.cw_mul(ground_albedo, sun_irradiance) * (sun_dir[1] / wp.pi)

@@ -94,7 +94,6 @@ class SingleScatter:
             sun_dir = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
             sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
             ground = scene.ground
-            extinctions = [float(m.extinction_scale.min()) for m in scene.media]
             kernel = single_scatter_kernel(ground is not None)
             inputs = [
                 media.values,
@@ -107,7 +106,6 @@ class SingleScatter:
                 wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist()),
                 float(settings.step_length),
                 float(settings.shadow_step_length),
-                min(extinctions) if extinctions else 0.0,
                 float(settings.min_transmittance),
                 radiance,
                 transmittance,

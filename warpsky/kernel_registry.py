@@ -1,0 +1,19 @@
+"""Every Warp module warpsky launches, including each specialisation of factory-made kernels.
+
+The CUDA code-generation test compiles all of them to sm_90 PTX (Warp's bundled NVRTC works without a GPU), so
+CPU-only CI catches CUDA-only compile errors. A new kernel module or specialisation must be listed here.
+"""
+
+from __future__ import annotations
+
+
+def kernel_modules() -> list:
+    """Warp ``Module`` objects for every kernel warpsky can launch."""
+    import warp as wp
+
+    import warpsky.media.fields as fields
+    from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
+
+    modules = [wp.get_module(fields.__name__)]
+    modules += [single_scatter_kernel(has_ground).module for has_ground in (False, True)]
+    return modules
