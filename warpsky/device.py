@@ -9,6 +9,7 @@ single launch covers the frame. Kernels that want this take ``row_offset`` as th
 from __future__ import annotations
 
 import os
+import sys
 from concurrent.futures import ThreadPoolExecutor
 
 from warpsky.errors import UsageError
@@ -20,9 +21,20 @@ def init_warp(*, verbose: bool = False) -> None:
     """Initialise Warp; unless ``verbose``, only errors are logged (no banner, no "no CUDA driver" warning)."""
     import warp as wp
 
-    if not verbose and os.environ.get("WARPSKY_VERBOSE", "") in ("", "0"):
-        wp.config.log_level = wp.LOG_ERROR
-    wp.init()
+    if verbose or os.environ.get("WARPSKY_VERBOSE", "") not in ("", "0"):
+        wp.init()
+        return
+    wp.config.log_level = wp.LOG_ERROR
+    # Warp's native library prints a "no CUDA driver" warning on CPU-only machines straight to fd 2.
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            wp.init()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def resolve_device(name: str = "auto") -> str:
