@@ -61,7 +61,8 @@ def main(argv=None) -> int:
                 "lookups_per_s": lookups / best, "pixels_per_s": size * size / best,
                 "settings": plan.settings_dict(),
             })
-    header = f"{'device':<8} {'size':>9} {'ms/frame':>10} {'median ms':>10} {'Mlookups':>9} {'Mlookups/s':>11} {'Mpix/s':>8}"
+    header = (f"{'device':<8} {'size':>9} {'ms/frame':>10} {'median ms':>10} {'Mlookups':>9} {'Mlookups/s':>11} "
+              f"{'Mpix/s':>8}")
     print(f"single_scatter on {args.stage.name}; best of {args.repeats} after one untimed compile/warm-up render;"
           f" CPU threads {cpu_thread_count()}")
     print(header)

@@ -62,7 +62,8 @@ def single_scatter_quadrature(origin, d, sun, albedo=1.0, pieces=64, nodes=32):
     t = (half * x + 0.5 * (edges[1:] + edges[:-1])[:, None]).reshape(-1)
     weights = (half * w).reshape(-1)
     points = origin + t[:, None] * d
-    integrand = np.exp(-SIGMA * (t - t0)) * SIGMA * albedo / (4 * np.pi) * np.exp(-SIGMA * sun_exit_distance(points, sun))
+    sun_depth = SIGMA * sun_exit_distance(points, sun)
+    integrand = np.exp(-SIGMA * (t - t0)) * SIGMA * albedo / (4 * np.pi) * np.exp(-sun_depth)
     return float(np.sum(weights * integrand))
 
 
