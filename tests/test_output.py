@@ -32,6 +32,17 @@ def test_exr_round_trip(tmp_path, half):
     assert not validate_exr(path, required_channels=["R"], metadata_expect={"count": 4})
 
 
+def test_written_files_get_normal_permissions(tmp_path):
+    import os
+    import stat
+
+    rgba, _, _ = frame()
+    mask = os.umask(0o022)
+    os.umask(mask)
+    for path in (write_exr(tmp_path / "a.exr", rgba), write_png(tmp_path / "a.png", rgba[..., :3])):
+        assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~mask
+
+
 def test_exr_refuses_nan_and_writes_nothing(tmp_path):
     rgba, trans, depth = frame()
     trans[1, 2, 0] = np.nan

@@ -55,19 +55,23 @@ def cumulus_density(resolution: int = 96, seed: int = 7) -> tuple[np.ndarray, fl
     X, Y, Z = np.meshgrid(x, y, z, indexing="ij")
     # Soft spheres: a big central tower, shoulders around it, all sitting on the base at y = 0.
     shape = np.zeros_like(X)
-    blobs = [(0.0, 450.0, 0.0, 520.0)]
-    for _ in range(9):
-        angle = rng.uniform(0, 2 * np.pi)
-        dist = rng.uniform(250.0, 600.0)
-        radius = rng.uniform(220.0, 380.0)
-        blobs.append((dist * np.cos(angle), radius * 0.8, dist * np.sin(angle), radius))
+    blobs = [(0.0, 420.0, 0.0, 480.0), (-380.0, 260.0, 120.0, 330.0), (360.0, 240.0, -80.0, 320.0)]
+    # Cauliflower: smaller turrets whose centres sit on the surface of the big ones, biased upwards.
+    for _ in range(28):
+        cx, cy, cz, r = blobs[rng.integers(0, 3)]
+        direction = rng.normal(size=3)
+        direction[1] = abs(direction[1]) * 1.5
+        direction /= np.linalg.norm(direction)
+        radius = rng.uniform(0.25, 0.45) * r
+        centre = np.array([cx, cy, cz]) + direction * r * 0.85
+        blobs.append((centre[0], max(centre[1], radius * 0.6), centre[2], radius))
     for cx, cy, cz, r in blobs:
         d = np.sqrt((X - cx) ** 2 + (Y - cy) ** 2 + (Z - cz) ** 2) / r
         shape = np.maximum(shape, np.clip(1.0 - d, 0.0, None))
-    flat_base = np.clip(Y / 120.0, 0.0, 1.0)
+    flat_base = np.clip(Y / 100.0, 0.0, 1.0)
     points = np.stack([(X + EXTENT_XZ / 2) / EXTENT_XZ, Y / EXTENT_Y, (Z + EXTENT_XZ / 2) / EXTENT_XZ], axis=-1)
-    fbm = sum(0.5**o * value_noise(points, rng, 4 * 2**o) for o in range(4)) / sum(0.5**o for o in range(4))
-    density = np.clip((shape * 2.2 - 0.55 * fbm) * flat_base, 0.0, 1.0)
+    fbm = sum(0.5**o * value_noise(points, rng, 6 * 2**o) for o in range(4)) / sum(0.5**o for o in range(4))
+    density = np.clip((shape * 3.0 - 0.8 * fbm) * flat_base, 0.0, 1.0)
     # Zero the outermost voxels so every format (clamped .npy, background-padded VDB) agrees at the edges.
     density[[0, -1], :, :] = 0.0
     density[:, [0, -1], :] = 0.0

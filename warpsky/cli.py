@@ -174,6 +174,14 @@ def cmd_render(args) -> int:
     return 0
 
 
+def _fmt3(values) -> str:
+    """RGB triples as short numbers; one number when all three agree."""
+    values = [float(v) for v in values]
+    if max(values) == min(values):
+        return f"{values[0]:.6g}"
+    return "(" + ", ".join(f"{v:.6g}" for v in values) + ")"
+
+
 def cmd_info(args) -> int:
     import numpy as np
 
@@ -205,8 +213,8 @@ def cmd_info(args) -> int:
             f"{np.round(hi, 2).tolist()} m"
         )
         out.append(
-            f"            extinction {medium.extinction_scale.tolist()} 1/m per unit, max field "
-            f"{float(medium.density.max()):g}, albedo {medium.albedo.tolist()}, {medium.phase!r}"
+            f"            extinction {_fmt3(medium.extinction_scale)} 1/m per unit, max field "
+            f"{float(medium.density.max()):g}, albedo {_fmt3(medium.albedo)}, {medium.phase!r}"
         )
     out.append("plan:")
     out += ["  " + line for line in plan.describe().splitlines()]
