@@ -14,7 +14,6 @@ import os
 import shutil
 import struct
 import subprocess
-import tempfile
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +22,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.errors import SceneError
+from warpsky.files import atomic_write, cache_dir
 
 NPY_MAGIC = b"\x93NUMPY"
 NANOVDB_MAGICS = (b"NanoVDB0", b"NanoVDB1", b"NanoVDB2")
@@ -48,11 +48,6 @@ class FieldGrid:
     local_from_index: np.ndarray | None
     source: str
     grid_name: str = ""
-
-
-def cache_dir() -> Path:
-    """Root of warpsky's on-disk cache (``$WARPSKY_CACHE``, default ``~/.cache/warpsky``)."""
-    return Path(os.environ.get("WARPSKY_CACHE") or Path.home() / ".cache" / "warpsky")
 
 
 def sniff_format(path: Path) -> str:
@@ -108,18 +103,14 @@ def convert_vdb(path: Path) -> Path:
     target = cache_dir() / "nanovdb" / f"{digest}.nvdb"
     if target.is_file():
         return target
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".nvdb", dir=target.parent)
-    os.close(fd)
-    try:
-        proc = subprocess.run([tool, "-f", str(path), tmp], capture_output=True, text=True, timeout=600)
+
+    def convert(tmp):
+        proc = subprocess.run([tool, "-f", str(path), str(tmp)], capture_output=True, text=True, timeout=600)
         if proc.returncode != 0 or os.path.getsize(tmp) == 0:
             detail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or ["no output"]
             raise SceneError(f"nanovdb_convert failed on {path}: {detail[0]}")
-        os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+
+    atomic_write(target, convert)
     return target
 
 

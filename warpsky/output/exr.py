@@ -8,20 +8,17 @@ written to a temporary file in the target directory and renamed into place, so r
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from warpsky.errors import WarpskyError
+from warpsky.files import OutputError, atomic_write
+
+__all__ = ["OutputError", "ExrImage", "read_exr", "validate_exr", "write_exr"]
 
 METADATA_PREFIX = "warpsky/"
 COMPRESSIONS = ("none", "zip", "piz", "dwaa", "zstd")
-
-
-class OutputError(WarpskyError):
-    """An output file cannot be written or read back."""
 
 
 def _check(name: str, array: np.ndarray | None, shape: tuple) -> np.ndarray | None:
@@ -34,38 +31,6 @@ def _check(name: str, array: np.ndarray | None, shape: tuple) -> np.ndarray | No
     if bad:
         raise OutputError(f"channel {name}: {bad} NaN/Inf values; refusing to write them")
     return array
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write(path: str | os.PathLike, write) -> Path:
-    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it onto ``path``.
-
-    The temporary file is removed on any failure; ``path`` either keeps its old content or gets the new one whole.
-    """
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    try:
-        directory.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp" + path.suffix, dir=directory)
-    except OSError as exc:
-        raise OutputError(f"cannot write into directory {directory}: {exc.strerror or exc}") from None
-    os.close(fd)
-    try:
-        write(tmp)
-        # mkstemp makes the file private (0600); give it the permissions a plain open() would.
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
 
 
 def write_exr(

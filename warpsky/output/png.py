@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.output.exr import atomic_write
+from warpsky.files import atomic_write
 
 
 def tonemap(rgb: np.ndarray, *, exposure: float = 1.0) -> np.ndarray:
