@@ -100,6 +100,10 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("stage", type=Path, help="USD stage")
     info.add_argument("--time", type=float, default=None, help="time code to inspect (default: earliest)")
     _add_render_options(info)
+
+    from warpsky.optics.cli import add_parser as add_optics
+
+    add_optics(sub)
     return parser
 
 
@@ -232,6 +236,10 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         init_warp(verbose=args.verbose)
+        if args.command == "optics":
+            from warpsky.optics.cli import run as run_optics
+
+            return run_optics(args)
         return {"render": cmd_render, "info": cmd_info}[args.command](args)
     except WarpskyError as exc:
         print(f"warpsky: error: {exc}", file=sys.stderr)

@@ -12,8 +12,13 @@ def kernel_modules() -> list:
     import warp as wp
 
     import warpsky.media.fields as fields
+    import warpsky.optics.kernels as optics
     from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
 
-    modules = [wp.get_module(fields.__name__)]
-    modules += [single_scatter_kernel(has_ground).module for has_ground in (False, True)]
+    modules = [wp.get_module(fields.__name__), wp.get_module(optics.__name__)]
+    modules += [
+        single_scatter_kernel(has_ground, has_tables).module
+        for has_ground in (False, True)
+        for has_tables in (False, True)
+    ]
     return modules

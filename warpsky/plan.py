@@ -89,6 +89,14 @@ def make_plan(
         features["media"] = f"{len(scene.media)} voxel grid(s), {voxels:,} voxels, {voxels * 4 / 2**20:.1f} MiB"
     else:
         features["media"] = "none"
+    species = tuple(dict.fromkeys(m.species for m in scene.media if m.species is not None))
+    if species:
+        from warpsky.optics.tables import is_cached
+
+        states = [f"{name} ({'cached' if is_cached(name) else 'to build'})" for name in species]
+        features["optics"] = "phase tables for " + ", ".join(states)
+    else:
+        features["optics"] = "analytic phase only: no species fields, no tables built"
     features["ground"] = (
         f"{scene.ground.name} at y = {scene.ground.height:g} m, albedo {np.round(scene.ground.albedo, 3).tolist()}"
         if scene.ground is not None

@@ -29,7 +29,7 @@ class VoxelGrid:
     index_from_world: wp.mat33  # index-space displacement per world metre
     extinction: wp.vec3  # extinction per unit field value [1/m], RGB
     scattering: wp.vec3  # extinction * albedo [1/m per unit field value], RGB
-    phase_kind: int  # PhaseKind code
+    phase_kind: int  # PhaseKind code, or TABLE_KIND + table index for a species
     phase_g: float  # HG asymmetry
 
 
@@ -108,7 +108,12 @@ class VoxelMediaBuffers:
     min_voxel_size: float  # smallest voxel edge over all grids [m]
 
     @classmethod
-    def upload(cls, media: tuple[VoxelMedium, ...], camera_position: np.ndarray, device) -> VoxelMediaBuffers:
+    def upload(
+        cls, media: tuple[VoxelMedium, ...], camera_position: np.ndarray, device, species: tuple[str, ...] = ()
+    ) -> VoxelMediaBuffers:
+        """Upload ``media``; a medium of species ``species[i]`` uses phase table i."""
+        from warpsky.optics.kernels import TABLE_KIND
+
         infos = []
         chunks = []
         offset = 0
@@ -122,7 +127,10 @@ class VoxelMediaBuffers:
             grid.index_from_world = wp.mat33(*index_from_world[:3, :3].reshape(-1).tolist())
             grid.extinction = wp.vec3(*medium.extinction_scale.tolist())
             grid.scattering = wp.vec3(*(medium.extinction_scale * medium.albedo).tolist())
-            grid.phase_kind = int(medium.phase.kind)
+            if medium.species is not None:
+                grid.phase_kind = int(TABLE_KIND) + species.index(medium.species)
+            else:
+                grid.phase_kind = int(medium.phase.kind)
             grid.phase_g = float(medium.phase.g)
             infos.append(grid)
             chunks.append(medium.density.reshape(-1))

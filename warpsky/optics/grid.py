@@ -113,3 +113,16 @@ def delta_table(theta: np.ndarray | None = None) -> np.ndarray:
     values = np.zeros(len(theta))
     values[0] = 1.0
     return normalise(values, theta)
+
+
+def cumulative(values: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:
+    """Integral over the cap theta' < theta_i of tabulated ``values`` at every node (last axis); starts at 0."""
+    theta = angle_grid() if theta is None else theta
+    values = np.asarray(values, dtype=np.float64)
+    a, b = theta[:-1], theta[1:]
+    s0, s1 = _linear_moment(a, b)
+    h = b - a
+    pieces = 2.0 * np.pi * (values[..., :-1] * (s0 - s1 / h) + values[..., 1:] * (s1 / h))
+    out = np.zeros_like(values)
+    out[..., 1:] = np.cumsum(pieces, axis=-1)
+    return out

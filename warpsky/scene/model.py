@@ -203,8 +203,10 @@ class VoxelMedium:
         world_from_index: 4x4 affine matrix (float64, column vectors) from index coordinates to world metres.
         extinction_scale: Extinction per unit field value [1/m], RGB.
         albedo: Single-scattering albedo, RGB in [0, 1].
-        phase: Phase function of the scatterers.
+        phase: Phase function of the scatterers (analytic; used when ``species`` is None).
         source: File the field was read from, for messages and ``warpsky info``.
+        species: Particle species (``cloud``, ``rain``, ``ice``, ``snow``, ``air``) whose tabulated phase
+            function is used, or None for the analytic ``phase``.
     """
 
     name: str
@@ -214,8 +216,13 @@ class VoxelMedium:
     albedo: np.ndarray = field(default_factory=lambda: np.ones(3))
     phase: PhaseModel = field(default_factory=PhaseModel)
     source: str = ""
+    species: str | None = None
 
     def __post_init__(self):
+        if self.species is not None:
+            from warpsky.optics.species import get_species
+
+            get_species(self.species)
         dens = np.asarray(self.density)
         if dens.ndim != 3 or min(dens.shape) < 1:
             raise SceneError(f"medium {self.name}: density must be a non-empty 3-D grid, got shape {dens.shape}")
@@ -259,7 +266,8 @@ class VoxelMedium:
     def __repr__(self) -> str:
         return (
             f"VoxelMedium({self.name!r}, shape={self.shape}, voxel_size={np.round(self.voxel_size, 4).tolist()} m, "
-            f"extinction_scale={self.extinction_scale.tolist()} 1/m, albedo={self.albedo.tolist()}, {self.phase!r})"
+            f"extinction_scale={self.extinction_scale.tolist()} 1/m, albedo={self.albedo.tolist()}, "
+            f"{self.species if self.species else repr(self.phase)})"
         )
 
 

@@ -7,7 +7,8 @@ What is read (the README's "USD attributes" section lists the same with units an
 
 - ``UsdGeomCamera``: chosen by ``--camera``, else the render settings' camera, else the first camera.
 - ``UsdLuxDistantLight``: the sun (the first visible one).
-- ``UsdVolVolume`` with ``field:density`` -> ``OpenVDBAsset`` (``.vdb``, ``.nvdb`` or dense ``.npy``).
+- ``UsdVolVolume`` with ``field:density`` (analytic phase) and/or ``field:cloud|rain|ice|snow`` (tabulated
+  species optics) -> ``OpenVDBAsset`` (``.vdb``, ``.nvdb`` or dense ``.npy``).
 - ``UsdGeomPlane``: a horizontal ground plane, albedo ``color3f warpsky:albedo``.
 - ``UsdRenderSettings``: ``resolution`` and ``camera`` as defaults for the command line.
 """
@@ -26,6 +27,10 @@ from warpsky.scene.model import Camera, Ground, PhaseKind, PhaseModel, Scene, Su
 
 PHASE_TOKENS = {"isotropic": PhaseKind.ISOTROPIC, "hg": PhaseKind.HG, "rayleigh": PhaseKind.RAYLEIGH}
 DENSITY_FIELD = "density"
+#: Field relationship names warpsky renders: the generic one (analytic phase) and one per species (tables).
+SPECIES_FIELDS = ("cloud", "rain", "ice", "snow")
+RENDERED_FIELDS = (DENSITY_FIELD, *SPECIES_FIELDS)
+QUANTITIES = ("extinction", "concentration")
 
 
 @dataclass(frozen=True)
@@ -263,48 +268,65 @@ class StageReader:
         media = []
         for prim in self._prims_of(UsdVol.Volume):
             if self._visible(prim, tc):
-                media.append(self._read_volume(prim, tc))
+                media.extend(self._read_volume(prim, tc))
         return tuple(media)
 
-    def _read_volume(self, prim, tc) -> VoxelMedium:
+    def _read_volume(self, prim, tc) -> list[VoxelMedium]:
+        """One medium per rendered field of the Volume (``field:density`` and ``field:<species>``)."""
         from pxr import UsdVol
 
         volume = UsdVol.Volume(prim)
         path = str(prim.GetPath())
         fields = {str(name): field_path for name, field_path in volume.GetFieldPaths().items()}
+        expected = ", ".join(f"field:{n}" for n in RENDERED_FIELDS)
         if not fields:
-            raise SceneError(f"Volume {path} has no fields; expected a field:{DENSITY_FIELD} relationship")
-        if DENSITY_FIELD not in fields:
+            raise SceneError(f"Volume {path} has no fields; expected one of {expected}")
+        rendered = [name for name in RENDERED_FIELDS if name in fields]
+        if not rendered:
             raise SceneError(
-                f"Volume {path} has fields {', '.join(sorted(fields))} but no field:{DENSITY_FIELD}, "
-                "the field warpsky renders"
+                f"Volume {path} has fields {', '.join(sorted(fields))} but none that warpsky renders ({expected})"
             )
-        field_prim = self.stage.GetPrimAtPath(fields[DENSITY_FIELD])
-        if not field_prim or not field_prim.IsA(UsdVol.OpenVDBAsset):
-            raise SceneError(
-                f"Volume {path}: field:{DENSITY_FIELD} targets {fields[DENSITY_FIELD]}, which is not an OpenVDBAsset"
-            )
-        grid = self._load_field(field_prim, tc)
         volume_world = self._world(prim, tc)
-        if grid.local_from_index is None:
-            local_from_index = self._extent_placement(prim, tc, grid.values.shape)
-        else:
-            local_from_index = grid.local_from_index
-        extinction = self._float_attr(field_prim, "warpsky:extinctionScale", tc, 1.0)
-        albedo = self._float_attr(prim, "warpsky:albedo", tc, 1.0)
         phase_token = self._token_attr(prim, "warpsky:phase", tc, "hg")
         if phase_token not in PHASE_TOKENS:
-            raise SceneError(
-                f"{path}.warpsky:phase must be one of {', '.join(PHASE_TOKENS)}, got {phase_token!r}"
-            )
+            raise SceneError(f"{path}.warpsky:phase must be one of {', '.join(PHASE_TOKENS)}, got {phase_token!r}")
         g = self._float_attr(prim, "warpsky:phase:g", tc, 0.85)
-        try:
-            phase = PhaseModel(PHASE_TOKENS[phase_token], g)
-            return VoxelMedium(
-                path, grid.values, volume_world @ local_from_index, extinction, albedo, phase, grid.source
-            )
-        except SceneError as exc:
-            raise SceneError(f"Volume {path}: {exc}") from None
+        volume_albedo = self._float_attr(prim, "warpsky:albedo", tc, 1.0)
+        media = []
+        for name in rendered:
+            field_prim = self.stage.GetPrimAtPath(fields[name])
+            if not field_prim or not field_prim.IsA(UsdVol.OpenVDBAsset):
+                raise SceneError(f"Volume {path}: field:{name} targets {fields[name]}, which is not an OpenVDBAsset")
+            grid = self._load_field(field_prim, tc)
+            if grid.local_from_index is None:
+                local_from_index = self._extent_placement(prim, tc, grid.values.shape)
+            else:
+                local_from_index = grid.local_from_index
+            species = None if name == DENSITY_FIELD else name
+            scale = np.full(3, self._float_attr(field_prim, "warpsky:extinctionScale", tc, 1.0))
+            quantity = self._token_attr(field_prim, "warpsky:quantity", tc, "extinction")
+            if quantity not in QUANTITIES:
+                raise SceneError(
+                    f"{field_prim.GetPath()}.warpsky:quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}"
+                )
+            if quantity == "concentration":
+                if species is None:
+                    raise SceneError(
+                        f"{field_prim.GetPath()}: warpsky:quantity = concentration needs a species field "
+                        f"(field:{'|'.join(SPECIES_FIELDS)}), not field:{DENSITY_FIELD}"
+                    )
+                from warpsky.optics.species import get_species
+
+                scale = scale * np.array(get_species(species).extinction_cross_section)
+            albedo = self._float_attr(field_prim, "warpsky:albedo", tc, volume_albedo)
+            try:
+                media.append(VoxelMedium(
+                    f"{path}:{name}" if species else path, grid.values, volume_world @ local_from_index, scale,
+                    albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species,
+                ))
+            except SceneError as exc:
+                raise SceneError(f"Volume {path}: {exc}") from None
+        return media
 
     def _extent_placement(self, prim, tc, shape) -> np.ndarray:
         """Index-to-local matrix of a dense grid filling the Volume's authored extent, cell-centred."""

@@ -14,6 +14,7 @@ import functools
 import warp as wp
 
 from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value
+from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.phase import phase_eval
 from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, exp_lerp_mean3, luminance
 
@@ -55,14 +56,16 @@ def sun_optical_depth(
 
 
 @functools.cache
-def single_scatter_kernel(has_ground: bool) -> wp.Kernel:
-    """The per-pixel march, specialised on whether the scene has a ground plane (no cost when it has none)."""
+def single_scatter_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
+    """The per-pixel march, specialised on whether the scene has a ground plane and tabulated species: a scene
+    without them pays nothing for those branches."""
 
     @wp.kernel(module="unique")
     def single_scatter(
         values: wp.array(dtype=float),
         grids: wp.array(dtype=VoxelGrid),
         grid_count: int,
+        phase_tables: wp.array(dtype=float),
         cam: PinholeCamera,
         sun_dir: wp.vec3,
         sun_irradiance: wp.vec3,
@@ -84,7 +87,8 @@ def single_scatter_kernel(has_ground: bool) -> wp.Kernel:
         t_near = cam.near / cos_axis
         t_end = cam.far / cos_axis
         lit = wp.max(sun_irradiance) > 0.0
-        cos_theta = wp.dot(sun_dir, view)
+        # Light travels along -sun_dir and leaves towards the eye along -view.
+        theta = scattering_angle(sun_dir, view)
         hit_ground = bool(False)
         sun_blocked = bool(False)
         if wp.static(has_ground):
@@ -126,7 +130,12 @@ def single_scatter_kernel(has_ground: bool) -> wp.Kernel:
                     value = grid_value(values, grid, grid.eye_index + tm * (grid.index_from_world * view))
                     if value > 0.0:
                         extinction += grid.extinction * value
-                        scatter += grid.scattering * (value * phase_eval(grid.phase_kind, grid.phase_g, cos_theta))
+                        phase = wp.vec3(0.0)
+                        if wp.static(has_tables):
+                            phase = medium_phase(phase_tables, grid.phase_kind, grid.phase_g, theta)
+                        else:
+                            phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
+                        scatter += wp.cw_mul(grid.scattering * value, phase)
                 lookups += wp.int64(grid_count)
                 tau_eye_b = tau_eye + extinction * dt
                 if lit and not sun_blocked and wp.max(scatter) > 0.0:

@@ -50,6 +50,11 @@ class SingleScatterSettings:
         )
 
 
+def scene_species(scene: Scene) -> tuple[str, ...]:
+    """Species present in the scene, in first-seen order (the order of their phase tables on the device)."""
+    return tuple(dict.fromkeys(m.species for m in scene.media if m.species is not None))
+
+
 class SingleScatter:
     """Single scattering of sunlight with exact per-step transmittance (Riley 2004, low-albedo mode, Fig. 13).
 
@@ -77,6 +82,8 @@ class SingleScatter:
 
         from warpsky.device import launch_rows
         from warpsky.media.voxel import VoxelMediaBuffers
+        from warpsky.optics.kernels import DevicePhaseTables
+        from warpsky.optics.tables import build_tables
         from warpsky.techniques.common import pinhole_camera
         from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
 
@@ -84,8 +91,10 @@ class SingleScatter:
         settings = self.resolved_settings(scene)
         device = self.device
         started = time.perf_counter()
+        species = scene_species(scene)
         with wp.ScopedDevice(device):
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, device)
+            tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species)
             radiance = wp.zeros((height, width), dtype=wp.vec3)
             transmittance = wp.zeros((height, width), dtype=wp.vec3)
             depth = wp.zeros((height, width), dtype=float)
@@ -94,11 +103,12 @@ class SingleScatter:
             sun_dir = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
             sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
             ground = scene.ground
-            kernel = single_scatter_kernel(ground is not None)
+            kernel = single_scatter_kernel(ground is not None, bool(species))
             inputs = [
                 media.values,
                 media.grids,
                 media.count,
+                tables.values,
                 pinhole_camera(camera, width, height),
                 wp.vec3(*sun_dir.tolist()),
                 wp.vec3(*sun_irradiance.tolist()),
