@@ -119,3 +119,53 @@ def test_time_sampled_file_path_picks_per_frame_files(tmp_path):
     assert reader.read_media(1.0)[0].density.max() == 1.0
     assert reader.read_media(2.0)[0].density.max() == 3.0
     assert reader.read_media(7.0)[0].density.max() == 3.0  # held, not interpolated
+
+
+def add_field(stage_path, name, npy, *, quantity=None, scale=None):
+    from pxr import Sdf, Usd, UsdVol
+
+    stage = Usd.Stage.Open(str(stage_path))
+    vol = UsdVol.Volume(stage.GetPrimAtPath("/World/Cloud"))
+    asset = UsdVol.OpenVDBAsset.Define(stage, f"/World/Cloud/{name}")
+    asset.CreateFilePathAttr(Sdf.AssetPath(str(npy)))
+    if quantity is not None:
+        asset.GetPrim().CreateAttribute("warpsky:quantity", Sdf.ValueTypeNames.Token).Set(quantity)
+    if scale is not None:
+        asset.GetPrim().CreateAttribute("warpsky:extinctionScale", Sdf.ValueTypeNames.Float).Set(scale)
+    vol.CreateFieldRelationship(name, asset.GetPath())
+    stage.Save()
+
+
+def test_species_fields_become_media_with_their_cross_sections(tmp_path, homogeneous_npy):
+    path = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy, extinction_scale=0.25))
+    add_field(path, "rain", homogeneous_npy, quantity="concentration", scale=2.0)
+    add_field(path, "ice", homogeneous_npy, scale=0.5)
+    add_field(path, "temperature", homogeneous_npy)  # not rendered, ignored
+    media = {m.name: m for m in StageReader(path).read_media()}
+    assert set(media) == {"/World/Cloud", "/World/Cloud:rain", "/World/Cloud:ice"}
+    assert media["/World/Cloud"].species is None
+    np.testing.assert_allclose(media["/World/Cloud"].extinction_scale, 0.25)
+    assert media["/World/Cloud:rain"].species == "rain"
+    np.testing.assert_allclose(media["/World/Cloud:rain"].extinction_scale, 2.0 * 6.28e-6)  # Riley Table 2
+    np.testing.assert_allclose(media["/World/Cloud:ice"].extinction_scale, 0.5)
+    np.testing.assert_array_equal(media["/World/Cloud:ice"].world_from_index, media["/World/Cloud"].world_from_index)
+
+
+@pytest.mark.parametrize("field,quantity,message", [
+    ("rain", "mass", "warpsky:quantity"), ("density", "concentration", "needs a species field"),
+])
+def test_bad_quantity(tmp_path, homogeneous_npy, field, quantity, message):
+    from pxr import Sdf, Usd
+
+    from warpsky.errors import SceneError
+
+    path = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy))
+    if field == "density":
+        stage = Usd.Stage.Open(str(path))
+        stage.GetPrimAtPath("/World/Cloud/density").CreateAttribute(
+            "warpsky:quantity", Sdf.ValueTypeNames.Token).Set(quantity)
+        stage.Save()
+    else:
+        add_field(path, field, homogeneous_npy, quantity=quantity)
+    with pytest.raises(SceneError, match=message):
+        StageReader(path).read_media()
