@@ -11,6 +11,7 @@ than through a NanoVDB ``wp.Volume`` (FACTS.md), and on the GPU dense grids of t
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -96,6 +97,66 @@ def grid_interval(grid: VoxelGrid, origin: wp.vec3, direction: wp.vec3, t0: floa
     for axis in range(3):
         r = slab_interval(origin[axis], direction[axis], -0.5, float(grid.shape[axis]) - 0.5, r[0], r[1])
     return r
+
+
+@wp.struct
+class MediaSample:
+    """All media at one point, for one scattering angle."""
+
+    extinction: wp.vec3  # summed extinction coefficient [1/m] (Riley Eqs. 2-3)
+    scattering: wp.vec3  # summed scattering coefficient [1/m]
+    phase_scattering: wp.vec3  # sum of scattering_i * P_i(theta) [1/(m sr)]
+    lookups: int  # grid lookups it took
+
+
+@wp.func
+def combined_phase(sample: MediaSample) -> wp.vec3:
+    """Phase function of the mixture at the point (Riley Eq. 6): scattering-weighted mean of the species' phases."""
+    out = wp.vec3(0.0)
+    for c in range(3):
+        if sample.scattering[c] > 0.0:
+            out[c] = sample.phase_scattering[c] / sample.scattering[c]
+    return out
+
+
+@functools.cache
+def media_sampler(has_tables: bool):
+    """``sample_media(values, grids, grid_count, phase_tables, t, view, theta) -> MediaSample`` at the point ``t``
+    metres along the view ray, specialised on whether any medium uses a phase table."""
+    from warpsky.optics.kernels import medium_phase
+    from warpsky.optics.phase import phase_eval
+
+    @wp.func
+    def sample_media(
+        values: wp.array(dtype=float),
+        grids: wp.array(dtype=VoxelGrid),
+        grid_count: int,
+        phase_tables: wp.array(dtype=float),
+        t: float,
+        view: wp.vec3,
+        theta: float,
+    ) -> MediaSample:
+        out = MediaSample()
+        out.extinction = wp.vec3(0.0)
+        out.scattering = wp.vec3(0.0)
+        out.phase_scattering = wp.vec3(0.0)
+        out.lookups = grid_count
+        for m in range(grid_count):
+            grid = grids[m]
+            value = grid_value(values, grid, grid.eye_index + t * (grid.index_from_world * view))
+            if value > 0.0:
+                phase = wp.vec3(0.0)
+                if wp.static(has_tables):
+                    phase = medium_phase(phase_tables, grid.phase_kind, grid.phase_g, theta)
+                else:
+                    phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
+                scattering = grid.scattering * value
+                out.extinction += grid.extinction * value
+                out.scattering += scattering
+                out.phase_scattering += wp.cw_mul(scattering, phase)
+        return out
+
+    return sample_media
 
 
 @dataclass

@@ -13,9 +13,8 @@ import functools
 
 import warp as wp
 
-from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value
-from warpsky.optics.kernels import medium_phase, scattering_angle
-from warpsky.optics.phase import phase_eval
+from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value, media_sampler
+from warpsky.optics.kernels import scattering_angle
 from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, exp_lerp_mean3, luminance
 
 #: Stand-in optical depth for light blocked by the ground (exp(-1e30) is exactly 0, never NaN).
@@ -59,6 +58,8 @@ def sun_optical_depth(
 def single_scatter_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
     """The per-pixel march, specialised on whether the scene has a ground plane and tabulated species: a scene
     without them pays nothing for those branches."""
+
+    sample_media = media_sampler(has_tables)
 
     @wp.kernel(module="unique")
     def single_scatter(
@@ -123,20 +124,10 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
             for i in range(count):
                 ta = t0 + float(i) * dt
                 tm = ta + 0.5 * dt
-                extinction = wp.vec3(0.0)
-                scatter = wp.vec3(0.0)
-                for m in range(grid_count):
-                    grid = grids[m]
-                    value = grid_value(values, grid, grid.eye_index + tm * (grid.index_from_world * view))
-                    if value > 0.0:
-                        extinction += grid.extinction * value
-                        phase = wp.vec3(0.0)
-                        if wp.static(has_tables):
-                            phase = medium_phase(phase_tables, grid.phase_kind, grid.phase_g, theta)
-                        else:
-                            phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
-                        scatter += wp.cw_mul(grid.scattering * value, phase)
-                lookups += wp.int64(grid_count)
+                here = sample_media(values, grids, grid_count, phase_tables, tm, view, theta)
+                extinction = here.extinction
+                scatter = here.phase_scattering
+                lookups += wp.int64(here.lookups)
                 tau_eye_b = tau_eye + extinction * dt
                 if lit and not sun_blocked and wp.max(scatter) > 0.0:
                     if not sun_a_known:
