@@ -140,3 +140,40 @@ def render_layer(stage_path: Path, device: str, width: int, height: int, *, time
     plan = make_plan(scene, settings={k: str(v) for k, v in settings.items()}, resolution=(width, height),
                      device=device)
     return scene, SingleScatter(plan.settings, device=device).render(scene, width, height)
+
+
+@pytest.fixture(scope="session")
+def optics_cache(tmp_path_factory):
+    """One optics cache for the whole session, so slow Mie/ice tables are built once (and first-built here)."""
+    import os
+
+    path = tmp_path_factory.mktemp("optics-cache")
+    previous = os.environ.get("WARPSKY_CACHE")
+    os.environ["WARPSKY_CACHE"] = str(path)
+    yield path
+    if previous is None:
+        os.environ.pop("WARPSKY_CACHE", None)
+    else:
+        os.environ["WARPSKY_CACHE"] = previous
+
+
+@pytest.fixture(scope="session")
+def species_phase(optics_cache):
+    """Phase table (3, M) of a species, built once per session in the session cache."""
+    import os
+
+    from warpsky.optics.tables import phase_table
+
+    memo = {}
+
+    def get(name: str) -> np.ndarray:
+        if name not in memo:
+            previous = os.environ.get("WARPSKY_CACHE")
+            os.environ["WARPSKY_CACHE"] = str(optics_cache)  # even inside a test that monkeypatched it
+            try:
+                memo[name] = phase_table(name)
+            finally:
+                os.environ["WARPSKY_CACHE"] = previous if previous is not None else str(optics_cache)
+        return memo[name]
+
+    return get

@@ -12,10 +12,11 @@ def kernel_modules() -> list:
     import warp as wp
 
     import warpsky.media.fields as fields
+    import warpsky.optics.ice_kernels as ice_kernels
     import warpsky.optics.kernels as optics
     from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
 
-    modules = [wp.get_module(fields.__name__), wp.get_module(optics.__name__)]
+    modules = [wp.get_module(fields.__name__), wp.get_module(optics.__name__), wp.get_module(ice_kernels.__name__)]
     modules += [
         single_scatter_kernel(has_ground, has_tables).module
         for has_ground in (False, True)

@@ -10,6 +10,7 @@ rain             6.28e-6 (1 mm sphere)          Mie, lognormal drops around r = 
 ice              1.82e-6                        geometric optics Monte Carlo of random hexagonal columns
                                                 plus diffraction (warpsky.optics.ice)
 snow             1.41e-5                        smooth aggregate model, no halo peaks (warpsky.optics.ice)
+stratus          1.54e-10 (π r_e², r_e = 7 µm)  Mie, Bouthors 2006 modified Gamma (N0 300 cm^-3, γ 2, r_e 7 µm)
 ================ ============================== =============================================================
 
 Cross sections are Riley et al. 2004, Table 2; all albedos default to 1 (Riley §3.1). A field's number
@@ -26,7 +27,9 @@ import numpy as np
 
 from warpsky.errors import SceneError
 
-SPECIES_NAMES = ("air", "cloud", "rain", "ice", "snow")
+SPECIES_NAMES = ("air", "cloud", "rain", "ice", "snow", "stratus")
+#: Species a Volume field can name (``field:cloud`` ...); ``stratus`` is the stratiform layers' droplet model.
+FIELD_SPECIES = ("cloud", "rain", "ice", "snow")
 
 
 @dataclass(frozen=True)
@@ -53,8 +56,13 @@ class Species:
         """Hash of everything that determines this species' tables."""
         from warpsky.optics.grid import SEGMENTS_DEG
 
+        details = dict(self.params)
+        if self.model == "mie":
+            from warpsky.optics import mie
+
+            details["distribution_values"] = repr(getattr(mie, self.params["distribution"]))
         blob = json.dumps(
-            {"name": self.name, "model": self.model, "params": self.params, "grid": SEGMENTS_DEG}, sort_keys=True
+            {"name": self.name, "model": self.model, "params": details, "grid": SEGMENTS_DEG}, sort_keys=True
         )
         return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
@@ -91,6 +99,9 @@ SPECIES: dict[str, Species] = {
     "ice": Species("ice", (1.82e-6,) * 3, "ice", {"habit": "column", "seed": 0},
                    source="Riley 2004 Table 2; ray-traced random hexagonal columns + diffraction"),
     "snow": Species("snow", (1.41e-5,) * 3, "snow", source="Riley 2004 Table 2; smooth aggregate model"),
+    "stratus": Species("stratus", (1.54e-10,) * 3, "mie", {"distribution": "BOUTHORS_STRATUS"},
+                       source="Bouthors 2006 §3.1: modified Gamma N0 = 300 cm^-3, gamma = 2, r_e = 7 um; "
+                       "sigma = pi r_e^2"),
 }
 
 
