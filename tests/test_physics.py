@@ -110,3 +110,30 @@ def test_ground_is_opaque_and_lambertian(tmp_path, device):
     cos_zenith = sun[1] / np.linalg.norm(sun)
     np.testing.assert_allclose(layer.radiance[4, 4], 0.5 / np.pi * cos_zenith, rtol=1e-5)
     assert np.all(layer.transmittance[4:] == 0.0)
+
+
+def test_species_field_scatters_with_its_tabulated_phase(tmp_path, homogeneous_npy, species_phase, device):
+    """A cloud field (Mie table) in place of the generic density: the isotropic 1/4pi of the quadrature becomes
+    the cloud's phase per channel at each pixel's scattering angle; only cloud tables are built."""
+    from test_scene_usd import add_field
+
+    from warpsky.optics import tables
+    from warpsky.optics.grid import angle_grid
+
+    cloud = species_phase("cloud")
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.0, camera_position=(3.0, 4.0, 42.0),
+                     camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.1, 0.3, -1.0))
+    stage = write_stage(tmp_path / "cloud.usda", spec)
+    add_field(stage, "cloud", homogeneous_npy, scale=SIGMA)
+    before = len(tables.BUILD_LOG)
+    scene, layer = render_layer(stage, device, 16, 16, step_length=0.05, shadow_step_length=0.05,
+                                min_transmittance=0.0)
+    assert {name for name, _, _ in tables.BUILD_LOG[before:]} <= {"cloud"}
+    cam = scene.camera.conformed(16, 16)
+    sun = scene.sun.direction
+    for row, col in [(8, 8), (5, 9), (11, 6), (3, 3)]:
+        d = cam.pixel_direction(col + 0.5, row + 0.5, 16, 16)
+        isotropic = single_scatter_quadrature(cam.position, d, sun)
+        theta = np.arccos(np.clip(np.dot(sun, d), -1.0, 1.0))  # light travels along -sun, leaves along -d
+        phase = np.array([np.interp(theta, angle_grid(), cloud[c]) for c in range(3)])
+        np.testing.assert_allclose(layer.radiance[row, col], isotropic * 4 * np.pi * phase, rtol=2e-3)
