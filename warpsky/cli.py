@@ -23,10 +23,14 @@ frames:
 technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default):
   single_scatter: step_length [m, auto = 0.5 x smallest voxel], shadow_step_length [m, auto = 1 voxel],
                   min_transmittance [default 1e-4: stop marching once the view is this opaque]
+  path_tracer:    spp [64], seed [0], max_bounces [1024], majorant_block [8 voxels], environment [0,
+                  uniform radiance], samples_per_pass [auto]; --spp N and --seed S are shorthands.
+                  Writes a variance.RGB AOV (variance of each pixel's mean).
 
 examples:
   warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
   warpsky render shot.usda out/shot.####.exr --frames 1:48x2 --res 1280x720 --device cuda
+  warpsky render usd_scenes/cumulus.usda out/ref.####.exr --frames 1 --technique path_tracer --spp 256 --seed 7
 """
 
 
@@ -64,6 +68,8 @@ def _add_render_options(parser: argparse.ArgumentParser) -> None:
                         help="rendering technique (default: single_scatter)")
     parser.add_argument("--set", dest="settings", type=_setting, action="append", default=[], metavar="NAME=VALUE",
                         help="technique setting, repeatable (see below)")
+    parser.add_argument("--spp", type=int, metavar="N", help="path_tracer: samples per pixel (= --set spp=N)")
+    parser.add_argument("--seed", type=int, metavar="S", help="path_tracer: random seed (= --set seed=S)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -107,13 +113,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _settings(args) -> dict[str, str]:
+    """--set pairs plus the --spp / --seed shorthands."""
+    settings = dict(args.settings)
+    for name in ("spp", "seed"):
+        value = getattr(args, name, None)
+        if value is not None:
+            settings[name] = str(value)
+    return settings
+
+
 def _render_options(args) -> object:
     from warpsky.device import resolve_device
     from warpsky.render import RenderOptions
 
     return RenderOptions(
         technique=args.technique,
-        settings=dict(args.settings),
+        settings=_settings(args),
         resolution=args.res,
         device=resolve_device(args.device),
         camera=args.camera,

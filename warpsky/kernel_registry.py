@@ -14,6 +14,7 @@ def kernel_modules() -> list:
     import warpsky.media.fields as fields
     import warpsky.optics.ice_kernels as ice_kernels
     import warpsky.optics.kernels as optics
+    from warpsky.techniques.path_tracer.kernels import path_trace_kernel
     from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
 
     modules = [wp.get_module(fields.__name__), wp.get_module(optics.__name__), wp.get_module(ice_kernels.__name__)]
@@ -21,5 +22,8 @@ def kernel_modules() -> list:
         single_scatter_kernel(has_ground, has_tables).module
         for has_ground in (False, True)
         for has_tables in (False, True)
+    ]
+    modules += [
+        path_trace_kernel(has_ground, has_tables).module for has_ground in (False, True) for has_tables in (False, True)
     ]
     return modules

@@ -108,7 +108,8 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
     if scene.sun is not None:
         metadata["sun"] = scene.sun.name
     exr = write_exr(
-        out_path, frame.rgba, transmittance=frame.transmittance, depth=frame.depth, metadata=metadata,
+        out_path, frame.rgba, transmittance=frame.transmittance, depth=frame.depth, aovs=frame.aovs,
+        metadata=metadata,
         half=options.half,
     )
     png = None

@@ -39,6 +39,7 @@ def write_exr(
     *,
     transmittance: np.ndarray | None = None,
     depth: np.ndarray | None = None,
+    aovs: dict | None = None,
     metadata: dict | None = None,
     half: bool = True,
     compression: str = "zip",
@@ -61,6 +62,10 @@ def write_exr(
             channels[f"transmittance.{c}"] = np.ascontiguousarray(transmittance[..., i], dtype=np.float32)
     if depth is not None:
         channels["depth.Z"] = np.ascontiguousarray(depth, dtype=np.float32)
+    for name, values in (aovs or {}).items():
+        values = _check(name, values, (height, width, 3))
+        for i, c in enumerate("RGB"):
+            channels[f"{name}.{c}"] = np.ascontiguousarray(values[..., i], dtype=np.float32)
     header = {
         "compression": getattr(OpenEXR, f"{'NO' if compression == 'none' else compression.upper()}_COMPRESSION"),
         "type": OpenEXR.scanlineimage,

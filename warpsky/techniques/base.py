@@ -21,16 +21,19 @@ class Layer:
         depth: (H, W) float32 representative camera-space depth along the view axis [m]: the opacity-weighted
             mean depth of what the layer shows; the camera's far clipping distance where it shows nothing.
         stats: Figures about the render (lookups, seconds, settings) for metadata and benchmarks.
+        aovs: Extra per-pixel outputs by name, e.g. ``variance`` (H, W, 3) of a Monte Carlo pixel mean.
     """
 
     radiance: np.ndarray
     transmittance: np.ndarray
     depth: np.ndarray
     stats: dict = field(default_factory=dict)
+    aovs: dict = field(default_factory=dict)
 
 
 _REGISTRY: dict[str, str] = {
     "single_scatter": "warpsky.techniques.single_scatter.technique:SingleScatter",
+    "path_tracer": "warpsky.techniques.path_tracer.technique:PathTracer",
 }
 
 

@@ -1,0 +1,123 @@
+"""The Monte Carlo reference: unbiased against single scattering, a white furnace, majorant choice and seeds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import StageSpec, look_rotation, render_layer, write_stage
+
+from warpsky.plan import make_plan
+from warpsky.scene.usd import StageReader
+from warpsky.techniques.path_tracer.technique import PathTracer, majorant_grid
+
+
+def path_traced(stage, device, size, **settings):
+    scene = StageReader(stage).scene_at(None)
+    plan = make_plan(scene, technique="path_tracer", settings={k: str(v) for k, v in settings.items()},
+                     resolution=(size, size), device=device)
+    return PathTracer(plan.settings, device=device).render(scene, size, size)
+
+
+@pytest.fixture
+def box(tmp_path, homogeneous_npy):
+    def make(**overrides):
+        spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.05, camera_position=(3.0, 4.0, 42.0),
+                         camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.4, 0.8, 0.3))
+        for key, value in overrides.items():
+            setattr(spec, key, value)
+        return write_stage(tmp_path / f"box{len(list(tmp_path.glob('*.usda')))}.usda", spec)
+
+    return make
+
+
+def test_single_scatter_estimator_equals_the_single_scatter_technique(box, device):
+    stage = box()
+    _, reference = render_layer(stage, device, 16, 16, step_length=0.05, shadow_step_length=0.05,
+                                min_transmittance=0.0)
+    layer = path_traced(stage, device, 16, spp=512, max_bounces=1)
+    covered = np.broadcast_to((reference.transmittance < 0.95).all(axis=-1)[..., None], reference.radiance.shape)
+    z = (layer.radiance - reference.radiance)[covered] / np.sqrt(layer.aovs["variance"][covered] + 1e-30)
+    assert np.max(np.abs(z)) < 5.0  # ~600 values: a false alarm has probability ~3e-4
+    z_mean = (layer.radiance - reference.radiance).sum() / np.sqrt(layer.aovs["variance"].sum())
+    assert abs(z_mean) < 4.0  # the image mean, not only each pixel, is unbiased
+    np.testing.assert_allclose(layer.transmittance, reference.transmittance, atol=0.1)
+    assert layer.transmittance.mean() == pytest.approx(reference.transmittance.mean(), rel=0.02)
+
+
+@pytest.mark.parametrize("phase,g", [("isotropic", None), ("hg", 0.8)])
+def test_white_furnace_returns_the_environment(box, device, phase, g):
+    """Albedo 1 in a uniform white environment, no sun: every pixel sees exactly the environment."""
+    stage = box(sun_direction=None, extinction_scale=0.2, phase=phase, g=g)
+    layer = path_traced(stage, device, 8, spp=256, environment=1.0)
+    seen = layer.radiance + layer.transmittance  # the layer over a background of the same radiance
+    assert seen.mean() == pytest.approx(1.0, abs=0.01)
+    np.testing.assert_allclose(seen, 1.0, atol=0.15)
+    assert layer.stats["capped_paths"] == 0
+
+
+def test_tight_and_loose_majorants_agree(tmp_path, device):
+    """A thin cloud with a dense core: local majorants (4-voxel cells) and one global majorant per medium must
+    give the same image in expectation; the local ones take fewer tracking steps."""
+    rng = np.random.default_rng(3)
+    density = 0.01 + 0.02 * rng.random((16, 16, 16)).astype(np.float32)
+    density[6:10, 6:10, 6:10] = 1.0
+    grid = tmp_path / "core.npy"
+    np.save(grid, density)
+    spec = StageSpec(volume_file=grid, extinction_scale=2.0, camera_position=(2.0, 3.0, 45.0),
+                     camera_rotation=look_rotation((-0.04, -0.05, -1.0)), sun_direction=(0.3, 0.9, -0.2))
+    stage = write_stage(tmp_path / "core.usda", spec)
+    tight = path_traced(stage, device, 12, spp=256, majorant_block=4, seed=1)
+    loose = path_traced(stage, device, 12, spp=256, majorant_block=1000, seed=2)
+    variance = tight.aovs["variance"] + loose.aovs["variance"]
+    z = (tight.radiance - loose.radiance) / np.sqrt(variance + 1e-30)
+    assert np.max(np.abs(z)) < 5.0
+    z_mean = (tight.radiance.sum() - loose.radiance.sum()) / np.sqrt(variance.sum())
+    assert abs(z_mean) < 4.0
+    assert tight.stats["tracking_steps"] < 0.5 * loose.stats["tracking_steps"]
+
+
+def test_majorant_grid_bounds_every_trilinear_lookup():
+    rng = np.random.default_rng(0)
+    density = rng.random((9, 7, 5)).astype(np.float32)
+    bound = majorant_grid(density, 4)
+    assert bound.shape == (3, 2, 2)
+    # any point in cell c interpolates voxels c*4 - 1 .. c*4 + 4 (clamped)
+    for (i, j, k), value in np.ndenumerate(bound):
+        block = density[max(4 * i - 1, 0):4 * i + 5, max(4 * j - 1, 0):4 * j + 5, max(4 * k - 1, 0):4 * k + 5]
+        assert value == block.max()
+
+
+def test_same_seed_same_image(box, device):
+    stage = box()
+    first = path_traced(stage, device, 8, spp=8, seed=5)
+    again = path_traced(stage, device, 8, spp=8, seed=5)
+    other = path_traced(stage, device, 8, spp=8, seed=6)
+    np.testing.assert_array_equal(first.radiance, again.radiance)
+    assert not np.array_equal(first.radiance, other.radiance)
+
+
+def test_optically_thick_albedo_one_stays_bounded_and_reports_the_cap(box, device):
+    stage = box(extinction_scale=50.0)  # optical thickness 1e3 across the box
+    layer = path_traced(stage, device, 8, spp=8, max_bounces=16)
+    for values in (layer.radiance, layer.transmittance, layer.aovs["variance"]):
+        assert np.all(np.isfinite(values)) and values.min() >= 0.0
+    assert layer.stats["capped_paths"] > 0
+    assert layer.transmittance.max() < 1e-6 or layer.transmittance[layer.radiance > 0].max() < 1e-6
+
+
+def test_grazing_sun_over_ground_is_finite(box, device):
+    stage = box(sun_direction=(1.0, 1e-4, 0.0), ground=(-12.0, 0.95))
+    layer = path_traced(stage, device, 8, spp=8)
+    assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
+
+
+def test_cli_writes_a_variance_aov(box, tmp_path):
+    from warpsky.cli import main
+    from warpsky.output.exr import read_exr
+
+    stage = box()
+    out = tmp_path / "pt.exr"
+    assert main(["render", str(stage), str(out), "--technique", "path_tracer", "--spp", "4", "--seed", "3",
+                 "--res", "8x8", "--device", "cpu"]) == 0
+    image = read_exr(out)
+    assert {"variance.R", "variance.G", "variance.B"} <= set(image.channels)
