@@ -54,13 +54,20 @@ class PathTracerSettings:
             raise UsageError(f"setting samples_per_pass must be >= 1, got {self.samples_per_pass}")
 
 
+def effective_block(shape: tuple[int, ...], block: int) -> int:
+    """Majorant cell edge [voxels] actually used for a grid of ``shape``: at most its largest edge."""
+    return max(1, min(int(block), max(shape)))
+
+
 def majorant_grid(density: np.ndarray, block: int) -> np.ndarray:
     """Upper bounds of a trilinearly interpolated grid over coarse cells of ``block`` voxels.
 
     A point in cell c interpolates voxels c*block - 1 .. (c+1)*block, so each cell takes the maximum over its
-    voxels dilated by one voxel (edge-clamped like the lookup).
+    voxels dilated by one voxel (edge-clamped like the lookup). ``block`` is clamped to the largest grid edge
+    (:func:`effective_block`), where one cell holds the whole grid.
     """
     d = np.asarray(density, dtype=np.float32)
+    block = effective_block(d.shape, block)
     dilated = d.copy()
     for axis in range(3):
         padded = np.pad(dilated, [(1, 1) if a == axis else (0, 0) for a in range(3)], mode="edge")
@@ -117,7 +124,7 @@ class PathTracer:
                 mg = MajorantGrid()
                 mg.offset = offset
                 mg.shape = wp.vec3i(*bound.shape)
-                mg.block = float(block)
+                mg.block = float(effective_block(medium.density.shape, block))
                 mgrids.append(mg)
                 chunks.append(bound.reshape(-1))
                 offset += bound.size
