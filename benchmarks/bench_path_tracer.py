@@ -2,7 +2,9 @@
 tracking cost per path (tentative collisions), with local majorants (8-voxel cells) and one global majorant.
 
 Runs on the CPU and on every CUDA device present. Timings exclude the first (compiling) render of each device and
-say so. No pass/fail: goals are read by people. (The Mitsuba 3 comparison of issue 4 is not part of this run yet.)
+say so. No pass/fail: goals are read by people. With Mitsuba 3 installed (extra ``compare``), the same scene without
+its ground plane is rendered by both at equal samples with box-filtered pixels, and the table adds each one's
+efficiency = 1 / (relative variance of the image mean x seconds): the ratio says who reaches equal error sooner.
 
 Run:  python benchmarks/bench_path_tracer.py [--size 128] [--spp 16] [--json out/bench_path_tracer.json]
 """
@@ -64,14 +66,51 @@ def main(argv=None) -> int:
                     "capped_paths": layer.stats["capped_paths"],
                     "mean_radiance": float(layer.radiance.mean()),
                 })
+    compare = []
+    try:
+        from warpsky.evaluation import mitsuba as bridge
+
+        bridge.import_mitsuba()
+    except Exception as exc:  # noqa: BLE001 - optional: say why and go on
+        print(f"(no Mitsuba comparison: {exc})", file=sys.stderr)
+        bridge = None
+    if bridge is not None:
+        import numpy as np
+
+        for scale in (float(s) for s in args.scales.split(",")):
+            media = tuple(dataclasses.replace(m, extinction_scale=m.extinction_scale * scale) for m in base.media)
+            scene = dataclasses.replace(base, media=media, ground=None)
+            mean, variance, mi_seconds = bridge.render(scene, size, size, spp=spp * 16, runs=16)
+            settings = PathTracerSettings(spp=spp * 16, pixel_jitter=1)
+            started = time.perf_counter()
+            layer = PathTracer(settings, device="cpu").render(scene, size, size)
+            ws_seconds = time.perf_counter() - started
+
+            def efficiency(image, var, seconds):
+                relative = var.sum() / max(image.sum(), 1e-30) ** 2
+                return 1.0 / (relative * seconds)
+
+            ours = efficiency(layer.radiance.astype(np.float64), layer.aovs["variance"], ws_seconds)
+            theirs = efficiency(mean, variance, mi_seconds)
+            compare.append({"scale": scale, "warpsky_s": ws_seconds, "mitsuba_s": mi_seconds,
+                            "warpsky_mean": float(layer.radiance.mean()), "mitsuba_mean": float(mean.mean()),
+                            "efficiency_ratio": ours / theirs})
     print(f"path tracer, {args.stage.name}, {size}x{size}, {spp} spp; excludes the first compile")
     print(f"{'device':<8} {'scale':>5} {'majorant':>9} {'s':>7} {'k paths/s':>10} {'steps/path':>11} {'capped':>7}")
     for r in rows:
         print(f"{r['device']:<8} {r['scale']:>5g} {r['majorant']:>9} {r['seconds']:>7.2f} "
               f"{r['paths_per_s'] / 1e3:>10.1f} {r['steps_per_path']:>11.1f} {r['capped_paths']:>7}")
+    if compare:
+        print(f"\nvs Mitsuba 3 volpath llvm_ad_rgb (cpu, no ground, {spp * 16} spp, box-filtered pixels)")
+        print(f"{'scale':>5} {'warpsky s':>10} {'mitsuba s':>10} {'mean ws':>9} {'mean mi':>9} "
+              f"{'efficiency ws/mi':>17}")
+        for r in compare:
+            print(f"{r['scale']:>5g} {r['warpsky_s']:>10.2f} {r['mitsuba_s']:>10.2f} {r['warpsky_mean']:>9.5f} "
+                  f"{r['mitsuba_mean']:>9.5f} {r['efficiency_ratio']:>17.2f}")
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps({
         "machine": platform.platform(), "cpu_threads": cpu_thread_count(), "warp": wp.config.version, "rows": rows,
+        "mitsuba": compare,
     }, indent=2))
     print(f"wrote {args.json}")
     return 0

@@ -130,3 +130,57 @@ def test_sampling_chi_square_against_table(device, channel):
     assert chi2 < dof + 5 * np.sqrt(2 * dof), (chi2, dof)
     # the returned pdf is the sampling density: its mean of 1/pdf over samples estimates 4 pi (the sphere)
     assert np.mean(1.0 / samples[:, 1]) == pytest.approx(4 * np.pi, rel=0.05)
+
+
+def chi_square(samples: np.ndarray, table: np.ndarray) -> tuple[float, int]:
+    """chi^2 of sampled angles against the exact bin masses of a tabulated phase function (bins of 25 nodes)."""
+    theta = angle_grid()
+    edges = theta[::25]
+    edges = np.append(edges, theta[-1]) if edges[-1] != theta[-1] else edges
+    cdf = cumulative(table)
+    masses = np.diff(np.interp(edges, theta, cdf)) / cdf[-1]
+    observed, _ = np.histogram(samples, bins=edges)
+    keep = masses * len(samples) > 20
+    expected = masses[keep] * len(samples)
+    return float(np.sum((observed[keep] - expected) ** 2 / expected)), int(keep.sum() - 1)
+
+
+@pytest.mark.parametrize("name", ["cloud", "rain"])
+def test_sampling_chi_square_for_mie_tables(device, species_phase, name):
+    """The path tracer samples species by the green row's inverse CDF: chi^2 against cloud and rain Mie tables."""
+    from warpsky.optics.kernels import DevicePhaseTables, sample
+
+    table = species_phase(name)
+    samples = sample(DevicePhaseTables.upload(table[None], device), 1, 400_000, seed=3, device=device)
+    chi2, dof = chi_square(samples[:, 0], table[1])
+    assert chi2 < dof + 5 * np.sqrt(2 * dof), (chi2, dof)
+
+
+def test_path_tracer_hg_sampling_chi_square(device):
+    """Henyey-Greenstein sampling of the path tracer (exact inversion) against the closed-form CDF in cos theta."""
+    import warp as wp
+
+    from warpsky.techniques.path_tracer.kernels import hg_sample_cos
+
+    @wp.kernel
+    def draw(g: float, out: wp.array(dtype=float)):
+        i = wp.tid()
+        state = wp.rand_init(11, i)
+        out[i] = hg_sample_cos(g, wp.randf(state))
+
+    for g in (0.0, 0.85, -0.5):
+        count = 200_000
+        out = wp.zeros(count, dtype=float, device=device)
+        wp.launch(draw, dim=count, inputs=[g, out], device=device)
+        mu = out.numpy()
+        edges = np.linspace(-1.0, 1.0, 101)
+        if abs(g) < 1e-4:
+            cdf = (edges + 1.0) / 2.0
+        else:  # P(cos <= m) = (1 - g^2) / (2 g) (1 / sqrt(1 + g^2 - 2 g m) - 1 / (1 + g))
+            cdf = (1 - g * g) / (2 * g) * (1 / np.sqrt(1 + g * g - 2 * g * edges) - 1 / (1 + g))
+        expected = np.diff(cdf) * count
+        observed, _ = np.histogram(mu, bins=edges)
+        keep = expected > 20
+        chi2 = np.sum((observed[keep] - expected[keep]) ** 2 / expected[keep])
+        dof = keep.sum() - 1
+        assert chi2 < dof + 5 * np.sqrt(2 * dof), (g, chi2, dof)

@@ -41,6 +41,14 @@ def pinhole_camera(camera: Camera, width: int, height: int) -> PinholeCamera:
 
 
 @wp.func
+def camera_ray_at(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) -> wp.vec3:
+    """Unit world direction through the point (fx, fy) in [0, 1)^2 of pixel (row, col); fx right, fy down."""
+    sx = ((float(col) + fx) / float(cam.width) - 0.5) * cam.horizontal_aperture + cam.horizontal_offset
+    sy = (0.5 - (float(row) + fy) / float(cam.height)) * cam.vertical_aperture + cam.vertical_offset
+    return wp.normalize(cam.rotation * wp.vec3(sx, sy, -cam.focal_length))
+
+
+@wp.func
 def camera_ray(cam: PinholeCamera, row: int, col: int) -> wp.vec3:
     """Unit world direction through the centre of pixel (row, col); row 0 is the top of the image."""
     sx = ((float(col) + 0.5) / float(cam.width) - 0.5) * cam.horizontal_aperture + cam.horizontal_offset

@@ -23,7 +23,7 @@ import warp as wp
 from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value
 from warpsky.optics.kernels import GRID_SIZE, grid_angle, grid_node, medium_phase, sample_table
 from warpsky.optics.phase import phase_eval
-from warpsky.techniques.common import PinholeCamera, camera_ray
+from warpsky.techniques.common import PinholeCamera, camera_ray, camera_ray_at
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
 MAJORANT_MARGIN = wp.constant(1.0001)
@@ -401,6 +401,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         ground_offset: float,
         ground_albedo: wp.vec3,
         seed: int,
+        pixel_jitter: int,
         first_sample: int,
         sample_count: int,
         max_bounces: int,
@@ -427,8 +428,16 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         # the path carries one stream (re-seeding from the stream would replay it: rand_init(randi(s)) is s's next).
         steps = int(0)
         capped = int(0)
+        centre = view
         for s in range(sample_count):
             state = wp.rand_init(seed + (first_sample + s) * 9973, pixel)
+            view = centre
+            if pixel_jitter != 0:
+                # a box-filtered pixel, as Mitsuba and pbrt sample it (used by the Mitsuba cross-check)
+                view = camera_ray_at(cam, row, col, wp.randf(state), wp.randf(state))
+                cos_axis = wp.dot(view, axis)
+                t_near = cam.near / cos_axis
+                t_far = cam.far / cos_axis
             # primary transmittance (the layer's transmittance AOV) by ratio tracking, 0 where the ground is hit
             origin = view * t_near
             t_end = t_far - t_near

@@ -30,6 +30,8 @@ class PathTracerSettings:
     environment       --    0       >= 0       uniform radiance arriving from every direction (grey), for furnace
                                                tests and overcast light; 0 = none
     samples_per_pass  --    auto    >= 1       paths per pixel per kernel launch (auto: 8 on the CPU, 64 on GPUs)
+    pixel_jitter      --    0       0 or 1     0: every path through the pixel centre, like the other techniques
+                                               (the reference compares pixel for pixel); 1: box-filtered pixels
     ================= ===== ======= ========== =======================================================================
     """
 
@@ -40,8 +42,11 @@ class PathTracerSettings:
     majorant_block: float = 8
     environment: float = 0.0
     samples_per_pass: float | None = None
+    pixel_jitter: float = 0
 
     def __post_init__(self):
+        if self.pixel_jitter not in (0, 1):
+            raise UsageError(f"setting pixel_jitter must be 0 or 1, got {self.pixel_jitter}")
         for name in ("spp", "max_bounces", "majorant_block"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 1 and float(value).is_integer()):
@@ -153,7 +158,7 @@ class PathTracer:
                     wp.vec3(float(settings.environment)),
                     float(ground.height - camera.position[1]) if ground is not None else 0.0,
                     wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist()),
-                    int(settings.seed), done, count, int(settings.max_bounces),
+                    int(settings.seed), int(settings.pixel_jitter), done, count, int(settings.max_bounces),
                     radiance_sum, radiance_sq, transmittance_sum, depth_sum, counters,
                 ]
                 launch_rows(kernel, height, width, inputs, device)

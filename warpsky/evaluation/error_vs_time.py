@@ -1,0 +1,222 @@
+"""``warpsky bench error-vs-time``: every technique's error against a converged path-traced reference, and its time.
+
+The reference is the path tracer at ``reference_spp`` samples with its own seed, cached on disk under
+``$WARPSKY_CACHE/reference`` (keyed by a hash of the scene as read — media, camera, sun, ground —, the resolution,
+device kind, samples and seed) so repeated reports do not pay for
+it. Each technique then renders along its quality ladder; every rung is timed after one untimed render of that
+technique (first-compile time is excluded, and the report says so). Errors are taken over *covered* pixels (the
+reference's luminance transmittance below 0.99) on the layer radiance:
+
+=================== ===================================================================================
+column              meaning
+=================== ===================================================================================
+rel_rmse            sqrt(mean((x - r)^2)) / mean(r), over covered pixels and channels
+mean_rel, p95_rel   mean and 95th percentile of |x - r| / max(r, 1e-2 mean(r)) per covered pixel/channel
+bias                (mean(x) - mean(r)) / mean(r): the part of the error more samples do not remove
+=================== ===================================================================================
+
+The reference's own noise is reported as ``reference_rel_noise`` (relative standard error of the covered mean,
+and per-pixel relative RMS noise): errors below it are not resolved.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from warpsky.errors import UsageError
+from warpsky.files import atomic_write, cache_dir
+
+#: Techniques the report knows how to walk, with their quality ladders.
+LADDERS = {
+    "single_scatter": [{"step_length": k, "shadow_step_length": k} for k in (4.0, 2.0, 1.0, 0.5, 0.25)],
+    "path_tracer": [{"spp": n} for n in (1, 2, 4, 8, 16, 32, 64, 128, 256)],
+}
+#: Ladder settings given in voxel edges (multiplied by the scene's smallest voxel edge).
+VOXEL_SETTINGS = ("step_length", "shadow_step_length")
+
+
+@dataclass
+class Row:
+    technique: str
+    setting: str
+    seconds: float
+    rel_rmse: float
+    mean_rel: float
+    p95_rel: float
+    bias: float
+
+
+@dataclass
+class Report:
+    rows: list[Row]
+    reference: dict = field(default_factory=dict)
+
+
+def _reference_key(scene, width, height, device, spp, seed) -> str:
+    """Hash of everything the reference's pixels depend on: the scene as read (media, camera, sun, ground)."""
+    import pickle
+
+    import warpsky
+
+    digest = hashlib.sha256(pickle.dumps(scene, protocol=4))
+    digest.update(json.dumps([width, height, "cuda" in str(device), spp, seed, warpsky.__version__]).encode())
+    return digest.hexdigest()[:20]
+
+
+def reference_image(scene, width, height, device, *, spp: int, seed: int, use_cache: bool = True):
+    """(radiance, transmittance, variance, seconds, cached) of the path-traced reference."""
+    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+
+    key = _reference_key(scene, width, height, device, spp, seed)
+    path = cache_dir() / "reference" / f"{key}.npz"
+    if use_cache and path.is_file():
+        with np.load(path) as data:
+            return data["radiance"], data["transmittance"], data["variance"], float(data["seconds"]), True
+    layer = PathTracer(PathTracerSettings(spp=spp, seed=seed), device=device).render(scene, width, height)
+    arrays = {"radiance": layer.radiance, "transmittance": layer.transmittance,
+              "variance": layer.aovs["variance"], "seconds": np.float64(layer.stats["seconds"])}
+    atomic_write(path, lambda tmp: np.savez(tmp, **arrays))
+    return layer.radiance, layer.transmittance, layer.aovs["variance"], layer.stats["seconds"], False
+
+
+def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray) -> dict:
+    """The report's error columns for ``image`` against ``reference`` over ``covered`` pixels (H, W) bool."""
+    x = image[covered].astype(np.float64)
+    r = reference[covered].astype(np.float64)
+    if r.size == 0:
+        raise UsageError("the reference covers no pixel: nothing to measure (is the camera looking at the media?)")
+    mean_r = float(r.mean())
+    if mean_r <= 0.0:
+        raise UsageError("the reference is black over the covered pixels: is the sun below the horizon?")
+    rel = np.abs(x - r) / np.maximum(r, 1e-2 * mean_r)
+    return {
+        "rel_rmse": float(np.sqrt(np.mean((x - r) ** 2)) / mean_r),
+        "mean_rel": float(rel.mean()),
+        "p95_rel": float(np.percentile(rel, 95)),
+        "bias": float((x.mean() - mean_r) / mean_r),
+    }
+
+
+def _setting_label(values: dict) -> str:
+    return ", ".join(f"{k}={v:g}" for k, v in values.items() if k != "shadow_step_length")
+
+
+def run_report(
+    scene,
+    *,
+    techniques: list[str],
+    width: int,
+    height: int,
+    device: str,
+    budget: float = 60.0,
+    reference_spp: int = 1024,
+    reference_seed: int = 1_000_003,
+    use_cache: bool = True,
+    log=print,
+) -> Report:
+    """Render the reference and every technique's ladder; stop a ladder once its cumulative time passes
+    ``budget`` / len(techniques) seconds."""
+    from warpsky.techniques.base import parse_settings, technique_class
+
+    unknown = [t for t in techniques if t not in LADDERS]
+    if unknown:
+        raise UsageError(f"error-vs-time cannot measure {', '.join(unknown)} (yet); available: "
+                         f"{', '.join(LADDERS)}")
+    if not scene.media:
+        raise UsageError("the stage holds no media: nothing to measure")
+    radiance_ref, trans_ref, var_ref, ref_seconds, cached = reference_image(
+        scene, width, height, device, spp=reference_spp, seed=reference_seed, use_cache=use_cache)
+    log(f"reference: path_tracer {reference_spp} spp, {'loaded from cache' if cached else f'{ref_seconds:.1f} s'}")
+    luminance_t = trans_ref @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    covered = luminance_t < 0.99
+    mean_r = float(radiance_ref[covered].mean()) if covered.any() else 0.0
+    noise_mean = float(np.sqrt(var_ref[covered].sum()) / max(radiance_ref[covered].sum(), 1e-30))
+    noise_pixel = float(np.sqrt(var_ref[covered].mean()) / max(mean_r, 1e-30))
+    voxel = min(float(m.voxel_size.min()) for m in scene.media)
+    rows = []
+    share = budget / max(len(techniques), 1)
+    for name in techniques:
+        cls = technique_class(name)
+        spent = 0.0
+        warmed = False
+        for rung in LADDERS[name]:
+            values = {k: (v * voxel if k in VOXEL_SETTINGS else v) for k, v in rung.items()}
+            settings = parse_settings(cls.Settings, {k: str(v) for k, v in values.items()})
+            technique = cls(settings, device=device)
+            if not warmed:
+                technique.render(scene, min(width, 8), min(height, 8))  # compile / load: not timed
+                warmed = True
+            started = time.perf_counter()
+            layer = technique.render(scene, width, height)
+            seconds = time.perf_counter() - started
+            spent += seconds
+            row = Row(name, _setting_label(rung), seconds, **error_metrics(layer.radiance, radiance_ref, covered))
+            rows.append(row)
+            log(f"  {name:<15} {row.setting:<22} {seconds:8.3f} s  rel RMSE {row.rel_rmse:.4f}")
+            if spent > share:
+                break
+    return Report(rows, {"spp": reference_spp, "seconds": ref_seconds, "cached": cached,
+                         "covered_pixels": int(covered.sum()), "rel_noise_of_mean": noise_mean,
+                         "rel_noise_per_pixel": noise_pixel, "width": width, "height": height, "device": device})
+
+
+def format_table(report: Report) -> str:
+    lines = [f"{'technique':<15} {'setting':<22} {'seconds':>9} {'rel RMSE':>9} {'mean rel':>9} {'p95 rel':>9} "
+             f"{'bias':>8}"]
+    for r in report.rows:
+        lines.append(f"{r.technique:<15} {r.setting:<22} {r.seconds:>9.3f} {r.rel_rmse:>9.4f} {r.mean_rel:>9.4f} "
+                     f"{r.p95_rel:>9.4f} {r.bias:>+8.4f}")
+    ref = report.reference
+    lines.append(f"reference: path_tracer {ref['spp']} spp on {ref['width']}x{ref['height']}, "
+                 f"{ref['covered_pixels']} covered pixels; its own noise: {ref['rel_noise_per_pixel']:.4f} per pixel, "
+                 f"{ref['rel_noise_of_mean']:.5f} of the mean. Times exclude first compiles.")
+    return "\n".join(lines)
+
+
+def write_outputs(report: Report, out_dir: Path, stem: str = "error_vs_time") -> list[Path]:
+    """CSV, JSON and a log-log PNG (one curve per technique) into ``out_dir``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = [out_dir / f"{stem}.csv", out_dir / f"{stem}.json", out_dir / f"{stem}.png"]
+    columns = [f.name for f in dataclasses.fields(Row)]
+
+    def write_csv(tmp):
+        with open(tmp, "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(columns)
+            for r in report.rows:
+                writer.writerow([getattr(r, c) for c in columns])
+
+    atomic_write(paths[0], write_csv)
+    blob = json.dumps({"rows": [dataclasses.asdict(r) for r in report.rows], "reference": report.reference,
+                       "note": "seconds exclude first-compile time"}, indent=2)
+    atomic_write(paths[1], lambda tmp: Path(tmp).write_text(blob))
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for name in dict.fromkeys(r.technique for r in report.rows):
+        rows = [r for r in report.rows if r.technique == name]
+        ax.loglog([r.seconds for r in rows], [max(r.rel_rmse, 1e-6) for r in rows], "o-", label=name)
+    ax.axhline(report.reference["rel_noise_per_pixel"], color="grey", ls="--", lw=0.8,
+               label="reference noise (per pixel)")
+    ax.set_xlabel("render time [s] (excluding first compile)")
+    ax.set_ylabel("relative RMSE vs path-traced reference")
+    ax.set_title(f"error vs time, {report.reference['width']}x{report.reference['height']} on "
+                 f"{report.reference['device']}")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    atomic_write(paths[2], lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
+    plt.close(fig)
+    return paths
