@@ -86,7 +86,9 @@ def scene_dict(scene, width: int, height: int, spp: int, *, max_depth: int = -1)
     fov = math.degrees(2.0 * math.atan(0.5 * camera.horizontal_aperture / camera.focal_length))
     out = {
         "type": "scene",
-        "integrator": {"type": "volpath", "max_depth": max_depth, "rr_depth": 5},
+        # Russian roulette off: with albedo 1, its 0.95 survival cap makes deep paths heavy-tailed (weights
+        # 1/0.95^n), so finite-sample means in thick clouds come out low; paths end by escaping instead.
+        "integrator": {"type": "volpath", "max_depth": max_depth, "rr_depth": 1 << 30},
         "sensor": {
             "type": "perspective", "fov": fov, "fov_axis": "x",
             "near_clip": float(camera.near), "far_clip": float(camera.far),
