@@ -14,10 +14,12 @@ def kernel_modules() -> list:
     import warpsky.media.fields as fields
     import warpsky.optics.ice_kernels as ice_kernels
     import warpsky.optics.kernels as optics
+    import warpsky.techniques.sky.kernels as sky
     from warpsky.techniques.path_tracer.kernels import path_trace_kernel
     from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
 
-    modules = [wp.get_module(fields.__name__), wp.get_module(optics.__name__), wp.get_module(ice_kernels.__name__)]
+    modules = [wp.get_module(fields.__name__), wp.get_module(optics.__name__), wp.get_module(ice_kernels.__name__),
+               wp.get_module(sky.__name__)]
     modules += [
         single_scatter_kernel(has_ground, has_tables).module
         for has_ground in (False, True)

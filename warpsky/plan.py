@@ -97,6 +97,16 @@ def make_plan(
         features["optics"] = "phase tables for " + ", ".join(states)
     else:
         features["optics"] = "analytic phase only: no species fields, no tables built"
+    if scene.atmosphere is not None:
+        atm = scene.atmosphere
+        night = scene.sun is None or scene.sun.direction[1] <= 0.0
+        features["sky"] = (
+            f"{atm.name}: analytic Riley single-scattering sky, aerial perspective and sun disk; betaSeaLevel "
+            f"{np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, scale height {atm.scale_height:g} m, altitude "
+            f"{atm.altitude:g} m" + ("; sun below the horizon: night (black sky)" if night else "")
+        )
+    else:
+        features["sky"] = "off (no warpsky:atmosphere prim): black background, no sky pass"
     features["ground"] = (
         f"{scene.ground.name} at y = {scene.ground.height:g} m, albedo {np.round(scene.ground.albedo, 3).tolist()}"
         if scene.ground is not None

@@ -84,6 +84,19 @@ def settings_hash(plan: RenderPlan, options: RenderOptions) -> str:
     return hashlib.sha256(key.encode()).hexdigest()[:16]
 
 
+def render_layers(technique, scene, plan):
+    """(the technique's layer, all layers front to back): with an atmosphere, the media see sunlight reddened by
+    the air above them, and the sky pass adds air in front of and behind them plus the sun's disk."""
+    if scene.atmosphere is None:
+        layer = technique.render(scene, plan.width, plan.height)
+        return layer, [layer]
+    from warpsky.techniques.sky.technique import SkyPass, attenuated_sun
+
+    layer = technique.render(attenuated_sun(scene), plan.width, plan.height)
+    front, back = SkyPass(device=plan.device).render(scene, plan.width, plan.height, media_depth=layer.depth)
+    return layer, [front, layer, back]
+
+
 def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> FrameResult:
     """Render the stage at ``time_code`` (None: earliest) and write ``out_path`` atomically."""
     from warpsky.output.exr import write_exr
@@ -91,8 +104,8 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
     started = _time.perf_counter()
     scene, plan = plan_frame(reader, time_code, options)
     technique = technique_class(plan.technique)(plan.settings, device=plan.device)
-    layer = technique.render(scene, plan.width, plan.height)
-    frame = composite([layer], far=scene.camera.far)
+    layer, layers = render_layers(technique, scene, plan)
+    frame = composite(layers, far=scene.camera.far)
     metadata = {
         "stage": str(Path(reader.path).resolve()),
         "camera": scene.camera.name,

@@ -295,6 +295,46 @@ class Ground:
 
 
 @dataclass(frozen=True)
+class Atmosphere:
+    """Air as Riley 2004 §4.1 models it: Rayleigh scattering, density falling exponentially with altitude.
+
+    ========================= ============================= ====== ======================= ========================
+    attribute (USD)           field                         unit   default                 meaning
+    ========================= ============================= ====== ======================= ========================
+    ``warpsky:atmosphere:``   ``beta_sea_level``            1/m    Riley Table 3:          scattering (= extinction)
+    ``betaSeaLevel`` color3f                                       5.8e-6, 1.35e-5,        coefficient at sea level
+                                                                   3.31e-5                 per channel
+    ``...:scaleHeight`` float ``scale_height``              m      8000                    1/γ of Eq. 10
+    ``...:altitude`` float    ``altitude``                  m      0                       altitude above sea level
+                                                                                           of the stage's y = 0
+    ========================= ============================= ====== ======================= ========================
+
+    The sun's irradiance is the DistantLight's, taken as outside the atmosphere.
+    """
+
+    beta_sea_level: np.ndarray = field(default_factory=lambda: np.array([5.8e-6, 1.35e-5, 3.31e-5]))
+    scale_height: float = 8000.0
+    altitude: float = 0.0
+    name: str = "atmosphere"
+
+    def __post_init__(self):
+        beta = _vec3(self.beta_sea_level, f"atmosphere {self.name}: betaSeaLevel")
+        if np.any(beta < 0.0):
+            raise SceneError(f"atmosphere {self.name}: betaSeaLevel must be >= 0 [1/m], got {beta.tolist()}")
+        object.__setattr__(self, "beta_sea_level", beta)
+        if not (math.isfinite(self.scale_height) and self.scale_height > 0.0):
+            raise SceneError(f"atmosphere {self.name}: scaleHeight must be a positive length [m], "
+                             f"got {self.scale_height}")
+        if not math.isfinite(self.altitude):
+            raise SceneError(f"atmosphere {self.name}: altitude must be finite [m], got {self.altitude}")
+
+    @property
+    def gamma(self) -> float:
+        """γ = 1 / scale height [1/m]."""
+        return 1.0 / self.scale_height
+
+
+@dataclass(frozen=True)
 class Scene:
     """Everything a renderer needs at one time code.
 
@@ -303,6 +343,7 @@ class Scene:
         sun: The sun, or None for a scene lit by nothing (renders black).
         media: Participating media; their extinctions add where they overlap.
         ground: Optional ground plane.
+        atmosphere: Optional air (sky, aerial perspective, reddened sunlight); None: black background.
         time_code: USD time code this scene was read at (``nan`` for the default time).
         source: Stage file path, for metadata.
         resolution: Image size (width, height) authored on the stage's render settings, if any.
@@ -312,6 +353,7 @@ class Scene:
     sun: Sun | None = None
     media: tuple[VoxelMedium, ...] = ()
     ground: Ground | None = None
+    atmosphere: Atmosphere | None = None
     time_code: float = float("nan")
     source: str = ""
     resolution: tuple[int, int] | None = None

@@ -260,6 +260,41 @@ class StageReader:
             return Ground(float(world[1, 3]), albedo, str(prim.GetPath()))
         return None
 
+    # ------------------------------------------------------------------------------------------ atmosphere
+    def read_atmosphere(self, time=None):
+        """The first active prim with ``warpsky:atmosphere:*`` attributes (e.g. a Scope /World/Atmosphere)."""
+        from warpsky.scene.model import Atmosphere
+
+        tc = self._time(time)
+        for prim in self.stage.Traverse():
+            names = [a.GetName() for a in prim.GetAttributes() if a.GetName().startswith("warpsky:atmosphere:")]
+            if not names:
+                continue
+            known = {"warpsky:atmosphere:betaSeaLevel", "warpsky:atmosphere:scaleHeight",
+                     "warpsky:atmosphere:altitude", "warpsky:atmosphere:enabled"}
+            unknown = sorted(set(names) - known)
+            if unknown:
+                raise SceneError(f"atmosphere {prim.GetPath()}: unknown attribute(s) {', '.join(unknown)}; known: "
+                                 f"{', '.join(sorted(known))}")
+            enabled = prim.GetAttribute("warpsky:atmosphere:enabled")
+            if enabled and enabled.HasAuthoredValue() and not bool(enabled.Get(tc)):
+                return None
+            kwargs = {"name": str(prim.GetPath())}
+            beta = self._color_attr(prim, "warpsky:atmosphere:betaSeaLevel", tc)
+            if beta is not None:
+                kwargs["beta_sea_level"] = beta
+            for attr, key, scale in (("scaleHeight", "scale_height", self.meters_per_unit),
+                                     ("altitude", "altitude", self.meters_per_unit)):
+                a = prim.GetAttribute(f"warpsky:atmosphere:{attr}")
+                if a and a.HasAuthoredValue():
+                    value = a.Get(tc)
+                    if not isinstance(value, (int, float)):
+                        raise SceneError(f"atmosphere {prim.GetPath()}: warpsky:atmosphere:{attr} must be a float "
+                                         f"[scene units], got {value!r}")
+                    kwargs[key] = float(value) * scale
+            return Atmosphere(**kwargs)
+        return None
+
     # ----------------------------------------------------------------------------------------------- media
     def read_media(self, time=None) -> tuple[VoxelMedium, ...]:
         from pxr import UsdVol
@@ -414,6 +449,7 @@ class StageReader:
             sun=self.read_sun(time),
             media=self.read_media(time),
             ground=self.read_ground(time),
+            atmosphere=self.read_atmosphere(time),
             time_code=float("nan") if time is None else float(time),
             source=str(self.path),
             resolution=resolution,

@@ -1,0 +1,112 @@
+"""The sky pass in frames: USD atmosphere prim, composition with media, the sun's disk, night, no banding."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import StageSpec, look_rotation, write_stage
+
+from warpsky.errors import SceneError
+from warpsky.scene.usd import StageReader
+
+
+def add_atmosphere(stage_path, **attributes):
+    from pxr import Sdf, Usd
+
+    stage = Usd.Stage.Open(str(stage_path))
+    prim = stage.DefinePrim("/World/Atmosphere", "Scope")
+    types = {"scaleHeight": Sdf.ValueTypeNames.Float, "altitude": Sdf.ValueTypeNames.Float,
+             "betaSeaLevel": Sdf.ValueTypeNames.Color3f, "enabled": Sdf.ValueTypeNames.Bool,
+             "scaleHight": Sdf.ValueTypeNames.Float}
+    for name, value in attributes.items():
+        prim.CreateAttribute(f"warpsky:atmosphere:{name}", types[name]).Set(value)
+    if not attributes:
+        prim.CreateAttribute("warpsky:atmosphere:scaleHeight", Sdf.ValueTypeNames.Float).Set(8000.0)
+    stage.Save()
+    return stage_path
+
+
+def frame(stage_path, device, width=16, height=16):
+    from warpsky.composite import composite
+    from warpsky.plan import make_plan
+    from warpsky.render import render_layers
+    from warpsky.techniques.single_scatter.technique import SingleScatter
+
+    scene = StageReader(stage_path).scene_at(None)
+    plan = make_plan(scene, resolution=(width, height), device=device)
+    _, layers = render_layers(SingleScatter(plan.settings, device=device), scene, plan)
+    return scene, composite(layers, far=scene.camera.far)
+
+
+def test_atmosphere_prim_is_read_and_validated(tmp_path, homogeneous_npy):
+    path = write_stage(tmp_path / "a.usda", StageSpec(volume_file=homogeneous_npy))
+    assert StageReader(path).scene_at(None).atmosphere is None
+    add_atmosphere(path, scaleHeight=7000.0, altitude=250.0)
+    atm = StageReader(path).scene_at(None).atmosphere
+    assert atm.scale_height == 7000.0 and atm.altitude == 250.0
+    np.testing.assert_allclose(atm.beta_sea_level, [5.8e-6, 1.35e-5, 3.31e-5])  # Riley Table 3
+    add_atmosphere(path, enabled=False)
+    assert StageReader(path).scene_at(None).atmosphere is None
+    bad = write_stage(tmp_path / "b.usda", StageSpec(volume_file=homogeneous_npy))
+    add_atmosphere(bad, scaleHight=1.0)
+    with pytest.raises(SceneError, match="scaleHight"):
+        StageReader(bad).scene_at(None)
+
+
+def test_zero_density_medium_leaves_the_sky_unchanged(tmp_path, device):
+    zero = tmp_path / "zero.npy"
+    np.save(zero, np.zeros((4, 4, 4), np.float32))
+    spec = StageSpec(volume_file=zero, camera_position=(0.0, 50.0, 40.0),
+                     camera_rotation=look_rotation((0.0, 0.2, -1.0)), sun_direction=(0.2, 0.5, -0.6))
+    with_medium = add_atmosphere(write_stage(tmp_path / "m.usda", spec))
+    spec.volume_file = None
+    without = add_atmosphere(write_stage(tmp_path / "n.usda", spec))
+    _, a = frame(with_medium, device)
+    _, b = frame(without, device)
+    np.testing.assert_allclose(a.rgba, b.rgba, rtol=1e-6, atol=1e-12)
+    assert b.rgba[..., :3].min() > 0.0 and np.all(b.rgba[..., 3] == 1.0)  # the sky covers every pixel
+
+
+def test_sky_scales_with_irradiance_and_night_is_black(tmp_path, device):
+    images = []
+    for intensity in (1.0, 4.0):
+        spec = StageSpec(sun_intensity=intensity, camera_position=(0.0, 10.0, 0.0),
+                         camera_rotation=look_rotation((0.0, 0.3, -1.0)), sun_direction=(0.0, 0.4, 1.0))
+        images.append(frame(add_atmosphere(write_stage(tmp_path / f"s{intensity}.usda", spec)), device)[1].rgba)
+    np.testing.assert_allclose(images[1][..., :3], 4.0 * images[0][..., :3], rtol=1e-5)
+    spec = StageSpec(camera_position=(0.0, 10.0, 0.0), sun_direction=(0.0, -0.1, 1.0))
+    _, night = frame(add_atmosphere(write_stage(tmp_path / "night.usda", spec)), device)
+    assert np.all(np.isfinite(night.rgba)) and np.all(night.rgba[..., :3] == 0.0)
+
+
+def test_sun_disk_is_seen_through_the_air(tmp_path, device):
+    from warpsky.techniques.sky.analytic import transmittance
+
+    sun = np.array([0.0, 0.5, -1.0]) / np.linalg.norm([0.0, 0.5, -1.0])
+    spec = StageSpec(camera_position=(0.0, 0.0, 0.0), camera_rotation=look_rotation(sun), focal_length=2000.0,
+                     aperture=(30.0, 30.0), sun_direction=tuple(sun))
+    scene, image = frame(add_atmosphere(write_stage(tmp_path / "sun.usda", spec)), device, 9, 9)
+    centre = image.rgba[4, 4, :3]
+    solid = 2 * np.pi * (1 - np.cos(0.5 * scene.sun.angular_diameter))
+    disk = scene.sun.irradiance / solid * transmittance(scene.atmosphere.beta_sea_level, scene.atmosphere.gamma,
+                                                          0.0, sun[1], np.inf)
+    np.testing.assert_allclose(centre, disk, rtol=1e-3)  # the in-scattered sky is 1e-5 of the disk
+    assert image.rgba[0, 0, 1] < 1e-3 * centre[1]  # the corner is 0.6 deg off the sun: sky, not disk
+
+
+def test_horizon_column_has_no_banding(device):
+    from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
+    from warpsky.techniques.sky.technique import SkyPass
+
+    camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.0, 0.0, -1.0)), 50.0, 36.0, 36.0)
+    scene = Scene(camera, Sun(np.array([0.3, 0.2, -1.0]) / np.linalg.norm([0.3, 0.2, -1.0]), np.ones(3)),
+                  atmosphere=Atmosphere())
+    front, _ = SkyPass(device=device).render(scene, 1, 4096)
+    column = front.radiance[:, 0, :].astype(np.float64)
+    assert np.all(np.isfinite(column)) and column.min() >= 0.0
+    # a flat earth's horizon is a steep but continuous cusp (optical depth ~ 1/elevation): away from its 16
+    # nearest rows the column is smooth to float32 precision, with no stair steps (banding)
+    second = np.abs(np.diff(column, 2, axis=0)).max(axis=1)
+    rows = np.arange(len(second)) + 1
+    away = np.abs(rows - 2048) > 16
+    assert second[away].max() < 3e-4 * column.max()

@@ -1,0 +1,69 @@
+"""The sky pass: per pixel, air in front of the media's midplane, air behind it, and the sun's disk (Riley §4)."""
+
+from __future__ import annotations
+
+import warp as wp
+
+from warpsky.techniques.common import PinholeCamera, camera_ray
+from warpsky.techniques.sky.analytic import air_depth, air_inscatter
+
+RAYLEIGH_NORM = wp.constant(0.05968310365946075)  # 3 / (16 pi)
+INFINITE = wp.constant(1.0e30)
+
+
+@wp.func
+def exp3(v: wp.vec3) -> wp.vec3:
+    return wp.vec3(wp.exp(-v[0]), wp.exp(-v[1]), wp.exp(-v[2]))
+
+
+@wp.kernel
+def sky_kernel(
+    cam: PinholeCamera,
+    camera_altitude: float,
+    beta_sl: wp.vec3,
+    gamma: float,
+    sun_dir: wp.vec3,
+    sun_irradiance: wp.vec3,
+    sun_cos_radius: float,
+    sun_solid_angle: float,
+    has_ground: int,
+    ground_offset: float,
+    media_depth: wp.array2d(dtype=float),
+    front_radiance: wp.array2d(dtype=wp.vec3),
+    front_transmittance: wp.array2d(dtype=wp.vec3),
+    back_radiance: wp.array2d(dtype=wp.vec3),
+):
+    row, col = wp.tid()
+    view = camera_ray(cam, row, col)
+    axis = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
+    cos_axis = wp.dot(view, axis)
+    # where the air ends: the ground plane, else infinity
+    t_end = INFINITE
+    if has_ground != 0:
+        if view[1] < 0.0 and ground_offset < 0.0:
+            t_end = ground_offset / view[1]
+    # the media's representative depth splits the air into a front and a back part (Riley §4, Fig. 7)
+    split = t_end
+    d = media_depth[row, col]
+    if d < cam.far:
+        split = wp.min(d / cos_axis, t_end)
+    cos_theta = wp.dot(sun_dir, view)  # light travels along -sun, leaves towards the eye along -view
+    phase = RAYLEIGH_NORM * (1.0 + cos_theta * cos_theta)
+    sun_y = sun_dir[1]
+    front = air_inscatter(beta_sl, gamma, camera_altitude, view[1], sun_y, split)
+    front_radiance[row, col] = wp.cw_mul(sun_irradiance, front) * phase
+    front_transmittance[row, col] = exp3(air_depth(beta_sl, gamma, camera_altitude, view[1], split))
+    back = wp.vec3(0.0)
+    if split < t_end:
+        h_split = camera_altitude + view[1] * split
+        rest = t_end
+        if t_end < INFINITE:
+            rest = t_end - split
+        back = wp.cw_mul(sun_irradiance, air_inscatter(beta_sl, gamma, h_split, view[1], sun_y, rest)) * phase
+    # the sun's disk, behind everything, through the air beyond the split (to the top of the atmosphere)
+    if t_end >= INFINITE and cos_theta >= sun_cos_radius and sun_y > 0.0:
+        beyond = wp.vec3(1.0)  # no media: the front layer's transmittance already holds all the air
+        if split < INFINITE:
+            beyond = exp3(air_depth(beta_sl, gamma, camera_altitude + view[1] * split, view[1], INFINITE))
+        back += wp.cw_mul(sun_irradiance, beyond) / sun_solid_angle
+    back_radiance[row, col] = back

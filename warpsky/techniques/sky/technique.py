@@ -1,0 +1,86 @@
+"""Host side of the sky pass and the sunlight the atmosphere leaves for the media (Riley 2004 §4.1, §4.2.4)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from warpsky.scene.model import Scene
+from warpsky.techniques.base import Layer
+
+
+def media_altitude(scene: Scene) -> float:
+    """Altitude above sea level [m] at which the media (else the ground, else the camera) receive sunlight."""
+    atmosphere = scene.atmosphere
+    if scene.media:
+        centres = []
+        for medium in scene.media:
+            n = np.asarray(medium.shape, dtype=np.float64)
+            centre = np.asarray(medium.world_from_index, dtype=np.float64) @ np.append(0.5 * (n - 1.0), 1.0)
+            centres.append(centre[1])
+        y = float(np.mean(centres))
+    elif scene.ground is not None:
+        y = scene.ground.height
+    else:
+        y = float(scene.camera.position[1])
+    return y + atmosphere.altitude
+
+
+def attenuated_sun(scene: Scene) -> Scene:
+    """``scene`` with its sun's irradiance reduced by the air above the media (Eq. 12); night leaves it unlit.
+
+    One transmittance per scene, taken at the media's centre altitude: the variation across a cloud is below 1%
+    for clouds a few km tall at sun elevations above ~5 deg, and documented as an approximation.
+    """
+    if scene.atmosphere is None or scene.sun is None:
+        return scene
+    from warpsky.techniques.sky.analytic import sun_transmittance
+
+    atm = scene.atmosphere
+    t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), scene.sun.direction[1])
+    return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=scene.sun.irradiance * t))
+
+
+class SkyPass:
+    """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk)."""
+
+    def __init__(self, *, device: str = "cpu"):
+        self.device = device
+
+    def render(self, scene: Scene, width: int, height: int, media_depth: np.ndarray | None = None):
+        """(front Layer, back Layer); composite as [front, media, back]."""
+        import warp as wp
+
+        from warpsky.techniques.common import pinhole_camera
+        from warpsky.techniques.sky.kernels import sky_kernel
+
+        atm = scene.atmosphere
+        camera = scene.camera.conformed(width, height)
+        far = float(camera.far)
+        depth = np.full((height, width), far, np.float32) if media_depth is None else media_depth
+        sun = scene.sun
+        sun_dir = sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])
+        irradiance = sun.irradiance if sun is not None else np.zeros(3)
+        radius = 0.5 * (sun.angular_diameter if sun is not None else 0.0)
+        solid_angle = 2.0 * math.pi * (1.0 - math.cos(radius)) if radius > 0 else 1.0
+        cos_radius = math.cos(radius) if radius > 0 else 2.0  # a zero-size sun has no disk
+        ground = scene.ground
+        with wp.ScopedDevice(self.device):
+            shape = (height, width)
+            front = wp.zeros(shape, dtype=wp.vec3)
+            front_t = wp.zeros(shape, dtype=wp.vec3)
+            back = wp.zeros(shape, dtype=wp.vec3)
+            wp.launch(sky_kernel, dim=shape, inputs=[
+                pinhole_camera(camera, width, height), float(camera.position[1] + atm.altitude),
+                wp.vec3(*atm.beta_sea_level.tolist()), float(atm.gamma), wp.vec3(*np.asarray(sun_dir).tolist()),
+                wp.vec3(*np.asarray(irradiance).tolist()), float(cos_radius), float(solid_angle),
+                int(ground is not None), float(ground.height - camera.position[1]) if ground is not None else 0.0,
+                wp.array(np.ascontiguousarray(depth, dtype=np.float32)), front, front_t, back,
+            ])
+            wp.synchronize_device(self.device)
+            front_layer = Layer(front.numpy(), front_t.numpy(), np.full(shape, far, np.float32))
+            back_layer = Layer(back.numpy(), np.zeros((height, width, 3), np.float32),
+                               np.full(shape, far, np.float32))
+        return front_layer, back_layer
