@@ -110,3 +110,24 @@ def test_horizon_column_has_no_banding(device):
     rows = np.arange(len(second)) + 1
     away = np.abs(rows - 2048) > 16
     assert second[away].max() < 3e-4 * column.max()
+
+
+def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
+    """The path tracer with the air as a medium, one bounce: Riley's analytic single-scattering sky within noise,
+    and the analytic transmittance of the air to space."""
+    from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
+    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.techniques.sky.technique import SkyPass
+
+    camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.3, 0.35, -1.0)), 12.0, 36.0, 36.0)
+    sun = Sun(np.array([-0.4, 0.25, -1.0]) / np.linalg.norm([-0.4, 0.25, -1.0]), np.ones(3))
+    scene = Scene(camera, sun, atmosphere=Atmosphere())
+    front, _ = SkyPass(device=device).render(scene, 8, 8)
+    layer = PathTracer(PathTracerSettings(spp=4096, max_bounces=1, seed=9), device=device).render(scene, 8, 8)
+    variance = layer.aovs["variance"]
+    z = (layer.radiance - front.radiance) / np.sqrt(variance + 1e-30)
+    assert np.max(np.abs(z)) < 5.0, np.max(np.abs(z))
+    z_sum = (layer.radiance - front.radiance).sum() / np.sqrt(variance.sum())
+    assert abs(z_sum) < 4.0, z_sum
+    np.testing.assert_allclose(layer.transmittance, front.transmittance, atol=0.03)
+    assert front.radiance.min() > 0.0

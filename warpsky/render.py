@@ -87,8 +87,8 @@ def settings_hash(plan: RenderPlan, options: RenderOptions) -> str:
 def render_layers(technique, scene, plan):
     """(the technique's layer, all layers front to back): with an atmosphere, the media see sunlight reddened by
     the air above them, and the sky pass adds air in front of and behind them plus the sun's disk."""
-    if scene.atmosphere is None:
-        layer = technique.render(scene, plan.width, plan.height)
+    if scene.atmosphere is None or getattr(technique, "traces_air", False):
+        layer = technique.render(scene, plan.width, plan.height)  # the path tracer carries the air itself
         return layer, [layer]
     from warpsky.techniques.sky.technique import SkyPass, attenuated_sun
 

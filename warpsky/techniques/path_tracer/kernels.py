@@ -7,9 +7,11 @@ a few steps and a thick core does not slow the rest of the cloud down. Transmitt
 estimation) and along the primary ray (the layer's transmittance AOV) uses ratio tracking with the same majorants.
 
 RGB: one path carries three channels. Tentative collisions come at the majorant rate; a collision scatters with
-probability mean_c σ_t,c / μ̄ and is null otherwise, and each channel's throughput is multiplied by the ratio of
-its own probability to the one used (σ_s,c / mean σ_t for scattering, (μ̄ - σ_t,c) / (μ̄ - mean σ_t) for null
-collisions). This is unbiased for every channel (weighted delta tracking); for grey media all weights are 1.
+probability P = Σ_c w_c σ_t,c / (μ̄ Σ_c w_c), w the path's throughput (history-aware spectral tracking, Kutz et al.
+2017), and is null otherwise; each channel's weight is multiplied by its own probability over the one used
+(σ_s,c / (μ̄ P) for scattering, (μ̄ - σ_t,c) / (μ̄ (1 - P)) for null collisions). This is unbiased for every
+channel, keeps the sum of the weights on null collisions (no blow-up in chromatic air), and is exactly 1 for grey
+media.
 
 Positions are camera-relative metres (float32-safe far from the origin, as in :mod:`warpsky.media.voxel`).
 """
@@ -27,6 +29,7 @@ from warpsky.techniques.common import PinholeCamera, camera_ray, camera_ray_at
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
 MAJORANT_MARGIN = wp.constant(1.0001)
+RAYLEIGH_NORM = wp.constant(0.05968310365946075)  # 3 / (16 pi)
 INV_4PI = wp.constant(0.07957747154594767)
 #: Hard cap on tentative collisions per tracking call (guards against non-progress; counted in the stats).
 MAX_TRACKING_STEPS = wp.constant(1000000)
@@ -39,6 +42,29 @@ class MajorantGrid:
     offset: int  # first value in the flat majorant buffer
     shape: wp.vec3i  # coarse cells along index x, y, z
     block: float  # voxels per cell edge
+
+
+@wp.struct
+class Air:
+    """Riley's exponential atmosphere as a medium of the path tracer (enabled = 0: no air).
+
+    Extinction = scattering = beta_sl e^{-gamma h} [1/m] with h = camera_altitude + y (camera-relative y), Rayleigh
+    phase. Its majorant over a stretch of ray is the density at the stretch's lowest point; stretches span ``band``
+    metres of height. Above the height where the remaining optical depth to space falls below 1e-6 the air is
+    treated as vacuum (a relative bias below 1e-6), so upward rays end.
+    """
+
+    enabled: int
+    beta_sl: wp.vec3
+    gamma: float
+    camera_altitude: float
+    band: float
+
+
+@wp.func
+def air_coefficient(air: Air, y: float) -> wp.vec3:
+    """Air's extinction (= scattering) at camera-relative height y [1/m]."""
+    return air.beta_sl * wp.exp(-air.gamma * (air.camera_altitude + y))
 
 
 @wp.struct
@@ -59,11 +85,26 @@ def majorant_segment(
     direction: wp.vec3,
     t: float,
     t_max: float,
+    air: Air,
 ) -> Segment:
     """Sum of the majorants of all media at ``origin + t * direction`` and where the first of them changes."""
     out = Segment()
     out.majorant = 0.0
     out.end = t_max
+    if air.enabled != 0:
+        y = origin[1] + t * direction[1]
+        dy = direction[1]
+        if dy == 0.0:
+            out.majorant = wp.max(air_coefficient(air, y)) * MAJORANT_MARGIN
+        else:
+            remaining = wp.max(air_coefficient(air, y)) / (air.gamma * wp.max(dy, 1.0e-30))
+            if dy < 0.0 or remaining > 1.0e-6:
+                stretch = air.band / wp.abs(dy)
+                lowest = y
+                if dy < 0.0:
+                    lowest = y + dy * wp.min(stretch, t_max - t)
+                out.majorant = wp.max(air_coefficient(air, lowest)) * MAJORANT_MARGIN
+                out.end = wp.min(out.end, t + stretch)
     for m in range(grid_count):
         grid = grids[m]
         mg = mgrids[m]
@@ -106,12 +147,15 @@ class PointMedia:
 
 @wp.func
 def media_at(
-    values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid), grid_count: int, p: wp.vec3
+    values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid), grid_count: int, p: wp.vec3, air: Air
 ) -> PointMedia:
-    """Summed extinction and scattering of all media at the camera-relative point ``p``."""
+    """Summed extinction and scattering of all media (and the air) at the camera-relative point ``p``."""
     out = PointMedia()
     out.extinction = wp.vec3(0.0)
     out.scattering = wp.vec3(0.0)
+    if air.enabled != 0:
+        out.extinction = air_coefficient(air, p[1])
+        out.scattering = out.extinction
     for m in range(grid_count):
         grid = grids[m]
         value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
@@ -147,6 +191,8 @@ def delta_track(
     origin: wp.vec3,
     direction: wp.vec3,
     t_max: float,
+    air: Air,
+    history: wp.vec3,
     state: wp.uint32,
 ) -> Flight:
     """Weighted delta tracking from ``origin`` along ``direction`` up to ``t_max`` (see the module docstring)."""
@@ -158,7 +204,7 @@ def delta_track(
     steps = int(0)
     t = float(0.0)
     while t < t_max and steps < MAX_TRACKING_STEPS:
-        seg = majorant_segment(grids, mgrids, majorants, grid_count, origin, direction, t, t_max)
+        seg = majorant_segment(grids, mgrids, majorants, grid_count, origin, direction, t, t_max, air)
         if seg.majorant <= 0.0:
             if seg.end >= t_max:
                 break
@@ -171,21 +217,24 @@ def delta_track(
             t = seg.end
             continue
         t = t + step
-        point = media_at(values, grids, grid_count, origin + t * direction)
-        tracking = mean3(point.extinction)
-        p_scatter = wp.min(tracking / seg.majorant, 1.0)
+        point = media_at(values, grids, grid_count, origin + t * direction, air)
+        # history-aware spectral tracking (Kutz et al. 2017): scatter with the throughput-weighted probability,
+        # so the channels' weights keep their sum on null collisions and cannot blow up in chromatic air
+        hw = wp.cw_mul(history, weight)
+        total = hw[0] + hw[1] + hw[2]
+        p_scatter = float(0.0)
+        if total > 0.0:
+            p_scatter = wp.clamp(wp.dot(hw, point.extinction) / (total * seg.majorant), 0.0, 1.0)
         if wp.randf(state) < p_scatter:
             out.t = t
             out.scattered = 1
-            out.weight = wp.cw_mul(weight, point.scattering / tracking)
+            out.weight = wp.cw_mul(weight, point.scattering) / (seg.majorant * p_scatter)
             out.steps = steps
             out.state = state
             return out
-        spare = seg.majorant - tracking
-        if spare > 0.0:
-            null = seg.majorant * wp.vec3(1.0) - point.extinction
-            weight = wp.cw_mul(weight, wp.vec3(wp.max(null[0], 0.0), wp.max(null[1], 0.0), wp.max(null[2], 0.0)))
-            weight = weight / spare
+        null = seg.majorant * wp.vec3(1.0) - point.extinction
+        null = wp.vec3(wp.max(null[0], 0.0), wp.max(null[1], 0.0), wp.max(null[2], 0.0))
+        weight = wp.cw_mul(weight, null) / (seg.majorant * (1.0 - p_scatter))
     out.t = t_max
     out.weight = weight
     out.steps = steps
@@ -212,6 +261,7 @@ def ratio_track(
     origin: wp.vec3,
     direction: wp.vec3,
     t_max: float,
+    air: Air,
     state: wp.uint32,
 ) -> Transmittance:
     """Unbiased transmittance estimate per channel along the segment (ratio tracking)."""
@@ -220,7 +270,7 @@ def ratio_track(
     t = float(0.0)
     steps = int(0)
     while t < t_max and steps < MAX_TRACKING_STEPS:
-        seg = majorant_segment(grids, mgrids, majorants, grid_count, origin, direction, t, t_max)
+        seg = majorant_segment(grids, mgrids, majorants, grid_count, origin, direction, t, t_max, air)
         if seg.majorant <= 0.0:
             if seg.end >= t_max:
                 break
@@ -233,7 +283,7 @@ def ratio_track(
             t = seg.end
             continue
         t = t + step
-        point = media_at(values, grids, grid_count, origin + t * direction)
+        point = media_at(values, grids, grid_count, origin + t * direction, air)
         keep = wp.vec3(1.0) - point.extinction / seg.majorant
         tr = wp.cw_mul(tr, wp.vec3(wp.max(keep[0], 0.0), wp.max(keep[1], 0.0), wp.max(keep[2], 0.0)))
         if wp.max(tr) < 1.0e-3:
@@ -310,10 +360,16 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         tables: wp.array(dtype=float),
         p: wp.vec3,
         theta: float,
+        air: Air,
     ) -> wp.vec3:
-        """Riley Eq. 6: the scattering-weighted phase of all media at ``p`` [1/sr]."""
+        """Riley Eq. 6: the scattering-weighted phase of all media (and the air) at ``p`` [1/sr]."""
         num = wp.vec3(0.0)
         den = wp.vec3(0.0)
+        if air.enabled != 0:
+            s_air = air_coefficient(air, p[1])
+            c = wp.cos(theta)
+            num = s_air * (RAYLEIGH_NORM * (1.0 + c * c))
+            den = s_air
         for m in range(grid_count):
             grid = grids[m]
             value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
@@ -341,35 +397,42 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         cdf: wp.array(dtype=float),
         p: wp.vec3,
         d: wp.vec3,
+        air: Air,
         state: wp.uint32,
     ) -> PhaseSample:
-        """Pick a medium by its mean scattering, sample its phase, weight by the mixture's phase / mixture pdf."""
-        total = float(0.0)
+        """Pick the air or a medium by mean scattering, sample its phase (air: uniformly), and weight by the
+        mixture's phase over the mixture pdf."""
+        air_w = float(0.0)
+        if air.enabled != 0:
+            air_w = mean3(air_coefficient(air, p[1]))
+        total = air_w
         for m in range(grid_count):
             grid = grids[m]
             total += mean3(grid.scattering) * grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
         target = wp.randf(state) * total
+        use_air = target < air_w or grid_count == 0
         chosen = int(0)
-        running = float(0.0)
+        running = air_w
         for m in range(grid_count):
             grid = grids[m]
             running += mean3(grid.scattering) * grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
             if running < target:
                 chosen = m + 1
-        chosen = wp.min(chosen, grid_count - 1)
-        grid = grids[chosen]
+        chosen = wp.clamp(chosen, 0, wp.max(grid_count - 1, 0))
         u = wp.randf(state)
         cos_theta = 1.0 - 2.0 * u
-        if grid.phase_kind >= 3:
-            if wp.static(has_tables):
-                cos_theta = wp.cos(sample_table(cdf, (grid.phase_kind - 3) * 3 + 1, u)[0])
-        elif grid.phase_kind == 1:
-            cos_theta = hg_sample_cos(grid.phase_g, u)
+        if not use_air:
+            grid = grids[chosen]
+            if grid.phase_kind >= 3:
+                if wp.static(has_tables):
+                    cos_theta = wp.cos(sample_table(cdf, (grid.phase_kind - 3) * 3 + 1, u)[0])
+            elif grid.phase_kind == 1:
+                cos_theta = hg_sample_cos(grid.phase_g, u)
         theta = wp.acos(wp.clamp(cos_theta, -1.0, 1.0))
         out = PhaseSample()
         out.direction = rotate_about(d, cos_theta, 2.0 * wp.pi * wp.randf(state))
         theta = wp.atan2(wp.length(wp.cross(d, out.direction)), wp.dot(d, out.direction))
-        pdf = float(0.0)
+        pdf = air_w * INV_4PI
         for m in range(grid_count):
             g2 = grids[m]
             w = mean3(g2.scattering) * grid_value(values, g2, g2.eye_index + g2.index_from_world * p)
@@ -382,7 +445,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         out.state = state
         out.weight = wp.vec3(0.0)
         if pdf > 0.0:
-            out.weight = combined_phase_at(values, grids, grid_count, tables, p, theta) / pdf
+            out.weight = combined_phase_at(values, grids, grid_count, tables, p, theta, air) / pdf
         return out
 
     @wp.kernel(module="unique")
@@ -394,6 +457,9 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         majorants: wp.array(dtype=float),
         tables: wp.array(dtype=float),
         cdf: wp.array(dtype=float),
+        air: Air,
+        sun_cos_radius: float,
+        sun_solid_angle: float,
         cam: PinholeCamera,
         sun_dir: wp.vec3,
         sun_irradiance: wp.vec3,
@@ -423,6 +489,8 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         sun_up = bool(True)
         if wp.static(has_ground):
             sun_up = sun_dir[1] > 0.0
+        if air.enabled != 0:
+            sun_up = sun_dir[1] > 0.0  # a flat earth's air hides a sun below the horizon
         pixel = row * cam.width + col
         # Warp passes a random state to a function by value, so each function hands back its advanced state and
         # the path carries one stream (re-seeding from the stream would replay it: rand_init(randi(s)) is s's next).
@@ -449,7 +517,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                         t_end = tg
                         hits_ground = True
             if not hits_ground:
-                tr = ratio_track(values, grids, mgrids, majorants, grid_count, origin, view, t_end, state)
+                tr = ratio_track(values, grids, mgrids, majorants, grid_count, origin, view, t_end, air, state)
                 state = tr.state
                 transmittance_sum[row, col] = transmittance_sum[row, col] + tr.value
                 steps += tr.steps
@@ -473,13 +541,17 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                             on_ground = True
                 else:
                     on_ground = hits_ground
-                flight = delta_track(values, grids, mgrids, majorants, grid_count, origin, d, t_max, state)
+                flight = delta_track(values, grids, mgrids, majorants, grid_count, origin, d, t_max, air, throughput,
+                                     state)
                 state = flight.state
                 steps += flight.steps
                 throughput = wp.cw_mul(throughput, flight.weight)
                 if flight.scattered == 0 and not on_ground:
                     if bounce > 0:
                         radiance += wp.cw_mul(throughput, environment)
+                    elif air.enabled != 0 and lit and sun_up and wp.dot(d, sun_dir) >= sun_cos_radius:
+                        # with air the path tracer draws the sun's disk itself (the sky pass is not used)
+                        radiance += wp.cw_mul(throughput, sun_irradiance) / sun_solid_angle
                     break
                 p = origin + flight.t * d
                 if bounce == 0:
@@ -488,14 +560,15 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                     # next-event estimation toward the sun
                     if lit and sun_up:
                         t_sun = float(1.0e30)
-                        tr_sun = ratio_track(values, grids, mgrids, majorants, grid_count, p, sun_dir, t_sun, state)
+                        tr_sun = ratio_track(values, grids, mgrids, majorants, grid_count, p, sun_dir, t_sun, air,
+                                             state)
                         state = tr_sun.state
                         steps += tr_sun.steps
                         phase = combined_phase_at(values, grids, grid_count, tables, p,
-                                                  wp.atan2(wp.length(wp.cross(sun_dir, d)), wp.dot(sun_dir, d)))
+                                                  wp.atan2(wp.length(wp.cross(sun_dir, d)), wp.dot(sun_dir, d)), air)
                         radiance += wp.cw_mul(wp.cw_mul(throughput, phase),
                                               wp.cw_mul(sun_irradiance, tr_sun.value))
-                    ps = sample_phase(values, grids, grid_count, tables, cdf, p, d, state)
+                    ps = sample_phase(values, grids, grid_count, tables, cdf, p, d, air, state)
                     state = ps.state
                     throughput = wp.cw_mul(throughput, ps.weight)
                     d = ps.direction
@@ -506,7 +579,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                     if wp.static(has_ground):
                         if lit and sun_up:
                             tr_sun = ratio_track(values, grids, mgrids, majorants, grid_count, p, sun_dir,
-                                                 float(1.0e30), state)
+                                                 float(1.0e30), air, state)
                             state = tr_sun.state
                             steps += tr_sun.steps
                             lit_ground = wp.cw_mul(sun_irradiance, tr_sun.value)

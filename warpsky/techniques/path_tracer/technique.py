@@ -88,11 +88,14 @@ def majorant_grid(density: np.ndarray, block: int) -> np.ndarray:
 class PathTracer:
     """Unbiased volumetric path tracing of voxel media: delta tracking with local majorants, ratio-tracked
     next-event estimation toward the sun, phase sampling from the optics tables, all media combined (Riley Eq. 6),
+    the scene's atmosphere as a Rayleigh medium of exponential density (then it also draws the sun's disk),
     Russian roulette, a Lambertian ground and an optional uniform environment. Progressive: samples accumulate
     per pixel with their running variance (``Layer.aovs["variance"]``, the variance of the pixel mean)."""
 
     name = "path_tracer"
     Settings = PathTracerSettings
+    #: The atmosphere is traced as a medium: no separate sky pass.
+    traces_air = True
 
     def __init__(self, settings: PathTracerSettings | None = None, *, device: str = "cpu"):
         self.settings = settings or PathTracerSettings()
@@ -110,7 +113,7 @@ class PathTracer:
         from warpsky.optics.kernels import DevicePhaseTables
         from warpsky.optics.tables import build_tables
         from warpsky.techniques.common import pinhole_camera
-        from warpsky.techniques.path_tracer.kernels import MAJORANT_MARGIN, MajorantGrid, path_trace_kernel
+        from warpsky.techniques.path_tracer.kernels import MAJORANT_MARGIN, Air, MajorantGrid, path_trace_kernel
         from warpsky.techniques.single_scatter.technique import scene_species
 
         settings = self.resolved_settings(scene)
@@ -146,12 +149,24 @@ class PathTracer:
             sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
             ground = scene.ground
             kernel = path_trace_kernel(ground is not None, bool(species))
+            air = Air()
+            atmosphere = scene.atmosphere
+            air.enabled = int(atmosphere is not None)
+            if atmosphere is not None:
+                air.beta_sl = wp.vec3(*atmosphere.beta_sea_level.tolist())
+                air.gamma = float(atmosphere.gamma)
+                air.camera_altitude = float(camera.position[1] + atmosphere.altitude)
+                air.band = float(0.1 * atmosphere.scale_height)
+            radius = 0.5 * sun.angular_diameter if sun is not None else 0.0
+            sun_cos_radius = math.cos(radius) if radius > 0.0 else 2.0
+            sun_solid_angle = 2.0 * math.pi * (1.0 - math.cos(radius)) if radius > 0.0 else 1.0
             spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
             done = 0
             while done < spp:
                 count = min(per_pass, spp - done)
                 inputs = [
                     media.values, media.grids, media.count, mgrid_array, majorants, tables.values, tables.cdf,
+                    air, float(sun_cos_radius), float(sun_solid_angle),
                     pinhole_camera(camera, width, height),
                     wp.vec3(*np.asarray(sun_dir, dtype=np.float64).tolist()),
                     wp.vec3(*np.asarray(sun_irradiance, dtype=np.float64).tolist()),
