@@ -54,3 +54,19 @@ def test_report_refuses_unknown_techniques(tmp_path, homogeneous_npy):
     scene = StageReader(write_stage(tmp_path / "b.usda", StageSpec(volume_file=homogeneous_npy))).scene_at(None)
     with pytest.raises(UsageError, match="slicing"):
         run_report(scene, techniques=["slicing"], width=8, height=8, device="cpu")
+
+
+def test_report_on_a_scene_with_sky(tmp_path, homogeneous_npy, monkeypatch):
+    """With an atmosphere the techniques compare on frames: single scattering + sky pass vs the path tracer that
+    traces the air; the sky pixels agree, so the error comes from the cloud."""
+    from test_sky_render import add_atmosphere
+
+    monkeypatch.setenv("WARPSKY_CACHE", str(tmp_path / "cache"))
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.02, camera_position=(0.0, 30.0, 40.0),
+                     camera_rotation=look_rotation((0.0, 0.0, -1.0)), sun_direction=(0.3, 0.8, 0.5))
+    scene = StageReader(add_atmosphere(write_stage(tmp_path / "sky.usda", spec))).scene_at(None)
+    report = run_report(scene, techniques=["single_scatter"], width=8, height=8, device="cpu", budget=0.5,
+                        reference_spp=256, log=lambda text: None)
+    assert report.reference["covered_pixels"] >= 48  # the sky covers the frame (rows looking at the sea: dark)
+    assert all(np.isfinite(r.rel_rmse) for r in report.rows)
+    assert abs(report.rows[-1].bias) < 0.5

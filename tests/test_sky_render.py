@@ -119,7 +119,7 @@ def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
     from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
     from warpsky.techniques.sky.technique import SkyPass
 
-    camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.3, 0.35, -1.0)), 12.0, 36.0, 36.0)
+    camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.3, 0.9, -1.0)), 24.0, 36.0, 36.0)
     sun = Sun(np.array([-0.4, 0.25, -1.0]) / np.linalg.norm([-0.4, 0.25, -1.0]), np.ones(3))
     scene = Scene(camera, sun, atmosphere=Atmosphere())
     front, _ = SkyPass(device=device).render(scene, 8, 8)

@@ -5,7 +5,8 @@ The reference is the path tracer at ``reference_spp`` samples with its own seed,
 device kind, samples and seed) so repeated reports do not pay for
 it. Each technique then renders along its quality ladder; every rung is timed after one untimed render of that
 technique (first-compile time is excluded, and the report says so). Errors are taken over *covered* pixels (the
-reference's luminance transmittance below 0.99) on the layer radiance:
+reference's luminance transmittance below 0.99, or every lit pixel under a sky) on the frame's radiance (the
+technique's layer composited with the sky pass when the scene has an atmosphere; the path tracer traces the air):
 
 =================== ===================================================================================
 column              meaning
@@ -71,8 +72,21 @@ def _reference_key(scene, width, height, device, spp, seed) -> str:
     return digest.hexdigest()[:20]
 
 
+def render_frame_radiance(technique, scene, width: int, height: int, device: str):
+    """(frame radiance (H, W, 3), transmittance, frame aovs, technique layer): the technique's layer composited with
+    the sky pass when the scene has an atmosphere, so techniques compare on what a frame shows."""
+    from types import SimpleNamespace
+
+    from warpsky.composite import composite
+    from warpsky.render import render_layers
+
+    layer, layers = render_layers(technique, scene, SimpleNamespace(width=width, height=height, device=device))
+    frame = composite(layers, far=scene.camera.far)
+    return frame.rgba[..., :3], frame.transmittance, frame.aovs, layer
+
+
 def reference_image(scene, width, height, device, *, spp: int, seed: int, use_cache: bool = True):
-    """(radiance, transmittance, variance, seconds, cached) of the path-traced reference."""
+    """(radiance, transmittance, variance, seconds, cached) of the path-traced reference frame."""
     from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
 
     key = _reference_key(scene, width, height, device, spp, seed)
@@ -80,11 +94,12 @@ def reference_image(scene, width, height, device, *, spp: int, seed: int, use_ca
     if use_cache and path.is_file():
         with np.load(path) as data:
             return data["radiance"], data["transmittance"], data["variance"], float(data["seconds"]), True
-    layer = PathTracer(PathTracerSettings(spp=spp, seed=seed), device=device).render(scene, width, height)
-    arrays = {"radiance": layer.radiance, "transmittance": layer.transmittance,
-              "variance": layer.aovs["variance"], "seconds": np.float64(layer.stats["seconds"])}
+    technique = PathTracer(PathTracerSettings(spp=spp, seed=seed), device=device)
+    radiance, transmittance, aovs, layer = render_frame_radiance(technique, scene, width, height, device)
+    arrays = {"radiance": radiance, "transmittance": transmittance, "variance": aovs["variance"],
+              "seconds": np.float64(layer.stats["seconds"])}
     atomic_write(path, lambda tmp: np.savez(tmp, **arrays))
-    return layer.radiance, layer.transmittance, layer.aovs["variance"], layer.stats["seconds"], False
+    return radiance, transmittance, aovs["variance"], layer.stats["seconds"], False
 
 
 def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray) -> dict:
@@ -136,7 +151,7 @@ def run_report(
         scene, width, height, device, spp=reference_spp, seed=reference_seed, use_cache=use_cache)
     log(f"reference: path_tracer {reference_spp} spp, {'loaded from cache' if cached else f'{ref_seconds:.1f} s'}")
     luminance_t = trans_ref @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-    covered = luminance_t < 0.99
+    covered = (luminance_t < 0.99) & (radiance_ref.max(axis=-1) > 0.0)
     mean_r = float(radiance_ref[covered].mean()) if covered.any() else 0.0
     noise_mean = float(np.sqrt(var_ref[covered].sum()) / max(radiance_ref[covered].sum(), 1e-30))
     noise_pixel = float(np.sqrt(var_ref[covered].mean()) / max(mean_r, 1e-30))
@@ -155,10 +170,10 @@ def run_report(
                 technique.render(scene, min(width, 8), min(height, 8))  # compile / load: not timed
                 warmed = True
             started = time.perf_counter()
-            layer = technique.render(scene, width, height)
+            radiance, _, _, _ = render_frame_radiance(technique, scene, width, height, device)
             seconds = time.perf_counter() - started
             spent += seconds
-            row = Row(name, _setting_label(rung), seconds, **error_metrics(layer.radiance, radiance_ref, covered))
+            row = Row(name, _setting_label(rung), seconds, **error_metrics(radiance, radiance_ref, covered))
             rows.append(row)
             log(f"  {name:<15} {row.setting:<22} {seconds:8.3f} s  rel RMSE {row.rel_rmse:.4f}")
             if spent > share:

@@ -510,13 +510,20 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
             origin = view * t_near
             t_end = t_far - t_near
             hits_ground = bool(False)
+            sea_floor = bool(False)
+            if air.enabled != 0 and view[1] < 0.0:
+                t_sea = wp.max(air.camera_altitude + origin[1], 0.0) / (-view[1])
+                if t_sea < t_end:
+                    t_end = t_sea
+                    sea_floor = True
             if wp.static(has_ground):
                 if view[1] < 0.0 and origin[1] > ground_offset:
                     tg = (ground_offset - origin[1]) / view[1]
                     if tg < t_end:
                         t_end = tg
                         hits_ground = True
-            if not hits_ground:
+                        sea_floor = False
+            if not hits_ground and not sea_floor:
                 tr = ratio_track(values, grids, mgrids, majorants, grid_count, origin, view, t_end, air, state)
                 state = tr.state
                 transmittance_sum[row, col] = transmittance_sum[row, col] + tr.value
@@ -541,12 +548,21 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                             on_ground = True
                 else:
                     on_ground = hits_ground
+                if air.enabled != 0 and d[1] < 0.0:
+                    t_sea = wp.max(air.camera_altitude + origin[1], 0.0) / (-d[1])
+                    if t_sea < t_max:
+                        t_max = t_sea  # the air ends at a black sea level (no ground plane above it here)
+                        on_ground = False
+                        if bounce == 0:
+                            sea_floor = True
                 flight = delta_track(values, grids, mgrids, majorants, grid_count, origin, d, t_max, air, throughput,
                                      state)
                 state = flight.state
                 steps += flight.steps
                 throughput = wp.cw_mul(throughput, flight.weight)
                 if flight.scattered == 0 and not on_ground:
+                    if air.enabled != 0 and d[1] < 0.0:
+                        break  # reached the black sea level
                     if bounce > 0:
                         radiance += wp.cw_mul(throughput, environment)
                     elif air.enabled != 0 and lit and sun_up and wp.dot(d, sun_dir) >= sun_cos_radius:

@@ -39,9 +39,12 @@ def sky_kernel(
     cos_axis = wp.dot(view, axis)
     # where the air ends: the ground plane, else infinity
     t_end = INFINITE
+    if view[1] < 0.0:
+        # the air ends at sea level: below it lies a black surface unless a ground plane comes first
+        t_end = wp.max(camera_altitude, 0.0) / (-view[1])
     if has_ground != 0:
         if view[1] < 0.0 and ground_offset < 0.0:
-            t_end = ground_offset / view[1]
+            t_end = wp.min(t_end, ground_offset / view[1])
     # the media's representative depth splits the air into a front and a back part (Riley §4, Fig. 7)
     split = t_end
     d = media_depth[row, col]
