@@ -52,8 +52,8 @@ def test_report_on_a_box(tmp_path, homogeneous_npy, monkeypatch):
 
 def test_report_refuses_unknown_techniques(tmp_path, homogeneous_npy):
     scene = StageReader(write_stage(tmp_path / "b.usda", StageSpec(volume_file=homogeneous_npy))).scene_at(None)
-    with pytest.raises(UsageError, match="slicing"):
-        run_report(scene, techniques=["slicing"], width=8, height=8, device="cpu")
+    with pytest.raises(UsageError, match="raymarch_fast"):
+        run_report(scene, techniques=["raymarch_fast"], width=8, height=8, device="cpu")
 
 
 def test_report_on_a_scene_with_sky(tmp_path, homogeneous_npy, monkeypatch):

@@ -17,6 +17,7 @@ def kernel_modules() -> list:
     import warpsky.techniques.sky.kernels as sky
     from warpsky.techniques.path_tracer.kernels import path_trace_kernel
     from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
+    from warpsky.techniques.slicing.kernels import slicing_kernels
 
     modules = [wp.get_module(fields.__name__), wp.get_module(optics.__name__), wp.get_module(ice_kernels.__name__),
                wp.get_module(sky.__name__)]
@@ -28,4 +29,8 @@ def kernel_modules() -> list:
     modules += [
         path_trace_kernel(has_ground, has_tables).module for has_ground in (False, True) for has_tables in (False, True)
     ]
+    modules += [k.module for low in (False, True) for k in slicing_kernels(low)]
+    import warpsky.techniques.slicing.kernels as slicing
+
+    modules.append(wp.get_module(slicing.__name__))
     return modules

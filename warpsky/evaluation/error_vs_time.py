@@ -37,6 +37,7 @@ from warpsky.files import atomic_write, cache_dir
 
 #: Techniques the report knows how to walk, with their quality ladders.
 LADDERS = {
+    "slicing": [{"slice_count": n} for n in (16, 32, 64, 128, 256, 512)],
     "single_scatter": [{"step_length": k, "shadow_step_length": k} for k in (4.0, 2.0, 1.0, 0.5, 0.25)],
     "path_tracer": [{"spp": n} for n in (1, 2, 4, 8, 16, 32, 64, 128, 256)],
 }

@@ -34,6 +34,7 @@ class Layer:
 _REGISTRY: dict[str, str] = {
     "single_scatter": "warpsky.techniques.single_scatter.technique:SingleScatter",
     "path_tracer": "warpsky.techniques.path_tracer.technique:PathTracer",
+    "slicing": "warpsky.techniques.slicing.technique:Slicing",
 }
 
 

@@ -1,0 +1,291 @@
+"""Kernels of half-angle slicing with multiple-scattering phase functions (Riley 2004 §4.2, §5; Kniss et al.).
+
+Positions are camera-relative metres. Slices are the planes dot(s, x) = c_k perpendicular to the slice axis s; the
+host walks them in increasing c, which always moves away from the sun. Per slice, :func:`eye_kernel` composites the
+slice into the eye buffer (front to back or back to front, Eq. 26) reading the light buffer, then
+:func:`light_kernel` carries the light buffer to the next slice (Eq. 25). The light buffer is a square grid in the
+plane perpendicular to the light, so a texel follows its own light ray from slice to slice (no resampling).
+
+Every medium has a table of multiple-scattering distributions Ams_n (n = 0..N) and forward fractions F_n: species
+from :mod:`warpsky.optics.tables`, analytic phases in closed form (HG(g)^{*n} = HG(g^n)). Several media at a
+point mix their Ams and F by scattering weight (Riley Eq. 6 applied per order).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from warpsky.media.voxel import VoxelGrid, grid_value
+from warpsky.optics.kernels import GRID_SIZE, grid_node
+from warpsky.techniques.common import PinholeCamera, camera_ray, one_minus_exp_over_x
+from warpsky.techniques.single_scatter.kernels import sun_optical_depth
+
+
+@wp.struct
+class SliceFrame:
+    """Geometry of the slicing pass (camera-relative)."""
+
+    axis: wp.vec3  # slice normal s
+    light_dir: wp.vec3  # direction light travels (-sun)
+    light_u: wp.vec3  # light-buffer axes, perpendicular to light_dir
+    light_v: wp.vec3
+    light_origin: wp.vec3  # light-space origin (corner of the light buffer's square, on the plane c = 0)
+    light_size: float  # edge of the light buffer's square [m]
+    light_res: int
+    spacing: float  # distance between slices along s [m]
+    front_to_back: int  # 1: the eye composites front to back; 0: back to front
+
+
+@wp.struct
+class AmsTables:
+    """Ams_n per table (T tables, N+1 orders, 3 channels, GRID_SIZE angles) and F_n (T, N+1, 3)."""
+
+    ams: wp.array(dtype=float)
+    forward: wp.array(dtype=float)
+    orders: int  # N + 1
+
+
+@wp.func
+def ams_value(tables: AmsTables, table: int, order: int, channel: int, theta: float) -> float:
+    node = grid_node(theta)
+    i = int(node[0])
+    base = ((table * tables.orders + order) * 3 + channel) * GRID_SIZE + i
+    return tables.ams[base] + (tables.ams[base + 1] - tables.ams[base]) * node[1]
+
+
+@wp.func
+def ams_at(tables: AmsTables, table: int, n: float, channel: int, theta: float) -> float:
+    """Ams of fractional order n (linear between neighbouring orders; clamped to the last)."""
+    top = tables.orders - 1
+    x = wp.clamp(n, 0.0, float(top))
+    lo = wp.min(int(x), top)
+    hi = wp.min(lo + 1, top)
+    f = x - float(lo)
+    return ams_value(tables, table, lo, channel, theta) * (1.0 - f) + ams_value(tables, table, hi, channel, theta) * f
+
+
+@wp.func
+def forward_at(tables: AmsTables, table: int, n: float, channel: int) -> float:
+    top = tables.orders - 1
+    x = wp.clamp(n, 0.0, float(top))
+    lo = wp.min(int(x), top)
+    hi = wp.min(lo + 1, top)
+    f = x - float(lo)
+    a = tables.forward[(table * tables.orders + lo) * 3 + channel]
+    b = tables.forward[(table * tables.orders + hi) * 3 + channel]
+    return a * (1.0 - f) + b * f
+
+
+@wp.func
+def light_texel(frame: SliceFrame, p: wp.vec3) -> wp.vec2:
+    """Continuous light-buffer coordinates (texel units) of point p."""
+    rel = p - frame.light_origin
+    scale = float(frame.light_res) / frame.light_size
+    return wp.vec2(wp.dot(rel, frame.light_u) * scale - 0.5, wp.dot(rel, frame.light_v) * scale - 0.5)
+
+
+@wp.func
+def light_lookup(buffer: wp.array2d(dtype=wp.vec3), frame: SliceFrame, p: wp.vec3) -> wp.vec3:
+    """Bilinear light-buffer value at p (clamped at the edges)."""
+    uv = light_texel(frame, p)
+    r = frame.light_res
+    x = wp.clamp(uv[0], 0.0, float(r - 1))
+    y = wp.clamp(uv[1], 0.0, float(r - 1))
+    i0 = wp.min(int(x), r - 1)
+    j0 = wp.min(int(y), r - 1)
+    i1 = wp.min(i0 + 1, r - 1)
+    j1 = wp.min(j0 + 1, r - 1)
+    fx = x - float(i0)
+    fy = y - float(j0)
+    a = buffer[j0, i0] * (1.0 - fx) + buffer[j0, i1] * fx
+    b = buffer[j1, i0] * (1.0 - fx) + buffer[j1, i1] * fx
+    return a * (1.0 - fy) + b * fy
+
+
+@wp.func
+def exp_neg3(v: wp.vec3) -> wp.vec3:
+    return wp.vec3(wp.exp(-v[0]), wp.exp(-v[1]), wp.exp(-v[2]))
+
+
+@wp.func
+def one_minus_exp(tau: float) -> float:
+    """1 - e^{-tau} without cancellation for tiny tau (float32 would lose it below ~1e-6)."""
+    return tau * one_minus_exp_over_x(tau)
+
+
+@functools.cache
+def slicing_kernels(low_albedo: bool):
+    """(eye_kernel, light_kernel), specialised on Riley's low-albedo comparison mode (Fig. 13: Ams_1 only, light
+    attenuated by extinction, no multiple scattering)."""
+
+    @wp.kernel(module="unique")
+    def eye_kernel(
+        values: wp.array(dtype=float),
+        grids: wp.array(dtype=VoxelGrid),
+        grid_count: int,
+        table_of: wp.array(dtype=int),
+        tables: AmsTables,
+        cam: PinholeCamera,
+        frame: SliceFrame,
+        plane: float,
+        light_i: wp.array2d(dtype=wp.vec3),
+        light_n: wp.array2d(dtype=wp.vec3),
+        sun_dir: wp.vec3,
+        xi: float,
+        radiance: wp.array2d(dtype=wp.vec3),
+        transmittance: wp.array2d(dtype=wp.vec3),
+        depth_sum: wp.array2d(dtype=wp.vec2),
+        row_offset: int,
+    ):
+        r, col = wp.tid()
+        row = r + row_offset
+        view = camera_ray(cam, row, col)
+        along = wp.dot(frame.axis, view)
+        if wp.abs(along) < 1.0e-6:
+            return
+        t = plane / along
+        axis_cam = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
+        cos_axis = wp.dot(view, axis_cam)
+        if t * cos_axis < cam.near or t * cos_axis > cam.far:
+            return
+        p = view * t
+        step = frame.spacing / wp.abs(along)
+        extinction = wp.vec3(0.0)
+        scattering = wp.vec3(0.0)
+        for m in range(grid_count):
+            grid = grids[m]
+            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+            if value > 0.0:
+                extinction += grid.extinction * value
+                scattering += grid.scattering * value
+        if wp.max(extinction) <= 0.0:
+            return
+        light = light_lookup(light_i, frame, p)
+        n = light_lookup(light_n, frame, p)
+        theta = wp.atan2(wp.length(wp.cross(sun_dir, view)), wp.dot(sun_dir, view))
+        # Riley Eq. 26: Ams of one more scattering than the light has had, mixed over media by scattering
+        phase = wp.vec3(0.0)
+        for m in range(grid_count):
+            grid = grids[m]
+            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+            if value > 0.0:
+                s = grid.scattering * value
+                for c in range(3):
+                    order = n[c] + 1.0
+                    if wp.static(low_albedo):
+                        order = 1.0
+                    phase[c] = phase[c] + s[c] * ams_at(tables, table_of[m], order, c, theta)
+        contribution = wp.vec3(0.0)
+        tau = extinction * step
+        keep = exp_neg3(tau)
+        for c in range(3):
+            if scattering[c] > 0.0:
+                p_c = phase[c] / scattering[c] + xi
+                # scattering integrated exactly over the step: (1 - e^-tau) albedo instead of beta_s * step
+                contribution[c] = light[c] * p_c * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
+        before = transmittance[row, col]
+        if frame.front_to_back != 0:
+            radiance[row, col] = radiance[row, col] + wp.cw_mul(before, contribution)
+        else:
+            radiance[row, col] = wp.cw_mul(radiance[row, col], keep) + contribution
+        transmittance[row, col] = wp.cw_mul(before, keep)
+        opacity = 1.0 - (keep[0] + keep[1] + keep[2]) / 3.0
+        weight = opacity * (before[0] + before[1] + before[2]) / 3.0
+        if frame.front_to_back == 0:
+            weight = opacity
+        depth_sum[row, col] = depth_sum[row, col] + wp.vec2(weight * t * cos_axis, weight)
+
+    @wp.kernel(module="unique")
+    def light_kernel(
+        values: wp.array(dtype=float),
+        grids: wp.array(dtype=VoxelGrid),
+        grid_count: int,
+        table_of: wp.array(dtype=int),
+        tables: AmsTables,
+        frame: SliceFrame,
+        plane: float,
+        light_i: wp.array2d(dtype=wp.vec3),
+        light_n: wp.array2d(dtype=wp.vec3),
+    ):
+        j, i = wp.tid()
+        scale = frame.light_size / float(frame.light_res)
+        base = frame.light_origin + frame.light_u * ((float(i) + 0.5) * scale) + frame.light_v * (
+            (float(j) + 0.5) * scale)
+        along = wp.dot(frame.axis, frame.light_dir)
+        # the texel's light ray meets this slice at base + a l with dot(s, .) = plane; step to the next slice
+        a = (plane - wp.dot(frame.axis, base)) / along
+        step = frame.spacing / along
+        mid = base + frame.light_dir * (a + 0.5 * step)
+        extinction = wp.vec3(0.0)
+        scattering = wp.vec3(0.0)
+        forward = wp.vec3(0.0)
+        n = light_n[j, i]
+        for m in range(grid_count):
+            grid = grids[m]
+            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * mid)
+            if value > 0.0:
+                e = grid.extinction * value
+                s = grid.scattering * value
+                extinction += e
+                scattering += s
+                for c in range(3):
+                    order = n[c] + 1.0 + e[c] * step
+                    forward[c] = forward[c] + s[c] * forward_at(tables, table_of[m], order, c)
+        if wp.max(extinction) <= 0.0:
+            return
+        intensity = light_i[j, i]
+        out = wp.vec3(0.0)
+        for c in range(3):
+            tau = extinction[c] * step
+            keep = wp.exp(-tau)
+            kept = float(0.0)
+            if not wp.static(low_albedo):
+                if scattering[c] > 0.0:
+                    # Riley Eq. 25: scattered light keeps its forward part (alpha F)^(beta Delta)
+                    alpha_f = wp.clamp(forward[c] / extinction[c], 0.0, 1.0)
+                    if alpha_f > 0.0:
+                        kept = one_minus_exp(tau) * wp.exp(tau * wp.log(alpha_f))
+            out[c] = intensity[c] * (keep + kept)
+            n[c] = n[c] + (scattering[c] / extinction[c]) * tau  # Eq. 22: n = -alpha ln T
+        light_i[j, i] = out
+        light_n[j, i] = n
+
+    return eye_kernel, light_kernel
+
+
+@wp.kernel
+def ground_kernel(
+    values: wp.array(dtype=float),
+    grids: wp.array(dtype=VoxelGrid),
+    grid_count: int,
+    cam: PinholeCamera,
+    sun_dir: wp.vec3,
+    sun_irradiance: wp.vec3,
+    ground_offset: float,
+    ground_albedo: wp.vec3,
+    shadow_step: float,
+    radiance: wp.array2d(dtype=wp.vec3),
+    transmittance: wp.array2d(dtype=wp.vec3),
+    depth: wp.array2d(dtype=float),
+):
+    """The Lambertian ground behind the media, lit by the sun through them; it ends every ray that reaches it."""
+    row, col = wp.tid()
+    view = camera_ray(cam, row, col)
+    if view[1] >= 0.0 or ground_offset >= 0.0:
+        return
+    t = ground_offset / view[1]
+    axis_cam = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
+    z = t * wp.dot(view, axis_cam)
+    if z > cam.far:
+        return
+    lit = wp.vec3(0.0)
+    if sun_dir[1] > 0.0:
+        tau = sun_optical_depth(values, grids, grid_count, t, view, sun_dir, shadow_step)
+        lit = wp.cw_mul(sun_irradiance, exp_neg3(wp.vec3(tau[0], tau[1], tau[2]))) * (sun_dir[1] / wp.pi)
+    before = transmittance[row, col]
+    radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground_albedo, lit))
+    if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
+        depth[row, col] = z
+    transmittance[row, col] = wp.vec3(0.0)
