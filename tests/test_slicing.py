@@ -72,3 +72,14 @@ def test_slice_count_convergence(tmp_path, homogeneous_npy, device):
     coarse = np.abs(images[256] - images[128]).mean()
     fine = np.abs(images[512] - images[256]).mean()
     assert fine <= 0.5 * coarse + 1e-9, (coarse, fine)
+
+
+def test_both_light_equations_render_and_differ(tmp_path, homogeneous_npy, device):
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.3, camera_position=(0.0, 0.0, 40.0),
+                     sun_direction=(0.3, 0.8, 0.5), phase="hg", g=0.85)
+    stage = write_stage(tmp_path / "eq.usda", spec)
+    eq24 = sliced(stage, device, 8, slice_count=64, light_equation=24)
+    eq25 = sliced(stage, device, 8, slice_count=64, light_equation=25)
+    for layer in (eq24, eq25):
+        assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
+    assert not np.allclose(eq24.radiance, eq25.radiance)

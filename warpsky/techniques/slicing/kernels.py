@@ -115,10 +115,40 @@ def one_minus_exp(tau: float) -> float:
     return tau * one_minus_exp_over_x(tau)
 
 
+#: Scattering events of one light step evaluated one by one; the rest use the last order's forward fraction.
+MAX_EVENTS = wp.constant(64)
+
+
+@wp.func
+def mixed_forward(
+    values: wp.array(dtype=float),
+    grids: wp.array(dtype=VoxelGrid),
+    grid_count: int,
+    table_of: wp.array(dtype=int),
+    tables: AmsTables,
+    p: wp.vec3,
+    order: float,
+    channel: int,
+) -> float:
+    """alpha F_order of the media mixed at p: sum of scattering_i F_i over the total extinction."""
+    num = float(0.0)
+    den = float(0.0)
+    for m in range(grid_count):
+        grid = grids[m]
+        value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+        if value > 0.0:
+            num += grid.scattering[channel] * value * forward_at(tables, table_of[m], order, channel)
+            den += grid.extinction[channel] * value
+    if den <= 0.0:
+        return 0.0
+    return num / den
+
+
 @functools.cache
-def slicing_kernels(low_albedo: bool):
+def slicing_kernels(low_albedo: bool, equation: int = 24):
     """(eye_kernel, light_kernel), specialised on Riley's low-albedo comparison mode (Fig. 13: Ams_1 only, light
-    attenuated by extinction, no multiple scattering)."""
+    attenuated by extinction, no multiple scattering) and on the light-buffer update: Riley's Eq. 24 (per-event
+    forward fractions; converges as slices are added) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta))."""
 
     @wp.kernel(module="unique")
     def eye_kernel(
@@ -220,19 +250,13 @@ def slicing_kernels(low_albedo: bool):
         mid = base + frame.light_dir * (a + 0.5 * step)
         extinction = wp.vec3(0.0)
         scattering = wp.vec3(0.0)
-        forward = wp.vec3(0.0)
         n = light_n[j, i]
         for m in range(grid_count):
             grid = grids[m]
             value = grid_value(values, grid, grid.eye_index + grid.index_from_world * mid)
             if value > 0.0:
-                e = grid.extinction * value
-                s = grid.scattering * value
-                extinction += e
-                scattering += s
-                for c in range(3):
-                    order = n[c] + 1.0 + e[c] * step
-                    forward[c] = forward[c] + s[c] * forward_at(tables, table_of[m], order, c)
+                extinction += grid.extinction * value
+                scattering += grid.scattering * value
         if wp.max(extinction) <= 0.0:
             return
         intensity = light_i[j, i]
@@ -242,11 +266,25 @@ def slicing_kernels(low_albedo: bool):
             keep = wp.exp(-tau)
             kept = float(0.0)
             if not wp.static(low_albedo):
-                if scattering[c] > 0.0:
-                    # Riley Eq. 25: scattered light keeps its forward part (alpha F)^(beta Delta)
-                    alpha_f = wp.clamp(forward[c] / extinction[c], 0.0, 1.0)
+                if scattering[c] > 0.0 and wp.static(equation == 25):
+                    alpha_f = wp.clamp(mixed_forward(values, grids, grid_count, table_of, tables, mid,
+                                                     n[c] + 1.0 + tau, c), 0.0, 1.0)
                     if alpha_f > 0.0:
                         kept = one_minus_exp(tau) * wp.exp(tau * wp.log(alpha_f))
+                if scattering[c] > 0.0 and wp.static(equation == 24):
+                    # Riley Eq. 24: the light scattered within the step keeps, per scattering event, its forward
+                    # part alpha F_i, over ceil(beta Delta) events (Eq. 25's (alpha F)^(beta Delta) shortcut loses
+                    # only O(Delta^2) per step, so it does not converge as slices are added; see the README)
+                    events = int(wp.ceil(tau))
+                    log_kept = float(0.0)
+                    for e in range(wp.min(events, MAX_EVENTS)):
+                        log_kept += wp.log(wp.max(mixed_forward(values, grids, grid_count, table_of, tables, mid,
+                                                                n[c] + 1.0 + float(e), c), 1.0e-30))
+                    if events > MAX_EVENTS:
+                        last = mixed_forward(values, grids, grid_count, table_of, tables, mid,
+                                             n[c] + float(MAX_EVENTS), c)
+                        log_kept += float(events - MAX_EVENTS) * wp.log(wp.max(last, 1.0e-30))
+                    kept = one_minus_exp(tau) * wp.exp(log_kept)
             out[c] = intensity[c] * (keep + kept)
             n[c] = n[c] + (scattering[c] / extinction[c]) * tau  # Eq. 22: n = -alpha ln T
         light_i[j, i] = out

@@ -26,6 +26,9 @@ class SlicingSettings:
     xi                1/sr  0       >= 0       Riley's back-scatter term added to the phase in the eye gather
     low_albedo        --    0       0 or 1     1: Riley's low-albedo comparison mode (Fig. 13)
     orders            --    60      >= 1       highest multiple-scattering order tabulated (Ams_0..N)
+    light_equation    --    24      24 or 25   light-buffer update: Riley Eq. 24 (converges with slice count) or
+                                               Eq. 25 (his shortcut; loses O(Delta^2) per slice, so its result
+                                               depends on the slice count)
     ================= ===== ======= ========== ======================================================================
     """
 
@@ -35,8 +38,11 @@ class SlicingSettings:
     xi: float = 0.0
     low_albedo: float = 0
     orders: float = 60
+    light_equation: float = 24
 
     def __post_init__(self):
+        if self.light_equation not in (24, 25):
+            raise UsageError(f"setting light_equation must be 24 or 25, got {self.light_equation}")
         for name, low in (("slice_count", 1), ("light_resolution", 2), ("orders", 1)):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= low and float(value).is_integer()):
@@ -135,7 +141,7 @@ class Slicing:
                 res = int(settings.light_resolution)
                 light_i = wp.full((res, res), wp.vec3(*sun.irradiance.tolist()), dtype=wp.vec3)
                 light_n = wp.zeros((res, res), dtype=wp.vec3)
-                eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo))
+                eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation))
                 cam = pinhole_camera(camera, width, height)
                 sun_dir = wp.vec3(*sun.direction.tolist())
                 for plane in planes:
