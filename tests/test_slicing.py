@@ -83,3 +83,11 @@ def test_both_light_equations_render_and_differ(tmp_path, homogeneous_npy, devic
     for layer in (eq24, eq25):
         assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
     assert not np.allclose(eq24.radiance, eq25.radiance)
+
+
+def test_sun_below_the_ground_lights_nothing(tmp_path, homogeneous_npy, device):
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.1, camera_position=(0.0, 0.0, 40.0),
+                     sun_direction=(0.3, -0.2, 0.5), ground=(-30.0, 0.5))
+    layer = sliced(write_stage(tmp_path / "night.usda", spec), device, 8, slice_count=16)
+    assert np.all(layer.radiance == 0.0) and np.all(np.isfinite(layer.transmittance))
+    assert layer.transmittance.min() < 0.5  # the cloud still hides what lies behind it

@@ -128,7 +128,9 @@ class Slicing:
             transmittance = wp.full(shape, wp.vec3(1.0, 1.0, 1.0), dtype=wp.vec3)
             depth_sum = wp.zeros(shape, dtype=wp.vec2)
             slices = 0
-            if scene.media and sun is not None and float(np.max(sun.irradiance)) > 0.0:
+            # a sun below the ground plane lights nothing, but the media still hide what lies behind them
+            ground_hides_sun = scene.ground is not None and sun is not None and sun.direction[1] <= 0.0
+            if scene.media:
                 species = scene_species(scene)
                 media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species)
                 tables, forwards, index = self._tables(scene, species, orders)
@@ -137,13 +139,16 @@ class Slicing:
                 ams.forward = wp.array(np.stack(forwards).astype(np.float32).reshape(-1), dtype=float)
                 ams.orders = orders + 1
                 table_of = wp.array(np.asarray(index, dtype=np.int32), dtype=int)
-                frame, planes = self._frame(scene, camera, int(settings.slice_count), int(settings.light_resolution))
+                toward_sun = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])  # unlit: any axis
+                frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count),
+                                            int(settings.light_resolution))
                 res = int(settings.light_resolution)
-                light_i = wp.full((res, res), wp.vec3(*sun.irradiance.tolist()), dtype=wp.vec3)
+                start = np.zeros(3) if ground_hides_sun or sun is None else sun.irradiance
+                light_i = wp.full((res, res), wp.vec3(*np.asarray(start, dtype=np.float64).tolist()), dtype=wp.vec3)
                 light_n = wp.zeros((res, res), dtype=wp.vec3)
                 eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation))
                 cam = pinhole_camera(camera, width, height)
-                sun_dir = wp.vec3(*sun.direction.tolist())
+                sun_dir = wp.vec3(*np.asarray(toward_sun, dtype=np.float64).tolist())
                 for plane in planes:
                     launch_rows(eye_kernel, height, width, [
                         media.values, media.grids, media.count, table_of, ams, cam, frame, float(plane), light_i,
@@ -163,14 +168,14 @@ class Slicing:
         return layer
 
     @staticmethod
-    def _frame(scene: Scene, camera, slice_count: int, light_res: int):
+    def _frame(scene: Scene, camera, toward_sun: np.ndarray, slice_count: int, light_res: int):
         """Slice axis and order (half-angle, Kniss et al.), slice planes and the light buffer's square."""
         import warp as wp
 
         from warpsky.techniques.slicing.kernels import SliceFrame
 
         view = -np.asarray(camera.rotation, dtype=np.float64)[:, 2]
-        light = -np.asarray(scene.sun.direction, dtype=np.float64)  # the way light travels
+        light = -np.asarray(toward_sun, dtype=np.float64)  # the way light travels
         if float(view @ light) > 0.0:  # sun behind the viewer: light and eye advance together, front to back
             axis, front_to_back = view + light, 1
         else:  # sun ahead: slices run from the far side towards the eye, back to front
