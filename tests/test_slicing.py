@@ -91,3 +91,87 @@ def test_sun_below_the_ground_lights_nothing(tmp_path, homogeneous_npy, device):
     layer = sliced(write_stage(tmp_path / "night.usda", spec), device, 8, slice_count=16)
     assert np.all(layer.radiance == 0.0) and np.all(np.isfinite(layer.transmittance))
     assert layer.transmittance.min() < 0.5  # the cloud still hides what lies behind it
+
+
+def test_rain_sheet_shows_the_primary_bow(tmp_path, homogeneous_npy, species_phase, device):
+    """A thin rain sheet lit from behind the camera: the radial profile of rendered radiance (per unit opacity)
+    around the antisolar point peaks at the primary bow's radius, measured from pixel positions."""
+    from test_scene_usd import add_field
+
+    species_phase("rain")  # build (or load) the rain tables in the session cache
+    sun = np.array([0.0, np.sin(np.radians(10.0)), np.cos(np.radians(10.0))])
+    look = -sun
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.0, camera_position=(0.0, 0.0, 0.0),
+                     camera_rotation=look_rotation(look), focal_length=12.0, aperture=(36.0, 36.0),
+                     volume_extent=((-3000.0, -3000.0, -400.0), (3000.0, 3000.0, -300.0)),
+                     sun_direction=tuple(sun), clipping=(0.1, 1e5))
+    stage = write_stage(tmp_path / "rain.usda", spec)
+    add_field(stage, "rain", homogeneous_npy, scale=2e-4)  # optical depth ~0.02 across the sheet
+    scene = StageReader(stage).scene_at(None)
+    size = 96
+    layer = Slicing(Slicing.Settings(slice_count=64, orders=8), device=device).render(scene, size, size)
+    camera = scene.camera.conformed(size, size)
+    rows, cols = np.mgrid[0:size, 0:size]
+    directions = np.stack([camera.pixel_direction(c + 0.5, r + 0.5, size, size)
+                           for r, c in zip(rows.ravel(), cols.ravel(), strict=True)])
+    radius = np.degrees(np.arccos(np.clip(directions @ look, -1.0, 1.0))).reshape(size, size)
+    opacity = 1.0 - layer.transmittance[..., 1]
+    seen = (opacity > 1e-4) & (radius > 30.0) & (radius < 50.0)
+    per_opacity = layer.radiance[..., 1][seen] / opacity[seen]
+    peak = float(radius[seen][np.argmax(per_opacity)])
+    assert 41.4 <= peak <= 42.5, peak
+
+
+def test_cirrus_sheet_shows_the_22_degree_halo(tmp_path, homogeneous_npy, species_phase, device):
+    """A thin ice-crystal sheet between the camera and the sun: a ring of peak radiance 22 deg around the sun."""
+    from test_scene_usd import add_field
+
+    species_phase("ice")
+    sun = np.array([0.0, np.sin(np.radians(30.0)), -np.cos(np.radians(30.0))])
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.0, camera_position=(0.0, 0.0, 0.0),
+                     camera_rotation=look_rotation(sun), focal_length=18.0, aperture=(36.0, 36.0),
+                     volume_extent=((-20000.0, 7000.0, -20000.0), (20000.0, 7500.0, 20000.0)),
+                     sun_direction=tuple(sun), clipping=(0.1, 1e6))
+    stage = write_stage(tmp_path / "cirrus.usda", spec)
+    add_field(stage, "ice", homogeneous_npy, scale=4e-5)  # optical depth ~0.02 through the layer
+    scene = StageReader(stage).scene_at(None)
+    size = 96
+    layer = Slicing(Slicing.Settings(slice_count=64, orders=8), device=device).render(scene, size, size)
+    camera = scene.camera.conformed(size, size)
+    rows, cols = np.mgrid[0:size, 0:size]
+    directions = np.stack([camera.pixel_direction(c + 0.5, r + 0.5, size, size)
+                           for r, c in zip(rows.ravel(), cols.ravel(), strict=True)])
+    radius = np.degrees(np.arccos(np.clip(directions @ sun, -1.0, 1.0))).reshape(size, size)
+    opacity = 1.0 - layer.transmittance[..., 1]
+    seen = (opacity > 1e-4) & (radius > 15.0) & (radius < 30.0)
+    per_opacity = layer.radiance[..., 1][seen] / opacity[seen]
+    peak = float(radius[seen][np.argmax(per_opacity)])
+    assert 21.3 <= peak <= 22.7, peak
+
+
+def test_cloud_sheet_shows_the_glory(tmp_path, homogeneous_npy, species_phase, device):
+    """A thin sheet of 10 um droplets lit from behind the camera: brightest (per unit opacity) at the antisolar
+    point, darker a few degrees out (the glory's first dark ring)."""
+    from test_scene_usd import add_field
+
+    species_phase("cloud")
+    sun = np.array([0.0, np.sin(np.radians(20.0)), np.cos(np.radians(20.0))])
+    look = -sun
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.0, camera_position=(0.0, 0.0, 0.0),
+                     camera_rotation=look_rotation(look), focal_length=120.0, aperture=(36.0, 36.0),
+                     volume_extent=((-3000.0, -3000.0, -400.0), (3000.0, 3000.0, -300.0)),
+                     sun_direction=tuple(sun), clipping=(0.1, 1e5))
+    stage = write_stage(tmp_path / "glory.usda", spec)
+    add_field(stage, "cloud", homogeneous_npy, scale=2e-4)
+    scene = StageReader(stage).scene_at(None)
+    size = 64
+    layer = Slicing(Slicing.Settings(slice_count=32, orders=8), device=device).render(scene, size, size)
+    camera = scene.camera.conformed(size, size)
+    rows, cols = np.mgrid[0:size, 0:size]
+    directions = np.stack([camera.pixel_direction(c + 0.5, r + 0.5, size, size)
+                           for r, c in zip(rows.ravel(), cols.ravel(), strict=True)])
+    radius = np.degrees(np.arccos(np.clip(directions @ look, -1.0, 1.0))).reshape(size, size)
+    per_opacity = layer.radiance[..., 1] / np.maximum(1.0 - layer.transmittance[..., 1], 1e-12)
+    centre = per_opacity[radius < 0.5].mean()
+    ring = per_opacity[(radius > 3.0) & (radius < 6.0)].mean()
+    assert centre > 2.0 * ring, (centre, ring)
