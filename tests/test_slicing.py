@@ -119,6 +119,7 @@ def test_rain_sheet_shows_the_primary_bow(tmp_path, homogeneous_npy, species_pha
     seen = (opacity > 1e-4) & (radius > 30.0) & (radius < 50.0)
     per_opacity = layer.radiance[..., 1][seen] / opacity[seen]
     peak = float(radius[seen][np.argmax(per_opacity)])
+    print(f"rendered primary bow radius {peak:.2f} deg")
     assert 41.4 <= peak <= 42.5, peak
 
 
@@ -146,6 +147,7 @@ def test_cirrus_sheet_shows_the_22_degree_halo(tmp_path, homogeneous_npy, specie
     seen = (opacity > 1e-4) & (radius > 15.0) & (radius < 30.0)
     per_opacity = layer.radiance[..., 1][seen] / opacity[seen]
     peak = float(radius[seen][np.argmax(per_opacity)])
+    print(f"rendered halo radius {peak:.2f} deg")
     assert 21.3 <= peak <= 22.7, peak
 
 
@@ -174,4 +176,5 @@ def test_cloud_sheet_shows_the_glory(tmp_path, homogeneous_npy, species_phase, d
     per_opacity = layer.radiance[..., 1] / np.maximum(1.0 - layer.transmittance[..., 1], 1e-12)
     centre = per_opacity[radius < 0.5].mean()
     ring = per_opacity[(radius > 3.0) & (radius < 6.0)].mean()
+    print(f"rendered glory: centre / 3-6 deg ring = {centre / ring:.2f}")
     assert centre > 2.0 * ring, (centre, ring)
