@@ -178,3 +178,32 @@ def test_cloud_sheet_shows_the_glory(tmp_path, homogeneous_npy, species_phase, d
     ring = per_opacity[(radius > 3.0) & (radius < 6.0)].mean()
     print(f"rendered glory: centre / 3-6 deg ring = {centre / ring:.2f}")
     assert centre > 2.0 * ring, (centre, ring)
+
+
+def test_rotating_scene_camera_and_sun_together_leaves_the_image_unchanged(tmp_path, device):
+    import dataclasses
+
+    rng = np.random.default_rng(2)
+    grid = tmp_path / "blob.npy"
+    np.save(grid, (rng.random((6, 6, 6)) ** 2).astype(np.float32))
+    spec = StageSpec(volume_file=grid, extinction_scale=0.2, camera_position=(5.0, 6.0, 40.0),
+                     camera_rotation=look_rotation((-0.1, -0.15, -1.0)), sun_direction=(0.5, 0.7, 0.2),
+                     phase="hg", g=0.8)
+    scene = StageReader(write_stage(tmp_path / "blob.usda", spec)).scene_at(None)
+    angle = np.radians(37.0)
+    rot = np.array([[np.cos(angle), 0.0, np.sin(angle)], [0.0, 1.0, 0.0], [-np.sin(angle), 0.0, np.cos(angle)]])
+    shift = np.array([1.0e5, 0.0, -3.0e4])  # and far from the origin
+    m4 = np.eye(4)
+    m4[:3, :3] = rot
+    m4[:3, 3] = shift
+    medium = dataclasses.replace(scene.media[0], world_from_index=m4 @ scene.media[0].world_from_index)
+    camera = dataclasses.replace(scene.camera, position=rot @ scene.camera.position + shift,
+                                 rotation=rot @ scene.camera.rotation)
+    sun = dataclasses.replace(scene.sun, direction=rot @ scene.sun.direction)
+    turned = dataclasses.replace(scene, media=(medium,), camera=camera, sun=sun)
+    settings = Slicing.Settings(slice_count=64)
+    a = Slicing(settings, device=device).render(scene, 16, 16)
+    b = Slicing(settings, device=device).render(turned, 16, 16)
+    assert a.radiance.max() > 0.0
+    np.testing.assert_allclose(b.radiance, a.radiance, rtol=2e-3, atol=1e-4 * a.radiance.max())
+    np.testing.assert_allclose(b.transmittance, a.transmittance, atol=1e-4)
