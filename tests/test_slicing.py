@@ -11,6 +11,15 @@ from warpsky.scene.usd import StageReader
 from warpsky.techniques.slicing.technique import Slicing
 
 
+def pixel_radius(scene, size: int, centre: np.ndarray) -> np.ndarray:
+    """Angle [deg] between each pixel's view direction (camera model, pixel centres) and ``centre``."""
+    camera = scene.camera.conformed(size, size)
+    rows, cols = np.mgrid[0:size, 0:size]
+    directions = np.stack([camera.pixel_direction(c + 0.5, r + 0.5, size, size)
+                           for r, c in zip(rows.ravel(), cols.ravel(), strict=True)])
+    return np.degrees(np.arccos(np.clip(directions @ centre, -1.0, 1.0))).reshape(size, size)
+
+
 def sliced(stage, device, size, **settings):
     scene = StageReader(stage).scene_at(None)
     plan = make_plan(scene, technique="slicing", settings={k: str(v) for k, v in settings.items()},
@@ -110,11 +119,7 @@ def test_rain_sheet_shows_the_primary_bow(tmp_path, homogeneous_npy, species_pha
     scene = StageReader(stage).scene_at(None)
     size = 96
     layer = Slicing(Slicing.Settings(slice_count=64, orders=8), device=device).render(scene, size, size)
-    camera = scene.camera.conformed(size, size)
-    rows, cols = np.mgrid[0:size, 0:size]
-    directions = np.stack([camera.pixel_direction(c + 0.5, r + 0.5, size, size)
-                           for r, c in zip(rows.ravel(), cols.ravel(), strict=True)])
-    radius = np.degrees(np.arccos(np.clip(directions @ look, -1.0, 1.0))).reshape(size, size)
+    radius = pixel_radius(scene, size, look)
     opacity = 1.0 - layer.transmittance[..., 1]
     seen = (opacity > 1e-4) & (radius > 30.0) & (radius < 50.0)
     per_opacity = layer.radiance[..., 1][seen] / opacity[seen]
@@ -138,11 +143,7 @@ def test_cirrus_sheet_shows_the_22_degree_halo(tmp_path, homogeneous_npy, specie
     scene = StageReader(stage).scene_at(None)
     size = 96
     layer = Slicing(Slicing.Settings(slice_count=64, orders=8), device=device).render(scene, size, size)
-    camera = scene.camera.conformed(size, size)
-    rows, cols = np.mgrid[0:size, 0:size]
-    directions = np.stack([camera.pixel_direction(c + 0.5, r + 0.5, size, size)
-                           for r, c in zip(rows.ravel(), cols.ravel(), strict=True)])
-    radius = np.degrees(np.arccos(np.clip(directions @ sun, -1.0, 1.0))).reshape(size, size)
+    radius = pixel_radius(scene, size, sun)
     opacity = 1.0 - layer.transmittance[..., 1]
     seen = (opacity > 1e-4) & (radius > 15.0) & (radius < 30.0)
     per_opacity = layer.radiance[..., 1][seen] / opacity[seen]
@@ -168,11 +169,7 @@ def test_cloud_sheet_shows_the_glory(tmp_path, homogeneous_npy, species_phase, d
     scene = StageReader(stage).scene_at(None)
     size = 64
     layer = Slicing(Slicing.Settings(slice_count=32, orders=8), device=device).render(scene, size, size)
-    camera = scene.camera.conformed(size, size)
-    rows, cols = np.mgrid[0:size, 0:size]
-    directions = np.stack([camera.pixel_direction(c + 0.5, r + 0.5, size, size)
-                           for r, c in zip(rows.ravel(), cols.ravel(), strict=True)])
-    radius = np.degrees(np.arccos(np.clip(directions @ look, -1.0, 1.0))).reshape(size, size)
+    radius = pixel_radius(scene, size, look)
     per_opacity = layer.radiance[..., 1] / np.maximum(1.0 - layer.transmittance[..., 1], 1e-12)
     centre = per_opacity[radius < 0.5].mean()
     ring = per_opacity[(radius > 3.0) & (radius < 6.0)].mean()

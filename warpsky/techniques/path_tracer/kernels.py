@@ -24,13 +24,12 @@ import warp as wp
 
 from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value
 from warpsky.optics.kernels import GRID_SIZE, grid_angle, grid_node, medium_phase, sample_table
-from warpsky.optics.phase import phase_eval
+from warpsky.optics.phase import INV_FOUR_PI, phase_eval, phase_rayleigh
 from warpsky.techniques.common import PinholeCamera, camera_ray, camera_ray_at
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
 MAJORANT_MARGIN = wp.constant(1.0001)
-RAYLEIGH_NORM = wp.constant(0.05968310365946075)  # 3 / (16 pi)
-INV_4PI = wp.constant(0.07957747154594767)
+INV_4PI = wp.constant(INV_FOUR_PI)
 #: Hard cap on tentative collisions per tracking call (guards against non-progress; counted in the stats).
 MAX_TRACKING_STEPS = wp.constant(1000000)
 
@@ -367,8 +366,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         den = wp.vec3(0.0)
         if air.enabled != 0:
             s_air = air_coefficient(air, p[1])
-            c = wp.cos(theta)
-            num = s_air * (RAYLEIGH_NORM * (1.0 + c * c))
+            num = s_air * phase_rayleigh(wp.cos(theta))
             den = s_air
         for m in range(grid_count):
             grid = grids[m]

@@ -4,16 +4,11 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.techniques.common import PinholeCamera, camera_ray
+from warpsky.optics.phase import phase_rayleigh
+from warpsky.techniques.common import PinholeCamera, camera_ray, exp3
 from warpsky.techniques.sky.analytic import air_depth, air_inscatter
 
-RAYLEIGH_NORM = wp.constant(0.05968310365946075)  # 3 / (16 pi)
 INFINITE = wp.constant(1.0e30)
-
-
-@wp.func
-def exp3(v: wp.vec3) -> wp.vec3:
-    return wp.vec3(wp.exp(-v[0]), wp.exp(-v[1]), wp.exp(-v[2]))
 
 
 @wp.kernel
@@ -51,7 +46,7 @@ def sky_kernel(
     if d < cam.far:
         split = wp.min(d / cos_axis, t_end)
     cos_theta = wp.dot(sun_dir, view)  # light travels along -sun, leaves towards the eye along -view
-    phase = RAYLEIGH_NORM * (1.0 + cos_theta * cos_theta)
+    phase = phase_rayleigh(cos_theta)
     sun_y = sun_dir[1]
     front = air_inscatter(beta_sl, gamma, camera_altitude, view[1], sun_y, split)
     front_radiance[row, col] = wp.cw_mul(sun_irradiance, front) * phase

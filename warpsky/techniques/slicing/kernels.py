@@ -19,7 +19,7 @@ import warp as wp
 
 from warpsky.media.voxel import VoxelGrid, grid_value
 from warpsky.optics.kernels import GRID_SIZE, grid_node
-from warpsky.techniques.common import PinholeCamera, camera_ray, one_minus_exp_over_x
+from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, one_minus_exp_over_x
 from warpsky.techniques.single_scatter.kernels import sun_optical_depth
 
 
@@ -102,11 +102,6 @@ def light_lookup(buffer: wp.array2d(dtype=wp.vec3), frame: SliceFrame, p: wp.vec
     a = buffer[j0, i0] * (1.0 - fx) + buffer[j0, i1] * fx
     b = buffer[j1, i0] * (1.0 - fx) + buffer[j1, i1] * fx
     return a * (1.0 - fy) + b * fy
-
-
-@wp.func
-def exp_neg3(v: wp.vec3) -> wp.vec3:
-    return wp.vec3(wp.exp(-v[0]), wp.exp(-v[1]), wp.exp(-v[2]))
 
 
 @wp.func
@@ -209,7 +204,7 @@ def slicing_kernels(low_albedo: bool, equation: int = 24):
                     phase[c] = phase[c] + s[c] * ams_at(tables, table_of[m], order, c, theta)
         contribution = wp.vec3(0.0)
         tau = extinction * step
-        keep = exp_neg3(tau)
+        keep = exp3(tau)
         for c in range(3):
             if scattering[c] > 0.0:
                 p_c = phase[c] / scattering[c] + xi
@@ -321,7 +316,7 @@ def ground_kernel(
     lit = wp.vec3(0.0)
     if sun_dir[1] > 0.0:
         tau = sun_optical_depth(values, grids, grid_count, t, view, sun_dir, shadow_step)
-        lit = wp.cw_mul(sun_irradiance, exp_neg3(wp.vec3(tau[0], tau[1], tau[2]))) * (sun_dir[1] / wp.pi)
+        lit = wp.cw_mul(sun_irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (sun_dir[1] / wp.pi)
     before = transmittance[row, col]
     radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground_albedo, lit))
     if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
