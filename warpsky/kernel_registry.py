@@ -33,8 +33,10 @@ def kernel_modules() -> list:
     import warpsky.techniques.slicing.kernels as slicing
 
     modules.append(wp.get_module(slicing.__name__))
+    import warpsky.techniques.radiosity.kernels as radiosity
     import warpsky.techniques.stratiform.reference as stratiform_reference
     import warpsky.techniques.stratiform.slab as stratiform_slab
 
-    modules += [wp.get_module(stratiform_slab.__name__), wp.get_module(stratiform_reference.__name__)]
+    modules += [wp.get_module(stratiform_slab.__name__), wp.get_module(stratiform_reference.__name__),
+                wp.get_module(radiosity.__name__)]
     return modules
