@@ -39,4 +39,7 @@ def kernel_modules() -> list:
 
     modules += [wp.get_module(stratiform_slab.__name__), wp.get_module(stratiform_reference.__name__),
                 wp.get_module(radiosity.__name__)]
+    import warpsky.techniques.stratiform.kernels as stratiform_kernels
+
+    modules.append(wp.get_module(stratiform_kernels.__name__))
     return modules

@@ -1,0 +1,187 @@
+"""Host side of the stratiform technique: a :class:`~warpsky.media.stratiform.StratiformLayer` over a (textured)
+ground, with the ground <-> cloud-base radiosity of Bouthors 2006 §5 (see :mod:`.kernels`)."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from warpsky.media.stratiform import GroundTexture, StratiformLayer
+from warpsky.scene.model import Scene
+from warpsky.techniques.base import Layer
+
+
+@dataclass(frozen=True)
+class StratiformSettings:
+    """================== ===== ======= ==================================================================
+    name               unit  default meaning
+    ================== ===== ======= ==================================================================
+    radiosity          --    1       1: iterate ground <-> cloud exchanges; 0: sky and cloud light reach
+                                     the ground once, nothing comes back to the cloud base
+    radiosity_detail   --    0       buffer texels per h = 2^detail (h: ground to cloud base)
+    tolerance          --    1e-4    stop when an iteration's exchanged energy ratio is below this
+    max_iterations     --    64      iteration cap (warns with the residual)
+    ================== ===== ======= ==================================================================
+    """
+
+    technique = "stratiform"
+    radiosity: float = 1
+    radiosity_detail: float = 0
+    tolerance: float = 1e-4
+    max_iterations: float = 64
+
+
+def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray:
+    """Uniform radiance [sun units/sr] with the same irradiance on a horizontal surface at ``altitude`` [m above
+    the stage's y = 0] as the analytic Riley sky above it; 0 without an atmosphere or sun."""
+    if scene.atmosphere is None or scene.sun is None or scene.sun.direction[1] <= 0.0:
+        return np.zeros(3)
+    from warpsky.techniques.sky.analytic import inscatter, rayleigh
+
+    atm = scene.atmosphere
+    zen = (np.arange(samples) + 0.5) / samples * 0.5 * np.pi
+    az = (np.arange(2 * samples) + 0.5) / (2 * samples) * 2 * np.pi
+    z, a = np.meshgrid(zen, az, indexing="ij")
+    dirs = np.stack([np.sin(z) * np.cos(a), np.cos(z), np.sin(z) * np.sin(a)], -1)
+    cos_theta = dirs @ scene.sun.direction
+    radiance = np.stack([scene.sun.irradiance[c] * rayleigh(cos_theta) * inscatter(
+        atm.beta_sea_level[c], atm.gamma, altitude + atm.altitude, dirs[..., 1], scene.sun.direction[1], np.inf)
+        for c in range(3)], -1)
+    weight = (np.cos(z) * np.sin(z))[..., None] * (0.5 * np.pi / samples) * (2 * np.pi / (2 * samples))
+    return (radiance * weight).sum(axis=(0, 1)) / np.pi
+
+
+def _sample(map2d: np.ndarray, origin, size, xs: np.ndarray, zs: np.ndarray) -> np.ndarray:
+    """Nearest-texel lookup of a (nx, nz[, C]) map at world points (clamped; 0 outside for thickness maps)."""
+    nx, nz = map2d.shape[:2]
+    i = np.clip(((xs - origin[0]) / size[0] * nx).astype(int), 0, nx - 1)
+    j = np.clip(((zs - origin[1]) / size[1] * nz).astype(int), 0, nz - 1)
+    return map2d[i, j]
+
+
+class Stratiform:
+    """Bouthors 2006 stratiform layer + radiosity. ``render`` takes the layer (and ground texture) explicitly."""
+
+    name = "stratiform"
+    Settings = StratiformSettings
+
+    def __init__(self, settings: StratiformSettings | None = None, *, device: str = "cpu"):
+        self.settings = settings or StratiformSettings()
+        self.device = device
+
+    def resolved_settings(self, scene: Scene) -> StratiformSettings:
+        return self.settings
+
+    def radiosity_inputs(self, scene: Scene, layer: StratiformLayer, texture: GroundTexture | None, optics,
+                         sky: np.ndarray):
+        """(grid box (x0, z0, sx, sz), R_G, R_C, RadiosityResult or None) on the shared low-resolution grid."""
+        from warpsky.techniques.radiosity.solver import Radiosity, ground_direct, pyramid_shape
+        from warpsky.techniques.stratiform.model1d import order_energies, reference_thickness
+
+        s = self.settings
+        ground = scene.ground
+        h = layer.base_altitude - ground.height
+        detail = int(s.radiosity_detail)
+        pixel = h / 2**detail
+        margin = 8.0 * h
+        x0, z0 = layer.origin[0] - margin, layer.origin[1] - margin
+        shape = pyramid_shape((math.ceil((layer.size[0] + 2 * margin) / pixel),
+                               math.ceil((layer.size[1] + 2 * margin) / pixel)), detail + 3)
+        box = (x0, z0, shape[0] * pixel, shape[1] * pixel)
+        # area averages of the maps over each texel (4 x 4 sub-samples)
+        sub = (np.arange(4) + 0.5) / 4
+        xs = x0 + (np.arange(shape[0])[:, None] + sub[None, :]).reshape(-1) * pixel
+        zs = z0 + (np.arange(shape[1])[:, None] + sub[None, :]).reshape(-1) * pixel
+        X, Z = np.meshgrid(xs, zs, indexing="ij")
+        inside = ((X >= layer.origin[0]) & (X <= layer.origin[0] + layer.size[0]) & (Z >= layer.origin[1])
+                  & (Z <= layer.origin[1] + layer.size[1]))
+        thick = np.where(inside, _sample(layer.thickness, layer.origin, layer.size, X, Z), 0.0)
+        sun = scene.sun.direction if scene.sun is not None else np.array([0.0, 1.0, 0.0])
+        irradiance = scene.sun.irradiance if scene.sun is not None and sun[1] > 0 else np.zeros(3)
+        mu_l = max(float(sun[1]), 1e-6)
+        e = order_energies(reference_thickness(thick, optics.kappa), np.degrees(np.arccos(min(mu_l, 1.0))),
+                           float(optics.kappa_s[1] / optics.to_reference))
+
+        def texel_mean(values):
+            return values.reshape(shape[0], 4, shape[1], 4, *values.shape[2:]).mean(axis=(1, 3))
+
+        t_c = texel_mean(e.t0 + e.t1 + e.t2)
+        rho_c = texel_mean(e.r_ms)
+        source = texel_mean(e.t3p)[..., None] * irradiance * mu_l + texel_mean(e.t_ms)[..., None] * np.pi * sky
+        if texture is not None:
+            rho_g = texel_mean(_sample(texture.albedo, texture.origin, texture.size, X, Z))
+        else:
+            rho_g = np.broadcast_to(ground.albedo, (*shape, 3))
+        direct = ground_direct(t_c, pixel=pixel, h=h, sun_direction=sun, sun_irradiance=irradiance,
+                               device=self.device)
+        solver = Radiosity(pixel_over_h=2.0**-detail, tolerance=s.tolerance, max_iterations=int(s.max_iterations),
+                           device=self.device)
+        if s.radiosity:
+            result = solver.solve(ground_albedo=rho_g, cloud_reflectance=rho_c, ground_direct=direct,
+                                  cloud_source=source)
+            return box, result.ground_received, result.cloud_received, result
+        return box, solver.gather(source), np.zeros((*shape, 3), np.float32), None
+
+    def render(self, scene: Scene, width: int, height: int, *, layer: StratiformLayer,
+               ground_texture: GroundTexture | None = None) -> Layer:
+        import warp as wp
+
+        from warpsky.device import launch_rows
+        from warpsky.techniques.common import pinhole_camera
+        from warpsky.techniques.stratiform.kernels import LayerGeometry, stratiform_kernel
+        from warpsky.techniques.stratiform.optics import stratiform_optics
+
+        started = time.perf_counter()
+        camera = scene.camera.conformed(width, height)
+        eye = camera.position
+        optics = stratiform_optics(layer.number_density, layer.effective_radius)
+        sky = sky_radiance(scene, layer.base_altitude + float(layer.thickness.max()))
+        stats = {"radiosity": bool(self.settings.radiosity)}
+        with wp.ScopedDevice(self.device):
+            slab_optics, tables, params = optics.device_inputs(self.device)
+            g = LayerGeometry()
+            g.base = float(layer.base_altitude - eye[1])
+            g.x0 = float(layer.origin[0] - eye[0])
+            g.z0 = float(layer.origin[1] - eye[2])
+            g.sx, g.sz = float(layer.size[0]), float(layer.size[1])
+            g.top = g.base + float(layer.thickness.max())
+            ground = scene.ground
+            if ground is not None and ground.height < layer.base_altitude:
+                box, r_g, r_c, result = self.radiosity_inputs(scene, layer, ground_texture, optics, sky)
+                if result is not None:
+                    stats.update(radiosity_iterations=result.iterations, radiosity_residual=result.residual,
+                                 radiosity_seconds=result.seconds, radiosity_converged=result.converged)
+            else:
+                box, r_g, r_c = (0.0, 0.0, 1.0, 1.0), np.zeros((2, 2, 3)), np.zeros((2, 2, 3))
+            if ground_texture is not None:
+                albedo, abox = ground_texture.albedo, (*ground_texture.origin, *ground_texture.size)
+            else:
+                albedo = np.broadcast_to(ground.albedo if ground is not None else np.zeros(3), (2, 2, 3))
+                abox = (-1e9, -1e9, 2e9, 2e9)
+            rel = lambda b: wp.vec4(b[0] - eye[0], b[1] - eye[2], b[2], b[3])  # noqa: E731
+            sun = scene.sun
+            shape = (height, width)
+            radiance = wp.zeros(shape, dtype=wp.vec3)
+            transmittance = wp.zeros(shape, dtype=wp.vec3)
+            depth = wp.zeros(shape, dtype=float)
+            inputs = [
+                pinhole_camera(camera, width, height), wp.array(layer.thickness, dtype=float), g, tables.values,
+                params, slab_optics,
+                wp.vec3(*(sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])).tolist()),
+                wp.vec3(*(sun.irradiance if sun is not None else np.zeros(3)).tolist()), wp.vec3(*sky.tolist()),
+                int(ground is not None), float(ground.height - eye[1]) if ground is not None else 0.0,
+                wp.array(np.ascontiguousarray(albedo, dtype=np.float32), dtype=wp.vec3), rel(abox),
+                wp.array(np.ascontiguousarray(r_g, dtype=np.float32), dtype=wp.vec3),
+                wp.array(np.ascontiguousarray(r_c, dtype=np.float32), dtype=wp.vec3), rel(box),
+                radiance, transmittance, depth,
+            ]
+            render_started = time.perf_counter()
+            launch_rows(stratiform_kernel, height, width, inputs, self.device)
+            wp.synchronize_device(self.device)
+            stats["shading_seconds"] = time.perf_counter() - render_started
+            out = Layer(radiance.numpy(), transmittance.numpy(), depth.numpy(), stats)
+        stats["seconds"] = time.perf_counter() - started
+        return out
