@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test lint bench venv data clean help
+.PHONY: demo test lint bench venv data clean help stratocumulus
 
 help:
 	@echo "make demo   - install into $(VENV), generate sample data, render the demo cumulus to out/"
@@ -39,6 +39,9 @@ lint: $(STAMP)
 
 bench: $(STAMP) data/cumulus.nvdb
 	$(PY) benchmarks/bench_single_scatter.py
+
+stratocumulus: $(STAMP)
+	$(PY) tools/make_stratocumulus.py --out data --render out
 
 clean:
 	rm -rf out data .pytest_cache
