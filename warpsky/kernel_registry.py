@@ -42,4 +42,5 @@ def kernel_modules() -> list:
     import warpsky.techniques.stratiform.kernels as stratiform_kernels
 
     modules.append(wp.get_module(stratiform_kernels.__name__))
+    modules.append(wp.get_module(__import__("warpsky.media.advection_kernels", fromlist=["*"]).__name__))
     return modules
