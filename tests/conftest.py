@@ -137,8 +137,8 @@ def render_layer(stage_path: Path, device: str, width: int, height: int, *, time
     from warpsky.techniques.single_scatter.technique import SingleScatter
 
     scene = StageReader(stage_path).scene_at(time)
-    plan = make_plan(scene, settings={k: str(v) for k, v in settings.items()}, resolution=(width, height),
-                     device=device)
+    plan = make_plan(scene, technique="single_scatter", settings={k: str(v) for k, v in settings.items()},
+                     resolution=(width, height), device=device)
     return scene, SingleScatter(plan.settings, device=device).render(scene, width, height)
 
 

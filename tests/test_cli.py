@@ -25,7 +25,7 @@ def run(args, capsys):
 def test_render_writes_exr_with_channels_and_metadata(tmp_path, good_stage, capsys):
     out = tmp_path / "out" / "f.####.exr"
     code, stdout, _ = run(["render", good_stage, out, "--frames", "1:3", "--res", "16x12", "--device", "cpu",
-                           "--png", "--set", "step_length=0.5"], capsys)
+                           "--png", "--technique", "single_scatter", "--set", "step_length=0.5"], capsys)
     assert code == 0
     for frame in (1, 2, 3):
         path = tmp_path / "out" / f"f.{frame:04d}.exr"
@@ -54,7 +54,7 @@ def test_float_output_and_single_frame_without_placeholder(tmp_path, good_stage,
 def test_info_prints_stage_and_plan(good_stage, capsys):
     code, stdout, _ = run(["info", good_stage, "--device", "cpu"], capsys)
     assert code == 0
-    for text in ("upAxis Y", "/World/Camera", "/World/Cloud", "technique   single_scatter", "step_length",
+    for text in ("upAxis Y", "/World/Camera", "/World/Cloud", "technique   slicing", "slice_count", "xi=0.1",
                  "ground      off"):
         assert text in stdout
 
@@ -199,8 +199,8 @@ def test_usage_errors_exit_2(tmp_path, good_stage, capsys):
     assert exc.value.code == 2
     code, _, err = run(["render", good_stage, tmp_path / "a.png"], capsys)
     assert code == 2 and "a.png" in err
-    code, _, err = run(["render", good_stage, tmp_path / "a.exr", "--set", "step_length=-1"], capsys)
-    assert code == 2 and "step_length" in err
+    code, _, err = run(["render", good_stage, tmp_path / "a.exr", "--set", "slice_count=-1"], capsys)
+    assert code == 2 and "slice_count" in err
     code, _, err = run(["render", good_stage, tmp_path / "a.exr", "--set", "bogus=1"], capsys)
     assert code == 2 and "bogus" in err
 

@@ -33,7 +33,7 @@ def frame(stage_path, device, width=16, height=16):
     from warpsky.techniques.single_scatter.technique import SingleScatter
 
     scene = StageReader(stage_path).scene_at(None)
-    plan = make_plan(scene, resolution=(width, height), device=device)
+    plan = make_plan(scene, technique="single_scatter", resolution=(width, height), device=device)
     _, layers = render_layers(SingleScatter(plan.settings, device=device), scene, plan)
     return scene, composite(layers, far=scene.camera.far)
 

@@ -34,7 +34,7 @@ def test_optically_thin_limit_equals_single_scattering(tmp_path, homogeneous_npy
     stage = write_stage(tmp_path / "thin.usda", spec)
     _, reference = render_layer(stage, device, 16, 16, step_length=0.05, shadow_step_length=0.05,
                                 min_transmittance=0.0)
-    layer = sliced(stage, device, 16, slice_count=512)
+    layer = sliced(stage, device, 16, slice_count=512, xi=0)  # xi models thick-cloud back-scatter: none here
     # per-slice optical depth is ~1e-6 here: 1 - e^-tau must be taken without float32 cancellation
     interior = reference.radiance[..., 1] > 0.5 * reference.radiance[..., 1].max()
     np.testing.assert_allclose(layer.radiance[interior], reference.radiance[interior], rtol=0.01)
@@ -72,26 +72,46 @@ def test_low_albedo_mode_is_darker(tmp_path, homogeneous_npy, device):
     assert low.radiance.sum() < full.radiance.sum()
 
 
-def test_slice_count_convergence(tmp_path, homogeneous_npy, device):
-    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.15, camera_position=(3.0, 4.0, 42.0),
-                     camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.4, 0.8, 0.3),
-                     phase="hg", g=0.8)
+def smooth_blob(path, size: int = 16):
+    """A Gaussian puff on a size^3 grid, zero at the faces (clouds have soft edges; a hard-edged box converges only
+    at first order in the slice spacing whatever the light update, because of where planes cut its faces)."""
+    x = (np.arange(size) + 0.5) / size * 2.0 - 1.0
+    X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+    blob = np.exp(-4.0 * (X**2 + Y**2 + Z**2)).astype(np.float32)
+    blob[[0, -1]] = 0.0
+    blob[:, [0, -1]] = 0.0
+    blob[:, :, [0, -1]] = 0.0
+    np.save(path, blob)
+    return path
+
+
+@pytest.mark.parametrize("equation", [0, 24])
+def test_slice_count_convergence(tmp_path, device, equation):
+    """|I_512 - I_256| <= 1/2 |I_256 - I_128|. Measured (12x12, cpu): equation 0 (default) 7.3e-8, 2.0e-8, 5.1e-9
+    for 64->128->256->512 differences after 4.1e-7 (second order); Riley's Eq. 24 halves each time (first order),
+    so it is held to the issue's 1/2 with a 5% margin."""
+    spec = StageSpec(volume_file=smooth_blob(tmp_path / "blob.npy"), extinction_scale=0.3,
+                     camera_position=(3.0, 4.0, 42.0), camera_rotation=look_rotation((-0.05, -0.06, -1.0)),
+                     sun_direction=(0.4, 0.8, 0.3), phase="hg", g=0.8)
     stage = write_stage(tmp_path / "conv.usda", spec)
-    images = {n: sliced(stage, device, 12, slice_count=n).radiance for n in (128, 256, 512)}
+    images = {n: sliced(stage, device, 12, slice_count=n, light_equation=equation).radiance for n in (128, 256, 512)}
     coarse = np.abs(images[256] - images[128]).mean()
     fine = np.abs(images[512] - images[256]).mean()
-    assert fine <= 0.5 * coarse + 1e-9, (coarse, fine)
+    print(f"equation {equation}: |I256 - I128| = {coarse:.3g}, |I512 - I256| = {fine:.3g}, ratio {fine / coarse:.3f}")
+    assert fine <= (0.35 if equation == 0 else 0.525) * coarse, (coarse, fine)
 
 
 def test_both_light_equations_render_and_differ(tmp_path, homogeneous_npy, device):
     spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.3, camera_position=(0.0, 0.0, 40.0),
                      sun_direction=(0.3, 0.8, 0.5), phase="hg", g=0.85)
     stage = write_stage(tmp_path / "eq.usda", spec)
+    limit = sliced(stage, device, 8, slice_count=64, light_equation=0)
     eq24 = sliced(stage, device, 8, slice_count=64, light_equation=24)
     eq25 = sliced(stage, device, 8, slice_count=64, light_equation=25)
-    for layer in (eq24, eq25):
+    for layer in (limit, eq24, eq25):
         assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
     assert not np.allclose(eq24.radiance, eq25.radiance)
+    assert not np.allclose(limit.radiance, eq24.radiance)
 
 
 def test_sun_below_the_ground_lights_nothing(tmp_path, homogeneous_npy, device):
@@ -118,7 +138,7 @@ def test_rain_sheet_shows_the_primary_bow(tmp_path, homogeneous_npy, species_pha
     add_field(stage, "rain", homogeneous_npy, scale=2e-4)  # optical depth ~0.02 across the sheet
     scene = StageReader(stage).scene_at(None)
     size = 96
-    layer = Slicing(Slicing.Settings(slice_count=64, orders=8), device=device).render(scene, size, size)
+    layer = Slicing(Slicing.Settings(slice_count=64, orders=8, xi=0.0), device=device).render(scene, size, size)
     radius = pixel_radius(scene, size, look)
     opacity = 1.0 - layer.transmittance[..., 1]
     seen = (opacity > 1e-4) & (radius > 30.0) & (radius < 50.0)
@@ -142,7 +162,7 @@ def test_cirrus_sheet_shows_the_22_degree_halo(tmp_path, homogeneous_npy, specie
     add_field(stage, "ice", homogeneous_npy, scale=4e-5)  # optical depth ~0.02 through the layer
     scene = StageReader(stage).scene_at(None)
     size = 96
-    layer = Slicing(Slicing.Settings(slice_count=64, orders=8), device=device).render(scene, size, size)
+    layer = Slicing(Slicing.Settings(slice_count=64, orders=8, xi=0.0), device=device).render(scene, size, size)
     radius = pixel_radius(scene, size, sun)
     opacity = 1.0 - layer.transmittance[..., 1]
     seen = (opacity > 1e-4) & (radius > 15.0) & (radius < 30.0)
@@ -168,7 +188,7 @@ def test_cloud_sheet_shows_the_glory(tmp_path, homogeneous_npy, species_phase, d
     add_field(stage, "cloud", homogeneous_npy, scale=2e-4)
     scene = StageReader(stage).scene_at(None)
     size = 64
-    layer = Slicing(Slicing.Settings(slice_count=32, orders=8), device=device).render(scene, size, size)
+    layer = Slicing(Slicing.Settings(slice_count=32, orders=8, xi=0.0), device=device).render(scene, size, size)
     radius = pixel_radius(scene, size, look)
     per_opacity = layer.radiance[..., 1] / np.maximum(1.0 - layer.transmittance[..., 1], 1e-12)
     centre = per_opacity[radius < 0.5].mean()
@@ -204,3 +224,27 @@ def test_rotating_scene_camera_and_sun_together_leaves_the_image_unchanged(tmp_p
     assert a.radiance.max() > 0.0
     np.testing.assert_allclose(b.radiance, a.radiance, rtol=2e-3, atol=1e-4 * a.radiance.max())
     np.testing.assert_allclose(b.transmittance, a.transmittance, atol=1e-4)
+
+
+def test_xi_per_volume_from_usd(tmp_path, homogeneous_npy, device):
+    """``warpsky:slicing:xi`` on a Volume overrides the technique's ``xi`` for that medium only."""
+    from pxr import Sdf, Usd
+
+    from warpsky.errors import SceneError
+
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.2, camera_position=(0.0, 0.0, 40.0),
+                     sun_direction=(0.3, 0.8, 0.5), phase="hg", g=0.85)
+    stage_path = write_stage(tmp_path / "xi.usda", spec)
+    no_xi = sliced(stage_path, device, 8, slice_count=32, xi=0)
+    with_xi = sliced(stage_path, device, 8, slice_count=32, xi=0.2)
+    assert with_xi.radiance.sum() > 1.05 * no_xi.radiance.sum()
+    stage = Usd.Stage.Open(str(stage_path))
+    attr = stage.GetPrimAtPath("/World/Cloud").CreateAttribute("warpsky:slicing:xi", Sdf.ValueTypeNames.Float)
+    attr.Set(0.0)
+    stage.Save()
+    authored = sliced(stage_path, device, 8, slice_count=32, xi=0.2)
+    np.testing.assert_array_equal(authored.radiance, no_xi.radiance)
+    attr.Set(-1.0)
+    stage.Save()
+    with pytest.raises(SceneError, match=r"/World/Cloud.*warpsky:slicing:xi"):
+        StageReader(stage_path).scene_at(None)

@@ -56,7 +56,7 @@ def _setting(text: str) -> tuple[str, str]:
 
 
 def _add_render_options(parser: argparse.ArgumentParser) -> None:
-    from warpsky.techniques.base import technique_names
+    from warpsky.techniques.base import DEFAULT_TECHNIQUE, technique_names
 
     parser.add_argument("--camera", metavar="PATH", help="camera prim path (default: render settings' camera, "
                         "else the first camera)")
@@ -64,8 +64,8 @@ def _add_render_options(parser: argparse.ArgumentParser) -> None:
                         help="image size; WIDTH alone keeps the camera's aspect (default: the stage's "
                         "RenderSettings resolution, else 512 wide)")
     parser.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
-    parser.add_argument("--technique", default="single_scatter", choices=technique_names(),
-                        help="rendering technique (default: single_scatter)")
+    parser.add_argument("--technique", default=DEFAULT_TECHNIQUE, choices=technique_names(),
+                        help=f"rendering technique (default: {DEFAULT_TECHNIQUE})")
     parser.add_argument("--set", dest="settings", type=_setting, action="append", default=[], metavar="NAME=VALUE",
                         help="technique setting, repeatable (see below)")
     parser.add_argument("--spp", type=int, metavar="N", help="path_tracer: samples per pixel (= --set spp=N)")

@@ -29,7 +29,8 @@ def kernel_modules() -> list:
     modules += [
         path_trace_kernel(has_ground, has_tables).module for has_ground in (False, True) for has_tables in (False, True)
     ]
-    modules += [k.module for low in (False, True) for eq in (24, 25) for k in slicing_kernels(low, eq)]
+    modules += [k.module for low in (False, True) for eq in (0, 24, 25)
+                for k in slicing_kernels(low, eq)]
     import warpsky.techniques.slicing.kernels as slicing
 
     modules.append(wp.get_module(slicing.__name__))

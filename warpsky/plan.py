@@ -13,7 +13,7 @@ import numpy as np
 
 from warpsky.errors import UsageError
 from warpsky.scene.model import Scene
-from warpsky.techniques.base import parse_settings, technique_class
+from warpsky.techniques.base import DEFAULT_TECHNIQUE, parse_settings, technique_class
 
 DEFAULT_WIDTH = 512
 
@@ -67,7 +67,7 @@ def resolve_resolution(scene: Scene, resolution: tuple[int, int | None] | None) 
 def make_plan(
     scene: Scene,
     *,
-    technique: str = "single_scatter",
+    technique: str = DEFAULT_TECHNIQUE,
     settings: dict[str, str] | None = None,
     resolution: tuple[int, int | None] | None = None,
     device: str = "cpu",

@@ -14,7 +14,7 @@ import warpsky
 from warpsky.composite import composite
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
-from warpsky.techniques.base import technique_class
+from warpsky.techniques.base import DEFAULT_TECHNIQUE, technique_class
 
 #: Channels every warpsky EXR holds.
 EXR_CHANNELS = ("R", "G", "B", "A", "transmittance.R", "transmittance.G", "transmittance.B", "depth.Z")
@@ -35,7 +35,7 @@ class RenderOptions:
         exposure: Preview exposure in stops, on top of the automatic sun-based normalisation.
     """
 
-    technique: str = "single_scatter"
+    technique: str = DEFAULT_TECHNIQUE
     settings: dict[str, str] = field(default_factory=dict)
     resolution: tuple[int, int | None] | None = None
     device: str = "cpu"

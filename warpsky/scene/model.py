@@ -207,6 +207,8 @@ class VoxelMedium:
         source: File the field was read from, for messages and ``warpsky info``.
         species: Particle species (``cloud``, ``rain``, ``ice``, ``snow``, ``air``) whose tabulated phase
             function is used, or None for the analytic ``phase``.
+        slicing_xi: Riley's back-scatter term ξ [1/sr] for this medium in half-angle slicing (``float
+            warpsky:slicing:xi`` on the Volume), or None for the technique's ``xi`` setting.
     """
 
     name: str
@@ -217,8 +219,12 @@ class VoxelMedium:
     phase: PhaseModel = field(default_factory=PhaseModel)
     source: str = ""
     species: str | None = None
+    slicing_xi: float | None = None
 
     def __post_init__(self):
+        if self.slicing_xi is not None and not (math.isfinite(self.slicing_xi) and self.slicing_xi >= 0.0):
+            raise SceneError(f"medium {self.name}: warpsky:slicing:xi must be a finite phase value >= 0 [1/sr], "
+                             f"got {self.slicing_xi}")
         if self.species is not None:
             from warpsky.optics.species import get_species
 

@@ -327,6 +327,8 @@ class StageReader:
             raise SceneError(f"{path}.warpsky:phase must be one of {', '.join(PHASE_TOKENS)}, got {phase_token!r}")
         g = self._float_attr(prim, "warpsky:phase:g", tc, 0.85)
         volume_albedo = self._float_attr(prim, "warpsky:albedo", tc, 1.0)
+        slicing_xi = self._float_attr(prim, "warpsky:slicing:xi", tc, math.nan)  # nan: not authored
+        slicing_xi = None if math.isnan(slicing_xi) else slicing_xi
         media = []
         for name in rendered:
             field_prim = self.stage.GetPrimAtPath(fields[name])
@@ -357,7 +359,7 @@ class StageReader:
             try:
                 media.append(VoxelMedium(
                     f"{path}:{name}" if species else path, grid.values, volume_world @ local_from_index, scale,
-                    albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species,
+                    albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi,
                 ))
             except SceneError as exc:
                 raise SceneError(f"Volume {path}: {exc}") from None

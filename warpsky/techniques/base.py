@@ -31,6 +31,10 @@ class Layer:
     aovs: dict = field(default_factory=dict)
 
 
+#: The technique ``warpsky render`` uses unless told otherwise: half-angle slicing (Riley 2004), one sweep with
+#: multiple-scattering phase functions; ``single_scatter`` and ``path_tracer`` remain for comparison and reference.
+DEFAULT_TECHNIQUE = "slicing"
+
 _REGISTRY: dict[str, str] = {
     "single_scatter": "warpsky.techniques.single_scatter.technique:SingleScatter",
     "path_tracer": "warpsky.techniques.path_tracer.technique:PathTracer",

@@ -113,37 +113,65 @@ def one_minus_exp(tau: float) -> float:
 #: Scattering events of one light step evaluated one by one; the rest use the last order's forward fraction.
 MAX_EVENTS = wp.constant(64)
 
+#: Voxel fields one slicing pass combines; each sample keeps every field's density in registers (one grid read
+#: per field per sample, however many scattering orders the light update and the eye gather then evaluate).
+MAX_MEDIA = 16
+FieldDensities = wp.types.vector(length=MAX_MEDIA, dtype=float)
+
+
+@wp.struct
+class SliceSample:
+    """All media at one point: each field's density and the summed coefficients [1/m]."""
+
+    density: FieldDensities
+    extinction: wp.vec3
+    scattering: wp.vec3
+
 
 @wp.func
-def mixed_forward(
-    values: wp.array(dtype=float),
-    grids: wp.array(dtype=VoxelGrid),
-    grid_count: int,
-    table_of: wp.array(dtype=int),
-    tables: AmsTables,
-    p: wp.vec3,
-    order: float,
-    channel: int,
-) -> float:
-    """alpha F_order of the media mixed at p: sum of scattering_i F_i over the total extinction."""
-    num = float(0.0)
-    den = float(0.0)
+def sample_fields(values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid), grid_count: int,
+                  p: wp.vec3) -> SliceSample:
+    out = SliceSample()
+    out.density = FieldDensities()
+    out.extinction = wp.vec3(0.0)
+    out.scattering = wp.vec3(0.0)
     for m in range(grid_count):
         grid = grids[m]
         value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
         if value > 0.0:
-            num += grid.scattering[channel] * value * forward_at(tables, table_of[m], order, channel)
-            den += grid.extinction[channel] * value
-    if den <= 0.0:
+            out.density[m] = value
+            out.extinction += grid.extinction * value
+            out.scattering += grid.scattering * value
+    return out
+
+
+@wp.func
+def mixed_forward(
+    sample: SliceSample,
+    grids: wp.array(dtype=VoxelGrid),
+    grid_count: int,
+    table_of: wp.array(dtype=int),
+    tables: AmsTables,
+    order: float,
+    channel: int,
+) -> float:
+    """alpha F_order of the media mixed at the sample: sum of scattering_i F_i over the total extinction."""
+    if sample.extinction[channel] <= 0.0:
         return 0.0
-    return num / den
+    num = float(0.0)
+    for m in range(grid_count):
+        value = sample.density[m]
+        if value > 0.0:
+            num += grids[m].scattering[channel] * value * forward_at(tables, table_of[m], order, channel)
+    return num / sample.extinction[channel]
 
 
 @functools.cache
-def slicing_kernels(low_albedo: bool, equation: int = 24):
+def slicing_kernels(low_albedo: bool, equation: int = 0):
     """(eye_kernel, light_kernel), specialised on Riley's low-albedo comparison mode (Fig. 13: Ams_1 only, light
-    attenuated by extinction, no multiple scattering) and on the light-buffer update: Riley's Eq. 24 (per-event
-    forward fractions; converges as slices are added) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta))."""
+    attenuated by extinction, no multiple scattering) and on the light-buffer update: 0, the continuous limit of
+    Riley's model solved per step (second order in the slice spacing); Riley's Eq. 24 (per-event forward
+    fractions, first order) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta), which does not converge)."""
 
     @wp.kernel(module="unique")
     def eye_kernel(
@@ -158,7 +186,7 @@ def slicing_kernels(low_albedo: bool, equation: int = 24):
         light_i: wp.array2d(dtype=wp.vec3),
         light_n: wp.array2d(dtype=wp.vec3),
         sun_dir: wp.vec3,
-        xi: float,
+        xi_of: wp.array(dtype=float),
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
         depth_sum: wp.array2d(dtype=wp.vec2),
@@ -177,14 +205,9 @@ def slicing_kernels(low_albedo: bool, equation: int = 24):
             return
         p = view * t
         step = frame.spacing / wp.abs(along)
-        extinction = wp.vec3(0.0)
-        scattering = wp.vec3(0.0)
-        for m in range(grid_count):
-            grid = grids[m]
-            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
-            if value > 0.0:
-                extinction += grid.extinction * value
-                scattering += grid.scattering * value
+        sample = sample_fields(values, grids, grid_count, p)
+        extinction = sample.extinction
+        scattering = sample.scattering
         if wp.max(extinction) <= 0.0:
             return
         light = light_lookup(light_i, frame, p)
@@ -193,21 +216,20 @@ def slicing_kernels(low_albedo: bool, equation: int = 24):
         # Riley Eq. 26: Ams of one more scattering than the light has had, mixed over media by scattering
         phase = wp.vec3(0.0)
         for m in range(grid_count):
-            grid = grids[m]
-            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+            value = sample.density[m]
             if value > 0.0:
-                s = grid.scattering * value
+                s = grids[m].scattering * value
                 for c in range(3):
                     order = n[c] + 1.0
                     if wp.static(low_albedo):
                         order = 1.0
-                    phase[c] = phase[c] + s[c] * ams_at(tables, table_of[m], order, c, theta)
+                    phase[c] = phase[c] + s[c] * (ams_at(tables, table_of[m], order, c, theta) + xi_of[m])
         contribution = wp.vec3(0.0)
         tau = extinction * step
         keep = exp3(tau)
         for c in range(3):
             if scattering[c] > 0.0:
-                p_c = phase[c] / scattering[c] + xi
+                p_c = phase[c] / scattering[c]  # xi included, per medium
                 # scattering integrated exactly over the step: (1 - e^-tau) albedo instead of beta_s * step
                 contribution[c] = light[c] * p_c * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
         before = transmittance[row, col]
@@ -231,9 +253,11 @@ def slicing_kernels(low_albedo: bool, equation: int = 24):
         tables: AmsTables,
         frame: SliceFrame,
         plane: float,
+        advance: float,
         light_i: wp.array2d(dtype=wp.vec3),
         light_n: wp.array2d(dtype=wp.vec3),
     ):
+        """Carry the light buffer from the slice plane ``plane`` to ``plane + advance`` (along the slice axis)."""
         j, i = wp.tid()
         scale = frame.light_size / float(frame.light_res)
         base = frame.light_origin + frame.light_u * ((float(i) + 0.5) * scale) + frame.light_v * (
@@ -241,17 +265,12 @@ def slicing_kernels(low_albedo: bool, equation: int = 24):
         along = wp.dot(frame.axis, frame.light_dir)
         # the texel's light ray meets this slice at base + a l with dot(s, .) = plane; step to the next slice
         a = (plane - wp.dot(frame.axis, base)) / along
-        step = frame.spacing / along
+        step = advance / along
         mid = base + frame.light_dir * (a + 0.5 * step)
-        extinction = wp.vec3(0.0)
-        scattering = wp.vec3(0.0)
         n = light_n[j, i]
-        for m in range(grid_count):
-            grid = grids[m]
-            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * mid)
-            if value > 0.0:
-                extinction += grid.extinction * value
-                scattering += grid.scattering * value
+        sample = sample_fields(values, grids, grid_count, mid)
+        extinction = sample.extinction
+        scattering = sample.scattering
         if wp.max(extinction) <= 0.0:
             return
         intensity = light_i[j, i]
@@ -260,9 +279,9 @@ def slicing_kernels(low_albedo: bool, equation: int = 24):
             tau = extinction[c] * step
             keep = wp.exp(-tau)
             kept = float(0.0)
-            if not wp.static(low_albedo):
+            if wp.static(not low_albedo and equation != 0):
                 if scattering[c] > 0.0 and wp.static(equation == 25):
-                    alpha_f = wp.clamp(mixed_forward(values, grids, grid_count, table_of, tables, mid,
+                    alpha_f = wp.clamp(mixed_forward(sample, grids, grid_count, table_of, tables,
                                                      n[c] + 1.0 + tau, c), 0.0, 1.0)
                     if alpha_f > 0.0:
                         kept = one_minus_exp(tau) * wp.exp(tau * wp.log(alpha_f))
@@ -270,17 +289,32 @@ def slicing_kernels(low_albedo: bool, equation: int = 24):
                     # Riley Eq. 24: the light scattered within the step keeps, per scattering event, its forward
                     # part alpha F_i, over ceil(beta Delta) events (Eq. 25's (alpha F)^(beta Delta) shortcut loses
                     # only O(Delta^2) per step, so it does not converge as slices are added; see the README)
-                    events = int(wp.ceil(tau))
+                    events = int(wp.ceil(wp.min(tau, 1.0e6)))  # beyond 64 events the rest share one factor
+                    first = n[c] + 1.0  # Riley: events n+1 .. n+ceil(tau)
                     log_kept = float(0.0)
                     for e in range(wp.min(events, MAX_EVENTS)):
-                        log_kept += wp.log(wp.max(mixed_forward(values, grids, grid_count, table_of, tables, mid,
-                                                                n[c] + 1.0 + float(e), c), 1.0e-30))
+                        log_kept += wp.log(wp.max(mixed_forward(sample, grids, grid_count, table_of, tables,
+                                                                first + float(e), c), 1.0e-30))
                     if events > MAX_EVENTS:
-                        last = mixed_forward(values, grids, grid_count, table_of, tables, mid,
-                                             n[c] + float(MAX_EVENTS), c)
+                        last = mixed_forward(sample, grids, grid_count, table_of, tables,
+                                             first + float(MAX_EVENTS - 1), c)
                         log_kept += float(events - MAX_EVENTS) * wp.log(wp.max(last, 1.0e-30))
                     kept = one_minus_exp(tau) * wp.exp(log_kept)
             out[c] = intensity[c] * (keep + kept)
+            if wp.static(equation == 0 and not low_albedo):
+                # the limit both equations discretise: dI/dtau = -(1 - alpha F_{n+1}) I while n grows by alpha
+                # per unit optical depth, integrated over the step by the midpoint rule on <= 64 chunks (exact
+                # for thin steps to O(tau^3): second order in the slice spacing). It is also the expectation of
+                # (alpha F)^K over a Poisson number K of scattering events, where Eq. 24 takes K = ceil(tau).
+                if extinction[c] > 0.0:
+                    chunks = int(wp.ceil(wp.min(tau, float(MAX_EVENTS))))
+                    chunk = tau / float(chunks)
+                    albedo = scattering[c] / extinction[c]
+                    exponent = float(0.0)
+                    for e in range(chunks):
+                        order = n[c] + 1.0 + albedo * chunk * (float(e) + 0.5)
+                        exponent += (1.0 - mixed_forward(sample, grids, grid_count, table_of, tables, order, c)) * chunk
+                    out[c] = intensity[c] * wp.exp(-exponent)
             n[c] = n[c] + (scattering[c] / extinction[c]) * tau  # Eq. 22: n = -alpha ln T
         light_i[j, i] = out
         light_n[j, i] = n
