@@ -189,6 +189,62 @@ class Sun:
 
 
 @dataclass(frozen=True)
+class DetailSpec:
+    """Animated density detail of a voxel medium (issue 7): the coarse field times an advected noise factor,
+    evaluated at each sample inside the kernels (the grid is never rewritten).
+
+    The factor is ``max(0, 1 + amplitude * clamp(z, -3, 3))`` with ``z`` a periodic 3D noise of unit standard
+    deviation (features about ``scale`` across), advected by ``wind`` plus divergence-free curl noise (eddies of
+    8 ``scale`` and 4 ``scale``, rms speed ``curl_speed``) in Neyret's staggered layers of life ``period``
+    (:mod:`warpsky.media.advection`). The factor never exceeds ``1 + 3 amplitude``. The noise is anchored in
+    world space and tiles it with a period of 32 ``scale``; time is ``time_code / timeCodesPerSecond``, and every
+    frame is computed on its own (random access). Attributes on the ``Volume`` prim (all its fields share them):
+
+    ==================================  ========== ======= =========== ================================================
+    USD attribute                       unit       default range       meaning
+    ==================================  ========== ======= =========== ================================================
+    ``float warpsky:detail:amplitude``  --         0       [0, 1]      strength; 0 turns detail off (no kernel cost)
+    ``float warpsky:detail:scale``      m          100     > 0         size of the detail features
+    ``float3 warpsky:detail:wind``      m/s        (0,0,0) finite      uniform wind, along the stage's axes (metres
+                                                                       per second whatever metersPerUnit says)
+    ``float warpsky:detail:curlSpeed``  m/s        2       >= 0        rms speed of the turbulent (curl) part
+    ``float warpsky:detail:period``     s          60      > 0         life of one advection layer (best about one
+                                                                       or two eddy turnover times, 8 scale / speed)
+    ``int warpsky:detail:seed``         --         0       >= 0        seed of the noise and of the curl flow
+    ==================================  ========== ======= =========== ================================================
+    """
+
+    amplitude: float = 0.0
+    scale: float = 100.0
+    wind: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    curl_speed: float = 2.0
+    period: float = 60.0
+    seed: int = 0
+    name: str = "detail"
+
+    def __post_init__(self):
+        where = f"{self.name}: warpsky:detail"
+        if not (math.isfinite(self.amplitude) and 0.0 <= self.amplitude <= 1.0):
+            raise SceneError(f"{where}:amplitude must lie in [0, 1], got {self.amplitude}")
+        if not (math.isfinite(self.scale) and self.scale > 0.0):
+            raise SceneError(f"{where}:scale must be a positive length [m], got {self.scale}")
+        wind = tuple(float(w) for w in _vec3(self.wind, f"{where}:wind (float3 [m/s])"))
+        object.__setattr__(self, "wind", wind)
+        if not (math.isfinite(self.curl_speed) and self.curl_speed >= 0.0):
+            raise SceneError(f"{where}:curlSpeed must be a finite speed >= 0 [m/s], got {self.curl_speed}")
+        if not (math.isfinite(self.period) and self.period > 0.0):
+            raise SceneError(f"{where}:period must be a positive duration [s], got {self.period}")
+        if isinstance(self.seed, bool) or int(self.seed) != self.seed or self.seed < 0:
+            raise SceneError(f"{where}:seed must be an integer >= 0, got {self.seed!r}")
+        object.__setattr__(self, "seed", int(self.seed))
+
+    @property
+    def active(self) -> bool:
+        """Whether the detail changes anything (amplitude > 0)."""
+        return self.amplitude > 0.0
+
+
+@dataclass(frozen=True)
 class VoxelMedium:
     """A participating medium given by a dense grid of field values.
 
@@ -209,6 +265,7 @@ class VoxelMedium:
             function is used, or None for the analytic ``phase``.
         slicing_xi: Riley's back-scatter term ξ [1/sr] for this medium in half-angle slicing (``float
             warpsky:slicing:xi`` on the Volume), or None for the technique's ``xi`` setting.
+        detail: Animated density detail (:class:`DetailSpec`, ``warpsky:detail:*`` on the Volume), or None.
     """
 
     name: str
@@ -220,8 +277,11 @@ class VoxelMedium:
     source: str = ""
     species: str | None = None
     slicing_xi: float | None = None
+    detail: DetailSpec | None = None
 
     def __post_init__(self):
+        if self.detail is not None and not isinstance(self.detail, DetailSpec):
+            raise SceneError(f"medium {self.name}: detail must be a DetailSpec or None, got {self.detail!r}")
         if self.slicing_xi is not None and not (math.isfinite(self.slicing_xi) and self.slicing_xi >= 0.0):
             raise SceneError(f"medium {self.name}: warpsky:slicing:xi must be a finite phase value >= 0 [1/sr], "
                              f"got {self.slicing_xi}")
@@ -353,6 +413,7 @@ class Scene:
         time_code: USD time code this scene was read at (``nan`` for the default time).
         source: Stage file path, for metadata.
         resolution: Image size (width, height) authored on the stage's render settings, if any.
+        time_codes_per_second: The stage's ``timeCodesPerSecond`` (USD's default 24), for :attr:`time_s`.
     """
 
     camera: Camera
@@ -363,6 +424,14 @@ class Scene:
     time_code: float = float("nan")
     source: str = ""
     resolution: tuple[int, int] | None = None
+    time_codes_per_second: float = 24.0
 
     def __post_init__(self):
         object.__setattr__(self, "media", tuple(self.media))
+        if not (math.isfinite(self.time_codes_per_second) and self.time_codes_per_second > 0.0):
+            raise SceneError(f"timeCodesPerSecond must be positive, got {self.time_codes_per_second}")
+
+    @property
+    def time_s(self) -> float:
+        """Scene time [s]: ``time_code / time_codes_per_second`` (0 at the default time code)."""
+        return 0.0 if math.isnan(self.time_code) else self.time_code / self.time_codes_per_second

@@ -9,6 +9,7 @@ What is read (the README's "USD attributes" section lists the same with units an
 - ``UsdLuxDistantLight``: the sun (the first visible one).
 - ``UsdVolVolume`` with ``field:density`` (analytic phase) and/or ``field:cloud|rain|ice|snow`` (tabulated
   species optics) -> ``OpenVDBAsset`` (``.vdb``, ``.nvdb`` or dense ``.npy``).
+- ``warpsky:detail:*`` on a Volume: animated density detail (:class:`~warpsky.scene.model.DetailSpec`).
 - ``UsdGeomPlane``: a horizontal ground plane, albedo ``color3f warpsky:albedo``.
 - ``UsdRenderSettings``: ``resolution`` and ``camera`` as defaults for the command line.
 """
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.errors import SceneError
-from warpsky.scene.model import Camera, Ground, PhaseKind, PhaseModel, Scene, Sun, VoxelMedium
+from warpsky.scene.model import Camera, DetailSpec, Ground, PhaseKind, PhaseModel, Scene, Sun, VoxelMedium
 
 PHASE_TOKENS = {"isotropic": PhaseKind.ISOTROPIC, "hg": PhaseKind.HG, "rayleigh": PhaseKind.RAYLEIGH}
 DENSITY_FIELD = "density"
@@ -329,6 +330,7 @@ class StageReader:
         volume_albedo = self._float_attr(prim, "warpsky:albedo", tc, 1.0)
         slicing_xi = self._float_attr(prim, "warpsky:slicing:xi", tc, math.nan)  # nan: not authored
         slicing_xi = None if math.isnan(slicing_xi) else slicing_xi
+        detail = self._read_detail(prim, tc)
         media = []
         for name in rendered:
             field_prim = self.stage.GetPrimAtPath(fields[name])
@@ -359,11 +361,47 @@ class StageReader:
             try:
                 media.append(VoxelMedium(
                     f"{path}:{name}" if species else path, grid.values, volume_world @ local_from_index, scale,
-                    albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi,
+                    albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi, detail,
                 ))
             except SceneError as exc:
                 raise SceneError(f"Volume {path}: {exc}") from None
         return media
+
+    def _read_detail(self, prim, tc) -> DetailSpec | None:
+        """``warpsky:detail:*`` of a Volume (see DetailSpec); None when absent or amplitude 0 (detail off)."""
+        path = str(prim.GetPath())
+        names = {a.GetName() for a in prim.GetAttributes() if a.GetName().startswith("warpsky:detail:")}
+        if not names:
+            return None
+        known = {f"warpsky:detail:{n}" for n in ("amplitude", "scale", "wind", "curlSpeed", "period", "seed")}
+        unknown = sorted(names - known)
+        if unknown:
+            raise SceneError(f"Volume {path}: unknown attribute(s) {', '.join(unknown)}; known: "
+                             f"{', '.join(sorted(known))}")
+        defaults = DetailSpec()
+        kwargs = {"name": f"Volume {path}"}
+        for attr, key in (("amplitude", "amplitude"), ("scale", "scale"), ("curlSpeed", "curl_speed"),
+                          ("period", "period")):
+            kwargs[key] = self._float_attr(prim, f"warpsky:detail:{attr}", tc, getattr(defaults, key))
+        seed = prim.GetAttribute("warpsky:detail:seed")
+        if seed.HasAuthoredValue():
+            value = seed.Get(tc)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise SceneError(f"{path}.warpsky:detail:seed must be an int >= 0, got {value!r}")
+            kwargs["seed"] = int(value)
+        wind = prim.GetAttribute("warpsky:detail:wind")
+        if wind.HasAuthoredValue():
+            value = wind.Get(tc)
+            try:
+                vector = np.array(value, dtype=np.float64).reshape(3)
+            except (TypeError, ValueError):
+                raise SceneError(f"{path}.warpsky:detail:wind must be a float3 [m/s], got {value!r}") from None
+            if not np.all(np.isfinite(vector)):
+                raise SceneError(f"{path}.warpsky:detail:wind must be 3 finite speeds [m/s], got {value!r}")
+            # stage axes -> warpsky's Y-up axes; a speed in m/s is not rescaled by metersPerUnit
+            kwargs["wind"] = tuple((self.world_from_stage[:3, :3] / self.meters_per_unit @ vector).tolist())
+        spec = DetailSpec(**kwargs)  # validates ranges; its SceneError names the Volume and the attribute
+        return spec if spec.active else None
 
     def _extent_placement(self, prim, tc, shape) -> np.ndarray:
         """Index-to-local matrix of a dense grid filling the Volume's authored extent, cell-centred."""
@@ -455,4 +493,5 @@ class StageReader:
             time_code=float("nan") if time is None else float(time),
             source=str(self.path),
             resolution=resolution,
+            time_codes_per_second=float(self.stage.GetTimeCodesPerSecond()),
         )
