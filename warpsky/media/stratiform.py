@@ -1,36 +1,16 @@
-"""Stratiform cloud layers (Bouthors 2006): a thickness map at a base altitude over a horizontal extent, and the
-ground's albedo texture that the radiosity paints on the cloud base.
+"""Stratiform cloud layers (Bouthors 2006): a thickness map at a base altitude over a horizontal extent, optionally
+advected by wind and curl noise (Neyret 2003, :mod:`warpsky.media.advection`), and the ground's albedo texture that
+the radiosity paints on the cloud base.
 
-=========================================== ===== =============== ==============================================
-USD attribute (on an ``Xform`` with          unit  default         meaning
-``uniform token warpsky:kind =
-"stratiformLayer"``)
-=========================================== ===== =============== ==============================================
-``asset warpsky:stratiform:thicknessMap``    --    (procedural)    ``.npy`` (2-D, axis 0 = world x, axis 1 =
-                                                                   world z), ``.exr`` (channel R or Y) or
-                                                                   ``.png`` (rows = z, columns = x, 0..1)
-``float warpsky:stratiform:thicknessScale``  m     1               map value -> thickness [m] (``.png``: the
-                                                                   thickness of a white pixel)
-``float2 warpsky:stratiform:size``           stage (1e4, 1e4)      extent along x and z, centred on the prim
-``float warpsky:stratiform:cover``           --    0.5             procedural map only: covered fraction [0, 1]
-``float warpsky:stratiform:maxThickness``    m     500             procedural map only
-``int warpsky:stratiform:seed``              --    0               procedural map only
-``float warpsky:stratiform:numberDensity``   1/m³  3e8             droplets N0 (extinction κ = N0 π r_e²)
-``float warpsky:stratiform:effectiveRadius`` m     7e-6            r_e; the phase function stays the ``stratus``
-                                                                   species' (γ = 2, r_e = 7 µm)
-=========================================== ===== =============== ==============================================
-
-The base altitude is the prim's world translation (y after the stage's up-axis conversion); rotation is ignored.
-The ground texture sits on the ``UsdGeomPlane``: ``asset warpsky:albedoMap`` (``.npy`` (nx, nz, 3) or ``.png``) over
-``float2 warpsky:albedoMapSize`` (stage units, centred on the plane's origin); outside it the plane's
-``warpsky:albedo``.
-
-Any 2-D numpy array works as a thickness map (e.g. an advected texture's state at time t, copied to the host).
+The USD prims are read by :mod:`warpsky.scene.usd` (attribute tables on :class:`StratiformLayer`,
+:class:`ThicknessAdvection` and :class:`GroundTexture`). Any 2-D numpy array works as a thickness map.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,20 +18,105 @@ import numpy as np
 
 from warpsky.errors import SceneError
 
+#: Texels per side of the procedural map a layer prim without ``thicknessMap`` gets.
+PROCEDURAL_RESOLUTION = 256
+
+
+@dataclass(frozen=True)
+class ThicknessAdvection:
+    """How a layer's thickness map moves: a uniform wind plus seeded divergence-free curl noise, applied with
+    Neyret's advected textures (3 staggered layers; frame t is computed on its own, see
+    :mod:`warpsky.media.advection`). The map is treated as periodic over the layer's extent.
+
+    ============================================ ===== ================= ========== ===================================
+    USD attribute (on the layer prim)            unit  default           range      meaning
+    ============================================ ===== ================= ========== ===================================
+    ``float2 warpsky:advection:wind``            m/s   (0, 0)            finite     uniform wind along world x and
+                                                                                    world z (Z-up stage: x and -y)
+    ``float warpsky:advection:curlSpeed``        m/s   0                 >= 0       rms speed of the curl noise; 0:
+                                                                                    wind only
+    ``float warpsky:advection:curlScale``        m     half the shorter  > 0,       wavelength of the largest eddies
+                                                       side of the layer <= extent  (3 octaves, each half as large)
+    ``float warpsky:advection:period``           s     300               > 0        lifetime of one advected layer
+                                                                                    (about 1-2 strain times)
+    ``int warpsky:advection:seed``               --    0                 any        curl-noise seed
+    ============================================ ===== ================= ========== ===================================
+
+    Authoring any ``warpsky:advection:*`` attribute animates the layer; time = timeCode / timeCodesPerSecond.
+    Zero wind and zero curl speed show the static map at every time.
+    """
+
+    wind_m_s: tuple[float, float] = (0.0, 0.0)
+    curl_speed_m_s: float = 0.0
+    curl_scale_m: float | None = None
+    period_s: float = 300.0
+    seed: int = 0
+
+    def __post_init__(self):
+        wind = tuple(float(w) for w in np.asarray(self.wind_m_s, dtype=np.float64).reshape(-1))
+        if len(wind) != 2 or not all(math.isfinite(w) for w in wind):
+            raise SceneError(f"advection wind must be 2 finite speeds [m/s], got {self.wind_m_s!r}")
+        object.__setattr__(self, "wind_m_s", wind)
+        if not (math.isfinite(self.curl_speed_m_s) and self.curl_speed_m_s >= 0.0):
+            raise SceneError(f"advection curlSpeed must be >= 0 m/s, got {self.curl_speed_m_s}")
+        if self.curl_scale_m is not None and not (math.isfinite(self.curl_scale_m) and self.curl_scale_m > 0.0):
+            raise SceneError(f"advection curlScale must be a positive length [m], got {self.curl_scale_m}")
+        if not (math.isfinite(self.period_s) and self.period_s > 0.0):
+            raise SceneError(f"advection period must be a positive duration [s], got {self.period_s}")
+
+    @property
+    def still(self) -> bool:
+        """True when nothing moves (the advected map equals the static one)."""
+        return self.curl_speed_m_s == 0.0 and self.wind_m_s == (0.0, 0.0)
+
+    def __repr__(self) -> str:
+        scale = "auto" if self.curl_scale_m is None else f"{self.curl_scale_m:g} m"
+        return (f"ThicknessAdvection(wind={self.wind_m_s} m/s, curl={self.curl_speed_m_s:g} m/s at {scale}, "
+                f"period={self.period_s:g} s, seed={self.seed})")
+
 
 @dataclass(frozen=True)
 class StratiformLayer:
     """A stratiform cloud layer.
 
+    ============================================ ===== =============== ============================================
+    USD attribute (on an ``Xform`` with          unit  default         meaning
+    ``uniform token warpsky:kind =
+    "stratiformLayer"``)
+    ============================================ ===== =============== ============================================
+    ``asset warpsky:stratiform:thicknessMap``    --    (procedural)    ``.npy`` (2-D, axis 0 = world x, axis 1 =
+                                                                       world z), ``.exr`` (channel R or Y) or
+                                                                       ``.png`` (rows = z, columns = x, 0..1)
+    ``float warpsky:stratiform:thicknessScale``  m     1               map value -> thickness [m] (``.png``: the
+                                                                       thickness of a white pixel), >= 0
+    ``float2 warpsky:stratiform:size``           stage (1e4, 1e4) m    extent along x and z, centred on the prim
+    ``float warpsky:stratiform:cover``           --    0.5             procedural map only: covered fraction [0, 1]
+    ``float warpsky:stratiform:maxThickness``    m     500             procedural map only, >= 0
+    ``int warpsky:stratiform:seed``              --    0               procedural map only
+    ``float warpsky:stratiform:numberDensity``   1/m³  3e8             droplets N0 (extinction κ = N0 π r_e²), > 0
+    ``float warpsky:stratiform:effectiveRadius`` m     7e-6            r_e > 0; the phase function stays the
+                                                                       ``stratus`` species' (γ = 2, r_e = 7 µm)
+    ``bool warpsky:stratiform:radiosity``        --    true            ground <-> cloud-base radiosity (§5) when a
+                                                                       ground lies below; ``--set
+                                                                       stratiform.radiosity=0|1`` overrides it
+    ``warpsky:advection:*``                      --    (static)        see :class:`ThicknessAdvection`
+    ============================================ ===== =============== ============================================
+
+    The base altitude is the prim's world translation (y after the stage's up-axis conversion); rotation is
+    ignored. A layer prim that is invisible or inactive is not rendered.
+
     Attributes:
         thickness: (nx, nz) float32 thickness [m] >= 0, axis 0 along world x, axis 1 along world z; sampled
-            bilinearly between texel centres.
+            bilinearly between texel centres. With ``advection``, the map at time 0 (the advected source).
         base_altitude: World y of the cloud base [m].
         origin: World (x, z) of the map's corner at texel (0, 0)'s outer edge [m].
         size: Extent (x, z) [m].
         number_density: N0 [1/m³].
         effective_radius: r_e [m].
         name: Prim path or label.
+        radiosity: Whether the ground <-> cloud exchange runs for this layer.
+        advection: How the map moves, or None for a static map.
+        time_s: Time [s] at which the advected map is shown.
     """
 
     thickness: np.ndarray
@@ -61,6 +126,9 @@ class StratiformLayer:
     number_density: float = 3.0e8
     effective_radius: float = 7.0e-6
     name: str = "stratiform"
+    radiosity: bool = True
+    advection: ThicknessAdvection | None = None
+    time_s: float = 0.0
 
     def __post_init__(self):
         t = np.asarray(self.thickness)
@@ -72,10 +140,12 @@ class StratiformLayer:
         object.__setattr__(self, "thickness", t)
         if not (math.isfinite(self.base_altitude)):
             raise SceneError(f"stratiform layer {self.name}: base altitude must be finite")
-        if not all(math.isfinite(s) and s > 0 for s in self.size):
-            raise SceneError(f"stratiform layer {self.name}: size must be positive, got {self.size}")
+        if len(self.size) != 2 or not all(math.isfinite(s) and s > 0 for s in self.size):
+            raise SceneError(f"stratiform layer {self.name}: size must be two positive lengths [m], got {self.size}")
         if not (self.number_density > 0 and self.effective_radius > 0):
             raise SceneError(f"stratiform layer {self.name}: numberDensity and effectiveRadius must be positive")
+        if not math.isfinite(self.time_s):
+            raise SceneError(f"stratiform layer {self.name}: time must be finite, got {self.time_s}")
 
     @property
     def extinction(self) -> float:
@@ -88,13 +158,26 @@ class StratiformLayer:
         return float(np.mean(self.thickness > 0.0))
 
     def __repr__(self) -> str:
+        moving = f", {self.advection!r} at t={self.time_s:g} s" if self.advection is not None else ""
         return (f"StratiformLayer({self.name!r}, map={self.thickness.shape}, base={self.base_altitude:g} m, "
-                f"size={tuple(self.size)} m, cover={self.cover:.2f}, max={float(self.thickness.max()):g} m)")
+                f"size={tuple(self.size)} m, cover={self.cover:.2f}, max={float(self.thickness.max()):g} m{moving})")
 
 
 @dataclass(frozen=True)
 class GroundTexture:
-    """A ground albedo texture: (nx, nz, 3) reflectances in [0, 1] over ``size`` (x, z) [m] from ``origin``."""
+    """A ground albedo texture: (nx, nz, 3) reflectances in [0, 1] over ``size`` (x, z) [m] from ``origin``.
+
+    ======================================= ===== ================ =============================================
+    USD attribute (on the ``UsdGeomPlane``)  unit  default          meaning
+    ======================================= ===== ================ =============================================
+    ``asset warpsky:albedoMap``              --    (none)           ``.npy`` (nx, nz, 3), ``.exr`` (R, G, B) or
+                                                                    ``.png`` (rows = z), values clipped to [0, 1]
+    ``float2 warpsky:albedoMapSize``         stage (1e4, 1e4) m    extent along x and z, centred on the plane
+    ======================================= ===== ================ =============================================
+
+    Beyond the map its edge texels continue (clamped lookups). The stratiform pass (the ground under a layer and
+    the radiosity) uses the map; the voxel techniques' ground uses the plane's uniform ``warpsky:albedo``.
+    """
 
     albedo: np.ndarray
     origin: tuple[float, float]
@@ -158,56 +241,53 @@ def load_map(path: str | Path, *, channels: int = 1) -> np.ndarray:
     return data
 
 
-def read_stratiform(reader, time=None) -> tuple[list[StratiformLayer], GroundTexture | None]:
-    """Stratiform layers and the ground albedo texture on ``reader``'s stage (a :class:`StageReader`).
-
-    Reads the prims documented in this module's docstring (kept here, next to the dataclasses, until the scene
-    reader grows them).
-    """
-    from pxr import Usd, UsdGeom
-
-    tc = _time_code(time)
-    mpu = reader.meters_per_unit
-    layers, texture = [], None
-    for prim in Usd.PrimRange(reader.stage.GetPseudoRoot()):
-        kind = prim.GetAttribute("warpsky:kind")
-        world = reader._world(prim, tc) if prim.IsA(UsdGeom.Xformable) else None
-        if kind and kind.Get(tc) == "stratiformLayer":
-            def attr(name, default, prim=prim):
-                a = prim.GetAttribute(f"warpsky:stratiform:{name}")
-                return a.Get(tc) if a and a.HasAuthoredValue() else default
-
-            size = np.asarray(attr("size", (1e4 / mpu, 1e4 / mpu)), dtype=np.float64) * mpu
-            asset = attr("thicknessMap", None)
-            if asset is not None and asset.resolvedPath:
-                thickness = load_map(asset.resolvedPath) * float(attr("thicknessScale", 1.0))
-            elif asset is not None and asset.path:
-                raise SceneError(f"{prim.GetPath()}.warpsky:stratiform:thicknessMap: cannot find {asset.path}")
-            else:
-                thickness = procedural_thickness(256, cover=float(attr("cover", 0.5)),
-                                                 max_thickness=float(attr("maxThickness", 500.0)),
-                                                 seed=int(attr("seed", 0)))
-            centre = world[:3, 3]
-            layers.append(StratiformLayer(
-                thickness, float(centre[1]), (float(centre[0] - size[0] / 2), float(centre[2] - size[1] / 2)),
-                (float(size[0]), float(size[1])), float(attr("numberDensity", 3e8)),
-                float(attr("effectiveRadius", 7e-6)), str(prim.GetPath())))
-        elif prim.IsA(UsdGeom.Plane):
-            a = prim.GetAttribute("warpsky:albedoMap")
-            if a and a.HasAuthoredValue():
-                asset = a.Get(tc)
-                if not asset.resolvedPath:
-                    raise SceneError(f"{prim.GetPath()}.warpsky:albedoMap: cannot find {asset.path}")
-                s = prim.GetAttribute("warpsky:albedoMapSize")
-                size = np.asarray(s.Get(tc) if s else (1e4 / mpu, 1e4 / mpu), dtype=np.float64) * mpu
-                centre = world[:3, 3]
-                texture = GroundTexture(np.clip(load_map(asset.resolvedPath, channels=3), 0.0, 1.0),
-                                        (float(centre[0] - size[0] / 2), float(centre[2] - size[1] / 2)),
-                                        (float(size[0]), float(size[1])))
-    return layers, texture
+# ---------------------------------------------------------------------------------------------- advected maps
+#: Advected textures kept between frames (sequential playback reuses their whole steps; pixels are the same either
+#: way): key -> AdvectedTexture, least recently used first.
+_ADVECTED: OrderedDict = OrderedDict()
+_ADVECTED_MAX = 4
 
 
-def _time_code(time):
-    from pxr import Usd
+def _advected_texture(layer: StratiformLayer, device: str):
+    from warpsky.media.advection import AdvectedTexture, Flow2D
 
-    return Usd.TimeCode.EarliestTime() if time is None else Usd.TimeCode(float(time))
+    adv = layer.advection
+    digest = hashlib.sha1(layer.thickness.tobytes()).hexdigest()
+    key = (layer.name, digest, layer.thickness.shape, tuple(layer.size), adv, str(device))
+    texture = _ADVECTED.get(key)
+    if texture is not None:
+        _ADVECTED.move_to_end(key)
+        return texture
+    extent = (float(layer.size[0]), float(layer.size[1]))
+    try:
+        if adv.curl_speed_m_s == 0.0:
+            flow = Flow2D.still(extent, wind_m_s=adv.wind_m_s)
+        else:
+            flow = Flow2D.procedural(extent, wind_m_s=adv.wind_m_s, speed_m_s=adv.curl_speed_m_s,
+                                     scale_m=adv.curl_scale_m, octaves=3, resolution=(64, 64), seed=int(adv.seed))
+        # the advection module's textures are (ny, nx) with x along columns: world z is its y
+        texture = AdvectedTexture(layer.thickness.T, extent, flow, layers=3, period_s=adv.period_s, device=device)
+    except ValueError as exc:
+        raise SceneError(f"stratiform layer {layer.name}: advection: {exc}") from None
+    _ADVECTED[key] = texture
+    while len(_ADVECTED) > _ADVECTED_MAX:
+        _ADVECTED.popitem(last=False)
+    return texture
+
+
+def thickness_at_time(layer: StratiformLayer, device: str = "cpu") -> np.ndarray:
+    """The layer's (nx, nz) thickness map [m] at ``layer.time_s``: the static map, or the advected one (clamped at
+    0 m: the contrast-preserving blend may dip below it next to cloud edges). A fresh array the caller owns."""
+    if layer.advection is None:
+        return layer.thickness.copy()
+    advected = _advected_texture(layer, device).at(layer.time_s)
+    return np.ascontiguousarray(np.maximum(advected.numpy().T, 0.0), dtype=np.float32)  # copy: .at reuses it
+
+
+def at_time(layer: StratiformLayer, device: str = "cpu") -> StratiformLayer:
+    """``layer`` with its thickness map resolved at its time and no advection left to apply."""
+    import dataclasses
+
+    if layer.advection is None:
+        return layer
+    return dataclasses.replace(layer, thickness=thickness_at_time(layer, device), advection=None)

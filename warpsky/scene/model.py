@@ -9,10 +9,14 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from warpsky.errors import SceneError
+
+if TYPE_CHECKING:
+    from warpsky.media.stratiform import GroundTexture, StratiformLayer
 
 #: Rec. 709 luminance weights used for alpha and for one-number summaries of RGB quantities.
 LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
@@ -345,11 +349,14 @@ class Ground:
         height: World Y of the plane [m].
         albedo: Diffuse reflectance, RGB in [0, 1].
         name: Prim path or label.
+        albedo_map: Optional albedo texture (``warpsky:albedoMap``), used by the stratiform pass; see
+            :class:`~warpsky.media.stratiform.GroundTexture`.
     """
 
     height: float = 0.0
     albedo: np.ndarray = field(default_factory=lambda: np.full(3, 0.3))
     name: str = "ground"
+    albedo_map: GroundTexture | None = None
 
     def __post_init__(self):
         if not math.isfinite(self.height):
@@ -408,6 +415,8 @@ class Scene:
         camera: The camera to render from.
         sun: The sun, or None for a scene lit by nothing (renders black).
         media: Participating media; their extinctions add where they overlap.
+        layers: Stratiform cloud layers (Bouthors 2006), rendered by the stratiform pass and composited with the
+            media by depth.
         ground: Optional ground plane.
         atmosphere: Optional air (sky, aerial perspective, reddened sunlight); None: black background.
         time_code: USD time code this scene was read at (``nan`` for the default time).
@@ -425,9 +434,11 @@ class Scene:
     source: str = ""
     resolution: tuple[int, int] | None = None
     time_codes_per_second: float = 24.0
+    layers: tuple[StratiformLayer, ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "media", tuple(self.media))
+        object.__setattr__(self, "layers", tuple(self.layers))
         if not (math.isfinite(self.time_codes_per_second) and self.time_codes_per_second > 0.0):
             raise SceneError(f"timeCodesPerSecond must be positive, got {self.time_codes_per_second}")
 
