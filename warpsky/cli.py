@@ -7,10 +7,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
-from warpsky.errors import WarpskyError
+from warpsky.errors import UsageError, WarpskyError
 
 EPILOG_RENDER = """\
 frames:
@@ -20,7 +19,20 @@ frames:
   OUT placeholders follow usdrecord: a run of # is the zero-padded frame number (####  -> 0012),
   ###.## adds decimals for subframes (-> 012.50).
 
+batches, resume and farms:
+  A frame whose EXR exists, opens, has every channel and carries the same settings hash is skipped (--overwrite
+  renders it again). Failed frames are retried (--retries, default 1) unless the input is at fault, and never cost
+  finished ones; every run is appended to OUT's log (out/storm.####.exr -> out/storm.log.json) and summarised.
+  --workers N starts a Dask LocalCluster of N single-threaded worker processes on this machine; --scheduler
+  tcp://HOST:PORT uses an existing Dask cluster: its workers open the stage and the optics cache themselves
+  (put stage, data, $WARPSKY_CACHE and OUT on shared storage) and return paths, never pixels. Pixels are
+  identical whatever the executor. GPU farms: start one worker per GPU with dask-cuda
+  (`dask cuda worker tcp://HOST:PORT`, or LocalCUDACluster in Python), which sets CUDA_VISIBLE_DEVICES per
+  worker, and render with --device cuda.
+
 technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default):
+  slicing (default): slice_count [64], light_resolution [256 texels], xi [0.1 /sr; per Volume:
+                  warpsky:slicing:xi], low_albedo [0], orders [60], light_equation [0 = continuous limit, 24, 25]
   single_scatter: step_length [m, auto = 0.5 x smallest voxel], shadow_step_length [m, auto = 1 voxel],
                   min_transmittance [default 1e-4: stop marching once the view is this opaque]
   path_tracer:    spp [64], seed [0], max_bounces [1024], majorant_block [8 voxels], environment [0,
@@ -31,6 +43,8 @@ examples:
   warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
   warpsky render shot.usda out/shot.####.exr --frames 1:48x2 --res 1280x720 --device cuda
   warpsky render usd_scenes/cumulus.usda out/ref.####.exr --frames 1 --technique path_tracer --spp 256 --seed 7
+  warpsky render usd_scenes/storm.usda out/storm.####.exr --res 256 --workers 2
+  warpsky render usd_scenes/storm.usda /shared/storm.####.exr --scheduler tcp://farm:8786
 """
 
 
@@ -99,6 +113,15 @@ def build_parser() -> argparse.ArgumentParser:
                         help="preview exposure in stops (default 0: a white surface facing the sun maps to ~0.63)")
     render.add_argument("--float", dest="full_float", action="store_true", help="write RGBA as 32-bit float "
                         "instead of half")
+    render.add_argument("--overwrite", action="store_true", help="render frames whose EXR is already up to date")
+    render.add_argument("--retries", type=int, default=1, metavar="N",
+                        help="retry a failed frame N times (default 1; input errors are not retried)")
+    render.add_argument("--workers", type=int, metavar="N", help="render on a Dask LocalCluster of N processes")
+    render.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="render on an existing Dask cluster")
+    render.add_argument("--scheduler-timeout", type=float, default=10.0, metavar="S",
+                        help="seconds to wait for --scheduler before giving up (default 10)")
+    render.add_argument("--log", type=Path, metavar="PATH", help="JSON log of the runs (default: next to OUT, "
+                        "out/name.####.exr -> out/name.log.json)")
 
     info = sub.add_parser("info", help="print what a stage holds and how it would render",
                           description="Print the stage's units, time range, cameras, sun, media and ground, "
@@ -181,40 +204,55 @@ def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
 
 
 def cmd_render(args) -> int:
-    from tqdm import tqdm
-
     from warpsky.batch.frames import FramePattern
-    from warpsky.render import render_frame
+    from warpsky.batch.run import (
+        DaskExecutor,
+        FrameJob,
+        InProcessExecutor,
+        check_writable,
+        format_summary,
+        log_path_for,
+        run_batch,
+    )
     from warpsky.scene.usd import StageReader
 
     pattern = FramePattern(args.output)
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    if args.retries < 0:
+        raise UsageError(f"--retries must be >= 0, got {args.retries}")
     options = _render_options(args)
     reader = StageReader(args.stage)
     times = frame_list(reader, pattern, args.frames)
-    failures = []
-    started = time.perf_counter()
-    bar = tqdm(total=len(times), unit="frame", disable=len(times) < 2, file=sys.stderr, dynamic_ncols=True)
-    for time_code in times:
-        out = pattern.path_for(time_code) if time_code is not None and pattern.has_placeholder else Path(args.output)
-        try:
-            result = render_frame(reader, time_code, out, options)
-        except WarpskyError as exc:
-            failures.append((time_code, exc))
-            bar.write(f"warpsky: frame {time_code}: error: {exc}", file=sys.stderr)
-        else:
-            bar.write(str(result.exr))
-            if result.png is not None:
-                bar.write(str(result.png))
-        bar.update(1)
-    bar.close()
-    if len(times) > 1:
-        print(f"warpsky: {len(times) - len(failures)} of {len(times)} frames written in "
-              f"{time.perf_counter() - started:.1f} s", file=sys.stderr)
-    if failures:
-        if len(times) > 1:
-            print(f"warpsky: {len(failures)} frame(s) failed: {', '.join(str(t) for t, _ in failures)}",
-                  file=sys.stderr)
-        return max(getattr(exc, "exit_code", 1) for _, exc in failures)
+    span = reader.time_range()
+    outside = [t for t in times if t is not None and span.authored and not span.start <= t <= span.end]
+    if outside:
+        print(f"warpsky: warning: frame(s) {', '.join(f'{t:g}' for t in outside[:8])}"
+              f"{' ...' if len(outside) > 8 else ''} lie outside the stage's time range {span.start:g}..{span.end:g}; "
+              "rendering them anyway (time samples hold their end values)", file=sys.stderr)
+    outputs = [pattern.path_for(t) if t is not None and pattern.has_placeholder else Path(args.output) for t in times]
+    for directory in dict.fromkeys(p.parent for p in outputs):
+        check_writable(directory)
+    jobs = [FrameJob(str(args.stage), t, str(out), options, args.overwrite) for t, out in zip(times, outputs,
+                                                                                            strict=True)]
+    if args.scheduler:
+        executor = DaskExecutor(address=args.scheduler, timeout=args.scheduler_timeout)
+    elif args.workers:
+        executor = DaskExecutor(workers=args.workers)
+    else:
+        executor = InProcessExecutor()
+    try:
+        result = run_batch(str(args.stage), jobs, executor, retries=args.retries,
+                           log=args.log or log_path_for(pattern.pattern))
+    finally:
+        executor.close()
+    if len(times) > 1 or result.failed or executor.name != "in-process":
+        print(format_summary(result), file=sys.stderr)
+    if result.failed:
+        for record in result.failed:
+            if len(times) == 1:
+                print(f"warpsky: error: {record.error}", file=sys.stderr)
+        return 1 if any(r.retryable for r in result.failed) else 2
     return 0
 
 

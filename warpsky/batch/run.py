@@ -1,0 +1,304 @@
+"""Frame sequences on one machine or a Dask cluster: resume, retries, a per-shot JSON log and a summary.
+
+A batch is a list of :class:`FrameJob`. Workers (this process, a Dask ``LocalCluster`` or an existing Dask
+scheduler) run :func:`run_frame` on each: open the stage themselves, plan the frame, skip it when its EXR already
+exists and validates (opens, has every channel, carries the same settings hash), else render and write it
+atomically. They return a small record (path, seconds, device, hash, error), never pixels. The client retries failed
+frames whose error was not the input's (``retries`` times; a missing file fails the same way again), appends one
+run to the shot's log after every frame (so a killed batch keeps what it finished), and prints a summary table.
+
+Test hook: the environment variable ``WARPSKY_FAIL_FRAMES`` (comma-separated time codes, each optionally ``@N`` for
+"only on attempt N") makes those frames raise before rendering, to exercise failure, retry and resume; it is read
+by the worker, so it reaches Dask workers started after it is set.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import socket
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from warpsky.errors import UsageError, WarpskyError
+from warpsky.files import atomic_write
+
+FAIL_FRAMES_ENV = "WARPSKY_FAIL_FRAMES"
+
+
+@dataclass(frozen=True)
+class FrameJob:
+    """One frame to render: everything a worker needs, picklable, no pixels."""
+
+    stage: str
+    time_code: float | None
+    out: str
+    options: object  # warpsky.render.RenderOptions
+    overwrite: bool = False
+
+
+@dataclass
+class FrameRecord:
+    """What a worker reports for one frame (one JSON object in the shot's log)."""
+
+    frame: float | None
+    path: str
+    status: str  # "done", "skipped" or "failed"
+    seconds: float = 0.0
+    device: str = ""
+    settings_hash: str = ""
+    worker: str = ""
+    attempt: int = 1
+    error: str | None = None
+    png: str | None = None  # the preview written beside the EXR, if asked for
+    retryable: bool = False  # errors in the input (a missing file, a bad attribute) fail the same way again
+    timings: dict = field(default_factory=dict)
+
+
+_READERS: dict[tuple[str, float], object] = {}
+
+
+def _reader(stage: str):
+    """The stage opened once per worker process (reopened when the file changes)."""
+    from warpsky.scene.usd import StageReader
+
+    key = (str(Path(stage).resolve()), Path(stage).stat().st_mtime if Path(stage).exists() else 0.0)
+    if key not in _READERS:
+        _READERS.clear()
+        _READERS[key] = StageReader(stage)
+    return _READERS[key]
+
+
+def _hook_fails(time_code: float | None, attempt: int) -> bool:
+    """Whether the ``WARPSKY_FAIL_FRAMES`` test hook asks this frame's attempt to fail."""
+    if time_code is None:
+        return False
+    for item in os.environ.get(FAIL_FRAMES_ENV, "").split(","):
+        frame, _, only = item.strip().partition("@")
+        if frame and float(frame) == float(time_code) and (not only or int(only) == attempt):
+            return True
+    return False
+
+
+def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
+    """Render (or skip) one frame; every error becomes a failed record naming what went wrong."""
+    from warpsky.device import init_warp
+    from warpsky.output.exr import validate_exr
+    from warpsky.render import EXR_CHANNELS, plan_frame, render_frame, settings_hash
+
+    init_warp()
+    started = time.perf_counter()
+    record = FrameRecord(job.time_code, job.out, "failed", device=job.options.device,
+                         worker=f"{socket.gethostname()}:{os.getpid()}", attempt=attempt)
+    try:
+        reader = _reader(job.stage)
+        t0 = time.perf_counter()
+        scene, plan = plan_frame(reader, job.time_code, job.options)
+        record.timings["stage_load"] = time.perf_counter() - t0
+        record.settings_hash = settings_hash(plan, job.options)
+        if not job.overwrite and validate_exr(job.out, required_channels=EXR_CHANNELS,
+                                              metadata_expect={"settingsHash": record.settings_hash}):
+            record.status = "skipped"
+            return record
+        if _hook_fails(job.time_code, attempt):
+            raise RuntimeError(f"{FAIL_FRAMES_ENV} asks frame {job.time_code:g} to fail (test hook)")
+        result = render_frame(reader, job.time_code, Path(job.out), job.options)
+        record.timings.update(getattr(result, "timings", {}) or {})
+        record.timings["technique"] = result.render_seconds
+        record.png = str(result.png) if result.png is not None else None
+        record.status = "done"
+    except WarpskyError as exc:
+        record.error = f"{type(exc).__name__}: {exc}"
+    except Exception as exc:  # a worker must report, not die: the client decides about retries
+        record.error = f"{type(exc).__name__}: {exc}"
+        record.retryable = True
+    finally:
+        record.seconds = time.perf_counter() - started
+    return record
+
+
+# ------------------------------------------------------------------------------------------------ executors
+class InProcessExecutor:
+    """Frames one after another in this process (the default)."""
+
+    name = "in-process"
+
+    def map(self, jobs: list[FrameJob], attempt: int):
+        for job in jobs:
+            yield job, run_frame(job, attempt)
+
+    def close(self) -> None:
+        pass
+
+
+class DaskExecutor:
+    """Frames as Dask futures: a ``LocalCluster`` of ``workers`` single-threaded processes, or an existing
+    scheduler at ``address``. Workers load the stage and the optics cache themselves (shared storage)."""
+
+    def __init__(self, *, workers: int | None = None, address: str | None = None, timeout: float = 10.0):
+        try:
+            from dask.distributed import Client, LocalCluster
+        except ImportError:
+            raise UsageError("--workers/--scheduler need Dask distributed: pip install 'warpsky[farm]'") from None
+        self.cluster = None
+        if address is not None:
+            self.name = f"dask scheduler {address}"
+            try:
+                self.client = Client(address, timeout=f"{timeout}s")
+            except (OSError, TimeoutError) as exc:
+                raise UsageError(f"--scheduler {address}: cannot reach a Dask scheduler within {timeout:g} s "
+                                 f"({type(exc).__name__}: {exc}); nothing was rendered") from None
+        else:
+            import logging
+
+            self.name = f"dask LocalCluster, {workers} worker process(es)"
+            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                        dashboard_address=None, silence_logs=logging.ERROR)
+            self.client = Client(self.cluster)
+
+    def map(self, jobs: list[FrameJob], attempt: int):
+        from dask.distributed import as_completed
+
+        futures = {self.client.submit(run_frame, job, attempt, pure=False): job for job in jobs}
+        for future in as_completed(futures):
+            job = futures[future]
+            try:
+                record = future.result()
+            except Exception as exc:  # the worker process died (killed, out of memory)
+                record = FrameRecord(job.time_code, job.out, "failed", device=job.options.device, attempt=attempt,
+                                     error=f"worker lost: {type(exc).__name__}: {exc}", retryable=True)
+            yield job, record
+
+    def close(self) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+# --------------------------------------------------------------------------------------------------- batch
+@dataclass
+class BatchResult:
+    records: list[FrameRecord]
+    seconds: float
+    executor: str
+    log: Path
+
+    def count(self, status: str) -> int:
+        return sum(r.status == status for r in self.records)
+
+    @property
+    def failed(self) -> list[FrameRecord]:
+        return [r for r in self.records if r.status == "failed"]
+
+
+def log_path_for(pattern: str) -> Path:
+    """``out/storm.####.exr`` -> ``out/storm.log.json``: one log per shot, next to its frames."""
+    from warpsky.batch.frames import PLACEHOLDER
+
+    path = Path(pattern)
+    stem = PLACEHOLDER.sub("", path.name[: -len(".exr")]).rstrip("._-") or "frames"
+    return path.with_name(f"{stem}.log.json")
+
+
+def check_writable(directory: Path) -> None:
+    """The output directory exists (made if needed) and accepts files; else a UsageError naming it."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"output directory {directory} cannot be created: {exc.strerror or exc}") from None
+    probe = directory / f".warpsky-write-test-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise UsageError(f"output directory {directory} is not writable: {exc.strerror or exc}") from None
+
+
+def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, log: Path,
+              echo=None) -> BatchResult:
+    """Run ``jobs`` on ``executor``, retrying failures; append this run to ``log`` after every frame."""
+    echo = echo or (lambda text: None)
+    from tqdm import tqdm
+
+    started = time.perf_counter()
+    run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "stage": str(Path(stage).resolve()),
+           "executor": executor.name, "argv": sys.argv[1:], "frames": []}
+    history = _read_log(log)
+    final: dict[int, FrameRecord] = {}
+    pending = list(enumerate(jobs))
+    bar = tqdm(total=len(jobs), unit="frame", disable=len(jobs) < 2, file=sys.stderr, dynamic_ncols=True)
+    for attempt in range(1, retries + 2):
+        index_of = {id(job): i for i, job in pending}
+        retry = []
+        for job, record in executor.map([job for _, job in pending], attempt):
+            i = index_of[id(job)]
+            run["frames"].append(dataclasses.asdict(record))
+            _write_log(log, history, run)
+            if record.status == "failed":
+                label = "" if job.time_code is None else f" {job.time_code:g}"
+                will_retry = attempt <= retries and record.retryable
+                bar.write(f"warpsky: frame{label}: error: {record.error}"
+                          + (f" (retrying, attempt {attempt + 1} of {retries + 1})" if will_retry else ""),
+                          file=sys.stderr)
+                if will_retry:
+                    retry.append((i, job))
+                    continue
+            elif record.status == "skipped":
+                bar.write(f"{record.path} (up to date, skipped)")
+            else:
+                bar.write(record.path)
+                if record.png:
+                    bar.write(record.png)
+            final[i] = record
+            bar.update(1)
+        pending = retry
+        if not pending:
+            break
+    bar.close()
+    records = [final[i] for i in sorted(final)]
+    run["summary"] = summary_dict(records, time.perf_counter() - started)
+    _write_log(log, history, run)
+    return BatchResult(records, time.perf_counter() - started, executor.name, log)
+
+
+def summary_dict(records: list[FrameRecord], seconds: float) -> dict:
+    rendered = [r for r in records if r.status == "done"]
+    return {
+        "frames": len(records), "done": len(rendered), "skipped": sum(r.status == "skipped" for r in records),
+        "failed": sum(r.status == "failed" for r in records), "seconds": seconds,
+        "seconds_per_rendered_frame": (sum(r.seconds for r in rendered) / len(rendered)) if rendered else 0.0,
+    }
+
+
+def format_summary(result: BatchResult) -> str:
+    s = summary_dict(result.records, result.seconds)
+    lines = [
+        f"{'frames':<9} {s['frames']} asked: {s['done']} rendered, {s['skipped']} skipped (up to date), "
+        f"{s['failed']} failed",
+        f"{'time':<9} {s['seconds']:.1f} s in all, {s['seconds_per_rendered_frame']:.2f} s per rendered frame "
+        f"({result.executor})",
+        f"{'log':<9} {result.log}",
+    ]
+    for record in result.failed:
+        label = "default time" if record.frame is None else f"{record.frame:g}"
+        lines.append(f"{'failed':<9} frame {label}: {record.error}")
+    return "\n".join(lines)
+
+
+def _read_log(log: Path) -> dict:
+    if log.is_file():
+        try:
+            data = json.loads(log.read_text())
+            if isinstance(data, dict) and isinstance(data.get("runs"), list):
+                return data
+        except (OSError, ValueError):
+            pass  # an unreadable log is replaced, never fatal
+    return {"runs": []}
+
+
+def _write_log(log: Path, history: dict, run: dict) -> None:
+    data = {"runs": history["runs"] + [run]}
+    atomic_write(log, lambda tmp: Path(tmp).write_text(json.dumps(data, indent=1, default=str)))
