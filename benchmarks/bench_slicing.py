@@ -1,9 +1,11 @@
-"""Benchmark: half-angle slicing on the demo cumulus — ms per frame and samples/s at 256²/128 slices,
-512²/256 slices (Riley's interactive setting) and 768²/512 slices, cpu and cuda when present, and peak device
-memory on cuda. Timings exclude the first (compiling) render and say so. No pass/fail: goals are read by people
-(issue 6: 512² x 256 slices in <= 3 s on the 2-core CPU; >= 100 fps on one modern GPU).
+"""Benchmark: half-angle slicing on the demo cumulus and the storm (frame 40: cloud, rain, snow, ice) — ms per frame
+and samples/s at 256²/128 slices, 512²/256 slices (Riley's interactive setting) and 768²/512 slices, cpu and cuda
+when present, and peak device memory on cuda. Timings exclude the first (compiling) render and say so. No
+pass/fail: goals are read by people (issue 6: 512² x 256 slices in <= 3 s on the 2-core CPU; >= 100 fps on one
+modern GPU).
 
 Run:  python benchmarks/bench_slicing.py [--json out/bench_slicing.json] [--configs 256x128,512x256]
+      [--stages cumulus.usda,storm.usda@40] (stages under usd_scenes/, @ picks the time code)
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--stage", type=Path, default=ROOT / "usd_scenes" / "cumulus.usda")
+    parser.add_argument("--stages", default="cumulus.usda,storm.usda@40",
+                        help="stages under usd_scenes/, comma-separated, each optionally @TIME")
     parser.add_argument("--json", type=Path, default=ROOT / "out" / "bench_slicing.json")
     parser.add_argument("--configs", default="256x128,512x256,768x512", help="SIZExSLICES, comma-separated")
     parser.add_argument("--repeats", type=int, default=2)
@@ -33,36 +36,45 @@ def main(argv=None) -> int:
     from warpsky.techniques.slicing.technique import Slicing, SlicingSettings
 
     init_warp()
-    if not (ROOT / "data" / "cumulus.nvdb").exists() and args.stage.name == "cumulus.usda":
-        print("data/cumulus.nvdb is missing: run `python tools/make_cumulus.py` (or `make data`)", file=sys.stderr)
-        return 2
-    scene = StageReader(args.stage).scene_at(None)
+    scenes = []
+    for item in args.stages.split(","):
+        name, _, when = item.partition("@")
+        if name == "cumulus.usda" and not (ROOT / "data" / "cumulus.nvdb").exists():
+            print("data/cumulus.nvdb is missing: run `python tools/make_cumulus.py` (or `make data`)", file=sys.stderr)
+            return 2
+        if name == "storm.usda" and not (ROOT / "data" / "storm" / "ice.0048.nvdb").exists():
+            sys.path.insert(0, str(ROOT / "tools"))
+            import make_storm
+
+            make_storm.write_frames(ROOT / "data" / "storm", 48)
+        scenes.append((item, StageReader(ROOT / "usd_scenes" / name).scene_at(float(when) if when else None)))
     devices = ["cpu"] + [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]
     rows = []
-    for device in devices:
-        Slicing(SlicingSettings(slice_count=2), device=device).render(scene, 8, 8)  # compile, not timed
-        for config in args.configs.split(","):
-            size, slices = (int(v) for v in config.split("x"))
-            technique = Slicing(SlicingSettings(slice_count=slices), device=device)
-            times = []
-            for _ in range(args.repeats):
-                started = time.perf_counter()
-                technique.render(scene, size, size)
-                times.append(time.perf_counter() - started)
-            best = min(times)
-            row = {"device": device, "size": size, "slices": slices, "ms": 1e3 * best,
-                   "samples_per_s": size * size * slices / best}
-            if device.startswith("cuda"):
-                try:  # the mempool's high-water mark, where this Warp has it
-                    row["peak_mib"] = wp.get_mempool_used_mem_high(device) / 2**20
-                except (AttributeError, RuntimeError):
-                    pass
-            rows.append(row)
-    print(f"slicing, {args.stage.name}; best of {args.repeats}, excluding the first compile")
-    print(f"{'device':<8} {'size':>6} {'slices':>7} {'ms':>9} {'M samples/s':>12} {'peak MiB':>9}")
+    for label, scene in scenes:
+        for device in devices:
+            Slicing(SlicingSettings(slice_count=2), device=device).render(scene, 8, 8)  # compile, not timed
+            for config in args.configs.split(","):
+                size, slices = (int(v) for v in config.split("x"))
+                technique = Slicing(SlicingSettings(slice_count=slices), device=device)
+                times = []
+                for _ in range(args.repeats):
+                    started = time.perf_counter()
+                    technique.render(scene, size, size)
+                    times.append(time.perf_counter() - started)
+                best = min(times)
+                row = {"stage": label, "device": device, "size": size, "slices": slices, "ms": 1e3 * best,
+                       "samples_per_s": size * size * slices / best}
+                if device.startswith("cuda"):
+                    try:  # the mempool's high-water mark, where this Warp has it
+                        row["peak_mib"] = wp.get_mempool_used_mem_high(device) / 2**20
+                    except (AttributeError, RuntimeError):
+                        pass
+                rows.append(row)
+    print(f"slicing (defaults: light_equation 0, xi 0.1); best of {args.repeats}, excluding the first compile")
+    print(f"{'stage':<16} {'device':<8} {'size':>6} {'slices':>7} {'ms':>9} {'M samples/s':>12} {'peak MiB':>9}")
     for r in rows:
-        print(f"{r['device']:<8} {r['size']:>6} {r['slices']:>7} {r['ms']:>9.1f} {r['samples_per_s'] / 1e6:>12.1f} "
-              f"{r.get('peak_mib', float('nan')):>9.1f}")
+        print(f"{r['stage']:<16} {r['device']:<8} {r['size']:>6} {r['slices']:>7} {r['ms']:>9.1f} "
+              f"{r['samples_per_s'] / 1e6:>12.1f} {r.get('peak_mib', float('nan')):>9.1f}")
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps({"machine": platform.platform(), "rows": rows}, indent=2))
     print(f"wrote {args.json}")
