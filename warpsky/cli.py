@@ -130,6 +130,30 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--time", type=float, default=None, help="time code to inspect (default: earliest)")
     _add_render_options(info)
 
+    preview = sub.add_parser(
+        "preview", help="draw a stage in 3-D (volumes, camera frustum, sun, ground, layers) to a PNG",
+        description="Draw the stage at one time code with pyvista, offscreen (EGL, no X server): density "
+        "isosurfaces of every volume (per species colour), the camera frustum, an arrow towards the sun, the ground "
+        "plane and stratiform layer extents. Needs the preview extra: pip install 'warpsky[preview]'.")
+    preview.add_argument("stage", type=Path, help="USD stage")
+    preview.add_argument("-o", "--output", type=Path, default=Path("preview.png"), help="PNG to write")
+    preview.add_argument("--frame", type=float, default=None, help="time code (default: earliest)")
+    preview.add_argument("--camera", metavar="PATH", help="camera prim path")
+    preview.add_argument("--size", type=_resolution, default=(1024, 768), metavar="WxH", help="image size")
+    preview.add_argument("--level", type=float, default=0.2,
+                         help="isosurface at this fraction of each field's maximum (default 0.2)")
+
+    sheet = sub.add_parser(
+        "contact-sheet", help="tile rendered EXR frames into one PNG with frame numbers",
+        description="Tone-map every EXR matching PATTERN (a #### placeholder) with one exposure and tile them in "
+        "frame order, numbered; unreadable frames show as red tiles.")
+    sheet.add_argument("pattern", help="frames, e.g. out/storm.####.exr")
+    sheet.add_argument("-o", "--output", type=Path, default=Path("contact_sheet.png"), help="PNG to write")
+    sheet.add_argument("--columns", type=int, default=None, help="tiles per row (default: about 1.5:1 overall)")
+    sheet.add_argument("--tile-width", type=int, default=256, help="tile width in pixels (default 256)")
+    sheet.add_argument("--exposure", type=float, default=None,
+                       help="linear exposure (default: the frames' preview exposure, else their 99th percentile)")
+
     from warpsky.optics.cli import add_parser as add_optics
 
     add_optics(sub)
@@ -285,6 +309,24 @@ def _fmt3(values) -> str:
     return "(" + ", ".join(f"{v:.6g}" for v in values) + ")"
 
 
+def cmd_preview(args) -> int:
+    from warpsky.output.preview import stage_preview
+    from warpsky.scene.usd import StageReader
+
+    scene = StageReader(args.stage).scene_at(args.frame, camera_path=args.camera)
+    print(stage_preview(scene, args.output, size=(args.size[0], args.size[1] or round(args.size[0] * 0.75)),
+                        level=args.level))
+    return 0
+
+
+def cmd_contact_sheet(args) -> int:
+    from warpsky.output.preview import contact_sheet
+
+    print(contact_sheet(args.pattern, args.output, columns=args.columns, tile_width=args.tile_width,
+                        exposure=args.exposure))
+    return 0
+
+
 def cmd_info(args) -> int:
     import numpy as np
 
@@ -339,7 +381,9 @@ def main(argv: list[str] | None = None) -> int:
             from warpsky.optics.cli import run as run_optics
 
             return run_optics(args)
-        return {"render": cmd_render, "info": cmd_info, "bench": cmd_bench}[args.command](args)
+        commands = {"render": cmd_render, "info": cmd_info, "bench": cmd_bench, "preview": cmd_preview,
+                    "contact-sheet": cmd_contact_sheet}
+        return commands[args.command](args)
     except WarpskyError as exc:
         print(f"warpsky: error: {exc}", file=sys.stderr)
         return exc.exit_code
