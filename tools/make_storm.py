@@ -6,7 +6,7 @@ Fields (values in [0, 1]; each OpenVDBAsset's ``warpsky:extinctionScale`` turns 
 field    species    where                                                          peak extinction [1/m]
 ======== ========== ============================================================= ==========================
 cloud    cloud      the tower: cloud base 1.8 km, top rising 6 -> 9.5 km           0.03 (τ ~ 100 across it)
-rain     rain       shaft under the base, leaning downwind, growing after t = 0.15 1.2e-3
+rain     rain       shaft under the base, leaning downwind, growing after t = 0.15 4e-4 (τ ~ 1.5 across)
 snow     snow       aloft inside the tower between 5 and 9 km                      6e-4
 ice      ice        the anvil (its own Volume): 8-11 km, spreading downwind to     6e-4 (τ ~ 1.5 through it)
                     25 km east of the tower after t = 0.3
@@ -48,7 +48,7 @@ ANVIL_Z = 14000.0
 CLOUD_BASE = 1800.0
 WIND = 6.0  # [m/s] towards +x, for the detail noise over the time-lapse
 DURATION = 24 * 60.0  # [s] of storm life the frames span
-EXTINCTION = {"cloud": 0.03, "rain": 1.2e-3, "snow": 6.0e-4, "ice": 6.0e-4}
+EXTINCTION = {"cloud": 0.03, "rain": 4.0e-4, "snow": 6.0e-4, "ice": 6.0e-4}
 
 
 def periodic_noise(shape: tuple[int, int, int], rng: np.random.Generator, octaves: int = 4) -> np.ndarray:
@@ -231,8 +231,8 @@ def write_stage(path: Path, data: Path, frames: int) -> Path:
             op.Set(look, frame)
 
     # sun at the back: the shaft stands ~38 deg from the antisolar point, where the bow's lower arc crosses it
-    camera("RainbowCam", 16.0, ((9500.0, 250.0, 8200.0), (9000.0, 250.0, 7400.0)),
-           ((-400.0, 2600.0, 0.0), (-400.0, 2600.0, 0.0)))
+    camera("RainbowCam", 20.0, ((6600.0, 150.0, 5600.0), (6000.0, 150.0, 5000.0)),
+           ((-400.0, 2400.0, 0.0), (-400.0, 2400.0, 0.0)))
     camera("AnvilCam", 12.0, ((4000.0, 60.0, -1500.0), (5500.0, 60.0, 1500.0)),
            ((30000.0, 14000.0, 0.0), (30000.0, 13000.0, 0.0)))
 
