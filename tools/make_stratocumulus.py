@@ -1,9 +1,14 @@
-"""Stratocumulus over a landscape of water, sand and snow (Bouthors 2006 Fig. 11.E: water sky and ice blink).
+"""Stratocumulus over a landscape of water, sand and snow (Bouthors 2006 Fig. 11.E: water sky and ice blink), still
+and animated by advected textures (Neyret 2003).
 
-Writes data/stratocumulus/{thickness.npy, ground_albedo.npy} and usd_scenes/stratocumulus.usda; with ``--render
-DIR`` also renders the stage looking up at the cloud base with radiosity on and off (two EXRs + PNG previews).
+Writes data/stratocumulus/{thickness.npy, ground_albedo.npy}, usd_scenes/stratocumulus.usda (one frame) and
+usd_scenes/stratocumulus_anim.usda (48 frames: the same layer with ``warpsky:advection:*`` wind and curl noise; a
+time-lapse at timeCodesPerSecond = 0.1, one frame per 10 s of cloud time, played at 24 fps). With ``--render DIR``
+also renders the still stage through ``warpsky render`` with radiosity on and off (two EXRs + PNG previews); the
+Makefile targets do the same from the shell:
 
-    python tools/make_stratocumulus.py --out data --render out            # = make stratocumulus
+    make stratocumulus          # = python tools/make_stratocumulus.py --out data --render out
+    make stratocumulus-anim     # warpsky render usd_scenes/stratocumulus_anim.usda out/stratocumulus_anim/sc.####.exr
 """
 
 from __future__ import annotations
@@ -15,6 +20,20 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 SIZE = 24000.0  # [m] of cloud layer and ground texture
+FRAMES = 48
+#: Animated stage: time codes per second of cloud time (0.1: one frame every 10 s) and the advection it gets.
+ANIM_TIME_CODES_PER_SECOND = 0.1
+ANIM_ADVECTION = """        custom float2 warpsky:advection:wind = (14, 5)
+        custom float warpsky:advection:curlSpeed = 2
+        custom float warpsky:advection:curlScale = 8000
+        custom float warpsky:advection:period = 400
+        custom int warpsky:advection:seed = 3
+"""
+ANIM_HEADER = f"""    startTimeCode = 1
+    endTimeCode = {FRAMES}
+    timeCodesPerSecond = {ANIM_TIME_CODES_PER_SECOND}
+    framesPerSecond = 24
+"""
 
 
 def ground_albedo(resolution: int = 256) -> np.ndarray:
@@ -32,10 +51,10 @@ def ground_albedo(resolution: int = 256) -> np.ndarray:
 STAGE = """#usda 1.0
 (
     defaultPrim = "World"
-    doc = "warpsky stratocumulus over water, sand and snow (Bouthors 2006); written by tools/make_stratocumulus.py"
+    doc = "warpsky stratocumulus over water, sand and snow (Bouthors 2006){doc}; written by tools/make_stratocumulus.py"
     metersPerUnit = 1
     upAxis = "Y"
-)
+{header})
 
 def Xform "World"
 {{
@@ -78,44 +97,24 @@ def Xform "World"
         custom float2 warpsky:stratiform:size = ({size}, {size})
         custom float warpsky:stratiform:numberDensity = 3e8
         custom float warpsky:stratiform:effectiveRadius = 7e-6
-        double3 xformOp:translate = (0, 1200, 0)
+{advection}        double3 xformOp:translate = (0, 1200, 0)
         uniform token[] xformOpOrder = ["xformOp:translate"]
     }}
 }}
 """
 
 
-def render(stage: Path, out: Path, *, width: int, device: str) -> list[Path]:
-    """Render with radiosity on and off; returns the written files."""
-    from warpsky.composite import composite
-    from warpsky.device import init_warp
-    from warpsky.media.stratiform import read_stratiform
-    from warpsky.output.exr import write_exr
-    from warpsky.output.png import write_png
-    from warpsky.render import preview_exposure
-    from warpsky.scene.usd import StageReader
-    from warpsky.techniques.sky.technique import SkyPass, attenuated_sun
-    from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
+def render(stage: Path, out: Path, *, width: int, device: str) -> int:
+    """``warpsky render`` the still stage with radiosity on and off (EXR + PNG each); returns the exit code."""
+    from warpsky.cli import main as warpsky
 
-    init_warp()
-    reader = StageReader(stage)
-    scene = reader.scene_at(None)
-    layers, texture = read_stratiform(reader)
-    height = round(width * 2 / 3)
-    written = []
-    for radiosity in (1, 0):
-        technique = Stratiform(StratiformSettings(radiosity=radiosity), device=device)
-        layer = technique.render(attenuated_sun(scene), width, height, layer=layers[0], ground_texture=texture)
-        front, back = SkyPass(device=device).render(scene, width, height, media_depth=layer.depth)
-        frame = composite([front, layer, back], far=scene.camera.far)
-        name = f"stratocumulus-radiosity-{'on' if radiosity else 'off'}"
-        exr = write_exr(out / f"{name}.exr", frame.rgba, transmittance=frame.transmittance, depth=frame.depth,
-                        metadata={"technique": "stratiform", "radiosity": str(bool(radiosity)),
-                                  "stats": str({k: v for k, v in layer.stats.items()})}, half=True)
-        png = write_png(out / f"{name}.png", frame.rgba[..., :3], exposure=preview_exposure(scene, 1.0))
-        print(f"{exr}  {png}  {layer.stats}")
-        written += [Path(exr), Path(png)]
-    return written
+    for radiosity in ("on", "off"):
+        args = ["render", str(stage), str(out / f"stratocumulus-radiosity-{radiosity}.exr"), "--res", str(width),
+                "--device", device, "--png", "--exposure", "1"]
+        code = warpsky(args + (["--set", "stratiform.radiosity=0"] if radiosity == "off" else []))
+        if code != 0:
+            return code
+    return 0
 
 
 def main(argv=None) -> int:
@@ -132,11 +131,13 @@ def main(argv=None) -> int:
     np.save(data / "thickness.npy", procedural_thickness(256, cover=0.75, max_thickness=450.0, seed=8))
     np.save(data / "ground_albedo.npy", ground_albedo())
     stage = ROOT / "usd_scenes" / "stratocumulus.usda"
-    stage.write_text(STAGE.format(size=SIZE))
-    print(f"wrote {data}/thickness.npy, {data}/ground_albedo.npy, {stage}")
+    stage.write_text(STAGE.format(size=SIZE, doc="", header="", advection=""))
+    anim = ROOT / "usd_scenes" / "stratocumulus_anim.usda"
+    anim.write_text(STAGE.format(size=SIZE, doc=f", {FRAMES} frames advected by wind and curl noise",
+                                 header=ANIM_HEADER, advection=ANIM_ADVECTION))
+    print(f"wrote {data}/thickness.npy, {data}/ground_albedo.npy, {stage}, {anim}")
     if args.render is not None:
-        args.render.mkdir(parents=True, exist_ok=True)
-        render(stage, args.render, width=args.width, device=args.device)
+        return render(stage, args.render, width=args.width, device=args.device)
     return 0
 
 

@@ -16,6 +16,11 @@ from warpsky.scene.model import Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, parse_settings, technique_class
 
 DEFAULT_WIDTH = 512
+#: ``--set`` names with this prefix go to the stratiform pass (``StratiformSettings``), not the voxel technique.
+LAYER_SETTING_PREFIX = "stratiform."
+#: Full-size (nu, nv) RGB float32 buffers the radiosity solver holds (ρ_G, ρ_C, ones, R_G, R_C, dR_G, dR_C) plus
+#: about a third more for the MIP pyramid.
+RADIOSITY_BUFFERS = 7 + 1 / 3
 
 
 @dataclass
@@ -28,12 +33,14 @@ class RenderPlan:
     width: int
     height: int
     features: dict[str, str] = field(default_factory=dict)
+    layer_settings: object | None = None  # StratiformSettings when the scene has layers, else None
 
     def settings_dict(self) -> dict:
         return dataclasses.asdict(self.settings)
 
     def settings_json(self) -> str:
-        return json.dumps({"technique": self.technique, **self.settings_dict()}, sort_keys=True)
+        extra = {} if self.layer_settings is None else {"stratiform": dataclasses.asdict(self.layer_settings)}
+        return json.dumps({"technique": self.technique, **self.settings_dict(), **extra}, sort_keys=True)
 
     def describe(self) -> str:
         lines = [
@@ -42,6 +49,9 @@ class RenderPlan:
             f"resolution  {self.width} x {self.height}",
             "settings    " + ", ".join(f"{k}={_fmt(v)}" for k, v in self.settings_dict().items()),
         ]
+        if self.layer_settings is not None:
+            lines.append("            " + ", ".join(f"stratiform.{k}={'auto' if v is None else _fmt(v)}"
+                                                  for k, v in dataclasses.asdict(self.layer_settings).items()))
         lines += [f"{name:<11} {state}" for name, state in self.features.items()]
         return "\n".join(lines)
 
@@ -73,6 +83,9 @@ def make_plan(
     device: str = "cpu",
 ) -> RenderPlan:
     cls = technique_class(technique)
+    settings = dict(settings or {})
+    layer_values = {k[len(LAYER_SETTING_PREFIX):]: settings.pop(k) for k in list(settings)
+                    if k.startswith(LAYER_SETTING_PREFIX)}
     instance = cls(parse_settings(cls.Settings, settings), device=device)
     width, height = resolve_resolution(scene, resolution)
     features = {}
@@ -87,8 +100,23 @@ def make_plan(
     if scene.media:
         voxels = sum(int(np.prod(m.shape)) for m in scene.media)
         features["media"] = f"{len(scene.media)} voxel grid(s), {voxels:,} voxels, {voxels * 4 / 2**20:.1f} MiB"
+    elif scene.layers:
+        features["media"] = f"none: {technique} does not run, the layers are rendered by the stratiform pass"
     else:
         features["media"] = "none"
+    layer_settings = None
+    if scene.layers:
+        if getattr(cls, "traces_air", False):
+            raise UsageError(f"technique {technique} does not render stratiform layers "
+                             f"({', '.join(layer.name for layer in scene.layers)}); use slicing or single_scatter")
+        from warpsky.techniques.stratiform.technique import StratiformSettings
+
+        layer_settings = parse_settings(StratiformSettings, layer_values)
+        features.update(_layer_features(scene, layer_settings))
+    else:
+        unused = f" (unused: {', '.join(LAYER_SETTING_PREFIX + k for k in layer_values)})" if layer_values else ""
+        features["layers"] = ('no layers (no prim with warpsky:kind = "stratiformLayer"): stratiform pass and '
+                              "radiosity not built" + unused)
     species = tuple(dict.fromkeys(m.species for m in scene.media if m.species is not None))
     if species:
         from warpsky.optics.tables import is_cached
@@ -112,4 +140,49 @@ def make_plan(
         if scene.ground is not None
         else "off (no Plane prim): kernel built without the ground branch"
     )
-    return RenderPlan(technique, instance.resolved_settings(scene), device, width, height, features)
+    if scene.ground is not None and scene.ground.albedo_map is not None:
+        tex = scene.ground.albedo_map
+        features["ground"] += (f"; albedo map {tex.albedo.shape[0]}x{tex.albedo.shape[1]} over "
+                               f"{tex.size[0]:g} x {tex.size[1]:g} m (stratiform pass only)")
+    if scene.ground is not None and scene.layers:
+        features["ground"] += "; drawn by the stratiform pass (layer shadows, radiosity), voxel media cast no shadow"
+    return RenderPlan(technique, instance.resolved_settings(scene), device, width, height, features, layer_settings)
+
+
+def _layer_features(scene: Scene, settings) -> dict[str, str]:
+    """One ``layer`` line per stratiform layer and one ``radiosity`` line per layer: what the stratiform pass
+    builds (map, optics, advection; the radiosity buffers and their size, or why there are none)."""
+    from warpsky.techniques.stratiform.technique import radiosity_grid
+
+    features = {}
+    count = len(scene.layers)
+    for number, layer in enumerate(scene.layers, start=1):
+        suffix = "" if count == 1 else f" {number}"
+        nx, nz = layer.thickness.shape
+        line = (f"{layer.name}: stratiform (Bouthors 2006), base {layer.base_altitude:g} m, "
+                f"{layer.size[0]:g} x {layer.size[1]:g} m, map {nx}x{nz}, cover {layer.cover:.0%}, max "
+                f"{float(layer.thickness.max()):g} m, kappa {layer.extinction:.4g} 1/m")
+        adv = layer.advection
+        if adv is None:
+            line += ", static map"
+        else:
+            scale = "half the layer" if adv.curl_scale_m is None else f"{adv.curl_scale_m:g} m"
+            line += (f", advected at t = {layer.time_s:g} s: wind {list(adv.wind_m_s)} m/s, curl "
+                     f"{adv.curl_speed_m_s:g} m/s at {scale}, period {adv.period_s:g} s, seed {adv.seed}")
+        features["layer" + suffix] = line
+        ground = scene.ground
+        if ground is None or ground.height >= layer.base_altitude:
+            state = "off: no ground below the layer"
+        elif not settings.radiosity_for(layer):
+            why = ("stratiform.radiosity=0" if settings.radiosity is not None
+                   else f"warpsky:stratiform:radiosity = false on {layer.name}")
+            state = f"off ({why}): sky and cloud light reach the ground once"
+        else:
+            detail = int(settings.radiosity_detail)
+            _, pixel, (nu, nv) = radiosity_grid(layer, ground.height, detail)
+            mib = nu * nv * 12 * RADIOSITY_BUFFERS / 2**20
+            state = (f"on: ground <-> cloud base, buffers {nu}x{nv} texels of {pixel:g} m (h / 2^{detail}), "
+                     f"{mib:.2f} MiB; rings gather, tolerance {settings.tolerance:g}, cap "
+                     f"{int(settings.max_iterations)} iterations")
+        features["radiosity" + suffix] = state
+    return features

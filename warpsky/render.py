@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import time as _time
@@ -11,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 import warpsky
-from warpsky.composite import composite
+from warpsky.composite import composite, merge_by_depth
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, technique_class
@@ -86,7 +87,10 @@ def settings_hash(plan: RenderPlan, options: RenderOptions) -> str:
 
 def render_layers(technique, scene, plan):
     """(the technique's layer, all layers front to back): with an atmosphere, the media see sunlight reddened by
-    the air above them, and the sky pass adds air in front of and behind them plus the sun's disk."""
+    the air above them, and the sky pass adds air in front of and behind them plus the sun's disk. Stratiform
+    layers are rendered by :func:`render_with_layers`."""
+    if scene.layers:
+        return render_with_layers(technique, scene, plan)
     if scene.atmosphere is None or getattr(technique, "traces_air", False):
         layer = technique.render(scene, plan.width, plan.height)  # the path tracer carries the air itself
         return layer, [layer]
@@ -95,6 +99,56 @@ def render_layers(technique, scene, plan):
     layer = technique.render(attenuated_sun(scene), plan.width, plan.height)
     front, back = SkyPass(device=plan.device).render(scene, plan.width, plan.height, media_depth=layer.depth)
     return layer, [front, layer, back]
+
+
+def _sun_at_altitude(scene: Scene, altitude: float) -> Scene:
+    """``scene`` with its sun reddened by the air above ``altitude`` [m of the stage's y] (Eq. 12)."""
+    if scene.atmosphere is None or scene.sun is None:
+        return scene
+    from warpsky.techniques.sky.analytic import sun_transmittance
+
+    atm = scene.atmosphere
+    t = sun_transmittance(atm.beta_sea_level, atm.gamma, altitude + atm.altitude, scene.sun.direction[1])
+    return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=scene.sun.irradiance * t))
+
+
+def render_with_layers(technique, scene, plan):
+    """(merged layer, all layers front to back) for a scene with stratiform layers.
+
+    The voxel ``technique`` runs only when there are voxel media, without the ground; each stratiform layer is its
+    own Layer (Bouthors slab + radiosity when a ground lies below), lit by the sun reddened down to its mid
+    altitude; the lowest layer draws the ground (textured, in the layer's shadow, lit by the radiosity). The media
+    and the layers are merged per pixel by depth (:func:`~warpsky.composite.merge_by_depth`), then the sky pass
+    splits the air at the merged depth. Not modelled: shadows between voxel media and layers, and of voxel media on
+    the ground.
+    """
+    from warpsky.techniques.stratiform.technique import Stratiform
+
+    width, height = plan.width, plan.height
+    parts = []
+    if scene.media:
+        media_scene = dataclasses.replace(scene, ground=None, layers=())
+        if scene.ground is not None and scene.sun is not None and scene.sun.direction[1] <= 0.0:
+            media_scene = dataclasses.replace(media_scene, sun=None)  # the ground hides a sun below the horizon
+        if scene.atmosphere is not None:
+            from warpsky.techniques.sky.technique import attenuated_sun
+
+            media_scene = attenuated_sun(media_scene)
+        parts.append(technique.render(media_scene, width, height))
+    stratiform = Stratiform(getattr(plan, "layer_settings", None), device=plan.device)
+    lowest = min(range(len(scene.layers)), key=lambda i: scene.layers[i].base_altitude)
+    for index, layer in enumerate(scene.layers):
+        lit = _sun_at_altitude(scene, layer.base_altitude + 0.5 * float(layer.thickness.max()))
+        part = stratiform.render(lit, width, height, layer=layer, draw_ground=index == lowest)
+        part.stats["layer"] = layer.name
+        parts.append(part)
+    merged = merge_by_depth(parts, far=scene.camera.far)
+    if scene.atmosphere is None:
+        return merged, [merged]
+    from warpsky.techniques.sky.technique import SkyPass
+
+    front, back = SkyPass(device=plan.device).render(scene, width, height, media_depth=merged.depth)
+    return merged, [front, merged, back]
 
 
 def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> FrameResult:
@@ -120,6 +174,10 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
     }
     if scene.sun is not None:
         metadata["sun"] = scene.sun.name
+    if scene.layers:
+        keys = ("layer", "radiosity", "radiosity_iterations", "radiosity_residual", "radiosity_converged", "seconds")
+        metadata["stratiform"] = json.dumps([{k: part[k] for k in keys if k in part}
+                                             for part in layer.stats["parts"] if "layer" in part])
     exr = write_exr(
         out_path, frame.rgba, transmittance=frame.transmittance, depth=frame.depth, aovs=frame.aovs,
         metadata=metadata,

@@ -9,29 +9,52 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpsky.media.stratiform import GroundTexture, StratiformLayer
+from warpsky.errors import UsageError
+from warpsky.media.stratiform import GroundTexture, StratiformLayer, at_time
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer
 
 
 @dataclass(frozen=True)
 class StratiformSettings:
-    """================== ===== ======= ==================================================================
+    """Settings of the stratiform pass (``--set stratiform.NAME=VALUE``).
+
+    ================== ===== ======= ==================================================================
     name               unit  default meaning
     ================== ===== ======= ==================================================================
-    radiosity          --    1       1: iterate ground <-> cloud exchanges; 0: sky and cloud light reach
-                                     the ground once, nothing comes back to the cloud base
-    radiosity_detail   --    0       buffer texels per h = 2^detail (h: ground to cloud base)
+    radiosity          --    auto    1: iterate ground <-> cloud exchanges; 0: sky and cloud light reach
+                                     the ground once, nothing comes back to the cloud base; auto: each
+                                     layer's ``bool warpsky:stratiform:radiosity`` (default true)
+    radiosity_detail   --    0       buffer texels per h = 2^detail (h: ground to cloud base), 0..4
     tolerance          --    1e-4    stop when an iteration's exchanged energy ratio is below this
     max_iterations     --    64      iteration cap (warns with the residual)
     ================== ===== ======= ==================================================================
+
+    The ``stratiform.`` prefix sends a ``--set`` to this pass instead of the voxel technique, e.g.
+    ``warpsky render usd_scenes/stratocumulus.usda out/sc.####.exr --set stratiform.radiosity=0``.
     """
 
     technique = "stratiform"
-    radiosity: float = 1
+    radiosity: float | None = None
     radiosity_detail: float = 0
     tolerance: float = 1e-4
     max_iterations: float = 64
+
+    def __post_init__(self):
+        if self.radiosity not in (None, 0, 1):
+            raise UsageError(f"setting stratiform.radiosity must be 0, 1 or auto, got {self.radiosity}")
+        if self.radiosity_detail not in (0, 1, 2, 3, 4):
+            raise UsageError(f"setting stratiform.radiosity_detail must be a whole number in 0..4, "
+                             f"got {self.radiosity_detail}")
+        if not (math.isfinite(self.tolerance) and self.tolerance > 0.0):
+            raise UsageError(f"setting stratiform.tolerance must be > 0, got {self.tolerance}")
+        if not (self.max_iterations >= 1 and float(self.max_iterations).is_integer()):
+            raise UsageError(f"setting stratiform.max_iterations must be a whole number >= 1, "
+                             f"got {self.max_iterations}")
+
+    def radiosity_for(self, layer: StratiformLayer) -> bool:
+        """Whether the exchange runs for ``layer``: this setting when given, else the layer's attribute."""
+        return bool(layer.radiosity) if self.radiosity is None else bool(self.radiosity)
 
 
 def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray:
@@ -52,6 +75,20 @@ def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray
         for c in range(3)], -1)
     weight = (np.cos(z) * np.sin(z))[..., None] * (0.5 * np.pi / samples) * (2 * np.pi / (2 * samples))
     return (radiance * weight).sum(axis=(0, 1)) / np.pi
+
+
+def radiosity_grid(layer: StratiformLayer, ground_height: float, detail: int):
+    """The radiosity buffers' placement for ``layer`` over a ground at ``ground_height`` [m]: (x0, z0) [m], texel
+    size [m] = h / 2^detail with h the ground-to-base height, and (nu, nv) texels covering the layer plus an 8 h
+    margin, rounded up for the MIP pyramid."""
+    from warpsky.techniques.radiosity.solver import pyramid_shape
+
+    h = layer.base_altitude - ground_height
+    pixel = h / 2**detail
+    margin = 8.0 * h
+    shape = pyramid_shape((math.ceil((layer.size[0] + 2 * margin) / pixel),
+                           math.ceil((layer.size[1] + 2 * margin) / pixel)), detail + 3)
+    return (layer.origin[0] - margin, layer.origin[1] - margin), pixel, shape
 
 
 def _sample(map2d: np.ndarray, origin, size, xs: np.ndarray, zs: np.ndarray) -> np.ndarray:
@@ -78,18 +115,14 @@ class Stratiform:
     def radiosity_inputs(self, scene: Scene, layer: StratiformLayer, texture: GroundTexture | None, optics,
                          sky: np.ndarray):
         """(grid box (x0, z0, sx, sz), R_G, R_C, RadiosityResult or None) on the shared low-resolution grid."""
-        from warpsky.techniques.radiosity.solver import Radiosity, ground_direct, pyramid_shape
+        from warpsky.techniques.radiosity.solver import Radiosity, ground_direct
         from warpsky.techniques.stratiform.model1d import order_energies, reference_thickness
 
         s = self.settings
         ground = scene.ground
         h = layer.base_altitude - ground.height
         detail = int(s.radiosity_detail)
-        pixel = h / 2**detail
-        margin = 8.0 * h
-        x0, z0 = layer.origin[0] - margin, layer.origin[1] - margin
-        shape = pyramid_shape((math.ceil((layer.size[0] + 2 * margin) / pixel),
-                               math.ceil((layer.size[1] + 2 * margin) / pixel)), detail + 3)
+        (x0, z0), pixel, shape = radiosity_grid(layer, ground.height, detail)
         box = (x0, z0, shape[0] * pixel, shape[1] * pixel)
         # area averages of the maps over each texel (4 x 4 sub-samples)
         sub = (np.arange(4) + 0.5) / 4
@@ -119,14 +152,17 @@ class Stratiform:
                                device=self.device)
         solver = Radiosity(pixel_over_h=2.0**-detail, tolerance=s.tolerance, max_iterations=int(s.max_iterations),
                            device=self.device)
-        if s.radiosity:
+        if s.radiosity_for(layer):
             result = solver.solve(ground_albedo=rho_g, cloud_reflectance=rho_c, ground_direct=direct,
                                   cloud_source=source)
             return box, result.ground_received, result.cloud_received, result
         return box, solver.gather(source), np.zeros((*shape, 3), np.float32), None
 
     def render(self, scene: Scene, width: int, height: int, *, layer: StratiformLayer,
-               ground_texture: GroundTexture | None = None) -> Layer:
+               ground_texture: GroundTexture | None = None, draw_ground: bool = True) -> Layer:
+        """Render ``layer`` (at its time, when advected) over the scene's ground, textured by ``ground_texture``
+        (default: the ground's ``albedo_map``). ``draw_ground=False`` leaves the ground out of the image (another
+        layer draws it) while the radiosity still lights this layer's base."""
         import warp as wp
 
         from warpsky.device import launch_rows
@@ -135,11 +171,14 @@ class Stratiform:
         from warpsky.techniques.stratiform.optics import stratiform_optics
 
         started = time.perf_counter()
+        layer = at_time(layer, self.device)
+        if ground_texture is None and scene.ground is not None:
+            ground_texture = scene.ground.albedo_map
         camera = scene.camera.conformed(width, height)
         eye = camera.position
         optics = stratiform_optics(layer.number_density, layer.effective_radius)
         sky = sky_radiance(scene, layer.base_altitude + float(layer.thickness.max()))
-        stats = {"radiosity": bool(self.settings.radiosity)}
+        stats = {"radiosity": bool(self.settings.radiosity_for(layer))}
         with wp.ScopedDevice(self.device):
             slab_optics, tables, params = optics.device_inputs(self.device)
             g = LayerGeometry()
@@ -172,7 +211,7 @@ class Stratiform:
                 params, slab_optics,
                 wp.vec3(*(sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])).tolist()),
                 wp.vec3(*(sun.irradiance if sun is not None else np.zeros(3)).tolist()), wp.vec3(*sky.tolist()),
-                int(ground is not None), float(ground.height - eye[1]) if ground is not None else 0.0,
+                int(ground is not None and draw_ground), float(ground.height - eye[1]) if ground is not None else 0.0,
                 wp.array(np.ascontiguousarray(albedo, dtype=np.float32), dtype=wp.vec3), rel(abox),
                 wp.array(np.ascontiguousarray(r_g, dtype=np.float32), dtype=wp.vec3),
                 wp.array(np.ascontiguousarray(r_c, dtype=np.float32), dtype=wp.vec3), rel(box),
