@@ -6,7 +6,7 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test lint bench venv data clean help stratocumulus
+.PHONY: demo test lint bench venv data clean help stratocumulus cumulus-wind
 
 help:
 	@echo "make demo   - install into $(VENV), generate sample data, render the demo cumulus to out/"
@@ -39,6 +39,9 @@ lint: $(STAMP)
 
 bench: $(STAMP) data/cumulus.nvdb
 	$(PY) benchmarks/bench_single_scatter.py
+
+cumulus-wind: $(STAMP) data/cumulus.nvdb
+	$(VENV)/bin/warpsky render usd_scenes/cumulus_wind.usda out/cumulus_wind.####.exr --frames 1:48 --png
 
 stratocumulus: $(STAMP)
 	$(PY) tools/make_stratocumulus.py --out data --render out

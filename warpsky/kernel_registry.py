@@ -22,18 +22,19 @@ def kernel_modules() -> list:
     modules = [wp.get_module(fields.__name__), wp.get_module(optics.__name__), wp.get_module(ice_kernels.__name__),
                wp.get_module(sky.__name__)]
     modules += [
-        single_scatter_kernel(has_ground, has_tables).module
+        single_scatter_kernel(has_ground, has_tables, has_detail).module
         for has_ground in (False, True)
         for has_tables in (False, True)
+        for has_detail in (False, True)
     ]
     modules += [
         path_trace_kernel(has_ground, has_tables).module for has_ground in (False, True) for has_tables in (False, True)
     ]
-    modules += [k.module for low in (False, True) for eq in (0, 24, 25)
-                for k in slicing_kernels(low, eq)]
-    import warpsky.techniques.slicing.kernels as slicing
+    modules += [k.module for low in (False, True) for eq in (0, 24, 25) for has_detail in (False, True)
+                for k in slicing_kernels(low, eq, has_detail)]
+    from warpsky.techniques.slicing.kernels import ground_kernel
 
-    modules.append(wp.get_module(slicing.__name__))
+    modules += [ground_kernel(has_detail).module for has_detail in (False, True)]
     import warpsky.techniques.radiosity.kernels as radiosity
     import warpsky.techniques.stratiform.reference as stratiform_reference
     import warpsky.techniques.stratiform.slab as stratiform_slab

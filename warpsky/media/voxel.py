@@ -17,7 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky.media.advection_kernels import DetailState, advected_detail
 from warpsky.scene.model import VoxelMedium
+
+#: Detail multiplies density by ``max(0, 1 + amplitude * clamp(z, -DETAIL_Z_MAX, DETAIL_Z_MAX))``, so by at most
+#: ``1 + DETAIL_Z_MAX * amplitude`` (what a majorant must allow for).
+DETAIL_Z_MAX = wp.constant(3.0)
 
 
 @wp.struct
@@ -74,6 +79,32 @@ def grid_value(values: wp.array(dtype=float), grid: VoxelGrid, p: wp.vec3) -> fl
     return c0 + (c1 - c0) * fx
 
 
+@wp.struct
+class MediumDetail:
+    """A medium's animated detail at one time (``amplitude`` 0: none; ``state`` is then never read)."""
+
+    state: DetailState  # the advected noise, positions relative to the camera [m]
+    amplitude: float
+
+
+@wp.func
+def detail_factor(detail: MediumDetail, p: wp.vec3) -> float:
+    """Factor on the coarse density at ``p`` (camera-relative metres): ``max(0, 1 + a clamp(z, -3, 3))`` with ``z``
+    the advected noise in standard deviations; in [0, 1 + 3 a]."""
+    z = (advected_detail(detail.state, p) - detail.state.mean) / detail.state.std
+    return wp.max(0.0, 1.0 + detail.amplitude * wp.clamp(z, -DETAIL_Z_MAX, DETAIL_Z_MAX))
+
+
+@wp.func
+def detailed_value(value: float, details: wp.array(dtype=MediumDetail), m: int, p: wp.vec3) -> float:
+    """Medium ``m``'s coarse ``value`` at ``p`` (camera-relative metres) times its detail factor, if it has one."""
+    if value > 0.0:
+        amplitude = details[m].amplitude
+        if amplitude > 0.0:
+            return value * detail_factor(details[m], p)
+    return value
+
+
 @wp.func
 def slab_interval(origin: float, direction: float, lo: float, hi: float, t0: float, t1: float) -> wp.vec2:
     """Clip the parameter interval [t0, t1] of ``origin + t * direction`` to the slab lo <= x <= hi."""
@@ -120,9 +151,10 @@ def combined_phase(sample: MediaSample) -> wp.vec3:
 
 
 @functools.cache
-def media_sampler(has_tables: bool):
-    """``sample_media(values, grids, grid_count, phase_tables, t, view, theta) -> MediaSample`` at the point ``t``
-    metres along the view ray, specialised on whether any medium uses a phase table."""
+def media_sampler(has_tables: bool, has_detail: bool = False):
+    """``sample_media(values, grids, grid_count, phase_tables, details, t, view, theta) -> MediaSample`` at the
+    point ``t`` metres along the view ray, specialised on whether any medium uses a phase table and whether any
+    has animated detail (``details`` is read only then)."""
     from warpsky.optics.kernels import medium_phase
     from warpsky.optics.phase import phase_eval
 
@@ -132,6 +164,7 @@ def media_sampler(has_tables: bool):
         grids: wp.array(dtype=VoxelGrid),
         grid_count: int,
         phase_tables: wp.array(dtype=float),
+        details: wp.array(dtype=MediumDetail),
         t: float,
         view: wp.vec3,
         theta: float,
@@ -144,6 +177,8 @@ def media_sampler(has_tables: bool):
         for m in range(grid_count):
             grid = grids[m]
             value = grid_value(values, grid, grid.eye_index + t * (grid.index_from_world * view))
+            if wp.static(has_detail):
+                value = detailed_value(value, details, m, t * view)
             if value > 0.0:
                 phase = wp.vec3(0.0)
                 if wp.static(has_tables):
@@ -167,12 +202,17 @@ class VoxelMediaBuffers:
     grids: wp.array
     count: int
     min_voxel_size: float  # smallest voxel edge over all grids [m]
+    details: wp.array | None = None  # MediumDetail per medium at the upload's time (a 1-entry dummy without detail)
+    has_detail: bool = False  # whether any medium has animated detail: pick the samplers' has_detail specialisation
 
     @classmethod
     def upload(
-        cls, media: tuple[VoxelMedium, ...], camera_position: np.ndarray, device, species: tuple[str, ...] = ()
+        cls, media: tuple[VoxelMedium, ...], camera_position: np.ndarray, device, species: tuple[str, ...] = (),
+        *, time_s: float = 0.0,
     ) -> VoxelMediaBuffers:
-        """Upload ``media``; a medium of species ``species[i]`` uses phase table i."""
+        """Upload ``media``; a medium of species ``species[i]`` uses phase table i; animated detail at ``time_s``
+        [s] (see :mod:`warpsky.media.detail`)."""
+        from warpsky.media.detail import medium_details
         from warpsky.optics.kernels import TABLE_KIND
 
         infos = []
@@ -202,4 +242,6 @@ class VoxelMediaBuffers:
         values = wp.array(flat, dtype=float, device=device)
         grids = wp.array(infos if infos else [VoxelGrid()], dtype=VoxelGrid, device=device)
         sizes = [float(m.voxel_size.min()) for m in media]
-        return cls(values, grids, len(infos), min(sizes) if sizes else 1.0)
+        entries = medium_details(tuple(media), time_s, camera_position, device)
+        details = wp.array(entries if entries else [MediumDetail()], dtype=MediumDetail, device=device)
+        return cls(values, grids, len(infos), min(sizes) if sizes else 1.0, details, entries is not None)

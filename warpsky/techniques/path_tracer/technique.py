@@ -122,6 +122,14 @@ class PathTracer:
         started = time.perf_counter()
         species = scene_species(scene)
         block = int(settings.majorant_block)
+        detailed = [m.name for m in scene.media if m.detail is not None and m.detail.active]
+        if detailed:
+            import warnings
+
+            # unbiased detail would need the samplers to multiply by the detail factor and the majorant grids by
+            # its bound 1 + 3 amplitude; until then the reference shows the coarse field and says so
+            warnings.warn(f"path_tracer renders the coarse density of {', '.join(detailed)}: animated detail "
+                          "(warpsky:detail:*) is not rendered by this technique", stacklevel=2)
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species)

@@ -13,7 +13,7 @@ import functools
 
 import warp as wp
 
-from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value, media_sampler
+from warpsky.media.voxel import MediumDetail, VoxelGrid, detailed_value, grid_interval, grid_value, media_sampler
 from warpsky.optics.kernels import scattering_angle
 from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, exp_lerp_mean3, luminance
 
@@ -21,45 +21,57 @@ from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, exp_lerp_
 OPAQUE_DEPTH = 1.0e30
 
 
-@wp.func
-def sun_optical_depth(
-    values: wp.array(dtype=float),
-    grids: wp.array(dtype=VoxelGrid),
-    grid_count: int,
-    t: float,
-    view_dir: wp.vec3,
-    sun_dir: wp.vec3,
-    shadow_step: float,
-) -> wp.vec4:
-    """Optical depth (RGB in xyz) from the point ``t`` metres along the view ray to the sun, summed over all
-    grids, and the number of grid lookups it took (w)."""
-    tau = wp.vec3(0.0)
-    lookups = float(0.0)
-    for m in range(grid_count):
-        grid = grids[m]
-        start = grid.eye_index + t * (grid.index_from_world * view_dir)
-        toward_sun = grid.index_from_world * sun_dir
-        span = grid_interval(grid, start, toward_sun, 0.0, 1.0e30)
-        if span[1] > span[0]:
-            length = span[1] - span[0]
-            count = wp.max(int(wp.ceil(length / shadow_step)), 1)
-            dt = length / float(count)
-            total = float(0.0)
-            # No early exit at large depth: a step's integral depends on the true depth at its far end through
-            # (exp(-a) - exp(-b)) / (b - a), so a truncated b would brighten optically thick steps.
-            for i in range(count):
-                total += grid_value(values, grid, start + (span[0] + (float(i) + 0.5) * dt) * toward_sun)
-            tau += grid.extinction * (total * dt)
-            lookups += float(count)
-    return wp.vec4(tau[0], tau[1], tau[2], lookups)
+@functools.cache
+def sun_depth_function(has_detail: bool):
+    """``sun_optical_depth(values, grids, grid_count, details, t, view_dir, sun_dir, shadow_step) -> vec4``: optical
+    depth (RGB in xyz) from the point ``t`` metres along the view ray to the sun, summed over all grids, and the
+    number of grid lookups it took (w); with ``has_detail`` the media's animated detail is included."""
+
+    @wp.func
+    def sun_optical_depth(
+        values: wp.array(dtype=float),
+        grids: wp.array(dtype=VoxelGrid),
+        grid_count: int,
+        details: wp.array(dtype=MediumDetail),
+        t: float,
+        view_dir: wp.vec3,
+        sun_dir: wp.vec3,
+        shadow_step: float,
+    ) -> wp.vec4:
+        tau = wp.vec3(0.0)
+        lookups = float(0.0)
+        for m in range(grid_count):
+            grid = grids[m]
+            start = grid.eye_index + t * (grid.index_from_world * view_dir)
+            toward_sun = grid.index_from_world * sun_dir  # index steps per metre towards the sun
+            span = grid_interval(grid, start, toward_sun, 0.0, 1.0e30)
+            if span[1] > span[0]:
+                length = span[1] - span[0]
+                count = wp.max(int(wp.ceil(length / shadow_step)), 1)
+                dt = length / float(count)
+                total = float(0.0)
+                # No early exit at large depth: a step's integral depends on the true depth at its far end through
+                # (exp(-a) - exp(-b)) / (b - a), so a truncated b would brighten optically thick steps.
+                for i in range(count):
+                    s = span[0] + (float(i) + 0.5) * dt
+                    value = grid_value(values, grid, start + s * toward_sun)
+                    if wp.static(has_detail):
+                        value = detailed_value(value, details, m, t * view_dir + s * sun_dir)
+                    total += value
+                tau += grid.extinction * (total * dt)
+                lookups += float(count)
+        return wp.vec4(tau[0], tau[1], tau[2], lookups)
+
+    return sun_optical_depth
 
 
 @functools.cache
-def single_scatter_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
-    """The per-pixel march, specialised on whether the scene has a ground plane and tabulated species: a scene
-    without them pays nothing for those branches."""
+def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False) -> wp.Kernel:
+    """The per-pixel march, specialised on whether the scene has a ground plane, tabulated species and animated
+    detail: a scene without them pays nothing for those branches."""
 
-    sample_media = media_sampler(has_tables)
+    sample_media = media_sampler(has_tables, has_detail)
+    sun_optical_depth = sun_depth_function(has_detail)
 
     @wp.kernel(module="unique")
     def single_scatter(
@@ -67,6 +79,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         grids: wp.array(dtype=VoxelGrid),
         grid_count: int,
         phase_tables: wp.array(dtype=float),
+        details: wp.array(dtype=MediumDetail),
         cam: PinholeCamera,
         sun_dir: wp.vec3,
         sun_irradiance: wp.vec3,
@@ -124,7 +137,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
             for i in range(count):
                 ta = t0 + float(i) * dt
                 tm = ta + 0.5 * dt
-                here = sample_media(values, grids, grid_count, phase_tables, tm, view, theta)
+                here = sample_media(values, grids, grid_count, phase_tables, details, tm, view, theta)
                 extinction = here.extinction
                 scatter = here.phase_scattering
                 lookups += wp.int64(here.lookups)
@@ -132,12 +145,12 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                 if lit and not sun_blocked and wp.max(scatter) > 0.0:
                     if not sun_a_known:
                         shadow = sun_optical_depth(
-                            values, grids, grid_count, ta, view, sun_dir, shadow_step
+                            values, grids, grid_count, details, ta, view, sun_dir, shadow_step
                         )
                         tau_sun_a = wp.vec3(shadow[0], shadow[1], shadow[2])
                         lookups += wp.int64(shadow[3])
                     shadow = sun_optical_depth(
-                        values, grids, grid_count, ta + dt, view, sun_dir, shadow_step
+                        values, grids, grid_count, details, ta + dt, view, sun_dir, shadow_step
                     )
                     tau_sun_b = wp.vec3(shadow[0], shadow[1], shadow[2])
                     lookups += wp.int64(shadow[3])
@@ -159,7 +172,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
             if hit_ground:
                 if lit and not sun_blocked and sun_dir[1] > 0.0:
                     shadow = sun_optical_depth(
-                        values, grids, grid_count, t_end, view, sun_dir, shadow_step
+                        values, grids, grid_count, details, t_end, view, sun_dir, shadow_step
                     )
                     lookups += wp.int64(shadow[3])
                     ground = wp.cw_mul(ground_albedo, sun_irradiance) * (sun_dir[1] / wp.pi)

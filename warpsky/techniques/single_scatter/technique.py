@@ -94,7 +94,7 @@ class SingleScatter:
         species = scene_species(scene)
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species)
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
             radiance = wp.zeros((height, width), dtype=wp.vec3)
             transmittance = wp.zeros((height, width), dtype=wp.vec3)
             depth = wp.zeros((height, width), dtype=float)
@@ -103,12 +103,13 @@ class SingleScatter:
             sun_dir = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
             sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
             ground = scene.ground
-            kernel = single_scatter_kernel(ground is not None, bool(species))
+            kernel = single_scatter_kernel(ground is not None, bool(species), media.has_detail)
             inputs = [
                 media.values,
                 media.grids,
                 media.count,
                 tables.values,
+                media.details,
                 pinhole_camera(camera, width, height),
                 wp.vec3(*sun_dir.tolist()),
                 wp.vec3(*sun_irradiance.tolist()),

@@ -17,10 +17,10 @@ import functools
 
 import warp as wp
 
-from warpsky.media.voxel import VoxelGrid, grid_value
+from warpsky.media.voxel import MediumDetail, VoxelGrid, detailed_value, grid_value
 from warpsky.optics.kernels import GRID_SIZE, grid_node
 from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, one_minus_exp_over_x
-from warpsky.techniques.single_scatter.kernels import sun_optical_depth
+from warpsky.techniques.single_scatter.kernels import sun_depth_function
 
 
 @wp.struct
@@ -128,21 +128,31 @@ class SliceSample:
     scattering: wp.vec3
 
 
-@wp.func
-def sample_fields(values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid), grid_count: int,
-                  p: wp.vec3) -> SliceSample:
-    out = SliceSample()
-    out.density = FieldDensities()
-    out.extinction = wp.vec3(0.0)
-    out.scattering = wp.vec3(0.0)
-    for m in range(grid_count):
-        grid = grids[m]
-        value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
-        if value > 0.0:
-            out.density[m] = value
-            out.extinction += grid.extinction * value
-            out.scattering += grid.scattering * value
-    return out
+@functools.cache
+def fields_sampler(has_detail: bool):
+    """``sample_fields(values, grids, grid_count, details, p) -> SliceSample`` at the camera-relative point ``p``
+    [m]; with ``has_detail`` each field's coarse density is multiplied by its animated detail factor here, once per
+    sample, so everything downstream (extinction, scattering, mixed phases) sees the detailed density."""
+
+    @wp.func
+    def sample_fields(values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid), grid_count: int,
+                      details: wp.array(dtype=MediumDetail), p: wp.vec3) -> SliceSample:
+        out = SliceSample()
+        out.density = FieldDensities()
+        out.extinction = wp.vec3(0.0)
+        out.scattering = wp.vec3(0.0)
+        for m in range(grid_count):
+            grid = grids[m]
+            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+            if wp.static(has_detail):
+                value = detailed_value(value, details, m, p)
+            if value > 0.0:
+                out.density[m] = value
+                out.extinction += grid.extinction * value
+                out.scattering += grid.scattering * value
+        return out
+
+    return sample_fields
 
 
 @wp.func
@@ -167,17 +177,21 @@ def mixed_forward(
 
 
 @functools.cache
-def slicing_kernels(low_albedo: bool, equation: int = 0):
+def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = False):
     """(eye_kernel, light_kernel), specialised on Riley's low-albedo comparison mode (Fig. 13: Ams_1 only, light
-    attenuated by extinction, no multiple scattering) and on the light-buffer update: 0, the continuous limit of
+    attenuated by extinction, no multiple scattering), on the light-buffer update: 0, the continuous limit of
     Riley's model solved per step (second order in the slice spacing); Riley's Eq. 24 (per-event forward
-    fractions, first order) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta), which does not converge)."""
+    fractions, first order) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta), which does not converge); and on
+    whether any medium has animated detail (without it the samplers never touch ``details``)."""
+
+    sample_fields = fields_sampler(has_detail)
 
     @wp.kernel(module="unique")
     def eye_kernel(
         values: wp.array(dtype=float),
         grids: wp.array(dtype=VoxelGrid),
         grid_count: int,
+        details: wp.array(dtype=MediumDetail),
         table_of: wp.array(dtype=int),
         tables: AmsTables,
         cam: PinholeCamera,
@@ -205,7 +219,7 @@ def slicing_kernels(low_albedo: bool, equation: int = 0):
             return
         p = view * t
         step = frame.spacing / wp.abs(along)
-        sample = sample_fields(values, grids, grid_count, p)
+        sample = sample_fields(values, grids, grid_count, details, p)
         extinction = sample.extinction
         scattering = sample.scattering
         if wp.max(extinction) <= 0.0:
@@ -249,6 +263,7 @@ def slicing_kernels(low_albedo: bool, equation: int = 0):
         values: wp.array(dtype=float),
         grids: wp.array(dtype=VoxelGrid),
         grid_count: int,
+        details: wp.array(dtype=MediumDetail),
         table_of: wp.array(dtype=int),
         tables: AmsTables,
         frame: SliceFrame,
@@ -268,7 +283,7 @@ def slicing_kernels(low_albedo: bool, equation: int = 0):
         step = advance / along
         mid = base + frame.light_dir * (a + 0.5 * step)
         n = light_n[j, i]
-        sample = sample_fields(values, grids, grid_count, mid)
+        sample = sample_fields(values, grids, grid_count, details, mid)
         extinction = sample.extinction
         scattering = sample.scattering
         if wp.max(extinction) <= 0.0:
@@ -322,37 +337,46 @@ def slicing_kernels(low_albedo: bool, equation: int = 0):
     return eye_kernel, light_kernel
 
 
-@wp.kernel
-def ground_kernel(
-    values: wp.array(dtype=float),
-    grids: wp.array(dtype=VoxelGrid),
-    grid_count: int,
-    cam: PinholeCamera,
-    sun_dir: wp.vec3,
-    sun_irradiance: wp.vec3,
-    ground_offset: float,
-    ground_albedo: wp.vec3,
-    shadow_step: float,
-    radiance: wp.array2d(dtype=wp.vec3),
-    transmittance: wp.array2d(dtype=wp.vec3),
-    depth: wp.array2d(dtype=float),
-):
-    """The Lambertian ground behind the media, lit by the sun through them; it ends every ray that reaches it."""
-    row, col = wp.tid()
-    view = camera_ray(cam, row, col)
-    if view[1] >= 0.0 or ground_offset >= 0.0:
-        return
-    t = ground_offset / view[1]
-    axis_cam = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
-    z = t * wp.dot(view, axis_cam)
-    if z > cam.far:
-        return
-    lit = wp.vec3(0.0)
-    if sun_dir[1] > 0.0:
-        tau = sun_optical_depth(values, grids, grid_count, t, view, sun_dir, shadow_step)
-        lit = wp.cw_mul(sun_irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (sun_dir[1] / wp.pi)
-    before = transmittance[row, col]
-    radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground_albedo, lit))
-    if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
-        depth[row, col] = z
-    transmittance[row, col] = wp.vec3(0.0)
+@functools.cache
+def ground_kernel(has_detail: bool = False):
+    """The ground pass, specialised on animated detail (the shadow rays see the same detailed media)."""
+
+    sun_optical_depth = sun_depth_function(has_detail)
+
+    @wp.kernel(module="unique")
+    def ground(
+        values: wp.array(dtype=float),
+        grids: wp.array(dtype=VoxelGrid),
+        grid_count: int,
+        details: wp.array(dtype=MediumDetail),
+        cam: PinholeCamera,
+        sun_dir: wp.vec3,
+        sun_irradiance: wp.vec3,
+        ground_offset: float,
+        ground_albedo: wp.vec3,
+        shadow_step: float,
+        radiance: wp.array2d(dtype=wp.vec3),
+        transmittance: wp.array2d(dtype=wp.vec3),
+        depth: wp.array2d(dtype=float),
+    ):
+        """The Lambertian ground behind the media, lit by the sun through them; it ends every ray that reaches it."""
+        row, col = wp.tid()
+        view = camera_ray(cam, row, col)
+        if view[1] >= 0.0 or ground_offset >= 0.0:
+            return
+        t = ground_offset / view[1]
+        axis_cam = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
+        z = t * wp.dot(view, axis_cam)
+        if z > cam.far:
+            return
+        lit = wp.vec3(0.0)
+        if sun_dir[1] > 0.0:
+            tau = sun_optical_depth(values, grids, grid_count, details, t, view, sun_dir, shadow_step)
+            lit = wp.cw_mul(sun_irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (sun_dir[1] / wp.pi)
+        before = transmittance[row, col]
+        radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground_albedo, lit))
+        if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
+            depth[row, col] = z
+        transmittance[row, col] = wp.vec3(0.0)
+
+    return ground

@@ -146,7 +146,8 @@ class Slicing:
                         f"{len(scene.media)}: {', '.join(m.name for m in scene.media)}; merge fields of one species "
                         "into one grid or use technique path_tracer")
                 species = scene_species(scene)
-                media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species)
+                media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species,
+                                                 time_s=scene.time_s)
                 tables, forwards, index = self._tables(scene, species, orders)
                 ams = AmsTables()
                 ams.ams = wp.array(np.stack(tables).astype(np.float32).reshape(-1), dtype=float)
@@ -162,22 +163,22 @@ class Slicing:
                 start = np.zeros(3) if ground_hides_sun or sun is None else sun.irradiance
                 light_i = wp.full((res, res), wp.vec3(*np.asarray(start, dtype=np.float64).tolist()), dtype=wp.vec3)
                 light_n = wp.zeros((res, res), dtype=wp.vec3)
-                eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation))
+                eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
+                                                           media.has_detail)
                 cam = pinhole_camera(camera, width, height)
                 sun_dir = wp.vec3(*np.asarray(toward_sun, dtype=np.float64).tolist())
                 spacing = float(frame.spacing)
                 # the light enters the media's extent half a slice before the first plane: carry it there first
                 # (starting it unattenuated at the first plane is a first-order error in the slice count)
+                fields = [media.values, media.grids, media.count, media.details, table_of, ams]
                 wp.launch(light_kernel, dim=(res, res), inputs=[
-                    media.values, media.grids, media.count, table_of, ams, frame, float(planes[0]) - 0.5 * spacing,
-                    0.5 * spacing, light_i, light_n])
+                    *fields, frame, float(planes[0]) - 0.5 * spacing, 0.5 * spacing, light_i, light_n])
                 for plane in planes:
                     launch_rows(eye_kernel, height, width, [
-                        media.values, media.grids, media.count, table_of, ams, cam, frame, float(plane), light_i,
-                        light_n, sun_dir, xi_of, radiance, transmittance, depth_sum], device)
+                        *fields, cam, frame, float(plane), light_i, light_n, sun_dir, xi_of, radiance, transmittance,
+                        depth_sum], device)
                     wp.launch(light_kernel, dim=(res, res), inputs=[
-                        media.values, media.grids, media.count, table_of, ams, frame, float(plane), spacing, light_i,
-                        light_n])
+                        *fields, frame, float(plane), spacing, light_i, light_n])
                     slices += 1
             wp.synchronize_device(device)
             depth = depth_sum.numpy()
@@ -244,15 +245,16 @@ class Slicing:
 
         ground, sun = scene.ground, scene.sun
         with wp.ScopedDevice(self.device):
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, self.device, scene_species(scene))
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, self.device, scene_species(scene),
+                                             time_s=scene.time_s)
             radiance = wp.array(layer.radiance, dtype=wp.vec3)
             transmittance = wp.array(layer.transmittance, dtype=wp.vec3)
             depth = wp.array(layer.depth, dtype=float)
             sun_dir = sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])
             irradiance = sun.irradiance if sun is not None else np.zeros(3)
             step = min((float(m.voxel_size.min()) for m in scene.media), default=1.0)
-            wp.launch(ground_kernel, dim=(height, width), inputs=[
-                media.values, media.grids, media.count, pinhole_camera(camera, width, height),
+            wp.launch(ground_kernel(media.has_detail), dim=(height, width), inputs=[
+                media.values, media.grids, media.count, media.details, pinhole_camera(camera, width, height),
                 wp.vec3(*np.asarray(sun_dir).tolist()), wp.vec3(*np.asarray(irradiance).tolist()),
                 float(ground.height - camera.position[1]), wp.vec3(*ground.albedo.tolist()), float(step),
                 radiance, transmittance, depth])

@@ -1,0 +1,117 @@
+"""Animated density detail of voxel media (issue 7 (b)): from a :class:`~warpsky.scene.model.DetailSpec` to the
+per-medium ``MediumDetail`` structs the samplers read at each sample.
+
+The detail of a spec is one :class:`~warpsky.media.advection.AdvectedDetail`: a periodic 64^3 noise texture
+(Gaussian-filtered, features about ``scale`` across, texel ``scale / 2``) that tiles world space with a period of
+``32 scale``, advected by the spec's wind plus curl noise (largest eddies ``8 scale``, two octaves, on a 32^3 flow
+grid) in 3 staggered layers of life ``period``. A cold frame costs at most 32 semi-Lagrangian steps per layer
+(``step_s = period / 32``), so frame 900 never needs frames 1..899; consecutive frames reuse the previous steps and
+give the same pixels bit for bit.
+
+Objects are cached per (spec without its amplitude, device), at most :data:`CACHE_SIZE` of them, so a sequence
+rendered in one process steps forward instead of starting over. The cache is not thread-safe: render frames of
+one process one after another (the batch executors do).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+import warp as wp
+
+from warpsky.scene.model import DetailSpec, VoxelMedium
+
+#: Texels of the detail texture per axis, and texels per ``scale`` (the tile is 32 scale wide).
+TEXTURE_RESOLUTION = 64
+TEXELS_PER_SCALE = 2
+#: Flow grid nodes per axis over the tile; the largest eddies span 8 scale, the smallest 4 scale (4 nodes).
+FLOW_RESOLUTION = 32
+EDDY_SCALES = 8.0
+LAYERS = 3
+CACHE_SIZE = 8
+
+_cache: OrderedDict = OrderedDict()
+
+
+def tile_size(spec: DetailSpec) -> float:
+    """Period of the detail in world space along every axis [m]."""
+    return spec.scale * TEXTURE_RESOLUTION / TEXELS_PER_SCALE
+
+
+def advected_detail(spec: DetailSpec, device):
+    """The (cached) :class:`~warpsky.media.advection.AdvectedDetail` of ``spec`` on ``device``, anchored at the
+    world origin (its texture tiles all space)."""
+    from warpsky.media.advection import AdvectedDetail, Flow3D, periodic_noise
+
+    device = str(wp.get_device(device))
+    key = (spec.scale, spec.wind, spec.curl_speed, spec.period, spec.seed, device)
+    if key in _cache:
+        _cache.move_to_end(key)
+        return _cache[key]
+    tile = tile_size(spec)
+    extent = (tile, tile, tile)
+    texture = periodic_noise((TEXTURE_RESOLUTION,) * 3, smoothing_texels=1.0, seed=spec.seed)
+    if spec.curl_speed > 0.0:
+        flow = Flow3D.procedural(extent, wind_m_s=spec.wind, speed_m_s=spec.curl_speed,
+                                 scale_m=EDDY_SCALES * spec.scale, octaves=2, resolution=(FLOW_RESOLUTION,) * 3,
+                                 seed=spec.seed + 1)
+    else:
+        flow = Flow3D.still(extent, wind_m_s=spec.wind)
+    detail = AdvectedDetail(texture, (0.0, 0.0, 0.0), flow, layers=LAYERS, period_s=spec.period, device=device)
+    _cache[key] = detail
+    while len(_cache) > CACHE_SIZE:
+        _cache.popitem(last=False)
+    return detail
+
+
+def clear_cache() -> None:
+    """Forget every cached detail (tests use it to render a frame cold)."""
+    _cache.clear()
+
+
+def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_position, device) -> list | None:
+    """One ``MediumDetail`` per medium at ``time_s`` [s], positions relative to ``camera_position`` (world m,
+    float64); None when no medium has active detail. Arrays inside are the cached objects' buffers: launch the
+    kernels that read them before asking for another time."""
+    from warpsky.media.voxel import MediumDetail
+
+    if not any(m.detail is not None and m.detail.active for m in media):
+        return None
+    camera = np.asarray(camera_position, dtype=np.float64)
+    states: dict = {}
+    out = []
+    for medium in media:
+        entry = MediumDetail()
+        entry.amplitude = 0.0
+        spec = medium.detail
+        if spec is not None and spec.active:
+            detail = advected_detail(spec, device)
+            if id(detail) not in states:  # one advection per spec and frame, however many fields share it
+                states[id(detail)] = detail.state(time_s)
+            # anchor the tiling at a tile corner near the medium, so float32 offsets stay small far from the origin
+            tile = tile_size(spec)
+            anchor = np.floor(medium.world_corners().min(axis=0) / tile) * tile
+            state = states[id(detail)]
+            entry.state = _with_origin(state, anchor - camera)
+            entry.amplitude = float(spec.amplitude)
+        out.append(entry)
+    return out
+
+
+def _with_origin(state, origin: np.ndarray):
+    """A copy of the DetailState struct with another ``origin`` (same device arrays)."""
+    from warpsky.media.advection_kernels import DetailState
+
+    copy = DetailState()
+    for name in ("texture", "correlation", "displacement", "cells_per_texel", "weights", "layer_count", "shift",
+                 "texels_per_m", "mean", "std"):
+        setattr(copy, name, getattr(state, name))
+    copy.origin = wp.vec3(*origin.tolist())
+    return copy
+
+
+def detail_bound(media: tuple[VoxelMedium, ...]) -> list[float]:
+    """Largest factor detail can multiply each medium's density by: ``1 + 3 amplitude`` (see DetailSpec)."""
+    return [1.0 + 3.0 * m.detail.amplitude if m.detail is not None and m.detail.active else 1.0 for m in media]
+
