@@ -43,8 +43,20 @@ bench: $(STAMP) data/cumulus.nvdb
 cumulus-wind: $(STAMP) data/cumulus.nvdb
 	$(VENV)/bin/warpsky render usd_scenes/cumulus_wind.usda out/cumulus_wind.####.exr --frames 1:48 --png
 
+# Stratocumulus over water, sand and snow (Bouthors 2006), rendered by warpsky render with radiosity on and off;
+# stratocumulus-anim: the 48-frame advected sequence (Neyret 2003), one EXR + PNG per frame.
+SC_RENDER = $(VENV)/bin/warpsky render --png --exposure 1
+
 stratocumulus: $(STAMP)
-	$(PY) tools/make_stratocumulus.py --out data --render out
+	$(PY) tools/make_stratocumulus.py --out data
+	$(SC_RENDER) usd_scenes/stratocumulus.usda out/stratocumulus-radiosity-on.exr --res 384
+	$(SC_RENDER) usd_scenes/stratocumulus.usda out/stratocumulus-radiosity-off.exr --res 384 \
+		--set stratiform.radiosity=0
+
+.PHONY: stratocumulus-anim
+stratocumulus-anim: $(STAMP)
+	$(PY) tools/make_stratocumulus.py --out data
+	$(SC_RENDER) usd_scenes/stratocumulus_anim.usda out/stratocumulus_anim/sc.####.exr --res 256
 
 clean:
 	rm -rf out data .pytest_cache
