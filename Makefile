@@ -6,20 +6,21 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test lint bench venv data clean help stratocumulus cumulus-wind
+.PHONY: demo test lint bench venv data clean help storm storm-data stratocumulus cumulus-wind
 
 help:
 	@echo "make demo   - install into $(VENV), generate sample data, render the demo cumulus to out/"
 	@echo "make test   - install into $(VENV) and run the tests on the CPU"
 	@echo "make bench  - run benchmarks/bench_single_scatter.py (cuda too when present)"
 	@echo "make lint   - ruff"
+	@echo "make storm  - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact sheets, preview"
 
 venv: $(STAMP)
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,compare]"
+	$(PY) -m pip install --quiet -e ".[dev,compare,farm,preview]"
 	rm -f $(VENV)/.installed-*
 	touch $@
 
@@ -57,6 +58,26 @@ stratocumulus: $(STAMP)
 stratocumulus-anim: $(STAMP)
 	$(PY) tools/make_stratocumulus.py --out data
 	$(SC_RENDER) usd_scenes/stratocumulus_anim.usda out/stratocumulus_anim/sc.####.exr --res 256
+
+# The storm: per-frame NanoVDB fields (tools/make_storm.py), two shots rendered as batches (resumable: rerun to
+# finish an interrupted one), a contact sheet per shot and a 3-D preview. STORM_WORKERS=0 renders in-process.
+STORM_WORKERS ?= 2
+STORM_RES     ?= 256
+STORM_BATCH    = $(if $(filter 0,$(STORM_WORKERS)),,--workers $(STORM_WORKERS))
+
+data/storm/.complete: tools/make_storm.py $(STAMP)
+	$(PY) tools/make_storm.py --out data/storm --frames 48
+	touch $@
+
+storm-data: data/storm/.complete
+
+storm: $(STAMP) data/storm/.complete
+	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm/rainbow.####.exr --res $(STORM_RES) $(STORM_BATCH)
+	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm/anvil.####.exr --camera /World/AnvilCam \
+		--res $(STORM_RES) $(STORM_BATCH)
+	$(VENV)/bin/warpsky contact-sheet out/storm/rainbow.####.exr -o out/storm/rainbow_sheet.png
+	$(VENV)/bin/warpsky contact-sheet out/storm/anvil.####.exr -o out/storm/anvil_sheet.png
+	$(VENV)/bin/warpsky preview usd_scenes/storm.usda -o out/storm/preview.png --frame 40
 
 clean:
 	rm -rf out data .pytest_cache

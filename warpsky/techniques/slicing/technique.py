@@ -21,7 +21,10 @@ class SlicingSettings:
     ================= ===== ======= ========== ======================================================================
     name              unit  default range      meaning
     ================= ===== ======= ========== ======================================================================
-    slice_count       --    64      >= 1       planes through the media's extent along the half-angle axis
+    slice_count       --    auto    >= 1       planes through the media's extent along the half-angle axis; auto:
+                                               one per voxel edge of the finest field across that extent,
+                                               clamped to 32..512 (thin sheets seen edge-on band when the
+                                               spacing exceeds their thickness)
     light_resolution  texel 256     >= 2       edge of the square light buffer
     xi                1/sr  0.1     >= 0       Riley's back-scatter term added to the phase in the eye gather, for
                                                media without their own ``warpsky:slicing:xi``
@@ -35,14 +38,15 @@ class SlicingSettings:
 
     Defaults come from ``warpsky bench error-vs-time usd_scenes/cumulus.usda`` (128x85, path tracer 4096 spp): with
     light_equation 0 the relative RMSE is 0.519 / 0.521 / 0.521 at 32 / 128 / 512 slices (converged by 32; Eq. 24
-    wanders 0.563 / 0.448 / 0.502), so 64 slices leave margin for finer clouds. ξ = 0.1 takes the bias from -0.41
+    wanders 0.563 / 0.448 / 0.502): on smooth media 32 slices suffice, so ``auto`` sizes the spacing by the voxels
+    instead, which is what keeps thin anvils and rain sheets free of slice banding. ξ = 0.1 takes the bias from -0.41
     to -0.21 and the RMSE from 0.68 to 0.52 (ξ = 0.15: bias -0.11, RMSE 0.51, p95 0.98 against 0.90). The rest is
     the model's: the light buffer carries only forward-scattered light. Set ξ = 0 for thin media, where it only
     adds light.
     """
 
     technique = "slicing"
-    slice_count: float = 64
+    slice_count: float | None = None  # auto
     light_resolution: float = 256
     xi: float = 0.1
     low_albedo: float = 0
@@ -54,6 +58,8 @@ class SlicingSettings:
             raise UsageError(f"setting light_equation must be 0, 24 or 25, got {self.light_equation}")
         for name, low in (("slice_count", 1), ("light_resolution", 2), ("orders", 1)):
             value = getattr(self, name)
+            if value is None and name == "slice_count":
+                continue
             if not (math.isfinite(value) and value >= low and float(value).is_integer()):
                 raise UsageError(f"setting {name} must be a whole number >= {low}, got {value}")
         if not (math.isfinite(self.xi) and self.xi >= 0.0):
@@ -81,6 +87,23 @@ def analytic_ams(kind: PhaseKind, g: float, orders: int) -> tuple[np.ndarray, np
     return ams, sphere_integral(ams, upto=0.5 * np.pi)
 
 
+def slice_axis(camera, toward_sun: np.ndarray) -> tuple[np.ndarray, int]:
+    """(unit slice axis, 1 if the eye composites front to back): the half-angle between the light's travel and the
+    view (sun behind the viewer), else between the light and the reversed view (Kniss et al.)."""
+    view = -np.asarray(camera.rotation, dtype=np.float64)[:, 2]
+    light = -np.asarray(toward_sun, dtype=np.float64)
+    if float(view @ light) > 0.0:  # sun behind the viewer: light and eye advance together, front to back
+        axis, front_to_back = view + light, 1
+    else:  # sun ahead: slices run from the far side towards the eye, back to front
+        axis, front_to_back = light - view, 0
+    return axis / np.linalg.norm(axis), front_to_back  # never zero: light = -view gives 2 light, = view 2 view
+
+
+def media_corners(scene: Scene, origin: np.ndarray) -> np.ndarray:
+    """World corners of every medium's index box relative to ``origin``, (8 x media, 3)."""
+    return np.concatenate([m.world_corners() for m in scene.media]) - np.asarray(origin, dtype=np.float64)
+
+
 class Slicing:
     """Half-angle slicing with multiple-scattering phase functions (Riley 2004 §4.2, §5): one sweep through the
     media carrying a light buffer (intensity and expected scattering count per channel, Eqs. 22, 25) and the eye
@@ -93,8 +116,22 @@ class Slicing:
         self.settings = settings or SlicingSettings()
         self.device = device
 
+    #: Bounds of the automatic slice count.
+    AUTO_SLICES = (32, 512)
+
     def resolved_settings(self, scene: Scene) -> SlicingSettings:
-        return self.settings
+        """The settings with ``slice_count = auto`` replaced by one slice per voxel edge of the finest field across
+        the media's depth along the half-angle axis (32..512)."""
+        if self.settings.slice_count is not None:
+            return self.settings
+        count = self.AUTO_SLICES[0]
+        if scene.media:
+            toward_sun = scene.sun.direction if scene.sun is not None else np.array([0.0, 1.0, 0.0])
+            axis, _ = slice_axis(scene.camera, toward_sun)
+            along = media_corners(scene, scene.camera.position) @ axis
+            finest = min(float(m.voxel_size.min()) for m in scene.media)
+            count = int(np.clip(np.ceil((along.max() - along.min()) / finest), *self.AUTO_SLICES))
+        return dataclasses.replace(self.settings, slice_count=count)
 
     def _tables(self, scene: Scene, species: tuple[str, ...], orders: int):
         """One Ams table per species and per distinct analytic phase; the table index of every medium."""
@@ -124,7 +161,7 @@ class Slicing:
         from warpsky.techniques.single_scatter.technique import scene_species
         from warpsky.techniques.slicing.kernels import MAX_MEDIA, AmsTables, slicing_kernels
 
-        settings = self.settings
+        settings = self.resolved_settings(scene)
         camera = scene.camera.conformed(width, height)
         device = self.device
         started = time.perf_counter()
@@ -197,19 +234,9 @@ class Slicing:
 
         from warpsky.techniques.slicing.kernels import SliceFrame
 
-        view = -np.asarray(camera.rotation, dtype=np.float64)[:, 2]
+        axis, front_to_back = slice_axis(camera, toward_sun)
         light = -np.asarray(toward_sun, dtype=np.float64)  # the way light travels
-        if float(view @ light) > 0.0:  # sun behind the viewer: light and eye advance together, front to back
-            axis, front_to_back = view + light, 1
-        else:  # sun ahead: slices run from the far side towards the eye, back to front
-            axis, front_to_back = light - view, 0
-        axis = axis / np.linalg.norm(axis)  # never zero: light = -view gives 2 light, light = view gives 2 view
-        corners = []
-        for medium in scene.media:
-            n = np.asarray(medium.shape, dtype=np.float64)
-            for corner in np.array(np.meshgrid(*[[-0.5, v - 0.5] for v in n], indexing="ij")).reshape(3, -1).T:
-                corners.append((np.asarray(medium.world_from_index) @ np.append(corner, 1.0))[:3] - camera.position)
-        corners = np.asarray(corners)
+        corners = media_corners(scene, camera.position)
         along = corners @ axis
         lo, hi = float(along.min()), float(along.max())
         spacing = (hi - lo) / slice_count
