@@ -12,7 +12,9 @@ ice      ice        the anvil (its own Volume): 8-11 km, spreading downwind to  
                     25 km east of the tower after t = 0.3
 ======== ========== ============================================================= ==========================
 
-Time t runs 0 -> 1 over the frames (a time-lapse: 48 frames stand for about 24 minutes of the cell's life). The
+Time t runs 0 -> 1 over the frames (a time-lapse: 48 frames stand for 24 minutes of the cell's life, so the stage's
+timeCodesPerSecond is 47 / 1440 s while framesPerSecond stays 24). Both Volumes carry wind-advected detail
+(``warpsky:detail:*``: 35% amplitude, 400 m features in the cell, 900 m in the anvil) on top of the frames. The
 wind blows towards +x (east, towards the rising sun), carrying the detail noise and leaning the rain shaft. The cell
 is one Volume (cloud, rain, snow share its grid); the anvil is a second Volume with a coarser, wider grid.
 
@@ -211,7 +213,9 @@ def write_stage(path: Path, data: Path, frames: int) -> Path:
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     stage.SetStartTimeCode(1)
     stage.SetEndTimeCode(frames)
-    stage.SetTimeCodesPerSecond(24)
+    # a time-lapse: one time code is DURATION / (frames - 1) seconds of storm life; playback stays at 24 fps
+    stage.SetTimeCodesPerSecond(max(frames - 1, 1) / DURATION)
+    stage.SetFramesPerSecond(24)
     world = UsdGeom.Xform.Define(stage, "/World")
     stage.SetDefaultPrim(world.GetPrim())
     rel = Path(os.path.relpath(data, path.parent)).as_posix()
@@ -251,6 +255,13 @@ def write_stage(path: Path, data: Path, frames: int) -> Path:
 
     for volume_name, fields in (("Cell", ("cloud", "rain", "snow")), ("Anvil", ("ice",))):
         volume = UsdVol.Volume.Define(stage, f"/World/{volume_name}")
+        # wind-advected detail below the grid's resolution, moving with the storm's wind (warpsky:detail:*)
+        prim = volume.GetPrim()
+        for name, kind, value in (("amplitude", "Float", 0.35), ("scale", "Float", 400.0 if volume_name == "Cell"
+                                                                  else 900.0),
+                                  ("wind", "Float3", Gf.Vec3f(WIND, 0.0, 1.0)), ("curlSpeed", "Float", 2.5),
+                                  ("period", "Float", 240.0), ("seed", "Int", 5)):
+            prim.CreateAttribute(f"warpsky:detail:{name}", getattr(Sdf.ValueTypeNames, kind)).Set(value)
         for field in fields:
             asset = UsdVol.OpenVDBAsset.Define(stage, f"/World/{volume_name}/{field}")
             attr = asset.CreateFilePathAttr()

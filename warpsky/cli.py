@@ -31,8 +31,11 @@ batches, resume and farms:
   worker, and render with --device cuda.
 
 technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default):
-  slicing (default): slice_count [64], light_resolution [256 texels], xi [0.1 /sr; per Volume:
-                  warpsky:slicing:xi], low_albedo [0], orders [60], light_equation [0 = continuous limit, 24, 25]
+  slicing (default): slice_count [auto: one per voxel, 32..512], light_resolution [256 texels],
+                  xi [0.1 /sr; per Volume: warpsky:slicing:xi], low_albedo [0], orders [60],
+                  light_equation [0 = continuous limit, 24, 25]
+  stratiform layers (prefix stratiform.): radiosity [the layer's warpsky:stratiform:radiosity, else 1],
+                  radiosity_detail [0], tolerance [1e-4], max_iterations [64]
   single_scatter: step_length [m, auto = 0.5 x smallest voxel], shadow_step_length [m, auto = 1 voxel],
                   min_transmittance [default 1e-4: stop marching once the view is this opaque]
   path_tracer:    spp [64], seed [0], max_bounces [1024], majorant_block [8 voxels], environment [0,

@@ -174,6 +174,7 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
     }
     if scene.sun is not None:
         metadata["sun"] = scene.sun.name
+    metadata["previewExposure"] = float(preview_exposure(scene, options.exposure))  # contact sheets reuse it
     if scene.layers:
         keys = ("layer", "radiosity", "radiosity_iterations", "radiosity_residual", "radiosity_converged", "seconds")
         metadata["stratiform"] = json.dumps([{k: part[k] for k in keys if k in part}

@@ -495,12 +495,12 @@ class StageReader:
     def read_layers(self, time=None) -> tuple:
         """Visible prims with ``uniform token warpsky:kind = "stratiformLayer"`` as
         :class:`~warpsky.media.stratiform.StratiformLayer` at ``time`` (the attribute table is on that class)."""
-        from pxr import Usd, UsdGeom
+        from pxr import UsdGeom
 
         tc = self._time(time)
         time_s = 0.0 if time is None else float(time) / float(self.stage.GetTimeCodesPerSecond())
         layers = []
-        for prim in Usd.PrimRange(self.stage.GetPseudoRoot()):
+        for prim in self.stage.Traverse():  # not the pseudo-root, which has no attributes to ask for
             names = {a.GetName() for a in prim.GetAttributes()}
             ours = {n for n in names if n.startswith(("warpsky:stratiform:", "warpsky:advection:"))}
             kind = prim.GetAttribute("warpsky:kind")
