@@ -53,6 +53,7 @@ stratocumulus: $(STAMP)
 	$(SC_RENDER) usd_scenes/stratocumulus.usda out/stratocumulus-radiosity-on.exr --res 384
 	$(SC_RENDER) usd_scenes/stratocumulus.usda out/stratocumulus-radiosity-off.exr --res 384 \
 		--set stratiform.radiosity=0
+	$(PY) tools/make_stratocumulus.py --radiosity-light out
 
 .PHONY: stratocumulus-anim
 stratocumulus-anim: $(STAMP)

@@ -117,13 +117,38 @@ def render(stage: Path, out: Path, *, width: int, device: str) -> int:
     return 0
 
 
+def write_radiosity_light(folder: Path) -> Path:
+    """``folder/stratocumulus-radiosity-light.png``: what radiosity adds (on minus off), each channel scaled by one
+    common factor so the ground's colour reflected onto the cloud base shows as hue (sand warm, water dark)."""
+    from PIL import Image
+
+    from warpsky.output.exr import read_exr
+
+    on, off = (read_exr(folder / f"stratocumulus-radiosity-{state}.exr").rgba()[..., :3].astype(np.float64)
+               for state in ("on", "off"))
+    added = np.clip(on - off, 0.0, None)
+    scale = max(float(np.percentile(added, 99.5)), 1e-12)
+    encoded = np.clip(added / scale, 0.0, 1.0) ** (1.0 / 2.2)
+    path = folder / "stratocumulus-radiosity-light.png"
+    Image.fromarray(np.round(encoded * 255).astype(np.uint8)).save(path)
+    mean = added.reshape(-1, 3).mean(axis=0)
+    print(f"{path}: radiosity adds mean RGB {np.round(mean, 4).tolist()} (R:G:B = "
+          f"{', '.join(f'{v / mean.sum():.3f}' for v in mean)})")
+    return path
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--radiosity-light", type=Path, default=None, metavar="DIR",
+                        help="only write DIR/stratocumulus-radiosity-light.png from the on/off renders in DIR")
     parser.add_argument("--out", type=Path, default=ROOT / "data", help="data directory")
     parser.add_argument("--render", type=Path, default=None, help="also render to this directory")
     parser.add_argument("--width", type=int, default=384)
     parser.add_argument("--device", default="cpu")
     args = parser.parse_args(argv)
+    if args.radiosity_light is not None:
+        write_radiosity_light(args.radiosity_light)
+        return 0
     from warpsky.media.stratiform import procedural_thickness
 
     data = args.out / "stratocumulus"
