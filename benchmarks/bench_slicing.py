@@ -27,7 +27,11 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, default=ROOT / "out" / "bench_slicing.json")
     parser.add_argument("--configs", default="256x128,512x256,768x512", help="SIZExSLICES, comma-separated")
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--convergence", action="store_true",
+                        help="instead: the slice-count convergence sequence of each light update on a soft puff")
     args = parser.parse_args(argv)
+    if args.convergence:
+        return convergence()
 
     import warp as wp
 
@@ -78,6 +82,42 @@ def main(argv=None) -> int:
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps({"machine": platform.platform(), "rows": rows}, indent=2))
     print(f"wrote {args.json}")
+    return 0
+
+
+def convergence() -> int:
+    """Mean |I_2N - I_N| for N = 64 .. 512 on a Gaussian puff (the scene of tests/test_slicing.py), per update."""
+    import numpy as np
+
+    from warpsky.device import init_warp
+    from warpsky.scene.model import Camera, PhaseKind, PhaseModel, Scene, Sun, VoxelMedium
+    from warpsky.techniques.slicing.technique import Slicing, SlicingSettings
+
+    init_warp()
+    x = (np.arange(16) + 0.5) / 16 * 2.0 - 1.0
+    blob = np.exp(-4.0 * (x[:, None, None] ** 2 + x[None, :, None] ** 2 + x[None, None, :] ** 2))
+    blob[[0, -1]] = 0.0
+    blob[:, [0, -1]] = 0.0
+    blob[:, :, [0, -1]] = 0.0
+    place = np.eye(4)
+    place[:3, :3] *= 20.0 / 16
+    place[:3, 3] = -10.0 + 0.5 * 20.0 / 16
+    forward = np.array([-0.05, -0.06, -1.0]) / np.linalg.norm([-0.05, -0.06, -1.0])
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    camera = Camera("cam", (3.0, 4.0, 42.0), np.column_stack([right, np.cross(right, forward), -forward]), 50.0,
+                    36.0, 36.0)
+    medium = VoxelMedium("puff", blob, place, 0.3, 1.0, PhaseModel(PhaseKind.HG, 0.8))
+    scene = Scene(camera, Sun((0.4, 0.8, 0.3), np.ones(3)), (medium,))
+    counts = (64, 128, 256, 512, 1024)
+    print("slice-count convergence, soft puff 16^3 at 12x12: mean |I_2N - I_N|")
+    print(f"{'update':<8} " + " ".join(f"{a}->{b:<6}" for a, b in zip(counts, counts[1:], strict=False)) + " ratios")
+    for equation in (0, 24, 25):
+        images = [Slicing(SlicingSettings(slice_count=n, light_equation=equation)).render(scene, 12, 12).radiance
+                  for n in counts]
+        diffs = [float(np.abs(b - a).mean()) for a, b in zip(images, images[1:], strict=False)]
+        ratios = [b / a for a, b in zip(diffs, diffs[1:], strict=False)]
+        print(f"{equation:<8} " + " ".join(f"{d:<10.2e}" for d in diffs) + " " + " ".join(f"{r:.2f}" for r in ratios))
     return 0
 
 
