@@ -154,9 +154,12 @@ class DaskExecutor:
         else:
             import logging
 
-            self.name = f"dask LocalCluster, {workers} worker process(es)"
+            # the cores shared out: each worker's CPU launches use its share (pixels do not depend on it)
+            threads = max(1, (os.cpu_count() or 1) // workers)
+            self.name = f"dask LocalCluster, {workers} worker process(es) x {threads} CPU thread(s)"
             self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR)
+                                        dashboard_address=None, silence_logs=logging.ERROR,
+                                        env={"WARPSKY_CPU_THREADS": str(threads)})
             self.client = Client(self.cluster)
 
     def map(self, jobs: list[FrameJob], attempt: int):
