@@ -135,3 +135,20 @@ def test_unreachable_scheduler_and_unwritable_output(tiny_storm, tmp_path, capsy
     blocker.write_text("not a directory")
     code, _, err = render(["render", tiny_storm, blocker / "sub" / "storm.####.exr", *FAST], capsys)
     assert code == 2 and str(blocker / "sub") in err
+
+
+def test_existing_scheduler_renders_the_same_pixels(tiny_storm, tmp_path, capsys):
+    """--scheduler: a cluster the user runs (here a one-worker LocalCluster started by the test)."""
+    from dask.distributed import LocalCluster
+
+    assert render(["render", tiny_storm, tmp_path / "a" / "storm.####.exr", *FAST, "--frames", "5:6"], capsys)[0] == 0
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        code, _, err = render(["render", tiny_storm, tmp_path / "b" / "storm.####.exr", *FAST, "--frames", "5:6",
+                               "--scheduler", cluster.scheduler_address], capsys)
+    assert code == 0, err
+    assert f"dask scheduler {cluster.scheduler_address}" in err
+    for frame in (5, 6):
+        a = pixels(tmp_path / "a" / f"storm.{frame:04d}.exr")
+        b = pixels(tmp_path / "b" / f"storm.{frame:04d}.exr")
+        for name in a:
+            np.testing.assert_array_equal(a[name], b[name])
