@@ -362,8 +362,14 @@ def cmd_info(args) -> int:
         )
         out.append(
             f"            extinction {_fmt3(medium.extinction_scale)} 1/m per unit, max field "
-            f"{float(medium.density.max()):g}, albedo {_fmt3(medium.albedo)}, {medium.phase!r}"
+            f"{float(medium.density.max()):g}, albedo {_fmt3(medium.albedo)}, "
+            + (f"{medium.species} phase table" if medium.species else repr(medium.phase))
         )
+        if medium.detail is not None and medium.detail.amplitude > 0.0:
+            d = medium.detail
+            out.append(f"            advected detail: amplitude {d.amplitude:g}, scale {d.scale:g} m, wind "
+                       f"{np.round(np.asarray(d.wind), 3).tolist()} m/s, curl {d.curl_speed:g} m/s, "
+                       f"period {d.period:g} s")
     out.append("plan:")
     out += ["  " + line for line in plan.describe().splitlines()]
     print("\n".join(out))
