@@ -5,11 +5,11 @@ Fields (values in [0, 1]; each OpenVDBAsset's ``warpsky:extinctionScale`` turns 
 ======== ========== ============================================================= ==========================
 field    species    where                                                          peak extinction [1/m]
 ======== ========== ============================================================= ==========================
-cloud    cloud      the tower: cloud base 1.8 km, top rising 6 -> 9.5 km           0.03 (τ ~ 100 across it)
+cloud    cloud      the tower: cloud base 1.8 km, top rising 8 -> 9.5 km           0.03 (τ ~ 100 across it)
 rain     rain       shaft under the base, leaning downwind, growing after t = 0.15 4e-4 (τ ~ 1.5 across)
 snow     snow       aloft inside the tower between 5 and 9 km                      6e-4
-ice      ice        the anvil (its own Volume): 8-11 km, spreading downwind to     6e-4 (τ ~ 1.5 through it)
-                    25 km east of the tower after t = 0.3
+ice      ice        the anvil (its own Volume): 8-11 km, spreading downwind from   6e-4 (τ ~ 1.5 through it)
+                    10 to 25 km east of the tower
 ======== ========== ============================================================= ==========================
 
 Time t runs 0 -> 1 over the frames (a time-lapse: 48 frames stand for 24 minutes of the cell's life, so the stage's
@@ -99,7 +99,7 @@ def cell_fields(t: float, res: int, noise: np.ndarray) -> dict[str, np.ndarray]:
     y = (np.arange(ny) + 0.5) * voxel
     X, Y, Z = np.meshgrid(x, y, x, indexing="ij")
     detail = shifted(noise, WIND * DURATION * t / voxel)
-    top = 6000.0 + 3500.0 * smoothstep(0.0, 0.8, t)
+    top = 8000.0 + 1500.0 * smoothstep(0.0, 0.8, t)  # a mature cell: its anvil exists from the first frame
     # the tower: a radius that swells at mid height and narrows into the top; turrets from the noise
     h = np.clip((Y - CLOUD_BASE) / (top - CLOUD_BASE), 0.0, 1.0)
     radius = 2600.0 * (0.75 + 0.45 * np.sin(np.pi * np.clip(h, 0.0, 1.0) ** 0.8)) * np.sqrt(np.clip(1.05 - h, 0, 1))
@@ -120,14 +120,14 @@ def cell_fields(t: float, res: int, noise: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def anvil_field(t: float, res: int, noise: np.ndarray) -> np.ndarray:
-    """Anvil ice at time t on the anvil grid: a sheet spreading downwind from the tower top after t = 0.3."""
+    """Anvil ice at time t on the anvil grid: a sheet spreading downwind from the tower top."""
     nx, ny, nz = noise.shape
     vx = (ANVIL_X[1] - ANVIL_X[0]) / nx
     x = ANVIL_X[0] + (np.arange(nx) + 0.5) * vx
     y = ANVIL_Y[0] + (np.arange(ny) + 0.5) * (ANVIL_Y[1] - ANVIL_Y[0]) / ny
     z = -ANVIL_Z + (np.arange(nz) + 0.5) * 2 * ANVIL_Z / nz
     X, Y, Z = np.meshgrid(x, y, z, indexing="ij")
-    grow = smoothstep(0.3, 1.0, t)
+    grow = 0.3 + 0.7 * smoothstep(0.0, 1.0, t)
     reach = 2500.0 + 22000.0 * grow  # downwind edge [m]
     width = 3000.0 + 9000.0 * grow * np.clip((X + 2000.0) / (reach + 2000.0), 0.0, 1.0)
     middle = 9600.0 + 300.0 * np.clip(X / 20000.0, 0.0, 1.0)
@@ -136,7 +136,7 @@ def anvil_field(t: float, res: int, noise: np.ndarray) -> np.ndarray:
     plan = (1.0 - np.abs(Z) / width) * (1.0 - smoothstep(reach - 3000.0, reach, X)) * smoothstep(-4000.0, -1500.0, X)
     sheet = 1.0 - np.abs(Y - middle) / thick
     ice = np.clip(sheet * 2.0, 0.0, 1.0) * np.clip(plan * 3.0, 0.0, 1.0) * (0.35 + 0.9 * detail)
-    return _framed(np.clip(ice * smoothstep(0.25, 0.4, t), 0.0, 1.0))
+    return _framed(np.clip(ice, 0.0, 1.0))
 
 
 def _framed(grid: np.ndarray) -> np.ndarray:
