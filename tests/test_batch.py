@@ -95,7 +95,7 @@ def test_retry_recovers_a_transient_failure(tiny_storm, tmp_path, capsys, monkey
     assert [(r["status"], r["attempt"]) for r in records] == [("failed", 1), ("done", 2)]
 
 
-def test_truncated_exr_is_rendered_again(tiny_storm, tmp_path, capsys):
+def test_truncated_exr_and_rewritten_data_are_rendered_again(tiny_storm, tmp_path, capsys):
     out = tmp_path / "out"
     assert render(["render", tiny_storm, out / "storm.####.exr", *FAST, "--frames", "1:2"], capsys)[0] == 0
     path = out / "storm.0002.exr"
@@ -104,6 +104,13 @@ def test_truncated_exr_is_rendered_again(tiny_storm, tmp_path, capsys):
     code, _, err = render(["render", tiny_storm, out / "storm.####.exr", *FAST, "--frames", "1:2"], capsys)
     assert code == 0 and "1 rendered, 1 skipped" in err
     assert read_exr(path).width == 32
+    # a rewritten field file (new modification time) makes its frame stale: the hash covers the inputs
+    field = tiny_storm.parent / "data" / "cloud.0001.nvdb"
+    stat = field.stat()
+    os.utime(field, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+    code, _, err = render(["render", tiny_storm, out / "storm.####.exr", *FAST, "--frames", "1:2"], capsys)
+    assert code == 0 and "1 rendered, 1 skipped" in err
+    assert [f["frame"] for f in run_log(out)[-1]["frames"] if f["status"] == "done"] == [1.0]
 
 
 def test_missing_frame_file_fails_only_that_frame(tiny_storm, tmp_path, capsys):

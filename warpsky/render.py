@@ -75,11 +75,23 @@ def plan_frame(reader, time_code, options: RenderOptions) -> tuple[Scene, Render
     return scene, plan
 
 
-def settings_hash(plan: RenderPlan, options: RenderOptions) -> str:
-    """Short hash of everything that changes pixels except the stage's content (used to resume batches)."""
+def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None = None) -> str:
+    """Short hash of what changes a frame's pixels: the resolved settings, resolution, camera and format, and (with
+    ``scene``) the identity of its input files — the stage and every medium's field file by size and modification
+    time — so a batch re-renders frames whose data were rewritten (used to resume batches)."""
+    inputs = []
+    if scene is not None:
+        import os
+
+        for path in [scene.source, *(m.source for m in scene.media)]:
+            try:
+                info = os.stat(path)
+                inputs.append([str(path), info.st_size, info.st_mtime_ns])
+            except (OSError, TypeError, ValueError):
+                inputs.append([str(path), None, None])
     key = json.dumps(
         {"plan": json.loads(plan.settings_json()), "res": [plan.width, plan.height], "camera": options.camera,
-         "half": options.half},
+         "half": options.half, "inputs": inputs},
         sort_keys=True,
     )
     return hashlib.sha256(key.encode()).hexdigest()[:16]
@@ -166,7 +178,7 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
         "timeCode": "earliest" if time_code is None else float(time_code),
         "technique": plan.technique,
         "settings": plan.settings_json(),
-        "settingsHash": settings_hash(plan, options),
+        "settingsHash": settings_hash(plan, options, scene),
         "device": plan.device,
         "version": warpsky.__version__,
         "renderSeconds": float(layer.stats.get("seconds", 0.0)),

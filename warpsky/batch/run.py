@@ -2,7 +2,8 @@
 
 A batch is a list of :class:`FrameJob`. Workers (this process, a Dask ``LocalCluster`` or an existing Dask
 scheduler) run :func:`run_frame` on each: open the stage themselves, plan the frame, skip it when its EXR already
-exists and validates (opens, has every channel, carries the same settings hash), else render and write it
+exists and validates (opens, has every channel, carries the same settings hash, which covers the settings and the
+stage's and field files' size and modification time), else render and write it
 atomically. They return a small record (path, seconds, device, hash, error), never pixels. The client retries failed
 frames whose error was not the input's (``retries`` times; a missing file fails the same way again), appends one
 run to the shot's log after every frame (so a killed batch keeps what it finished), and prints a summary table.
@@ -98,7 +99,7 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
         t0 = time.perf_counter()
         scene, plan = plan_frame(reader, job.time_code, job.options)
         record.timings["stage_load"] = time.perf_counter() - t0
-        record.settings_hash = settings_hash(plan, job.options)
+        record.settings_hash = settings_hash(plan, job.options, scene)
         if not job.overwrite and validate_exr(job.out, required_channels=EXR_CHANNELS,
                                               metadata_expect={"settingsHash": record.settings_hash}):
             record.status = "skipped"
