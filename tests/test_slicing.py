@@ -87,9 +87,9 @@ def smooth_blob(path, size: int = 16):
 
 @pytest.mark.parametrize("equation", [0, 24])
 def test_slice_count_convergence(tmp_path, device, equation):
-    """|I_512 - I_256| <= 1/2 |I_256 - I_128|. Measured (12x12, cpu): equation 0 (default) 7.3e-8, 2.0e-8, 5.1e-9
-    for 64->128->256->512 differences after 4.1e-7 (second order); Riley's Eq. 24 halves each time (first order),
-    so it is held to the issue's 1/2 with a 5% margin."""
+    """|I_512 - I_256| <= 1/2 |I_256 - I_128|. Measured (12x12, cpu, defaults): equation 0 5.8e-7 then 1.26e-7
+    (ratio 0.22: second order); Riley's Eq. 24 9.2e-6 then 4.5e-6 (0.49: first order), so it is held to the
+    issue's 1/2 with a 5% margin. `python benchmarks/bench_slicing.py --convergence` prints the longer sequence."""
     spec = StageSpec(volume_file=smooth_blob(tmp_path / "blob.npy"), extinction_scale=0.3,
                      camera_position=(3.0, 4.0, 42.0), camera_rotation=look_rotation((-0.05, -0.06, -1.0)),
                      sun_direction=(0.4, 0.8, 0.3), phase="hg", g=0.8)
@@ -248,3 +248,17 @@ def test_xi_per_volume_from_usd(tmp_path, homogeneous_npy, device):
     stage.Save()
     with pytest.raises(SceneError, match=r"/World/Cloud.*warpsky:slicing:xi"):
         StageReader(stage_path).scene_at(None)
+
+
+def test_single_voxel_and_orders_beyond_the_table(tmp_path, device):
+    """A volume of one voxel, and a thick cloud whose expected scattering count runs far past the last tabulated
+    order (orders=2, optical depth ~400): finite, non-negative, transmittance in [0, 1]."""
+    one = tmp_path / "one.npy"
+    np.save(one, np.ones((1, 1, 1), dtype=np.float32))
+    spec = StageSpec(volume_file=one, extinction_scale=20.0, camera_position=(0.0, 0.0, 40.0),
+                     sun_direction=(0.2, 0.9, 0.3), phase="hg", g=0.85)
+    for orders in (60, 2):
+        layer = sliced(write_stage(tmp_path / f"one{orders}.usda", spec), device, 12, orders=orders)
+        assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
+        assert layer.transmittance.min() >= 0.0 and layer.transmittance.max() <= 1.0
+        assert layer.transmittance.min() < 1e-6 and layer.radiance.max() > 0.0  # the voxel is there, opaque, lit
