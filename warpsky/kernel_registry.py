@@ -28,7 +28,8 @@ def kernel_modules() -> list:
         for has_detail in (False, True)
     ]
     modules += [
-        path_trace_kernel(has_ground, has_tables).module for has_ground in (False, True) for has_tables in (False, True)
+        path_trace_kernel(has_ground, has_tables, has_detail).module
+        for has_ground in (False, True) for has_tables in (False, True) for has_detail in (False, True)
     ]
     modules += [k.module for low in (False, True) for eq in (0, 24, 25) for has_detail in (False, True)
                 for k in slicing_kernels(low, eq, has_detail)]

@@ -22,7 +22,7 @@ import functools
 
 import warp as wp
 
-from warpsky.media.voxel import VoxelGrid, grid_interval, grid_value
+from warpsky.media.voxel import MediumDetail, VoxelGrid, detailed_value, grid_interval, grid_value
 from warpsky.optics.kernels import GRID_SIZE, grid_angle, grid_node, medium_phase, sample_table
 from warpsky.optics.phase import INV_FOUR_PI, phase_eval, phase_rayleigh
 from warpsky.techniques.common import PinholeCamera, camera_ray, camera_ray_at
@@ -145,26 +145,6 @@ class PointMedia:
 
 
 @wp.func
-def media_at(
-    values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid), grid_count: int, p: wp.vec3, air: Air
-) -> PointMedia:
-    """Summed extinction and scattering of all media (and the air) at the camera-relative point ``p``."""
-    out = PointMedia()
-    out.extinction = wp.vec3(0.0)
-    out.scattering = wp.vec3(0.0)
-    if air.enabled != 0:
-        out.extinction = air_coefficient(air, p[1])
-        out.scattering = out.extinction
-    for m in range(grid_count):
-        grid = grids[m]
-        value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
-        if value > 0.0:
-            out.extinction += grid.extinction * value
-            out.scattering += grid.scattering * value
-    return out
-
-
-@wp.func
 def mean3(v: wp.vec3) -> float:
     return (v[0] + v[1] + v[2]) / 3.0
 
@@ -180,67 +160,6 @@ class Flight:
     state: wp.uint32
 
 
-@wp.func
-def delta_track(
-    values: wp.array(dtype=float),
-    grids: wp.array(dtype=VoxelGrid),
-    mgrids: wp.array(dtype=MajorantGrid),
-    majorants: wp.array(dtype=float),
-    grid_count: int,
-    origin: wp.vec3,
-    direction: wp.vec3,
-    t_max: float,
-    air: Air,
-    history: wp.vec3,
-    state: wp.uint32,
-) -> Flight:
-    """Weighted delta tracking from ``origin`` along ``direction`` up to ``t_max`` (see the module docstring)."""
-    out = Flight()
-    out.t = t_max
-    out.scattered = 0
-    out.steps = 0
-    weight = wp.vec3(1.0)
-    steps = int(0)
-    t = float(0.0)
-    while t < t_max and steps < MAX_TRACKING_STEPS:
-        seg = majorant_segment(grids, mgrids, majorants, grid_count, origin, direction, t, t_max, air)
-        if seg.majorant <= 0.0:
-            if seg.end >= t_max:
-                break
-            t = wp.max(seg.end, t)
-            steps += 1
-            continue
-        step = -wp.log(1.0 - wp.randf(state)) / seg.majorant
-        steps += 1
-        if t + step >= seg.end:
-            t = seg.end
-            continue
-        t = t + step
-        point = media_at(values, grids, grid_count, origin + t * direction, air)
-        # history-aware spectral tracking (Kutz et al. 2017): scatter with the throughput-weighted probability,
-        # so the channels' weights keep their sum on null collisions and cannot blow up in chromatic air
-        hw = wp.cw_mul(history, weight)
-        total = hw[0] + hw[1] + hw[2]
-        p_scatter = float(0.0)
-        if total > 0.0:
-            p_scatter = wp.clamp(wp.dot(hw, point.extinction) / (total * seg.majorant), 0.0, 1.0)
-        if wp.randf(state) < p_scatter:
-            out.t = t
-            out.scattered = 1
-            out.weight = wp.cw_mul(weight, point.scattering) / (seg.majorant * p_scatter)
-            out.steps = steps
-            out.state = state
-            return out
-        null = seg.majorant * wp.vec3(1.0) - point.extinction
-        null = wp.vec3(wp.max(null[0], 0.0), wp.max(null[1], 0.0), wp.max(null[2], 0.0))
-        weight = wp.cw_mul(weight, null) / (seg.majorant * (1.0 - p_scatter))
-    out.t = t_max
-    out.weight = weight
-    out.steps = steps
-    out.state = state
-    return out
-
-
 @wp.struct
 class Transmittance:
     """A ratio-tracking estimate per channel, its tentative collisions, and the advanced random state."""
@@ -250,51 +169,144 @@ class Transmittance:
     state: wp.uint32
 
 
-@wp.func
-def ratio_track(
-    values: wp.array(dtype=float),
-    grids: wp.array(dtype=VoxelGrid),
-    mgrids: wp.array(dtype=MajorantGrid),
-    majorants: wp.array(dtype=float),
-    grid_count: int,
-    origin: wp.vec3,
-    direction: wp.vec3,
-    t_max: float,
-    air: Air,
-    state: wp.uint32,
-) -> Transmittance:
-    """Unbiased transmittance estimate per channel along the segment (ratio tracking)."""
-    out = Transmittance()
-    tr = wp.vec3(1.0)
-    t = float(0.0)
-    steps = int(0)
-    while t < t_max and steps < MAX_TRACKING_STEPS:
-        seg = majorant_segment(grids, mgrids, majorants, grid_count, origin, direction, t, t_max, air)
-        if seg.majorant <= 0.0:
-            if seg.end >= t_max:
-                break
-            t = wp.max(seg.end, t)
+@functools.cache
+def tracking_functions(has_detail: bool):
+    """(media_at, delta_track, ratio_track), specialised on animated detail: with it every density lookup is
+    multiplied by the medium's detail factor (the majorant grids are scaled by its bound on the host)."""
+
+    @wp.func
+    def media_at(
+        values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid), grid_count: int,
+        details: wp.array(dtype=MediumDetail), p: wp.vec3, air: Air,
+    ) -> PointMedia:
+        """Summed extinction and scattering of all media (and the air) at the camera-relative point ``p``."""
+        out = PointMedia()
+        out.extinction = wp.vec3(0.0)
+        out.scattering = wp.vec3(0.0)
+        if air.enabled != 0:
+            out.extinction = air_coefficient(air, p[1])
+            out.scattering = out.extinction
+        for m in range(grid_count):
+            grid = grids[m]
+            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+            if wp.static(has_detail):
+                value = detailed_value(value, details, m, p)
+            if value > 0.0:
+                out.extinction += grid.extinction * value
+                out.scattering += grid.scattering * value
+        return out
+
+
+    @wp.func
+    def delta_track(
+        values: wp.array(dtype=float),
+        grids: wp.array(dtype=VoxelGrid),
+        mgrids: wp.array(dtype=MajorantGrid),
+        majorants: wp.array(dtype=float),
+        grid_count: int,
+        details: wp.array(dtype=MediumDetail),
+        origin: wp.vec3,
+        direction: wp.vec3,
+        t_max: float,
+        air: Air,
+        history: wp.vec3,
+        state: wp.uint32,
+    ) -> Flight:
+        """Weighted delta tracking from ``origin`` along ``direction`` up to ``t_max`` (see the module docstring)."""
+        out = Flight()
+        out.t = t_max
+        out.scattered = 0
+        out.steps = 0
+        weight = wp.vec3(1.0)
+        steps = int(0)
+        t = float(0.0)
+        while t < t_max and steps < MAX_TRACKING_STEPS:
+            seg = majorant_segment(grids, mgrids, majorants, grid_count, origin, direction, t, t_max, air)
+            if seg.majorant <= 0.0:
+                if seg.end >= t_max:
+                    break
+                t = wp.max(seg.end, t)
+                steps += 1
+                continue
+            step = -wp.log(1.0 - wp.randf(state)) / seg.majorant
             steps += 1
-            continue
-        step = -wp.log(1.0 - wp.randf(state)) / seg.majorant
-        steps += 1
-        if t + step >= seg.end:
-            t = seg.end
-            continue
-        t = t + step
-        point = media_at(values, grids, grid_count, origin + t * direction, air)
-        keep = wp.vec3(1.0) - point.extinction / seg.majorant
-        tr = wp.cw_mul(tr, wp.vec3(wp.max(keep[0], 0.0), wp.max(keep[1], 0.0), wp.max(keep[2], 0.0)))
-        if wp.max(tr) < 1.0e-3:
-            # Russian roulette on a nearly opaque segment keeps the estimate unbiased and the cost bounded
-            if wp.randf(state) < 0.5:
-                tr = wp.vec3(0.0)
-                break
-            tr = tr * 2.0
-    out.value = tr
-    out.steps = steps
-    out.state = state
-    return out
+            if t + step >= seg.end:
+                t = seg.end
+                continue
+            t = t + step
+            point = media_at(values, grids, grid_count, details, origin + t * direction, air)
+            # history-aware spectral tracking (Kutz et al. 2017): scatter with the throughput-weighted probability,
+            # so the channels' weights keep their sum on null collisions and cannot blow up in chromatic air
+            hw = wp.cw_mul(history, weight)
+            total = hw[0] + hw[1] + hw[2]
+            p_scatter = float(0.0)
+            if total > 0.0:
+                p_scatter = wp.clamp(wp.dot(hw, point.extinction) / (total * seg.majorant), 0.0, 1.0)
+            if wp.randf(state) < p_scatter:
+                out.t = t
+                out.scattered = 1
+                out.weight = wp.cw_mul(weight, point.scattering) / (seg.majorant * p_scatter)
+                out.steps = steps
+                out.state = state
+                return out
+            null = seg.majorant * wp.vec3(1.0) - point.extinction
+            null = wp.vec3(wp.max(null[0], 0.0), wp.max(null[1], 0.0), wp.max(null[2], 0.0))
+            weight = wp.cw_mul(weight, null) / (seg.majorant * (1.0 - p_scatter))
+        out.t = t_max
+        out.weight = weight
+        out.steps = steps
+        out.state = state
+        return out
+
+
+    @wp.func
+    def ratio_track(
+        values: wp.array(dtype=float),
+        grids: wp.array(dtype=VoxelGrid),
+        mgrids: wp.array(dtype=MajorantGrid),
+        majorants: wp.array(dtype=float),
+        grid_count: int,
+        details: wp.array(dtype=MediumDetail),
+        origin: wp.vec3,
+        direction: wp.vec3,
+        t_max: float,
+        air: Air,
+        state: wp.uint32,
+    ) -> Transmittance:
+        """Unbiased transmittance estimate per channel along the segment (ratio tracking)."""
+        out = Transmittance()
+        tr = wp.vec3(1.0)
+        t = float(0.0)
+        steps = int(0)
+        while t < t_max and steps < MAX_TRACKING_STEPS:
+            seg = majorant_segment(grids, mgrids, majorants, grid_count, origin, direction, t, t_max, air)
+            if seg.majorant <= 0.0:
+                if seg.end >= t_max:
+                    break
+                t = wp.max(seg.end, t)
+                steps += 1
+                continue
+            step = -wp.log(1.0 - wp.randf(state)) / seg.majorant
+            steps += 1
+            if t + step >= seg.end:
+                t = seg.end
+                continue
+            t = t + step
+            point = media_at(values, grids, grid_count, details, origin + t * direction, air)
+            keep = wp.vec3(1.0) - point.extinction / seg.majorant
+            tr = wp.cw_mul(tr, wp.vec3(wp.max(keep[0], 0.0), wp.max(keep[1], 0.0), wp.max(keep[2], 0.0)))
+            if wp.max(tr) < 1.0e-3:
+                # Russian roulette on a nearly opaque segment keeps the estimate unbiased and the cost bounded
+                if wp.randf(state) < 0.5:
+                    tr = wp.vec3(0.0)
+                    break
+                tr = tr * 2.0
+        out.value = tr
+        out.steps = steps
+        out.state = state
+        return out
+
+    return media_at, delta_track, ratio_track
 
 
 @wp.func
@@ -348,14 +360,27 @@ class PhaseSample:
 
 
 @functools.cache
-def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
-    """The per-pixel progressive path tracer, specialised on ground and tabulated species."""
+def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False) -> wp.Kernel:
+    """The per-pixel progressive path tracer, specialised on ground, tabulated species and animated detail."""
+
+    media_at, delta_track, ratio_track = tracking_functions(has_detail)
+
+    @wp.func
+    def density(values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid),
+                details: wp.array(dtype=MediumDetail), m: int, p: wp.vec3) -> float:
+        """Medium ``m``'s field value at ``p`` (with its animated detail when the kernel has any)."""
+        grid = grids[m]
+        value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+        if wp.static(has_detail):
+            value = detailed_value(value, details, m, p)
+        return value
 
     @wp.func
     def combined_phase_at(
         values: wp.array(dtype=float),
         grids: wp.array(dtype=VoxelGrid),
         grid_count: int,
+        details: wp.array(dtype=MediumDetail),
         tables: wp.array(dtype=float),
         p: wp.vec3,
         theta: float,
@@ -370,7 +395,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
             den = s_air
         for m in range(grid_count):
             grid = grids[m]
-            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+            value = density(values, grids, details, m, p)
             if value > 0.0:
                 phase = wp.vec3(0.0)
                 if wp.static(has_tables):
@@ -391,6 +416,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         values: wp.array(dtype=float),
         grids: wp.array(dtype=VoxelGrid),
         grid_count: int,
+        details: wp.array(dtype=MediumDetail),
         tables: wp.array(dtype=float),
         cdf: wp.array(dtype=float),
         p: wp.vec3,
@@ -406,14 +432,14 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         total = air_w
         for m in range(grid_count):
             grid = grids[m]
-            total += mean3(grid.scattering) * grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+            total += mean3(grid.scattering) * density(values, grids, details, m, p)
         target = wp.randf(state) * total
         use_air = target < air_w or grid_count == 0
         chosen = int(0)
         running = air_w
         for m in range(grid_count):
             grid = grids[m]
-            running += mean3(grid.scattering) * grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
+            running += mean3(grid.scattering) * density(values, grids, details, m, p)
             if running < target:
                 chosen = m + 1
         chosen = wp.clamp(chosen, 0, wp.max(grid_count - 1, 0))
@@ -433,7 +459,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         pdf = air_w * INV_4PI
         for m in range(grid_count):
             g2 = grids[m]
-            w = mean3(g2.scattering) * grid_value(values, g2, g2.eye_index + g2.index_from_world * p)
+            w = mean3(g2.scattering) * density(values, grids, details, m, p)
             if w > 0.0:
                 if wp.static(has_tables):
                     pdf += w * model_pdf(cdf, g2.phase_kind, g2.phase_g, theta)
@@ -443,7 +469,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         out.state = state
         out.weight = wp.vec3(0.0)
         if pdf > 0.0:
-            out.weight = combined_phase_at(values, grids, grid_count, tables, p, theta, air) / pdf
+            out.weight = combined_phase_at(values, grids, grid_count, details, tables, p, theta, air) / pdf
         return out
 
     @wp.kernel(module="unique")
@@ -451,6 +477,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
         values: wp.array(dtype=float),
         grids: wp.array(dtype=VoxelGrid),
         grid_count: int,
+        details: wp.array(dtype=MediumDetail),
         mgrids: wp.array(dtype=MajorantGrid),
         majorants: wp.array(dtype=float),
         tables: wp.array(dtype=float),
@@ -522,7 +549,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                         hits_ground = True
                         sea_floor = False
             if not hits_ground and not sea_floor:
-                tr = ratio_track(values, grids, mgrids, majorants, grid_count, origin, view, t_end, air, state)
+                tr = ratio_track(values, grids, mgrids, majorants, grid_count, details, origin, view, t_end, air, state)
                 state = tr.state
                 transmittance_sum[row, col] = transmittance_sum[row, col] + tr.value
                 steps += tr.steps
@@ -553,8 +580,8 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                         on_ground = False
                         if bounce == 0:
                             sea_floor = True
-                flight = delta_track(values, grids, mgrids, majorants, grid_count, origin, d, t_max, air, throughput,
-                                     state)
+                flight = delta_track(values, grids, mgrids, majorants, grid_count, details, origin, d, t_max, air,
+                                     throughput, state)
                 state = flight.state
                 steps += flight.steps
                 throughput = wp.cw_mul(throughput, flight.weight)
@@ -574,15 +601,15 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                     # next-event estimation toward the sun
                     if lit and sun_up:
                         t_sun = float(1.0e30)
-                        tr_sun = ratio_track(values, grids, mgrids, majorants, grid_count, p, sun_dir, t_sun, air,
-                                             state)
+                        tr_sun = ratio_track(values, grids, mgrids, majorants, grid_count, details, p, sun_dir,
+                                             t_sun, air, state)
                         state = tr_sun.state
                         steps += tr_sun.steps
-                        phase = combined_phase_at(values, grids, grid_count, tables, p,
+                        phase = combined_phase_at(values, grids, grid_count, details, tables, p,
                                                   wp.atan2(wp.length(wp.cross(sun_dir, d)), wp.dot(sun_dir, d)), air)
                         radiance += wp.cw_mul(wp.cw_mul(throughput, phase),
                                               wp.cw_mul(sun_irradiance, tr_sun.value))
-                    ps = sample_phase(values, grids, grid_count, tables, cdf, p, d, air, state)
+                    ps = sample_phase(values, grids, grid_count, details, tables, cdf, p, d, air, state)
                     state = ps.state
                     throughput = wp.cw_mul(throughput, ps.weight)
                     d = ps.direction
@@ -592,7 +619,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool) -> wp.Kernel:
                     p = wp.vec3(p[0], ground_offset, p[2])
                     if wp.static(has_ground):
                         if lit and sun_up:
-                            tr_sun = ratio_track(values, grids, mgrids, majorants, grid_count, p, sun_dir,
+                            tr_sun = ratio_track(values, grids, mgrids, majorants, grid_count, details, p, sun_dir,
                                                  float(1.0e30), air, state)
                             state = tr_sun.state
                             steps += tr_sun.steps

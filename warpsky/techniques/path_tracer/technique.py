@@ -109,7 +109,7 @@ class PathTracer:
         import warp as wp
 
         from warpsky.device import launch_rows
-        from warpsky.media.voxel import VoxelMediaBuffers
+        from warpsky.media.voxel import DETAIL_Z_MAX, VoxelMediaBuffers
         from warpsky.optics.kernels import DevicePhaseTables
         from warpsky.optics.tables import build_tables
         from warpsky.techniques.common import pinhole_camera
@@ -122,21 +122,16 @@ class PathTracer:
         started = time.perf_counter()
         species = scene_species(scene)
         block = int(settings.majorant_block)
-        detailed = [m.name for m in scene.media if m.detail is not None and m.detail.active]
-        if detailed:
-            import warnings
-
-            # unbiased detail would need the samplers to multiply by the detail factor and the majorant grids by
-            # its bound 1 + 3 amplitude; until then the reference shows the coarse field and says so
-            warnings.warn(f"path_tracer renders the coarse density of {', '.join(detailed)}: animated detail "
-                          "(warpsky:detail:*) is not rendered by this technique", stacklevel=2)
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species)
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
             mgrids, chunks, offset = [], [], 0
             for medium in scene.media:
                 bound = majorant_grid(medium.density, block) * float(np.max(medium.extinction_scale))
                 bound *= float(MAJORANT_MARGIN)
+                if medium.detail is not None and medium.detail.active:
+                    # animated detail multiplies the density by at most 1 + DETAIL_Z_MAX amplitude
+                    bound *= 1.0 + float(DETAIL_Z_MAX) * float(medium.detail.amplitude)
                 mg = MajorantGrid()
                 mg.offset = offset
                 mg.shape = wp.vec3i(*bound.shape)
@@ -156,7 +151,7 @@ class PathTracer:
             sun_dir = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
             sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
             ground = scene.ground
-            kernel = path_trace_kernel(ground is not None, bool(species))
+            kernel = path_trace_kernel(ground is not None, bool(species), media.has_detail)
             air = Air()
             atmosphere = scene.atmosphere
             air.enabled = int(atmosphere is not None)
@@ -173,7 +168,8 @@ class PathTracer:
             while done < spp:
                 count = min(per_pass, spp - done)
                 inputs = [
-                    media.values, media.grids, media.count, mgrid_array, majorants, tables.values, tables.cdf,
+                    media.values, media.grids, media.count, media.details, mgrid_array, majorants, tables.values,
+                    tables.cdf,
                     air, float(sun_cos_radius), float(sun_solid_angle),
                     pinhole_camera(camera, width, height),
                     wp.vec3(*np.asarray(sun_dir, dtype=np.float64).tolist()),
