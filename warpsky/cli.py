@@ -275,10 +275,7 @@ def cmd_render(args) -> int:
         executor.close()
     if len(times) > 1 or result.failed or executor.name != "in-process":
         print(format_summary(result), file=sys.stderr)
-    if result.failed:
-        for record in result.failed:
-            if len(times) == 1:
-                print(f"warpsky: error: {record.error}", file=sys.stderr)
+    if result.failed:  # each failure was already reported as it happened
         return 1 if any(r.retryable for r in result.failed) else 2
     return 0
 

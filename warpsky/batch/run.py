@@ -221,10 +221,8 @@ def check_writable(directory: Path) -> None:
         raise UsageError(f"output directory {directory} is not writable: {exc.strerror or exc}") from None
 
 
-def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, log: Path,
-              echo=None) -> BatchResult:
+def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, log: Path) -> BatchResult:
     """Run ``jobs`` on ``executor``, retrying failures; append this run to ``log`` after every frame."""
-    echo = echo or (lambda text: None)
     from tqdm import tqdm
 
     started = time.perf_counter()
