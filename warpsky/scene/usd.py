@@ -400,15 +400,8 @@ class StageReader:
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise SceneError(f"{path}.warpsky:detail:seed must be an int >= 0, got {value!r}")
             kwargs["seed"] = int(value)
-        wind = prim.GetAttribute("warpsky:detail:wind")
-        if wind.HasAuthoredValue():
-            value = wind.Get(tc)
-            try:
-                vector = np.array(value, dtype=np.float64).reshape(3)
-            except (TypeError, ValueError):
-                raise SceneError(f"{path}.warpsky:detail:wind must be a float3 [m/s], got {value!r}") from None
-            if not np.all(np.isfinite(vector)):
-                raise SceneError(f"{path}.warpsky:detail:wind must be 3 finite speeds [m/s], got {value!r}")
+        vector = self._vector_attr(prim, "warpsky:detail:wind", tc, 3, "a float3 [m/s]", "3 finite speeds [m/s]")
+        if vector is not None:
             # stage axes -> warpsky's Y-up axes; a speed in m/s is not rescaled by metersPerUnit
             kwargs["wind"] = tuple((self.world_from_stage[:3, :3] / self.meters_per_unit @ vector).tolist())
         spec = DetailSpec(**kwargs)  # validates ranges; its SceneError names the Volume and the attribute
@@ -602,15 +595,8 @@ class StageReader:
                    for a in prim.GetAttributes()):
             return None
         kwargs = {}
-        wind = prim.GetAttribute("warpsky:advection:wind")
-        if wind.HasAuthoredValue():
-            value = wind.Get(tc)
-            try:
-                vector = np.array(value, dtype=np.float64).reshape(2)
-            except (TypeError, ValueError):
-                raise SceneError(f"{path}.warpsky:advection:wind must be a float2 [m/s], got {value!r}") from None
-            if not np.all(np.isfinite(vector)):
-                raise SceneError(f"{path}.warpsky:advection:wind must be 2 finite speeds [m/s], got {value!r}")
+        vector = self._vector_attr(prim, "warpsky:advection:wind", tc, 2, "a float2 [m/s]", "2 finite speeds [m/s]")
+        if vector is not None:
             # the stage's horizontal axes (Y up: x, z; Z up: x, y) -> warpsky's x, z; m/s whatever metersPerUnit
             kwargs["wind_m_s"] = (float(vector[0]), float(vector[1]) if self.up_axis == "Y" else -float(vector[1]))
         for attr, key, low in (("curlSpeed", "curl_speed_m_s", 0.0), ("curlScale", "curl_scale_m", None),
@@ -645,19 +631,27 @@ class StageReader:
                              (float(size[0]), float(size[1])))
 
     @staticmethod
-    def _positive2(prim, name: str, tc, default) -> np.ndarray:
+    def _vector_attr(prim, name: str, tc, size: int, shape: str, values: str,
+                     positive: bool = False) -> np.ndarray | None:
+        """An authored vector of ``size`` finite (and, with ``positive``, > 0) floats, or None when unauthored; the
+        SceneError says ``must be {shape}`` or ``must be {values}``."""
         attr = prim.GetAttribute(name)
         if not attr or not attr.HasAuthoredValue():
-            return np.asarray(default, dtype=np.float64)
+            return None
         value = attr.Get(tc)
         try:
-            pair = np.array(value, dtype=np.float64).reshape(2)
+            vector = np.array(value, dtype=np.float64).reshape(size)
         except (TypeError, ValueError):
-            raise SceneError(f"{prim.GetPath()}.{name} must be a float2 of lengths [scene units], "
-                             f"got {value!r}") from None
-        if not np.all(np.isfinite(pair)) or np.any(pair <= 0.0):
-            raise SceneError(f"{prim.GetPath()}.{name} must be two positive lengths [scene units], got {value!r}")
-        return pair
+            raise SceneError(f"{prim.GetPath()}.{name} must be {shape}, got {value!r}") from None
+        if not np.all(np.isfinite(vector)) or (positive and np.any(vector <= 0.0)):
+            raise SceneError(f"{prim.GetPath()}.{name} must be {values}, got {value!r}")
+        return vector
+
+    @classmethod
+    def _positive2(cls, prim, name: str, tc, default) -> np.ndarray:
+        pair = cls._vector_attr(prim, name, tc, 2, "a float2 of lengths [scene units]",
+                                "two positive lengths [scene units]", positive=True)
+        return np.asarray(default, dtype=np.float64) if pair is None else pair
 
     @staticmethod
     def _int_attr(prim, name: str, tc, default: int) -> int:

@@ -176,15 +176,15 @@ class Slicing:
             slices = 0
             # a sun below the ground plane lights nothing, but the media still hide what lies behind them
             ground_hides_sun = scene.ground is not None and sun is not None and sun.direction[1] <= 0.0
+            species = scene_species(scene)
+            # uploaded once for the sweep and the ground pass (with detail this also advects its noise to time_s)
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
             if scene.media:
                 if len(scene.media) > MAX_MEDIA:
                     raise UsageError(
                         f"slicing combines at most {MAX_MEDIA} voxel fields per frame, the scene has "
                         f"{len(scene.media)}: {', '.join(m.name for m in scene.media)}; merge fields of one species "
                         "into one grid or use technique path_tracer")
-                species = scene_species(scene)
-                media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species,
-                                                 time_s=scene.time_s)
                 tables, forwards, index = self._tables(scene, species, orders)
                 ams = AmsTables()
                 ams.ams = wp.array(np.stack(tables).astype(np.float32).reshape(-1), dtype=float)
@@ -224,7 +224,7 @@ class Slicing:
                 "seconds": time.perf_counter() - started, "settings": dataclasses.asdict(settings),
                 "slices": slices})
         if scene.ground is not None:
-            self._ground(scene, camera, width, height, layer)
+            self._ground(scene, camera, width, height, layer, media)
         return layer
 
     @staticmethod
@@ -261,28 +261,24 @@ class Slicing:
         frame.front_to_back = int(front_to_back)
         return frame, planes
 
-    def _ground(self, scene: Scene, camera, width: int, height: int, layer: Layer) -> None:
-        """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel)."""
+    def _ground(self, scene: Scene, camera, width: int, height: int, layer: Layer, media) -> None:
+        """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel);
+        ``media`` is the sweep's upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`)."""
         import warp as wp
 
-        from warpsky.media.voxel import VoxelMediaBuffers
         from warpsky.techniques.common import pinhole_camera
-        from warpsky.techniques.single_scatter.technique import scene_species
         from warpsky.techniques.slicing.kernels import ground_kernel
 
         ground, sun = scene.ground, scene.sun
         with wp.ScopedDevice(self.device):
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, self.device, scene_species(scene),
-                                             time_s=scene.time_s)
             radiance = wp.array(layer.radiance, dtype=wp.vec3)
             transmittance = wp.array(layer.transmittance, dtype=wp.vec3)
             depth = wp.array(layer.depth, dtype=float)
             sun_dir = sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])
             irradiance = sun.irradiance if sun is not None else np.zeros(3)
-            step = min((float(m.voxel_size.min()) for m in scene.media), default=1.0)
             wp.launch(ground_kernel(media.has_detail), dim=(height, width), inputs=[
                 media.values, media.grids, media.count, media.details, pinhole_camera(camera, width, height),
                 wp.vec3(*np.asarray(sun_dir).tolist()), wp.vec3(*np.asarray(irradiance).tolist()),
-                float(ground.height - camera.position[1]), wp.vec3(*ground.albedo.tolist()), float(step),
-                radiance, transmittance, depth])
+                float(ground.height - camera.position[1]), wp.vec3(*ground.albedo.tolist()),
+                float(media.min_voxel_size), radiance, transmittance, depth])
             layer.radiance, layer.transmittance, layer.depth = radiance.numpy(), transmittance.numpy(), depth.numpy()
