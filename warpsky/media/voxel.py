@@ -194,6 +194,57 @@ def media_sampler(has_tables: bool, has_detail: bool = False):
     return sample_media
 
 
+#: Voxel fields one frame combines. Every sample keeps each field's density in registers (one grid read per field
+#: per sample, however many phase functions or scattering orders are evaluated from it afterwards).
+MAX_MEDIA = 16
+FieldDensities = wp.types.vector(length=MAX_MEDIA, dtype=float)
+
+
+@wp.struct
+class VoxelMedia:
+    """Every voxel medium of a frame on one device, relative to the camera (built by :class:`VoxelMediaBuffers`)."""
+
+    values: wp.array(dtype=float)  # all grids' field values, one flat buffer
+    grids: wp.array(dtype=VoxelGrid)  # one entry per medium
+    details: wp.array(dtype=MediumDetail)  # one entry per medium (read only by kernels specialised on detail)
+    count: int  # number of media
+
+
+@wp.struct
+class MediaPoint:
+    """Every medium at one point: each field's density (its detail applied) and the summed coefficients [1/m]."""
+
+    density: FieldDensities
+    extinction: wp.vec3
+    scattering: wp.vec3
+
+
+@functools.cache
+def media_functions(has_detail: bool):
+    """``sample_media(media: VoxelMedia, p: vec3) -> MediaPoint`` at the camera-relative point ``p`` [m],
+    specialised on animated detail: with it each field's coarse density is multiplied by its detail factor here,
+    once per sample, so everything downstream (extinction, scattering, phases) sees the detailed density."""
+
+    @wp.func
+    def sample_media(media: VoxelMedia, p: wp.vec3) -> MediaPoint:
+        out = MediaPoint()
+        out.density = FieldDensities()
+        out.extinction = wp.vec3(0.0)
+        out.scattering = wp.vec3(0.0)
+        for m in range(media.count):
+            grid = media.grids[m]
+            value = grid_value(media.values, grid, grid.eye_index + grid.index_from_world * p)
+            if wp.static(has_detail):
+                value = detailed_value(value, media.details, m, p)
+            if value > 0.0:
+                out.density[m] = value
+                out.extinction += grid.extinction * value
+                out.scattering += grid.scattering * value
+        return out
+
+    return sample_media
+
+
 @dataclass
 class VoxelMediaBuffers:
     """All voxel media of a scene uploaded to one device, expressed relative to one camera position."""
@@ -204,6 +255,16 @@ class VoxelMediaBuffers:
     min_voxel_size: float  # smallest voxel edge over all grids [m]
     details: wp.array | None = None  # MediumDetail per medium at the upload's time (a 1-entry dummy without detail)
     has_detail: bool = False  # whether any medium has animated detail: pick the samplers' has_detail specialisation
+
+    @property
+    def media(self) -> VoxelMedia:
+        """The kernels' view of these buffers."""
+        out = VoxelMedia()
+        out.values = self.values
+        out.grids = self.grids
+        out.details = self.details
+        out.count = self.count
+        return out
 
     @classmethod
     def upload(

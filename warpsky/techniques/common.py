@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import warp as wp
 
@@ -38,6 +40,59 @@ def pinhole_camera(camera: Camera, width: int, height: int) -> PinholeCamera:
     cam.width = int(width)
     cam.height = int(height)
     return cam
+
+
+@wp.struct
+class Sun:
+    """The sun as kernels see it (``lit`` 0: no sun, or no light from it)."""
+
+    direction: wp.vec3  # unit vector towards the sun (world axes)
+    irradiance: wp.vec3  # at normal incidence, RGB
+    cos_radius: float  # cosine of the disk's angular radius (2: no disk)
+    solid_angle: float  # of the disk [sr] (1 when it has none, so dividing by it is safe)
+    lit: int
+
+
+@wp.struct
+class Ground:
+    """The ground plane as kernels see it (kernels specialised on having one read it)."""
+
+    offset: float  # plane height relative to the camera [m]
+    albedo: wp.vec3  # Lambertian albedo, RGB
+
+
+def sun_disk(angular_diameter: float) -> tuple[float, float]:
+    """(cos of the angular radius, solid angle [sr]) of a sun disk of ``angular_diameter`` [rad]; (2, 1) for none."""
+    radius = 0.5 * angular_diameter
+    if radius <= 0.0:
+        return 2.0, 1.0
+    return math.cos(radius), 2.0 * math.pi * (1.0 - math.cos(radius))
+
+
+def sun_struct(sun) -> Sun:
+    """Kernel view of a :class:`~warpsky.scene.model.Sun` (or None: unlit, pointing up)."""
+    out = Sun()
+    direction = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
+    irradiance = sun.irradiance if sun is not None else np.zeros(3)
+    out.direction = wp.vec3(*np.asarray(direction, dtype=np.float64).tolist())
+    out.irradiance = wp.vec3(*np.asarray(irradiance, dtype=np.float64).tolist())
+    out.cos_radius, out.solid_angle = sun_disk(sun.angular_diameter if sun is not None else 0.0)
+    out.lit = int(float(np.max(irradiance)) > 0.0)
+    return out
+
+
+def ground_struct(ground, camera_position) -> Ground:
+    """Kernel view of a :class:`~warpsky.scene.model.Ground` seen from ``camera_position`` (None: a zero struct)."""
+    out = Ground()
+    out.offset = float(ground.height - camera_position[1]) if ground is not None else 0.0
+    out.albedo = wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist())
+    return out
+
+
+@wp.func
+def camera_forward(cam: PinholeCamera) -> wp.vec3:
+    """Unit world direction of the camera's view axis (its -Z)."""
+    return wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
 
 
 @wp.func
