@@ -106,7 +106,7 @@ class PathTracer:
         from warpsky.media.voxel import DETAIL_Z_MAX, VoxelMediaBuffers
         from warpsky.optics.kernels import DevicePhaseTables
         from warpsky.optics.tables import build_tables
-        from warpsky.techniques.common import pinhole_camera
+        from warpsky.techniques.common import pinhole_camera, sun_disk
         from warpsky.techniques.path_tracer.kernels import MAJORANT_MARGIN, Air, MajorantGrid, path_trace_kernel
         from warpsky.techniques.single_scatter.technique import scene_species
 
@@ -154,9 +154,7 @@ class PathTracer:
                 air.gamma = float(atmosphere.gamma)
                 air.camera_altitude = float(camera.position[1] + atmosphere.altitude)
                 air.band = float(0.1 * atmosphere.scale_height)
-            radius = 0.5 * sun.angular_diameter if sun is not None else 0.0
-            sun_cos_radius = math.cos(radius) if radius > 0.0 else 2.0
-            sun_solid_angle = 2.0 * math.pi * (1.0 - math.cos(radius)) if radius > 0.0 else 1.0
+            sun_cos_radius, sun_solid_angle = sun_disk(sun.angular_diameter if sun is not None else 0.0)
             spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
             done = 0
             while done < spp:
