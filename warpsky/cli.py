@@ -10,7 +10,26 @@ import sys
 import textwrap
 from pathlib import Path
 
+import warpsky
+from warpsky.batch.frames import FramePattern, parse_frame_spec
+from warpsky.batch.run import (
+    DaskExecutor,
+    FrameJob,
+    InProcessExecutor,
+    check_writable,
+    format_summary,
+    log_path_for,
+    run_batch,
+)
+from warpsky.device import init_warp, resolve_device
 from warpsky.errors import UsageError, WarpskyError
+from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
+from warpsky.optics.cli import add_parser as add_optics
+from warpsky.optics.cli import run as run_optics
+from warpsky.output.preview import contact_sheet, stage_preview
+from warpsky.plan import resolve_resolution
+from warpsky.render import RenderOptions, plan_frame
+from warpsky.scene.usd import StageReader
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, settings_table, technique_class, technique_names
 from warpsky.techniques.stratiform.technique import StratiformSettings
 
@@ -105,8 +124,6 @@ def _add_render_options(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    import warpsky
-
     parser = argparse.ArgumentParser(
         prog="warpsky",
         description="Render clouds, rain, ice, sky and fog from USD stages to EXR frames with NVIDIA Warp, "
@@ -172,8 +189,6 @@ def build_parser() -> argparse.ArgumentParser:
     sheet.add_argument("--exposure", type=float, default=None,
                        help="linear exposure (default: the frames' preview exposure, else their 99th percentile)")
 
-    from warpsky.optics.cli import add_parser as add_optics
-
     add_optics(sub)
 
     bench = sub.add_parser("bench", help="measure techniques: error against a path-traced reference vs time",
@@ -213,9 +228,6 @@ def _settings(args) -> dict[str, str]:
 
 
 def _render_options(args) -> object:
-    from warpsky.device import resolve_device
-    from warpsky.render import RenderOptions
-
     return RenderOptions(
         technique=args.technique,
         settings=_settings(args),
@@ -230,8 +242,6 @@ def _render_options(args) -> object:
 
 def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
     """Time codes to render, by the rules in ``warpsky render --help``."""
-    from warpsky.batch.frames import parse_frame_spec
-
     if spec is not None:
         times = parse_frame_spec(spec)
         pattern.require_placeholder(len(times))
@@ -246,18 +256,6 @@ def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
 
 
 def cmd_render(args) -> int:
-    from warpsky.batch.frames import FramePattern
-    from warpsky.batch.run import (
-        DaskExecutor,
-        FrameJob,
-        InProcessExecutor,
-        check_writable,
-        format_summary,
-        log_path_for,
-        run_batch,
-    )
-    from warpsky.scene.usd import StageReader
-
     pattern = FramePattern(args.output)
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
@@ -296,11 +294,6 @@ def cmd_render(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from warpsky.device import resolve_device
-    from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
-    from warpsky.plan import resolve_resolution
-    from warpsky.scene.usd import StageReader
-
     reader = StageReader(args.stage)
     scene = reader.scene_at(args.time, camera_path=args.camera)
     device = resolve_device(args.device)
@@ -325,9 +318,6 @@ def _fmt3(values) -> str:
 
 
 def cmd_preview(args) -> int:
-    from warpsky.output.preview import stage_preview
-    from warpsky.scene.usd import StageReader
-
     scene = StageReader(args.stage).scene_at(args.frame, camera_path=args.camera)
     print(stage_preview(scene, args.output, size=(args.size[0], args.size[1] or round(args.size[0] * 0.75)),
                         level=args.level))
@@ -335,8 +325,6 @@ def cmd_preview(args) -> int:
 
 
 def cmd_contact_sheet(args) -> int:
-    from warpsky.output.preview import contact_sheet
-
     print(contact_sheet(args.pattern, args.output, columns=args.columns, tile_width=args.tile_width,
                         exposure=args.exposure))
     return 0
@@ -344,9 +332,6 @@ def cmd_contact_sheet(args) -> int:
 
 def cmd_info(args) -> int:
     import numpy as np
-
-    from warpsky.render import plan_frame
-    from warpsky.scene.usd import StageReader
 
     reader = StageReader(args.stage)
     span = reader.time_range()
@@ -394,13 +379,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    from warpsky.device import init_warp
-
     try:
         init_warp(verbose=args.verbose)
         if args.command == "optics":
-            from warpsky.optics.cli import run as run_optics
-
             return run_optics(args)
         commands = {"render": cmd_render, "info": cmd_info, "bench": cmd_bench, "preview": cmd_preview,
                     "contact-sheet": cmd_contact_sheet}

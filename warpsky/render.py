@@ -13,6 +13,8 @@ import numpy as np
 
 import warpsky
 from warpsky.composite import composite, merge_by_depth
+from warpsky.output.exr import write_exr
+from warpsky.output.png import write_png
 from warpsky.passes import StratiformPass, media_scene
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
@@ -139,8 +141,6 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
                 timings: dict[str, float] | None = None) -> FrameResult:
     """Render a planned frame (``plan_frame``'s scene and plan, of the stage at ``stage`` and ``time_code``) and
     write ``out_path`` atomically, plus the PNG preview when asked."""
-    from warpsky.output.exr import write_exr
-
     timings = dict(timings or {})
     started = _time.perf_counter()
     layer, layers = render_layers(plan.renderer, scene, plan)
@@ -154,8 +154,6 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
     )
     png = None
     if options.png:
-        from warpsky.output.png import write_png
-
         png = write_png(Path(out_path).with_suffix(".png"), frame.rgba[..., :3],
                         exposure=preview_exposure(scene, options.exposure))
     timings["write"] = _time.perf_counter() - started - timings["passes"] - timings["composite"]

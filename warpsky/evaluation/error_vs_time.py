@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+import warpsky
 from warpsky.composite import composite
 from warpsky.errors import UsageError
 from warpsky.files import atomic_write, cache_dir
@@ -68,8 +69,6 @@ class Report:
 def _reference_key(scene, width, height, device, spp, seed) -> str:
     """Hash of everything the reference's pixels depend on: the scene as read (media, camera, sun, ground)."""
     import pickle
-
-    import warpsky
 
     digest = hashlib.sha256(pickle.dumps(scene, protocol=4))
     digest.update(json.dumps([width, height, "cuda" in str(device), spp, seed, warpsky.__version__]).encode())
