@@ -83,7 +83,7 @@ def technique_names() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def technique_class(name: str):
+def technique_class(name: str) -> type[Technique]:
     """Import and return the technique class registered under ``name``."""
     import importlib
 
