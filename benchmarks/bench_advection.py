@@ -1,4 +1,4 @@
-"""Benchmark: advected textures (issue 7) — ms per frame for a 512² advected layer (``AdvectedTexture.at``) and a
+"""Benchmark: advected textures — ms per frame for a 512² advected layer (``AdvectedTexture.at``) and a
 256³-sampled detail field (``advected_detail`` evaluated at 256³ points by ``AdvectedDetail.sample_grid``), cold
 (random access: each frame from its layers' regenerations) and sequential (24 frames/s playback reusing the
 previous frame's steps), on cpu and on each cuda device present.

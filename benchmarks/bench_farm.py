@@ -52,18 +52,15 @@ def batch(stage: Path, frames: int, options, out: Path, executor) -> dict:
 
 def breakdown(stage: Path, frame: float, options) -> dict:
     """One frame, stage by stage (after a warm-up render, so compile time is excluded)."""
-    from types import SimpleNamespace
-
     import warp as wp
 
     from warpsky.composite import composite
     from warpsky.media.voxel import VoxelMediaBuffers
     from warpsky.optics.tables import ams_table
     from warpsky.output.exr import write_exr
+    from warpsky.plan import scene_species
     from warpsky.render import plan_frame, render_frame, render_layers
     from warpsky.scene.usd import StageReader
-    from warpsky.techniques.single_scatter.technique import scene_species
-    from warpsky.techniques.slicing.technique import Slicing
 
     reader = StageReader(stage)
     with tempfile.TemporaryDirectory() as tmp:
@@ -80,7 +77,7 @@ def breakdown(stage: Path, frame: float, options) -> dict:
         VoxelMediaBuffers.upload(scene.media, scene.camera.position, plan.device, scene_species(scene))
         wp.synchronize_device(plan.device)
         times["media upload"] = time.perf_counter() - t0
-        technique = Slicing(plan.settings, device=plan.device)
+        technique = plan.renderer
         sweeps = []
         for _ in range(2):
             t0 = time.perf_counter()
@@ -88,8 +85,7 @@ def breakdown(stage: Path, frame: float, options) -> dict:
             sweeps.append(time.perf_counter() - t0)
         times["slicing sweep (best of 2; its own table load + upload)"] = min(sweeps)
         t0 = time.perf_counter()
-        _, layers = render_layers(technique, scene, SimpleNamespace(width=plan.width, height=plan.height,
-                                                                    device=plan.device))
+        _, layers = render_layers(technique, scene, plan)
         image = composite(layers, far=scene.camera.far)
         times["sky pass + slicing + composite"] = time.perf_counter() - t0
         t0 = time.perf_counter()

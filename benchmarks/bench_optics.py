@@ -1,7 +1,7 @@
 """Benchmark: optics tables — first build and cached load for {cloud} and {cloud, rain, ice, snow}, and phase
 lookup / sampling throughput in a Warp kernel (cpu, and cuda when present).
 
-Goals (issue 3): all four species' first build <= 120 s on the 2-core CPU machine; cached load <= 0.5 s.
+Goals: all four species' first build <= 120 s on the 2-core CPU machine; cached load <= 0.5 s.
 The first build runs in an empty temporary cache, so it is a real first build; timings include Mie's numba JIT
 and Warp's first kernel compile, and say so.
 

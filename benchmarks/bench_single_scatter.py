@@ -32,7 +32,6 @@ def main(argv=None) -> int:
     from warpsky.device import cpu_thread_count, init_warp
     from warpsky.plan import make_plan
     from warpsky.scene.usd import StageReader
-    from warpsky.techniques.single_scatter.technique import SingleScatter
 
     init_warp()
     devices = args.devices.split(",") if args.devices else ["cpu"] + [
@@ -45,8 +44,8 @@ def main(argv=None) -> int:
     rows = []
     for device in devices:
         for size in (int(s) for s in args.sizes.split(",")):
-            plan = make_plan(scene, resolution=(size, size), device=device)
-            technique = SingleScatter(plan.settings, device=device)
+            plan = make_plan(scene, technique="single_scatter", resolution=(size, size), device=device)
+            technique = plan.renderer
             technique.render(scene, size, size)  # compile / load, not timed
             times, lookups = [], 0
             for _ in range(args.repeats):

@@ -1,7 +1,7 @@
 """Benchmark: half-angle slicing on the demo cumulus and the storm (frame 40: cloud, rain, snow, ice) — ms per frame
 and samples/s at 256²/128 slices, 512²/256 slices (Riley's interactive setting) and 768²/512 slices, cpu and cuda
 when present, and peak device memory on cuda. Timings exclude the first (compiling) render and say so. No
-pass/fail: goals are read by people (issue 6: 512² x 256 slices in <= 3 s on the 2-core CPU; >= 100 fps on one
+pass/fail: goals are read by people (512² x 256 slices in <= 3 s on the 2-core CPU; >= 100 fps on one
 modern GPU).
 
 Run:  python benchmarks/bench_slicing.py [--json out/bench_slicing.json] [--configs 256x128,512x256]

@@ -230,3 +230,58 @@ def test_failed_frame_keeps_finished_frames(tmp_path, capsys):
     assert code == 2 and "d.2.npy" in err
     assert (tmp_path / "o.0001.exr").is_file() and (tmp_path / "o.0003.exr").is_file()
     assert not (tmp_path / "o.0002.exr").exists()
+
+
+# ------------------------------------------------------------------------------------------ techniques, settings
+def test_every_technique_declares_the_protocol():
+    import dataclasses
+
+    from warpsky.techniques.base import field_kinds, technique_class, technique_names
+
+    for name in technique_names():
+        cls = technique_class(name)
+        assert cls.name == name == cls.Settings.technique
+        assert isinstance(cls.traces_air, bool) and isinstance(cls.renders_layers, bool)
+        assert set(field_kinds(cls.Settings)) == {f.name for f in dataclasses.fields(cls.Settings)}
+        assert all(f.metadata["help"] for f in dataclasses.fields(cls.Settings)), name
+
+
+def test_settings_are_parsed_by_their_declared_types(tmp_path, good_stage, capsys):
+    from warpsky.techniques.base import parse_settings
+    from warpsky.techniques.path_tracer.technique import PathTracerSettings
+    from warpsky.techniques.slicing.technique import LightEquation, SlicingSettings
+
+    s = parse_settings(SlicingSettings, {"slice_count": "12", "low_albedo": "true", "light_equation": "eq24",
+                                         "xi": "auto", "orders": "8.0"})
+    assert (s.slice_count, s.low_albedo, s.light_equation, s.xi, s.orders) == (12, True, LightEquation.EQ24, 0.1, 8)
+    assert type(s.slice_count) is int and type(s.orders) is int
+    assert parse_settings(SlicingSettings, {"slice_count": "auto", "light_equation": "25"}).slice_count is None
+    assert PathTracerSettings(spp=16.0, pixel_jitter=1) == PathTracerSettings(spp=16, pixel_jitter=True)
+    for technique, text, message in (
+        ("path_tracer", "spp=2.5", "setting spp must be a whole number >= 1, got 2.5"),
+        ("path_tracer", "seed=x", "setting seed: expected a whole number, got 'x'"),
+        ("slicing", "low_albedo=2", "setting low_albedo must be 0 or 1, got 2"),
+        ("slicing", "light_equation=23", "setting light_equation must be 0, 24 or 25"),
+        ("slicing", "stratiform.radiosity_detail=5", None),  # no layers: unused, reported by info
+    ):
+        code, _, err = run(["render", good_stage, tmp_path / "a.exr", "--res", "4", "--device", "cpu", "--technique",
+                            technique, "--set", text], capsys)
+        if message is None:
+            assert code == 0, err
+        else:
+            assert code == 2 and message in err, err
+
+
+def test_render_help_lists_every_setting_with_its_metadata(capsys):
+    import dataclasses
+
+    from warpsky.techniques.base import technique_class, technique_names
+    from warpsky.techniques.stratiform.technique import StratiformSettings
+
+    with pytest.raises(SystemExit):
+        main(["render", "--help"])
+    out = capsys.readouterr().out
+    for name in technique_names():
+        assert all(f.name in out for f in dataclasses.fields(technique_class(name).Settings))
+    assert all(f"stratiform.{f.name}" in out for f in dataclasses.fields(StratiformSettings))
+    assert "256 texel" in out and "samples (paths) per pixel" in out and "auto: 8 on the CPU" in out

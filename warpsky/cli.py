@@ -7,9 +7,31 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 from pathlib import Path
 
+import warpsky
+from warpsky.batch.frames import FramePattern, parse_frame_spec
+from warpsky.batch.run import (
+    DaskExecutor,
+    FrameJob,
+    InProcessExecutor,
+    check_writable,
+    format_summary,
+    log_path_for,
+    run_batch,
+)
+from warpsky.device import init_warp, resolve_device
 from warpsky.errors import UsageError, WarpskyError
+from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
+from warpsky.optics.cli import add_parser as add_optics
+from warpsky.optics.cli import run as run_optics
+from warpsky.output.preview import contact_sheet, stage_preview
+from warpsky.plan import resolve_resolution
+from warpsky.render import RenderOptions, plan_frame
+from warpsky.scene.usd import StageReader
+from warpsky.techniques.base import DEFAULT_TECHNIQUE, settings_table, technique_class, technique_names
+from warpsky.techniques.stratiform.technique import StratiformSettings
 
 EPILOG_RENDER = """\
 frames:
@@ -30,18 +52,7 @@ batches, resume and farms:
   (`dask cuda worker tcp://HOST:PORT`, or LocalCUDACluster in Python), which sets CUDA_VISIBLE_DEVICES per
   worker, and render with --device cuda.
 
-technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default):
-  slicing (default): slice_count [auto: one per voxel, 32..512], light_resolution [256 texels],
-                  xi [0.1 /sr; per Volume: warpsky:slicing:xi], low_albedo [0], orders [60],
-                  light_equation [0 = continuous limit, 24, 25]
-  stratiform layers (prefix stratiform.): radiosity [the layer's warpsky:stratiform:radiosity, else 1],
-                  radiosity_detail [0], tolerance [1e-4], max_iterations [64]
-  single_scatter: step_length [m, auto = 0.5 x smallest voxel], shadow_step_length [m, auto = 1 voxel],
-                  min_transmittance [default 1e-4: stop marching once the view is this opaque]
-  path_tracer:    spp [64], seed [0], max_bounces [1024], majorant_block [8 voxels], environment [0,
-                  uniform radiance], samples_per_pass [auto]; --spp N and --seed S are shorthands.
-                  Writes a variance.RGB AOV (variance of each pixel's mean).
-
+{settings}
 examples:
   warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
   warpsky render shot.usda out/shot.####.exr --frames 1:48x2 --res 1280x720 --device cuda
@@ -49,6 +60,31 @@ examples:
   warpsky render usd_scenes/storm.usda out/storm.####.exr --res 256 --workers 2
   warpsky render usd_scenes/storm.usda /shared/storm.####.exr --scheduler tcp://farm:8786
 """
+
+
+#: What the settings tables leave out: the shorthands of the command line and what a technique adds to the EXR.
+SETTINGS_NOTES = {
+    "path_tracer": "--spp N and --seed S are shorthands for --set spp=N / seed=S. Writes a variance.RGB AOV "
+                   "(variance of each pixel's mean).",
+}
+
+
+def settings_help() -> str:
+    """Every technique's settings (the default technique first, then the stratiform pass's, then the others) as
+    tables generated from the settings classes' field metadata."""
+    names = [DEFAULT_TECHNIQUE] + [n for n in technique_names() if n != DEFAULT_TECHNIQUE]
+    sections = []
+    for name in names:
+        cls = technique_class(name)
+        title = f"{name} (default)" if name == DEFAULT_TECHNIQUE else name
+        sections.append(f"  {title}:\n" + settings_table(cls.Settings, indent=4))
+        if name in SETTINGS_NOTES:
+            sections.append(textwrap.fill(SETTINGS_NOTES[name], 114, initial_indent="    ", subsequent_indent="    "))
+        if name == DEFAULT_TECHNIQUE:
+            sections.append("  stratiform layers (prefix stratiform., also with single_scatter):\n"
+                            + settings_table(StratiformSettings, indent=4))
+    return ("technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default; whole numbers for\n"
+            "counts, 0/1 or true/false for switches):\n" + "\n".join(sections) + "\n")
 
 
 def _resolution(text: str) -> tuple[int, int | None]:
@@ -73,8 +109,6 @@ def _setting(text: str) -> tuple[str, str]:
 
 
 def _add_render_options(parser: argparse.ArgumentParser) -> None:
-    from warpsky.techniques.base import DEFAULT_TECHNIQUE, technique_names
-
     parser.add_argument("--camera", metavar="PATH", help="camera prim path (default: render settings' camera, "
                         "else the first camera)")
     parser.add_argument("--res", type=_resolution, metavar="WxH",
@@ -90,8 +124,6 @@ def _add_render_options(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    import warpsky
-
     parser = argparse.ArgumentParser(
         prog="warpsky",
         description="Render clouds, rain, ice, sky and fog from USD stages to EXR frames with NVIDIA Warp, "
@@ -105,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
         "render", help="render a stage to EXR frames", description="Render STAGE to OUT, one EXR per frame "
         "(RGBA radiance + transmittance.RGB + depth.Z, metadata in the header). Files are written to a temporary "
         "name and renamed, so no partial EXR is ever left behind.",
-        epilog=EPILOG_RENDER, formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=EPILOG_RENDER.format(settings=settings_help()), formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     render.add_argument("stage", type=Path, help="USD stage (.usda, .usdc, .usd, .usdz)")
     render.add_argument("output", help="output EXR path, with a #### placeholder for several frames")
@@ -157,8 +189,6 @@ def build_parser() -> argparse.ArgumentParser:
     sheet.add_argument("--exposure", type=float, default=None,
                        help="linear exposure (default: the frames' preview exposure, else their 99th percentile)")
 
-    from warpsky.optics.cli import add_parser as add_optics
-
     add_optics(sub)
 
     bench = sub.add_parser("bench", help="measure techniques: error against a path-traced reference vs time",
@@ -198,9 +228,6 @@ def _settings(args) -> dict[str, str]:
 
 
 def _render_options(args) -> object:
-    from warpsky.device import resolve_device
-    from warpsky.render import RenderOptions
-
     return RenderOptions(
         technique=args.technique,
         settings=_settings(args),
@@ -215,8 +242,6 @@ def _render_options(args) -> object:
 
 def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
     """Time codes to render, by the rules in ``warpsky render --help``."""
-    from warpsky.batch.frames import parse_frame_spec
-
     if spec is not None:
         times = parse_frame_spec(spec)
         pattern.require_placeholder(len(times))
@@ -231,18 +256,6 @@ def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
 
 
 def cmd_render(args) -> int:
-    from warpsky.batch.frames import FramePattern
-    from warpsky.batch.run import (
-        DaskExecutor,
-        FrameJob,
-        InProcessExecutor,
-        check_writable,
-        format_summary,
-        log_path_for,
-        run_batch,
-    )
-    from warpsky.scene.usd import StageReader
-
     pattern = FramePattern(args.output)
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
@@ -281,18 +294,13 @@ def cmd_render(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from warpsky.device import resolve_device
-    from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
-    from warpsky.plan import make_plan
-    from warpsky.scene.usd import StageReader
-
     reader = StageReader(args.stage)
     scene = reader.scene_at(args.time, camera_path=args.camera)
     device = resolve_device(args.device)
-    plan = make_plan(scene, resolution=args.res, device=device)
+    width, height = resolve_resolution(scene, args.res)
     report = run_report(
-        scene, techniques=[t.strip() for t in args.techniques.split(",") if t.strip()], width=plan.width,
-        height=plan.height, device=device, budget=args.budget, reference_spp=args.reference_spp,
+        scene, techniques=[t.strip() for t in args.techniques.split(",") if t.strip()], width=width,
+        height=height, device=device, budget=args.budget, reference_spp=args.reference_spp,
         use_cache=not args.no_cache, log=lambda text: print(text, file=sys.stderr),
     )
     print(format_table(report))
@@ -310,9 +318,6 @@ def _fmt3(values) -> str:
 
 
 def cmd_preview(args) -> int:
-    from warpsky.output.preview import stage_preview
-    from warpsky.scene.usd import StageReader
-
     scene = StageReader(args.stage).scene_at(args.frame, camera_path=args.camera)
     print(stage_preview(scene, args.output, size=(args.size[0], args.size[1] or round(args.size[0] * 0.75)),
                         level=args.level))
@@ -320,8 +325,6 @@ def cmd_preview(args) -> int:
 
 
 def cmd_contact_sheet(args) -> int:
-    from warpsky.output.preview import contact_sheet
-
     print(contact_sheet(args.pattern, args.output, columns=args.columns, tile_width=args.tile_width,
                         exposure=args.exposure))
     return 0
@@ -329,9 +332,6 @@ def cmd_contact_sheet(args) -> int:
 
 def cmd_info(args) -> int:
     import numpy as np
-
-    from warpsky.render import plan_frame
-    from warpsky.scene.usd import StageReader
 
     reader = StageReader(args.stage)
     span = reader.time_range()
@@ -379,13 +379,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    from warpsky.device import init_warp
-
     try:
         init_warp(verbose=args.verbose)
         if args.command == "optics":
-            from warpsky.optics.cli import run as run_optics
-
             return run_optics(args)
         commands = {"render": cmd_render, "info": cmd_info, "bench": cmd_bench, "preview": cmd_preview,
                     "contact-sheet": cmd_contact_sheet}

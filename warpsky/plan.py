@@ -6,14 +6,17 @@ This is where "leave out what a scene does not need" lives, and what ``warpsky i
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from warpsky.errors import UsageError
+from warpsky.optics.tables import is_cached
 from warpsky.scene.model import Scene
-from warpsky.techniques.base import DEFAULT_TECHNIQUE, parse_settings, technique_class
+from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique, parse_settings, technique_class
+from warpsky.techniques.stratiform.technique import StratiformSettings, radiosity_grid
 
 DEFAULT_WIDTH = 512
 #: ``--set`` names with this prefix go to the stratiform pass (``StratiformSettings``), not the voxel technique.
@@ -25,15 +28,32 @@ RADIOSITY_BUFFERS = 7 + 1 / 3
 
 @dataclass
 class RenderPlan:
-    """What will run for one frame, fully resolved."""
+    """What will run for one frame, fully resolved.
+
+    Attributes:
+        technique: Registered name of the voxel technique.
+        settings: Its settings with every ``auto`` value resolved for the frame's scene.
+        device: Warp device name.
+        width, height: Image size [pixels].
+        renderer: The technique, built once for the frame with ``settings``.
+        passes: What runs, in order: ``media`` (the technique), ``stratiform`` (one layer per stratiform layer,
+            merged with the media by depth), ``sky`` (air in front of and behind them, and the sun's disk).
+        features: One line per feature of the scene, what ``warpsky info`` prints.
+        layer_settings: StratiformSettings when the scene has stratiform layers, else None.
+        settings_hash: Hash of what changes the frame's pixels, set by :func:`warpsky.render.plan_frame` (the
+            batch's resume check and the EXR metadata share it); empty until then.
+    """
 
     technique: str
     settings: object
     device: str
     width: int
     height: int
+    renderer: Technique
+    passes: tuple[str, ...] = ("media",)
     features: dict[str, str] = field(default_factory=dict)
-    layer_settings: object | None = None  # StratiformSettings when the scene has layers, else None
+    layer_settings: StratiformSettings | None = None
+    settings_hash: str = ""
 
     def settings_dict(self) -> dict:
         return dataclasses.asdict(self.settings)
@@ -52,11 +72,21 @@ class RenderPlan:
         if self.layer_settings is not None:
             lines.append("            " + ", ".join(f"stratiform.{k}={'auto' if v is None else _fmt(v)}"
                                                   for k, v in dataclasses.asdict(self.layer_settings).items()))
+        lines.append(f"passes      {' -> '.join(self.passes)} -> composite")
         lines += [f"{name:<11} {state}" for name, state in self.features.items()]
         return "\n".join(lines)
 
 
+def scene_species(scene: Scene) -> tuple[str, ...]:
+    """Species present in the scene, in first-seen order (the order of their phase tables on the device)."""
+    return tuple(dict.fromkeys(m.species for m in scene.media if m.species is not None))
+
+
 def _fmt(value) -> str:
+    if isinstance(value, bool):
+        return str(int(value))
+    if isinstance(value, enum.Enum):
+        return str(value.value)
     return f"{value:.6g}" if isinstance(value, float) else str(value)
 
 
@@ -82,12 +112,33 @@ def make_plan(
     resolution: tuple[int, int | None] | None = None,
     device: str = "cpu",
 ) -> RenderPlan:
+    """Plan a frame of ``scene``: parse the settings (``stratiform.``-prefixed ones go to the stratiform pass),
+    build the technique once with its settings resolved for the scene, decide the passes and describe the
+    features."""
     cls = technique_class(technique)
     settings = dict(settings or {})
     layer_values = {k[len(LAYER_SETTING_PREFIX):]: settings.pop(k) for k in list(settings)
                     if k.startswith(LAYER_SETTING_PREFIX)}
-    instance = cls(parse_settings(cls.Settings, settings), device=device)
+    renderer = cls(parse_settings(cls.Settings, settings), device=device)
+    renderer.settings = renderer.resolved_settings(scene)
     width, height = resolve_resolution(scene, resolution)
+    layer_settings = None
+    if scene.layers:
+        if not cls.renders_layers:
+            raise UsageError(f"technique {technique} does not render stratiform layers "
+                             f"({', '.join(layer.name for layer in scene.layers)}); use slicing or single_scatter")
+        layer_settings = parse_settings(StratiformSettings, layer_values)
+    passes = tuple(name for name, runs in (
+        ("media", bool(scene.media) or not scene.layers),
+        ("stratiform", bool(scene.layers)),
+        ("sky", scene.atmosphere is not None and not cls.traces_air),
+    ) if runs)
+    return RenderPlan(technique, renderer.settings, device, width, height, renderer, passes,
+                      _features(scene, technique, layer_settings, layer_values), layer_settings)
+
+
+def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) -> dict[str, str]:
+    """What ``warpsky info`` prints about the scene, one line per feature."""
     features = {}
     if scene.sun is None:
         features["sun"] = "none (no visible DistantLight): media render black, transmittance only"
@@ -104,37 +155,19 @@ def make_plan(
         features["media"] = f"none: {technique} does not run, the layers are rendered by the stratiform pass"
     else:
         features["media"] = "none"
-    layer_settings = None
-    if scene.layers:
-        if getattr(cls, "traces_air", False):
-            raise UsageError(f"technique {technique} does not render stratiform layers "
-                             f"({', '.join(layer.name for layer in scene.layers)}); use slicing or single_scatter")
-        from warpsky.techniques.stratiform.technique import StratiformSettings
-
-        layer_settings = parse_settings(StratiformSettings, layer_values)
+    if layer_settings is not None:
         features.update(_layer_features(scene, layer_settings))
     else:
         unused = f" (unused: {', '.join(LAYER_SETTING_PREFIX + k for k in layer_values)})" if layer_values else ""
         features["layers"] = ('no layers (no prim with warpsky:kind = "stratiformLayer"): stratiform pass and '
                               "radiosity not built" + unused)
-    species = tuple(dict.fromkeys(m.species for m in scene.media if m.species is not None))
+    species = scene_species(scene)
     if species:
-        from warpsky.optics.tables import is_cached
-
         states = [f"{name} ({'cached' if is_cached(name) else 'to build'})" for name in species]
         features["optics"] = "phase tables for " + ", ".join(states)
     else:
         features["optics"] = "analytic phase only: no species fields, no tables built"
-    if scene.atmosphere is not None:
-        atm = scene.atmosphere
-        night = scene.sun is None or scene.sun.direction[1] <= 0.0
-        features["sky"] = (
-            f"{atm.name}: analytic Riley single-scattering sky, aerial perspective and sun disk; betaSeaLevel "
-            f"{np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, scale height {atm.scale_height:g} m, altitude "
-            f"{atm.altitude:g} m" + ("; sun below the horizon: night (black sky)" if night else "")
-        )
-    else:
-        features["sky"] = "off (no warpsky:atmosphere prim): black background, no sky pass"
+    features["sky"] = _sky_feature(scene)
     features["ground"] = (
         f"{scene.ground.name} at y = {scene.ground.height:g} m, albedo {np.round(scene.ground.albedo, 3).tolist()}"
         if scene.ground is not None
@@ -146,14 +179,24 @@ def make_plan(
                                f"{tex.size[0]:g} x {tex.size[1]:g} m (stratiform pass only)")
     if scene.ground is not None and scene.layers:
         features["ground"] += "; drawn by the stratiform pass (layer shadows, radiosity), voxel media cast no shadow"
-    return RenderPlan(technique, instance.resolved_settings(scene), device, width, height, features, layer_settings)
+    return features
+
+
+def _sky_feature(scene: Scene) -> str:
+    if scene.atmosphere is None:
+        return "off (no warpsky:atmosphere prim): black background, no sky pass"
+    atm = scene.atmosphere
+    night = scene.sun is None or scene.sun.direction[1] <= 0.0
+    return (
+        f"{atm.name}: analytic Riley single-scattering sky, aerial perspective and sun disk; betaSeaLevel "
+        f"{np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, scale height {atm.scale_height:g} m, altitude "
+        f"{atm.altitude:g} m" + ("; sun below the horizon: night (black sky)" if night else "")
+    )
 
 
 def _layer_features(scene: Scene, settings) -> dict[str, str]:
     """One ``layer`` line per stratiform layer and one ``radiosity`` line per layer: what the stratiform pass
     builds (map, optics, advection; the radiosity buffers and their size, or why there are none)."""
-    from warpsky.techniques.stratiform.technique import radiosity_grid
-
     features = {}
     count = len(scene.layers)
     for number, layer in enumerate(scene.layers, start=1):

@@ -1,10 +1,10 @@
-"""Render one frame end to end: stage -> scene -> plan -> technique -> composite -> EXR (+ PNG preview)."""
+"""Render one frame end to end: stage -> scene -> plan -> passes -> composite -> EXR (+ PNG preview)."""
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
+import os
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,9 +13,13 @@ import numpy as np
 
 import warpsky
 from warpsky.composite import composite, merge_by_depth
+from warpsky.output.exr import write_exr
+from warpsky.output.png import write_png
+from warpsky.passes import StratiformPass, media_scene
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
-from warpsky.techniques.base import DEFAULT_TECHNIQUE, technique_class
+from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
+from warpsky.techniques.sky.technique import SkyPass
 
 #: Channels every warpsky EXR holds.
 EXR_CHANNELS = ("R", "G", "B", "A", "transmittance.R", "transmittance.G", "transmittance.B", "depth.Z")
@@ -48,12 +52,20 @@ class RenderOptions:
 
 @dataclass
 class FrameResult:
+    """What rendering one frame produced.
+
+    Attributes:
+        timings: Seconds per step of the frame: ``plan`` (stage read, plan, settings hash), ``passes`` (every
+            pass's render), ``composite``, ``write`` (EXR and PNG).
+    """
+
     exr: Path
     png: Path | None
     seconds: float
     render_seconds: float
     time_code: float | None
     plan: RenderPlan
+    timings: dict[str, float] = field(default_factory=dict)
 
 
 def preview_exposure(scene: Scene, stops: float = 0.0) -> float:
@@ -64,6 +76,8 @@ def preview_exposure(scene: Scene, stops: float = 0.0) -> float:
 
 
 def plan_frame(reader, time_code, options: RenderOptions) -> tuple[Scene, RenderPlan]:
+    """Read the stage at ``time_code`` once and plan the frame: technique built, settings resolved, passes chosen,
+    settings hash computed (``plan.settings_hash``)."""
     scene = reader.scene_at(time_code, camera_path=options.camera)
     plan = make_plan(
         scene,
@@ -72,6 +86,7 @@ def plan_frame(reader, time_code, options: RenderOptions) -> tuple[Scene, Render
         resolution=options.resolution,
         device=options.device,
     )
+    plan.settings_hash = settings_hash(plan, options, scene)
     return scene, plan
 
 
@@ -81,8 +96,6 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
     time — so a batch re-renders frames whose data were rewritten (used to resume batches)."""
     inputs = []
     if scene is not None:
-        import os
-
         for path in [scene.source, *(m.source for m in scene.media)]:
             try:
                 info = os.stat(path)
@@ -97,88 +110,66 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
     return hashlib.sha256(key.encode()).hexdigest()[:16]
 
 
-def render_layers(technique, scene, plan):
-    """(the technique's layer, all layers front to back): with an atmosphere, the media see sunlight reddened by
-    the air above them, and the sky pass adds air in front of and behind them plus the sun's disk. Stratiform
-    layers are rendered by :func:`render_with_layers`."""
-    if scene.layers:
-        return render_with_layers(technique, scene, plan)
-    if scene.atmosphere is None or getattr(technique, "traces_air", False):
-        layer = technique.render(scene, plan.width, plan.height)  # the path tracer carries the air itself
-        return layer, [layer]
-    from warpsky.techniques.sky.technique import SkyPass, attenuated_sun
-
-    layer = technique.render(attenuated_sun(scene), plan.width, plan.height)
-    front, back = SkyPass(device=plan.device).render(scene, plan.width, plan.height, media_depth=layer.depth)
-    return layer, [front, layer, back]
-
-
-def _sun_at_altitude(scene: Scene, altitude: float) -> Scene:
-    """``scene`` with its sun reddened by the air above ``altitude`` [m of the stage's y] (Eq. 12)."""
-    if scene.atmosphere is None or scene.sun is None:
-        return scene
-    from warpsky.techniques.sky.analytic import sun_transmittance
-
-    atm = scene.atmosphere
-    t = sun_transmittance(atm.beta_sea_level, atm.gamma, altitude + atm.altitude, scene.sun.direction[1])
-    return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=scene.sun.irradiance * t))
-
-
-def render_with_layers(technique, scene, plan):
-    """(merged layer, all layers front to back) for a scene with stratiform layers.
-
-    The voxel ``technique`` runs only when there are voxel media, without the ground; each stratiform layer is its
-    own Layer (Bouthors slab + radiosity when a ground lies below), lit by the sun reddened down to its mid
-    altitude; the lowest layer draws the ground (textured, in the layer's shadow, lit by the radiosity). The media
-    and the layers are merged per pixel by depth (:func:`~warpsky.composite.merge_by_depth`), then the sky pass
-    splits the air at the merged depth. Not modelled: shadows between voxel media and layers, and of voxel media on
-    the ground.
-    """
-    from warpsky.techniques.stratiform.technique import Stratiform
-
+def render_layers(technique: Technique, scene: Scene, plan: RenderPlan) -> tuple[Layer, list[Layer]]:
+    """Run the plan's passes: (the media's layer, merged by depth with the stratiform layers when the scene has
+    any; all layers front to back for :func:`~warpsky.composite.composite`). ``technique`` is the plan's
+    ``renderer`` or another technique with the same capabilities."""
     width, height = plan.width, plan.height
     parts = []
-    if scene.media:
-        media_scene = dataclasses.replace(scene, ground=None, layers=())
-        if scene.ground is not None and scene.sun is not None and scene.sun.direction[1] <= 0.0:
-            media_scene = dataclasses.replace(media_scene, sun=None)  # the ground hides a sun below the horizon
-        if scene.atmosphere is not None:
-            from warpsky.techniques.sky.technique import attenuated_sun
-
-            media_scene = attenuated_sun(media_scene)
-        parts.append(technique.render(media_scene, width, height))
-    stratiform = Stratiform(getattr(plan, "layer_settings", None), device=plan.device)
-    lowest = min(range(len(scene.layers)), key=lambda i: scene.layers[i].base_altitude)
-    for index, layer in enumerate(scene.layers):
-        lit = _sun_at_altitude(scene, layer.base_altitude + 0.5 * float(layer.thickness.max()))
-        part = stratiform.render(lit, width, height, layer=layer, draw_ground=index == lowest)
-        part.stats["layer"] = layer.name
-        parts.append(part)
-    merged = merge_by_depth(parts, far=scene.camera.far)
-    if scene.atmosphere is None:
-        return merged, [merged]
-    from warpsky.techniques.sky.technique import SkyPass
-
-    front, back = SkyPass(device=plan.device).render(scene, width, height, media_depth=merged.depth)
-    return merged, [front, merged, back]
+    if "media" in plan.passes:
+        parts.append(technique.render(media_scene(scene, plan.passes), width, height))
+    if "stratiform" in plan.passes:
+        parts += StratiformPass(plan.layer_settings, device=plan.device).render(scene, width, height)
+        main = merge_by_depth(parts, far=scene.camera.far)
+    else:
+        main = parts[0]
+    if "sky" not in plan.passes:
+        return main, [main]
+    front, back = SkyPass(device=plan.device).render(scene, width, height, media_depth=main.depth)
+    return main, [front, main, back]
 
 
 def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> FrameResult:
     """Render the stage at ``time_code`` (None: earliest) and write ``out_path`` atomically."""
-    from warpsky.output.exr import write_exr
-
     started = _time.perf_counter()
     scene, plan = plan_frame(reader, time_code, options)
-    technique = technique_class(plan.technique)(plan.settings, device=plan.device)
-    layer, layers = render_layers(technique, scene, plan)
+    timings = {"plan": _time.perf_counter() - started}
+    return write_frame(scene, plan, out_path, options, stage=reader.path, time_code=time_code, timings=timings)
+
+
+def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderOptions, *, stage, time_code,
+                timings: dict[str, float] | None = None) -> FrameResult:
+    """Render a planned frame (``plan_frame``'s scene and plan, of the stage at ``stage`` and ``time_code``) and
+    write ``out_path`` atomically, plus the PNG preview when asked."""
+    timings = dict(timings or {})
+    started = _time.perf_counter()
+    layer, layers = render_layers(plan.renderer, scene, plan)
+    timings["passes"] = _time.perf_counter() - started
     frame = composite(layers, far=scene.camera.far)
+    timings["composite"] = _time.perf_counter() - started - timings["passes"]
+    exr = write_exr(
+        out_path, frame.rgba, transmittance=frame.transmittance, depth=frame.depth, aovs=frame.aovs,
+        metadata=_metadata(scene, plan, options, layer, stage=stage, time_code=time_code),
+        half=options.half,
+    )
+    png = None
+    if options.png:
+        png = write_png(Path(out_path).with_suffix(".png"), frame.rgba[..., :3],
+                        exposure=preview_exposure(scene, options.exposure))
+    timings["write"] = _time.perf_counter() - started - timings["passes"] - timings["composite"]
+    return FrameResult(Path(exr), png, timings.get("plan", 0.0) + _time.perf_counter() - started,
+                       float(layer.stats.get("seconds", 0.0)), time_code, plan, timings)
+
+
+def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Layer, *, stage, time_code) -> dict:
+    """The EXR header of a frame."""
     metadata = {
-        "stage": str(Path(reader.path).resolve()),
+        "stage": str(Path(stage).resolve()),
         "camera": scene.camera.name,
         "timeCode": "earliest" if time_code is None else float(time_code),
         "technique": plan.technique,
         "settings": plan.settings_json(),
-        "settingsHash": settings_hash(plan, options, scene),
+        "settingsHash": plan.settings_hash or settings_hash(plan, options, scene),
         "device": plan.device,
         "version": warpsky.__version__,
         "renderSeconds": float(layer.stats.get("seconds", 0.0)),
@@ -191,17 +182,4 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
         keys = ("layer", "radiosity", "radiosity_iterations", "radiosity_residual", "radiosity_converged", "seconds")
         metadata["stratiform"] = json.dumps([{k: part[k] for k in keys if k in part}
                                              for part in layer.stats["parts"] if "layer" in part])
-    exr = write_exr(
-        out_path, frame.rgba, transmittance=frame.transmittance, depth=frame.depth, aovs=frame.aovs,
-        metadata=metadata,
-        half=options.half,
-    )
-    png = None
-    if options.png:
-        from warpsky.output.png import write_png
-
-        png = write_png(Path(out_path).with_suffix(".png"), frame.rgba[..., :3],
-                        exposure=preview_exposure(scene, options.exposure))
-    return FrameResult(
-        Path(exr), png, _time.perf_counter() - started, float(layer.stats.get("seconds", 0.0)), time_code, plan
-    )
+    return metadata

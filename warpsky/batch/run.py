@@ -1,12 +1,12 @@
 """Frame sequences on one machine or a Dask cluster: resume, retries, a per-shot JSON log and a summary.
 
 A batch is a list of :class:`FrameJob`. Workers (this process, a Dask ``LocalCluster`` or an existing Dask
-scheduler) run :func:`run_frame` on each: open the stage themselves, plan the frame, skip it when its EXR already
-exists and validates (opens, has every channel, carries the same settings hash, which covers the settings and the
-stage's and field files' size and modification time), else render and write it
-atomically. They return a small record (path, seconds, device, hash, error), never pixels. The client retries failed
-frames whose error was not the input's (``retries`` times; a missing file fails the same way again), appends one
-run to the shot's log after every frame (so a killed batch keeps what it finished), and prints a summary table.
+scheduler) run :func:`run_frame` on each: open the stage themselves, plan the frame once, skip it when its EXR
+already exists and validates (opens, has every channel, carries the same settings hash, which covers the settings
+and the stage's and field files' size and modification time), else render and write it atomically. They return a
+small record (path, seconds, device, hash, error), never pixels. The client retries failed frames whose error was
+not the input's (``retries`` times; a missing file fails the same way again), appends one run to the shot's log
+after every frame (so a killed batch keeps what it finished), and prints a summary table.
 
 Test hook: the environment variable ``WARPSKY_FAIL_FRAMES`` (comma-separated time codes, each optionally ``@N`` for
 "only on attempt N") makes those frames raise before rendering, to exercise failure, retry and resume; it is read
@@ -24,8 +24,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from warpsky.batch.frames import PLACEHOLDER
+from warpsky.device import init_warp
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.files import atomic_write
+from warpsky.output.exr import validate_exr
+from warpsky.render import EXR_CHANNELS, plan_frame, write_frame
+from warpsky.scene.usd import StageReader
 
 FAIL_FRAMES_ENV = "WARPSKY_FAIL_FRAMES"
 
@@ -64,8 +69,6 @@ _READERS: dict[tuple[str, float], object] = {}
 
 def _reader(stage: str):
     """The stage opened once per worker process (reopened when the file changes)."""
-    from warpsky.scene.usd import StageReader
-
     key = (str(Path(stage).resolve()), Path(stage).stat().st_mtime if Path(stage).exists() else 0.0)
     if key not in _READERS:
         _READERS.clear()
@@ -85,11 +88,10 @@ def _hook_fails(time_code: float | None, attempt: int) -> bool:
 
 
 def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
-    """Render (or skip) one frame; every error becomes a failed record naming what went wrong."""
-    from warpsky.device import init_warp
-    from warpsky.output.exr import validate_exr
-    from warpsky.render import EXR_CHANNELS, plan_frame, render_frame, settings_hash
+    """Render (or skip) one frame; every error becomes a failed record naming what went wrong.
 
+    The stage is read and the frame planned once: the plan's settings hash decides the skip and goes into the
+    EXR's metadata."""
     init_warp()
     started = time.perf_counter()
     record = FrameRecord(job.time_code, job.out, "failed", device=job.options.device,
@@ -99,15 +101,15 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
         t0 = time.perf_counter()
         scene, plan = plan_frame(reader, job.time_code, job.options)
         record.timings["stage_load"] = time.perf_counter() - t0
-        record.settings_hash = settings_hash(plan, job.options, scene)
+        record.settings_hash = plan.settings_hash
         if not job.overwrite and validate_exr(job.out, required_channels=EXR_CHANNELS,
                                               metadata_expect={"settingsHash": record.settings_hash}):
             record.status = "skipped"
             return record
         if _hook_fails(job.time_code, attempt):
             raise RuntimeError(f"{FAIL_FRAMES_ENV} asks frame {job.time_code:g} to fail (test hook)")
-        result = render_frame(reader, job.time_code, Path(job.out), job.options)
-        record.timings.update(getattr(result, "timings", {}) or {})
+        result = write_frame(scene, plan, Path(job.out), job.options, stage=reader.path, time_code=job.time_code)
+        record.timings.update(result.timings)
         record.timings["technique"] = result.render_seconds
         record.png = str(result.png) if result.png is not None else None
         record.status = "done"
@@ -200,8 +202,6 @@ class BatchResult:
 
 def log_path_for(pattern: str) -> Path:
     """``out/storm.####.exr`` -> ``out/storm.log.json``: one log per shot, next to its frames."""
-    from warpsky.batch.frames import PLACEHOLDER
-
     path = Path(pattern)
     stem = PLACEHOLDER.sub("", path.name[: -len(".exr")]).rstrip("._-") or "frames"
     return path.with_name(f"{stem}.log.json")

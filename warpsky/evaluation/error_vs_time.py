@@ -32,8 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
+import warpsky
+from warpsky.composite import composite
 from warpsky.errors import UsageError
 from warpsky.files import atomic_write, cache_dir
+from warpsky.plan import RenderPlan, make_plan
+from warpsky.render import render_layers
 
 #: Techniques the report knows how to walk, with their quality ladders.
 LADDERS = {
@@ -66,37 +70,36 @@ def _reference_key(scene, width, height, device, spp, seed) -> str:
     """Hash of everything the reference's pixels depend on: the scene as read (media, camera, sun, ground)."""
     import pickle
 
-    import warpsky
-
     digest = hashlib.sha256(pickle.dumps(scene, protocol=4))
     digest.update(json.dumps([width, height, "cuda" in str(device), spp, seed, warpsky.__version__]).encode())
     return digest.hexdigest()[:20]
 
 
-def render_frame_radiance(technique, scene, width: int, height: int, device: str):
-    """(frame radiance (H, W, 3), transmittance, frame aovs, technique layer): the technique's layer composited with
-    the sky pass when the scene has an atmosphere, so techniques compare on what a frame shows."""
-    from types import SimpleNamespace
+def frame_plan(scene, technique: str, values: dict, width: int, height: int, device: str) -> RenderPlan:
+    """The plan of one measured frame: ``technique`` with the settings ``values`` (numbers), resolved for
+    ``scene``."""
+    return make_plan(scene, technique=technique, settings={k: repr(v) for k, v in values.items()},
+                     resolution=(width, height), device=device)
 
-    from warpsky.composite import composite
-    from warpsky.render import render_layers
 
-    layer, layers = render_layers(technique, scene, SimpleNamespace(width=width, height=height, device=device))
+def render_frame_radiance(plan: RenderPlan, scene):
+    """(frame radiance (H, W, 3), transmittance, frame aovs, technique layer): the plan's passes composited (the
+    technique's layer with the sky pass when the scene has an atmosphere), so techniques compare on what a frame
+    shows."""
+    layer, layers = render_layers(plan.renderer, scene, plan)
     frame = composite(layers, far=scene.camera.far)
     return frame.rgba[..., :3], frame.transmittance, frame.aovs, layer
 
 
 def reference_image(scene, width, height, device, *, spp: int, seed: int, use_cache: bool = True):
     """(radiance, transmittance, variance, seconds, cached) of the path-traced reference frame."""
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
-
     key = _reference_key(scene, width, height, device, spp, seed)
     path = cache_dir() / "reference" / f"{key}.npz"
     if use_cache and path.is_file():
         with np.load(path) as data:
             return data["radiance"], data["transmittance"], data["variance"], float(data["seconds"]), True
-    technique = PathTracer(PathTracerSettings(spp=spp, seed=seed), device=device)
-    radiance, transmittance, aovs, layer = render_frame_radiance(technique, scene, width, height, device)
+    plan = frame_plan(scene, "path_tracer", {"spp": spp, "seed": seed}, width, height, device)
+    radiance, transmittance, aovs, layer = render_frame_radiance(plan, scene)
     arrays = {"radiance": radiance, "transmittance": transmittance, "variance": aovs["variance"],
               "seconds": np.float64(layer.stats["seconds"])}
     atomic_write(path, lambda tmp: np.savez(tmp, **arrays))
@@ -140,8 +143,6 @@ def run_report(
 ) -> Report:
     """Render the reference and every technique's ladder; stop a ladder once its cumulative time passes
     ``budget`` / len(techniques) seconds."""
-    from warpsky.techniques.base import parse_settings, technique_class
-
     unknown = [t for t in techniques if t not in LADDERS]
     if unknown:
         raise UsageError(f"error-vs-time cannot measure {', '.join(unknown)} (yet); available: "
@@ -160,18 +161,16 @@ def run_report(
     rows = []
     share = budget / max(len(techniques), 1)
     for name in techniques:
-        cls = technique_class(name)
         spent = 0.0
         warmed = False
         for rung in LADDERS[name]:
             values = {k: (v * voxel if k in VOXEL_SETTINGS else v) for k, v in rung.items()}
-            settings = parse_settings(cls.Settings, {k: str(v) for k, v in values.items()})
-            technique = cls(settings, device=device)
+            plan = frame_plan(scene, name, values, width, height, device)
             if not warmed:
-                technique.render(scene, min(width, 8), min(height, 8))  # compile / load: not timed
+                plan.renderer.render(scene, min(width, 8), min(height, 8))  # compile / load: not timed
                 warmed = True
             started = time.perf_counter()
-            radiance, _, _, _ = render_frame_radiance(technique, scene, width, height, device)
+            radiance, _, _, _ = render_frame_radiance(plan, scene)
             seconds = time.perf_counter() - started
             spent += seconds
             row = Row(name, _setting_label(rung), seconds, **error_metrics(radiance, radiance_ref, covered))

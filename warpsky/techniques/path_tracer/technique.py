@@ -11,42 +11,30 @@ import numpy as np
 
 from warpsky.errors import UsageError
 from warpsky.scene.model import Scene
-from warpsky.techniques.base import Layer
+from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 
 
+@documented
 @dataclass(frozen=True)
-class PathTracerSettings:
-    """Settings of the path tracer.
-
-    ================= ===== ======= ========== =======================================================================
-    name              unit  default range      meaning
-    ================= ===== ======= ========== =======================================================================
-    spp               --    64      >= 1       samples (paths) per pixel
-    seed              --    0       >= 0       random seed; a seed gives the same image on the same device
-    max_bounces       --    1024    >= 1       hard cap on scattering events per path; capped paths are counted in
-                                               the stats (``capped_paths``): their missing light is a bias
-    majorant_block    voxel 8       >= 1       edge of the coarse majorant cells; a huge value gives one global
-                                               majorant per medium (slower, same expectation)
-    environment       --    0       >= 0       uniform radiance arriving from every direction (grey), for furnace
-                                               tests and overcast light; 0 = none
-    samples_per_pass  --    auto    >= 1       paths per pixel per kernel launch (auto: 8 on the CPU, 64 on GPUs)
-    pixel_jitter      --    0       0 or 1     0: every path through the pixel centre, like the other techniques
-                                               (the reference compares pixel for pixel); 1: box-filtered pixels
-    ================= ===== ======= ========== =======================================================================
-    """
+class PathTracerSettings(TechniqueSettings):
+    """Settings of the path tracer."""
 
     technique = "path_tracer"
-    spp: float = 64
-    seed: float = 0
-    max_bounces: float = 1024
-    majorant_block: float = 8
-    environment: float = 0.0
-    samples_per_pass: float | None = None
-    pixel_jitter: float = 0
+    spp: int = setting(64, range=">= 1", help="samples (paths) per pixel")
+    seed: int = setting(0, range=">= 0", help="random seed; a seed gives the same image on the same device")
+    max_bounces: int = setting(1024, range=">= 1", help="hard cap on scattering events per path; capped paths are "
+                               "counted in the stats (capped_paths): their missing light is a bias")
+    majorant_block: int = setting(8, unit="voxel", range=">= 1", help="edge of the coarse majorant cells; a huge "
+                                  "value gives one global majorant per medium (slower, same expectation)")
+    environment: float = setting(0.0, range=">= 0", help="uniform radiance arriving from every direction (grey), "
+                                 "for furnace tests and overcast light; 0 = none")
+    samples_per_pass: int | None = setting(None, range=">= 1", help="paths per pixel per kernel launch",
+                                           auto="8 on the CPU, 64 on GPUs (at most spp)")
+    pixel_jitter: bool = setting(False, help="0: every path through the pixel centre, like the other techniques "
+                                 "(the reference compares pixel for pixel); 1: box-filtered pixels")
 
     def __post_init__(self):
-        if self.pixel_jitter not in (0, 1):
-            raise UsageError(f"setting pixel_jitter must be 0 or 1, got {self.pixel_jitter}")
+        self.normalise()
         for name in ("spp", "max_bounces", "majorant_block"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 1 and float(value).is_integer()):
@@ -96,14 +84,20 @@ class PathTracer:
     Settings = PathTracerSettings
     #: The atmosphere is traced as a medium: no separate sky pass.
     traces_air = True
+    #: Stratiform layers are not traced.
+    renders_layers = False
 
     def __init__(self, settings: PathTracerSettings | None = None, *, device: str = "cpu"):
         self.settings = settings or PathTracerSettings()
         self.device = device
 
     def resolved_settings(self, scene: Scene) -> PathTracerSettings:
-        per_pass = self.settings.samples_per_pass or (8 if str(self.device).startswith("cpu") else 64)
-        return dataclasses.replace(self.settings, samples_per_pass=float(min(per_pass, self.settings.spp)))
+        """The settings with ``samples_per_pass = auto`` filled in for the device, and at most ``spp``."""
+        given = self.settings.samples_per_pass
+        if given is not None and given <= self.settings.spp:
+            return self.settings
+        per_pass = given or (8 if str(self.device).startswith("cpu") else 64)
+        return dataclasses.replace(self.settings, samples_per_pass=min(per_pass, self.settings.spp))
 
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> Layer:
         import warp as wp
@@ -112,7 +106,7 @@ class PathTracer:
         from warpsky.media.voxel import DETAIL_Z_MAX, VoxelMediaBuffers
         from warpsky.optics.kernels import DevicePhaseTables
         from warpsky.optics.tables import build_tables
-        from warpsky.techniques.common import pinhole_camera
+        from warpsky.techniques.common import pinhole_camera, sun_disk
         from warpsky.techniques.path_tracer.kernels import MAJORANT_MARGIN, Air, MajorantGrid, path_trace_kernel
         from warpsky.techniques.single_scatter.technique import scene_species
 
@@ -160,9 +154,7 @@ class PathTracer:
                 air.gamma = float(atmosphere.gamma)
                 air.camera_altitude = float(camera.position[1] + atmosphere.altitude)
                 air.band = float(0.1 * atmosphere.scale_height)
-            radius = 0.5 * sun.angular_diameter if sun is not None else 0.0
-            sun_cos_radius = math.cos(radius) if radius > 0.0 else 2.0
-            sun_solid_angle = 2.0 * math.pi * (1.0 - math.cos(radius)) if radius > 0.0 else 1.0
+            sun_cos_radius, sun_solid_angle = sun_disk(sun.angular_diameter if sun is not None else 0.0)
             spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
             done = 0
             while done < spp:

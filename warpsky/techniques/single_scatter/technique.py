@@ -10,30 +10,26 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpsky.errors import UsageError
+from warpsky.plan import scene_species  # noqa: F401 - the techniques' render bodies import it from here
 from warpsky.scene.model import Scene
-from warpsky.techniques.base import Layer
+from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 
 
+@documented
 @dataclass(frozen=True)
-class SingleScatterSettings:
-    """Settings of the single-scattering ray march.
-
-    ================== ==== ================================= ========= =============================================
-    name               unit default                           range     meaning
-    ================== ==== ================================= ========= =============================================
-    step_length        m    auto: 0.5 x smallest voxel edge   > 0       eye-ray step
-    shadow_step_length m    auto: 1 x smallest voxel edge     > 0       shadow-ray step toward the sun
-    min_transmittance  --   1e-4                              [0, 1)    stop the eye march once luminance
-                                                                        transmittance falls below this
-    ================== ==== ================================= ========= =============================================
-    """
+class SingleScatterSettings(TechniqueSettings):
+    """Settings of the single-scattering ray march."""
 
     technique = "single_scatter"
-    step_length: float | None = None
-    shadow_step_length: float | None = None
-    min_transmittance: float = 1.0e-4
+    step_length: float | None = setting(None, unit="m", range="> 0", help="eye-ray step",
+                                        auto="0.5 x the smallest voxel edge")
+    shadow_step_length: float | None = setting(None, unit="m", range="> 0", help="shadow-ray step toward the sun",
+                                               auto="1 x the smallest voxel edge")
+    min_transmittance: float = setting(1.0e-4, range="[0, 1)", help="stop the eye march once the luminance "
+                                       "transmittance falls below this (the view is this opaque)")
 
     def __post_init__(self):
+        self.normalise()
         for name in ("step_length", "shadow_step_length"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0.0):
@@ -50,11 +46,6 @@ class SingleScatterSettings:
         )
 
 
-def scene_species(scene: Scene) -> tuple[str, ...]:
-    """Species present in the scene, in first-seen order (the order of their phase tables on the device)."""
-    return tuple(dict.fromkeys(m.species for m in scene.media if m.species is not None))
-
-
 class SingleScatter:
     """Single scattering of sunlight with exact per-step transmittance (Riley 2004, low-albedo mode, Fig. 13).
 
@@ -67,12 +58,17 @@ class SingleScatter:
 
     name = "single_scatter"
     Settings = SingleScatterSettings
+    traces_air = False
+    renders_layers = True
 
     def __init__(self, settings: SingleScatterSettings | None = None, *, device: str = "cpu"):
         self.settings = settings or SingleScatterSettings()
         self.device = device
 
     def resolved_settings(self, scene: Scene) -> SingleScatterSettings:
+        """The settings with the automatic step lengths filled in from the scene's smallest voxel edge."""
+        if self.settings.step_length is not None and self.settings.shadow_step_length is not None:
+            return self.settings
         sizes = [float(m.voxel_size.min()) for m in scene.media]
         return self.settings.resolved(min(sizes) if sizes else 1.0)
 

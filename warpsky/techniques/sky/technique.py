@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
@@ -44,7 +43,8 @@ def attenuated_sun(scene: Scene) -> Scene:
 
 
 class SkyPass:
-    """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk)."""
+    """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk): the
+    ``sky`` pass of a frame, run when the scene has an atmosphere and the technique does not trace the air."""
 
     def __init__(self, *, device: str = "cpu"):
         self.device = device
@@ -53,7 +53,7 @@ class SkyPass:
         """(front Layer, back Layer); composite as [front, media, back]."""
         import warp as wp
 
-        from warpsky.techniques.common import pinhole_camera
+        from warpsky.techniques.common import pinhole_camera, sun_disk
         from warpsky.techniques.sky.kernels import sky_kernel
 
         atm = scene.atmosphere
@@ -63,9 +63,7 @@ class SkyPass:
         sun = scene.sun
         sun_dir = sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])
         irradiance = sun.irradiance if sun is not None else np.zeros(3)
-        radius = 0.5 * (sun.angular_diameter if sun is not None else 0.0)
-        solid_angle = 2.0 * math.pi * (1.0 - math.cos(radius)) if radius > 0 else 1.0
-        cos_radius = math.cos(radius) if radius > 0 else 2.0  # a zero-size sun has no disk
+        cos_radius, solid_angle = sun_disk(sun.angular_diameter if sun is not None else 0.0)  # (2, 1): no disk
         ground = scene.ground
         with wp.ScopedDevice(self.device):
             shape = (height, width)

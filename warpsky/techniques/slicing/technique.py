@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 import time
 from dataclasses import dataclass
@@ -11,30 +12,21 @@ import numpy as np
 
 from warpsky.errors import UsageError
 from warpsky.scene.model import PhaseKind, Scene
-from warpsky.techniques.base import Layer
+from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 
 
+class LightEquation(enum.IntEnum):
+    """How the light buffer is updated from one slice to the next (the ``light_equation`` setting)."""
+
+    CONTINUOUS = 0
+    EQ24 = 24
+    EQ25 = 25
+
+
+@documented
 @dataclass(frozen=True)
-class SlicingSettings:
+class SlicingSettings(TechniqueSettings):
     """Settings of half-angle slicing.
-
-    ================= ===== ======= ========== ======================================================================
-    name              unit  default range      meaning
-    ================= ===== ======= ========== ======================================================================
-    slice_count       --    auto    >= 1       planes through the media's extent along the half-angle axis; auto:
-                                               one per voxel edge of the finest field across that extent,
-                                               clamped to 32..512 (thin sheets seen edge-on band when the
-                                               spacing exceeds their thickness)
-    light_resolution  texel 256     >= 2       edge of the square light buffer
-    xi                1/sr  0.1     >= 0       Riley's back-scatter term added to the phase in the eye gather, for
-                                               media without their own ``warpsky:slicing:xi``
-    low_albedo        --    0       0 or 1     1: Riley's low-albedo comparison mode (Fig. 13)
-    orders            --    60      >= 1       highest multiple-scattering order tabulated (Ams_0..N)
-    light_equation    --    0       0, 24, 25  light-buffer update: 0 = the continuous limit of Riley's model
-                                               (dI/dtau = -(1 - alpha F_{n+1}) I, solved per step: second order in
-                                               the slice spacing); 24 = Riley Eq. 24 (first order); 25 = his GPU
-                                               shortcut Eq. 25 (tends to no attenuation as slices are added)
-    ================= ===== ======= ========== ======================================================================
 
     Defaults come from ``warpsky bench error-vs-time usd_scenes/cumulus.usda`` (128x85, path tracer 4096 spp): with
     light_equation 0 the relative RMSE is 0.519 / 0.521 / 0.521 at 32 / 128 / 512 slices (converged by 32; Eq. 24
@@ -46,16 +38,22 @@ class SlicingSettings:
     """
 
     technique = "slicing"
-    slice_count: float | None = None  # auto
-    light_resolution: float = 256
-    xi: float = 0.1
-    low_albedo: float = 0
-    orders: float = 60
-    light_equation: float = 0
+    slice_count: int | None = setting(None, range=">= 1", help="planes through the media's extent along the "
+                                      "half-angle axis (thin sheets seen edge-on band when the spacing exceeds "
+                                      "their thickness)", auto="one per voxel edge of the finest field across that "
+                                      "extent, clamped to 32..512")
+    light_resolution: int = setting(256, unit="texel", range=">= 2", help="edge of the square light buffer")
+    xi: float = setting(0.1, unit="1/sr", range=">= 0", help="Riley's back-scatter term added to the phase in the "
+                        "eye gather, for media without their own warpsky:slicing:xi")
+    low_albedo: bool = setting(False, help="1: Riley's low-albedo comparison mode (Fig. 13)")
+    orders: int = setting(60, range=">= 1", help="highest multiple-scattering order tabulated (Ams_0..N)")
+    light_equation: LightEquation = setting(
+        LightEquation.CONTINUOUS, help="light-buffer update: 0 = the continuous limit of Riley's model, dI/dtau = "
+        "-(1 - alpha F_{n+1}) I solved per step (second order in the slice spacing); 24 = Riley Eq. 24 (first "
+        "order); 25 = his GPU shortcut Eq. 25 (tends to no attenuation as slices are added)")
 
     def __post_init__(self):
-        if self.light_equation not in (0, 24, 25):
-            raise UsageError(f"setting light_equation must be 0, 24 or 25, got {self.light_equation}")
+        self.normalise()
         for name, low in (("slice_count", 1), ("light_resolution", 2), ("orders", 1)):
             value = getattr(self, name)
             if value is None and name == "slice_count":
@@ -64,8 +62,6 @@ class SlicingSettings:
                 raise UsageError(f"setting {name} must be a whole number >= {low}, got {value}")
         if not (math.isfinite(self.xi) and self.xi >= 0.0):
             raise UsageError(f"setting xi must be a finite phase value >= 0 [1/sr], got {self.xi}")
-        if self.low_albedo not in (0, 1):
-            raise UsageError(f"setting low_albedo must be 0 or 1, got {self.low_albedo}")
 
 
 def analytic_ams(kind: PhaseKind, g: float, orders: int) -> tuple[np.ndarray, np.ndarray]:
@@ -111,6 +107,8 @@ class Slicing:
 
     name = "slicing"
     Settings = SlicingSettings
+    traces_air = False
+    renders_layers = True
 
     def __init__(self, settings: SlicingSettings | None = None, *, device: str = "cpu"):
         self.settings = settings or SlicingSettings()

@@ -12,37 +12,31 @@ import numpy as np
 from warpsky.errors import UsageError
 from warpsky.media.stratiform import GroundTexture, StratiformLayer, at_time
 from warpsky.scene.model import Scene
-from warpsky.techniques.base import Layer
+from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 
 
+@documented
 @dataclass(frozen=True)
-class StratiformSettings:
+class StratiformSettings(TechniqueSettings):
     """Settings of the stratiform pass (``--set stratiform.NAME=VALUE``).
-
-    ================== ===== ======= ==================================================================
-    name               unit  default meaning
-    ================== ===== ======= ==================================================================
-    radiosity          --    auto    1: iterate ground <-> cloud exchanges; 0: sky and cloud light reach
-                                     the ground once, nothing comes back to the cloud base; auto: each
-                                     layer's ``bool warpsky:stratiform:radiosity`` (default true)
-    radiosity_detail   --    0       buffer texels per h = 2^detail (h: ground to cloud base), 0..4
-    tolerance          --    1e-4    stop when an iteration's exchanged energy ratio is below this
-    max_iterations     --    64      iteration cap (warns with the residual)
-    ================== ===== ======= ==================================================================
 
     The ``stratiform.`` prefix sends a ``--set`` to this pass instead of the voxel technique, e.g.
     ``warpsky render usd_scenes/stratocumulus.usda out/sc.####.exr --set stratiform.radiosity=0``.
     """
 
     technique = "stratiform"
-    radiosity: float | None = None
-    radiosity_detail: float = 0
-    tolerance: float = 1e-4
-    max_iterations: float = 64
+    prefix = "stratiform."
+    radiosity: bool | None = setting(None, help="1: iterate ground <-> cloud exchanges; 0: sky and cloud light "
+                                     "reach the ground once, nothing comes back to the cloud base",
+                                     auto="each layer's bool warpsky:stratiform:radiosity (default true)")
+    radiosity_detail: int = setting(0, range="0..4", help="buffer texels per h = 2^detail (h: ground to cloud "
+                                    "base)")
+    tolerance: float = setting(1e-4, range="> 0", help="stop when an iteration's exchanged energy ratio is below "
+                               "this")
+    max_iterations: int = setting(64, range=">= 1", help="iteration cap (warns with the residual)")
 
     def __post_init__(self):
-        if self.radiosity not in (None, 0, 1):
-            raise UsageError(f"setting stratiform.radiosity must be 0, 1 or auto, got {self.radiosity}")
+        self.normalise()
         if self.radiosity_detail not in (0, 1, 2, 3, 4):
             raise UsageError(f"setting stratiform.radiosity_detail must be a whole number in 0..4, "
                              f"got {self.radiosity_detail}")
