@@ -120,6 +120,12 @@ def one_minus_exp_over_x(x: float) -> float:
 
 
 @wp.func
+def one_minus_exp(tau: float) -> float:
+    """1 - e^{-tau} for tau >= 0 without cancellation for tiny tau (float32 would lose it below ~1e-6)."""
+    return tau * one_minus_exp_over_x(tau)
+
+
+@wp.func
 def exp_lerp_mean(tau_a: float, tau_b: float) -> float:
     """Mean of exp(-tau) over a step along which tau goes linearly from tau_a to tau_b (both >= 0).
 
