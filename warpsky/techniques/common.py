@@ -69,10 +69,10 @@ def sun_disk(angular_diameter: float) -> tuple[float, float]:
     return math.cos(radius), 2.0 * math.pi * (1.0 - math.cos(radius))
 
 
-def sun_struct(sun) -> Sun:
-    """Kernel view of a :class:`~warpsky.scene.model.Sun` (or None: unlit, pointing up)."""
+def sun_struct(sun, unlit_direction: tuple[float, float, float] = (0.0, 1.0, 0.0)) -> Sun:
+    """Kernel view of a :class:`~warpsky.scene.model.Sun` (or None: unlit, pointing along ``unlit_direction``)."""
     out = Sun()
-    direction = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
+    direction = sun.direction if sun is not None else np.asarray(unlit_direction, dtype=np.float64)
     irradiance = sun.irradiance if sun is not None else np.zeros(3)
     out.direction = wp.vec3(*np.asarray(direction, dtype=np.float64).tolist())
     out.irradiance = wp.vec3(*np.asarray(irradiance, dtype=np.float64).tolist())
