@@ -106,9 +106,7 @@ def camera_ray_at(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) 
 @wp.func
 def camera_ray(cam: PinholeCamera, row: int, col: int) -> wp.vec3:
     """Unit world direction through the centre of pixel (row, col); row 0 is the top of the image."""
-    sx = ((float(col) + 0.5) / float(cam.width) - 0.5) * cam.horizontal_aperture + cam.horizontal_offset
-    sy = (0.5 - (float(row) + 0.5) / float(cam.height)) * cam.vertical_aperture + cam.vertical_offset
-    return wp.normalize(cam.rotation * wp.vec3(sx, sy, -cam.focal_length))
+    return camera_ray_at(cam, row, col, 0.5, 0.5)
 
 
 @wp.func
