@@ -111,8 +111,10 @@ def camera_ray(cam: PinholeCamera, row: int, col: int) -> wp.vec3:
 
 @wp.func
 def one_minus_exp_over_x(x: float) -> float:
-    """(1 - exp(-x)) / x for x >= 0, by its Taylor series near 0 (truncation error < x^4/120)."""
-    if x < 1.0e-2:
+    """(1 - exp(-x)) / x, limit 1 at 0, by its Taylor series for |x| < 0.01 (truncation error < x^4/120, where the
+    quotient would lose up to 1e-4 of its value to cancellation in float32). Negative x is fine: the air's optical
+    depth along a descending ray grows as e^{-x} with x < 0."""
+    if wp.abs(x) < 1.0e-2:
         return 1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0)))
     return (1.0 - wp.exp(-x)) / x
 
