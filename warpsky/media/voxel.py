@@ -6,7 +6,7 @@ directions, so a scene 100 km from the origin renders with the same float32 prec
 A ray ``x(t) = camera + t * d`` (t in metres) is ``p(t) = eye_index + t * (index_from_world @ d)`` in index space.
 
 Dense arrays are used on every device: on the CPU a trilinear lookup from a dense array is about six times faster
-than through a NanoVDB ``wp.Volume`` (FACTS.md), and on the GPU dense grids of the sizes warpsky renders fit.
+than through a NanoVDB ``wp.Volume``, and on the GPU dense grids of the sizes warpsky renders fit.
 """
 
 from __future__ import annotations

@@ -28,9 +28,6 @@ from warpsky.techniques.common import (
     luminance,
 )
 
-#: Stand-in optical depth for light blocked by the ground (exp(-1e30) is exactly 0, never NaN).
-OPAQUE_DEPTH = 1.0e30
-
 
 @wp.struct
 class MarchSettings:
