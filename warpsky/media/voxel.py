@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky.errors import UsageError
 from warpsky.media.detail import (
     DETAIL_Z_MAX,  # noqa: F401  (the path tracer's host reads the bound here)
     MediumDetail,
@@ -111,6 +112,15 @@ def grid_interval(grid: VoxelGrid, origin: wp.vec3, direction: wp.vec3, t0: floa
 #: per sample, however many phase functions or scattering orders are evaluated from it afterwards).
 MAX_MEDIA = 16
 FieldDensities = wp.types.vector(length=MAX_MEDIA, dtype=float)
+
+
+def check_field_count(media: tuple[VoxelMedium, ...], technique: str, advice: str = "") -> None:
+    """Raise a UsageError when ``technique``, whose samples keep every field's density in a
+    :data:`FieldDensities` vector, is given more than :data:`MAX_MEDIA` fields."""
+    if len(media) > MAX_MEDIA:
+        raise UsageError(
+            f"{technique} combines at most {MAX_MEDIA} voxel fields per frame, the scene has {len(media)}: "
+            f"{', '.join(m.name for m in media)}; merge fields of one species into one grid{advice}")
 
 
 @wp.struct

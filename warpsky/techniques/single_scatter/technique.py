@@ -11,7 +11,7 @@ import warp as wp
 
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
-from warpsky.media.voxel import VoxelMediaBuffers
+from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.tables import build_tables
 from warpsky.scene.model import Scene
@@ -89,6 +89,7 @@ class SingleScatter:
         device = self.device
         started = time.perf_counter()
         species = scene_species(scene)
+        check_field_count(scene.media, "single_scatter", " or use technique path_tracer")
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)

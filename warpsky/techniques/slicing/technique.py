@@ -12,7 +12,7 @@ import warp as wp
 
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
-from warpsky.media.voxel import MAX_MEDIA, VoxelMediaBuffers
+from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
 from warpsky.optics.phase import phase_numpy
 from warpsky.optics.tables import ams_table
@@ -189,11 +189,7 @@ class Slicing:
             # uploaded once for the sweep and the ground pass (with detail this also advects its noise to time_s)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
             if scene.media:
-                if len(scene.media) > MAX_MEDIA:
-                    raise UsageError(
-                        f"slicing combines at most {MAX_MEDIA} voxel fields per frame, the scene has "
-                        f"{len(scene.media)}: {', '.join(m.name for m in scene.media)}; merge fields of one species "
-                        "into one grid or use technique path_tracer")
+                check_field_count(scene.media, "slicing", " or use technique path_tracer")
                 ams = self._ams_tables(scene, species, orders, settings.xi)
                 toward_sun = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])  # unlit: any axis
                 frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count),
