@@ -216,17 +216,21 @@ def light_update(low_albedo: bool, equation: int):
     return {0: light_continuous, 24: light_riley24, 25: light_riley25}[equation]
 
 
-@kernel_variants(low_albedo=(False, True), equation=(0, 24, 25), has_detail=(False, True))
-@functools.cache
 def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = False):
     """(eye_kernel, light_kernel), specialised on Riley's low-albedo comparison mode (Fig. 13: Ams_1 only, light
     attenuated by extinction, no multiple scattering), on the light-buffer update: 0, the continuous limit of
     Riley's model solved per step (second order in the slice spacing); Riley's Eq. 24 (per-event forward
     fractions, first order) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta), which does not converge); and on
     whether any medium has animated detail (without it the samplers never touch ``details``)."""
+    return slice_eye_kernel(low_albedo, has_detail), slice_light_kernel(low_albedo, equation, has_detail)
+
+
+@kernel_variants(low_albedo=(False, True), has_detail=(False, True))
+@functools.cache
+def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
+    """The eye gather of one slice (see :func:`slicing_kernels`)."""
 
     sample_media = media_functions(has_detail)
-    carry_light = light_update(low_albedo, equation)
 
     @wp.kernel(module="unique")
     def eye_kernel(
@@ -289,6 +293,17 @@ def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = Fals
             weight = opacity
         depth_sum[row, col] = depth_sum[row, col] + wp.vec2(weight * t * cos_axis, weight)
 
+    return eye_kernel
+
+
+@kernel_variants(low_albedo=(False, True), equation=(0, 24, 25), has_detail=(False, True))
+@functools.cache
+def slice_light_kernel(low_albedo: bool, equation: int = 0, has_detail: bool = False):
+    """The light-buffer update from one slice to the next (see :func:`slicing_kernels`)."""
+
+    sample_media = media_functions(has_detail)
+    carry_light = light_update(low_albedo, equation)
+
     @wp.kernel(module="unique")
     def light_kernel(
         media: VoxelMedia,
@@ -324,7 +339,7 @@ def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = Fals
         light_i[j, i] = out
         light_n[j, i] = n
 
-    return eye_kernel, light_kernel
+    return light_kernel
 
 
 @kernel_variants(has_detail=(False, True))
