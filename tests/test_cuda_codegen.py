@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import ast
+from pathlib import Path
+
 import pytest
 import warp as wp
 
 from warpsky.kernel_registry import kernel_modules
+from warpsky.kernel_variants import registered_factories
 
 
 @pytest.mark.parametrize("module", kernel_modules(), ids=lambda m: m.name)
@@ -34,3 +38,32 @@ def test_registry_lists_every_kernel_module():
             if isinstance(value, wp.Kernel) and value.module.name not in registered:
                 missing.append(f"{info.name}.{value.key}")
     assert not missing, f"kernels not in warpsky.kernel_registry: {missing}"
+
+
+def _decorator_names(node) -> set[str]:
+    """Last dotted part of each decorator of a function (``functools.cache`` -> ``cache``)."""
+    names = set()
+    for d in node.decorator_list:
+        target = d.func if isinstance(d, ast.Call) else d
+        names.add(target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", ""))
+    return names
+
+
+def test_every_kernel_factory_declares_its_variants():
+    """A cached function that builds ``@wp.kernel``s must carry ``@kernel_variants``, so that every combination of
+    its flags reaches the compile test above."""
+    import warpsky
+
+    package = Path(warpsky.__file__).parent
+    undeclared = []
+    for path in sorted(package.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.FunctionDef) or "cache" not in _decorator_names(node):
+                continue
+            builds_kernel = any(isinstance(inner, ast.FunctionDef) and "kernel" in _decorator_names(inner)
+                                for inner in ast.walk(node) if inner is not node)
+            if builds_kernel and "kernel_variants" not in _decorator_names(node):
+                undeclared.append(f"{path.relative_to(package.parent)}:{node.name}")
+    registered = {factory.__wrapped__.__name__ for factory, _ in registered_factories()}
+    undeclared = [name for name in undeclared if name.split(":")[1] not in registered]
+    assert not undeclared, f"kernel factories without @kernel_variants: {undeclared}"

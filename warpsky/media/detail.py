@@ -1,4 +1,4 @@
-"""Animated density detail of voxel media (issue 7 (b)): from a :class:`~warpsky.scene.model.DetailSpec` to the
+"""Animated density detail of voxel media: from a :class:`~warpsky.scene.model.DetailSpec` to the
 per-medium ``MediumDetail`` structs the samplers read at each sample.
 
 The detail of a spec is one :class:`~warpsky.media.advection.AdvectedDetail`: a periodic 64^3 noise texture
@@ -20,6 +20,9 @@ from collections import OrderedDict
 import numpy as np
 import warp as wp
 
+from warpsky.media.advection import AdvectedDetail, Flow3D, periodic_noise
+from warpsky.media.advection_kernels import DetailState
+from warpsky.media.advection_kernels import advected_detail as advected_noise
 from warpsky.scene.model import DetailSpec, VoxelMedium
 
 #: Texels of the detail texture per axis, and texels per ``scale`` (the tile is 32 scale wide).
@@ -33,6 +36,44 @@ CACHE_SIZE = 8
 
 _cache: OrderedDict = OrderedDict()
 
+#: Detail multiplies density by ``max(0, 1 + amplitude * clamp(z, -DETAIL_Z_MAX, DETAIL_Z_MAX))``, so by at most
+#: ``1 + DETAIL_Z_MAX * amplitude`` (what a majorant must allow for).
+DETAIL_Z_MAX = wp.constant(3.0)
+
+
+@wp.struct
+class MediumDetail:
+    """A medium's animated detail at one time (``amplitude`` 0: none; ``state`` is then never read)."""
+
+    state: DetailState  # the advected noise, positions relative to the camera [m]
+    amplitude: float
+
+
+@wp.func
+def detail_factor(detail: MediumDetail, p: wp.vec3) -> float:
+    """Factor on the coarse density at ``p`` (camera-relative metres): ``max(0, 1 + a clamp(z, -Z, Z))`` with ``z``
+    the advected noise in standard deviations and Z = DETAIL_Z_MAX; in [0, 1 + Z a]."""
+    z = (advected_noise(detail.state, p) - detail.state.mean) / detail.state.std
+    return wp.max(0.0, 1.0 + detail.amplitude * wp.clamp(z, -DETAIL_Z_MAX, DETAIL_Z_MAX))
+
+
+@wp.func
+def detailed_value(value: float, details: wp.array(dtype=MediumDetail), m: int, p: wp.vec3) -> float:
+    """Medium ``m``'s coarse ``value`` at ``p`` (camera-relative metres) times its detail factor, if it has one."""
+    if value > 0.0:
+        amplitude = details[m].amplitude
+        if amplitude > 0.0:
+            return value * detail_factor(details[m], p)
+    return value
+
+
+def detail_factor_bound(medium: VoxelMedium) -> float:
+    """Largest factor animated detail can multiply ``medium``'s density by: ``1 + DETAIL_Z_MAX amplitude`` (1
+    without active detail), what a majorant must allow for."""
+    if medium.detail is None or not medium.detail.active:
+        return 1.0
+    return 1.0 + float(DETAIL_Z_MAX) * float(medium.detail.amplitude)
+
 
 def tile_size(spec: DetailSpec) -> float:
     """Period of the detail in world space along every axis [m]."""
@@ -42,8 +83,6 @@ def tile_size(spec: DetailSpec) -> float:
 def advected_detail(spec: DetailSpec, device):
     """The (cached) :class:`~warpsky.media.advection.AdvectedDetail` of ``spec`` on ``device``, anchored at the
     world origin (its texture tiles all space)."""
-    from warpsky.media.advection import AdvectedDetail, Flow3D, periodic_noise
-
     device = str(wp.get_device(device))
     key = (spec.scale, spec.wind, spec.curl_speed, spec.period, spec.seed, device)
     if key in _cache:
@@ -74,8 +113,6 @@ def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_positio
     """One ``MediumDetail`` per medium at ``time_s`` [s], positions relative to ``camera_position`` (world m,
     float64); None when no medium has active detail. Arrays inside are the cached objects' buffers: launch the
     kernels that read them before asking for another time."""
-    from warpsky.media.voxel import MediumDetail
-
     if not any(m.detail is not None and m.detail.active for m in media):
         return None
     camera = np.asarray(camera_position, dtype=np.float64)
@@ -101,17 +138,10 @@ def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_positio
 
 def _with_origin(state, origin: np.ndarray):
     """A copy of the DetailState struct with another ``origin`` (same device arrays)."""
-    from warpsky.media.advection_kernels import DetailState
-
     copy = DetailState()
     for name in ("texture", "correlation", "displacement", "cells_per_texel", "weights", "layer_count", "shift",
                  "texels_per_m", "mean", "std"):
         setattr(copy, name, getattr(state, name))
     copy.origin = wp.vec3(*origin.tolist())
     return copy
-
-
-def detail_bound(media: tuple[VoxelMedium, ...]) -> list[float]:
-    """Largest factor detail can multiply each medium's density by: ``1 + 3 amplitude`` (see DetailSpec)."""
-    return [1.0 + 3.0 * m.detail.amplitude if m.detail is not None and m.detail.active else 1.0 for m in media]
 

@@ -6,7 +6,7 @@ directions, so a scene 100 km from the origin renders with the same float32 prec
 A ray ``x(t) = camera + t * d`` (t in metres) is ``p(t) = eye_index + t * (index_from_world @ d)`` in index space.
 
 Dense arrays are used on every device: on the CPU a trilinear lookup from a dense array is about six times faster
-than through a NanoVDB ``wp.Volume`` (FACTS.md), and on the GPU dense grids of the sizes warpsky renders fit.
+than through a NanoVDB ``wp.Volume``, and on the GPU dense grids of the sizes warpsky renders fit.
 """
 
 from __future__ import annotations
@@ -17,12 +17,16 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.media.advection_kernels import DetailState, advected_detail
+from warpsky.errors import UsageError
+from warpsky.media.detail import (
+    DETAIL_Z_MAX,  # noqa: F401  (the path tracer's host reads the bound here)
+    MediumDetail,
+    detailed_value,
+    medium_details,
+)
+from warpsky.optics.kernels import TABLE_KIND, medium_phase
+from warpsky.optics.phase import phase_eval
 from warpsky.scene.model import VoxelMedium
-
-#: Detail multiplies density by ``max(0, 1 + amplitude * clamp(z, -DETAIL_Z_MAX, DETAIL_Z_MAX))``, so by at most
-#: ``1 + DETAIL_Z_MAX * amplitude`` (what a majorant must allow for).
-DETAIL_Z_MAX = wp.constant(3.0)
 
 
 @wp.struct
@@ -79,32 +83,6 @@ def grid_value(values: wp.array(dtype=float), grid: VoxelGrid, p: wp.vec3) -> fl
     return c0 + (c1 - c0) * fx
 
 
-@wp.struct
-class MediumDetail:
-    """A medium's animated detail at one time (``amplitude`` 0: none; ``state`` is then never read)."""
-
-    state: DetailState  # the advected noise, positions relative to the camera [m]
-    amplitude: float
-
-
-@wp.func
-def detail_factor(detail: MediumDetail, p: wp.vec3) -> float:
-    """Factor on the coarse density at ``p`` (camera-relative metres): ``max(0, 1 + a clamp(z, -3, 3))`` with ``z``
-    the advected noise in standard deviations; in [0, 1 + 3 a]."""
-    z = (advected_detail(detail.state, p) - detail.state.mean) / detail.state.std
-    return wp.max(0.0, 1.0 + detail.amplitude * wp.clamp(z, -DETAIL_Z_MAX, DETAIL_Z_MAX))
-
-
-@wp.func
-def detailed_value(value: float, details: wp.array(dtype=MediumDetail), m: int, p: wp.vec3) -> float:
-    """Medium ``m``'s coarse ``value`` at ``p`` (camera-relative metres) times its detail factor, if it has one."""
-    if value > 0.0:
-        amplitude = details[m].amplitude
-        if amplitude > 0.0:
-            return value * detail_factor(details[m], p)
-    return value
-
-
 @wp.func
 def slab_interval(origin: float, direction: float, lo: float, hi: float, t0: float, t1: float) -> wp.vec2:
     """Clip the parameter interval [t0, t1] of ``origin + t * direction`` to the slab lo <= x <= hi."""
@@ -130,74 +108,19 @@ def grid_interval(grid: VoxelGrid, origin: wp.vec3, direction: wp.vec3, t0: floa
     return r
 
 
-@wp.struct
-class MediaSample:
-    """All media at one point, for one scattering angle."""
-
-    extinction: wp.vec3  # summed extinction coefficient [1/m] (Riley Eqs. 2-3)
-    scattering: wp.vec3  # summed scattering coefficient [1/m]
-    phase_scattering: wp.vec3  # sum of scattering_i * P_i(theta) [1/(m sr)]
-    lookups: int  # grid lookups it took
-
-
-@wp.func
-def combined_phase(sample: MediaSample) -> wp.vec3:
-    """Phase function of the mixture at the point (Riley Eq. 6): scattering-weighted mean of the species' phases."""
-    out = wp.vec3(0.0)
-    for c in range(3):
-        if sample.scattering[c] > 0.0:
-            out[c] = sample.phase_scattering[c] / sample.scattering[c]
-    return out
-
-
-@functools.cache
-def media_sampler(has_tables: bool, has_detail: bool = False):
-    """``sample_media(values, grids, grid_count, phase_tables, details, t, view, theta) -> MediaSample`` at the
-    point ``t`` metres along the view ray, specialised on whether any medium uses a phase table and whether any
-    has animated detail (``details`` is read only then)."""
-    from warpsky.optics.kernels import medium_phase
-    from warpsky.optics.phase import phase_eval
-
-    @wp.func
-    def sample_media(
-        values: wp.array(dtype=float),
-        grids: wp.array(dtype=VoxelGrid),
-        grid_count: int,
-        phase_tables: wp.array(dtype=float),
-        details: wp.array(dtype=MediumDetail),
-        t: float,
-        view: wp.vec3,
-        theta: float,
-    ) -> MediaSample:
-        out = MediaSample()
-        out.extinction = wp.vec3(0.0)
-        out.scattering = wp.vec3(0.0)
-        out.phase_scattering = wp.vec3(0.0)
-        out.lookups = grid_count
-        for m in range(grid_count):
-            grid = grids[m]
-            value = grid_value(values, grid, grid.eye_index + t * (grid.index_from_world * view))
-            if wp.static(has_detail):
-                value = detailed_value(value, details, m, t * view)
-            if value > 0.0:
-                phase = wp.vec3(0.0)
-                if wp.static(has_tables):
-                    phase = medium_phase(phase_tables, grid.phase_kind, grid.phase_g, theta)
-                else:
-                    phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
-                scattering = grid.scattering * value
-                out.extinction += grid.extinction * value
-                out.scattering += scattering
-                out.phase_scattering += wp.cw_mul(scattering, phase)
-        return out
-
-    return sample_media
-
-
 #: Voxel fields one frame combines. Every sample keeps each field's density in registers (one grid read per field
 #: per sample, however many phase functions or scattering orders are evaluated from it afterwards).
 MAX_MEDIA = 16
 FieldDensities = wp.types.vector(length=MAX_MEDIA, dtype=float)
+
+
+def check_field_count(media: tuple[VoxelMedium, ...], technique: str, advice: str = "") -> None:
+    """Raise a UsageError when ``technique``, whose samples keep every field's density in a
+    :data:`FieldDensities` vector, is given more than :data:`MAX_MEDIA` fields."""
+    if len(media) > MAX_MEDIA:
+        raise UsageError(
+            f"{technique} combines at most {MAX_MEDIA} voxel fields per frame, the scene has {len(media)}: "
+            f"{', '.join(m.name for m in media)}; merge fields of one species into one grid{advice}")
 
 
 @wp.struct
@@ -245,6 +168,61 @@ def media_functions(has_detail: bool):
     return sample_media
 
 
+@functools.cache
+def ray_media_functions(has_detail: bool):
+    """``sample_media_on_ray(media: VoxelMedia, t: float, view: vec3) -> MediaPoint``: :func:`media_functions`'s
+    ``sample_media(media, t * view)``, with each grid position rounded as ``eye_index + t (index_from_world view)``
+    (the eye march's own arithmetic, shared with the shadow rays' start; rounding ``t * view`` first moves
+    single-scatter images by up to 1e-6 of their peak)."""
+
+    @wp.func
+    def sample_media_on_ray(media: VoxelMedia, t: float, view: wp.vec3) -> MediaPoint:
+        out = MediaPoint()
+        out.density = FieldDensities()
+        out.extinction = wp.vec3(0.0)
+        out.scattering = wp.vec3(0.0)
+        for m in range(media.count):
+            grid = media.grids[m]
+            value = grid_value(media.values, grid, grid.eye_index + t * (grid.index_from_world * view))
+            if wp.static(has_detail):
+                value = detailed_value(value, media.details, m, t * view)
+            if value > 0.0:
+                out.density[m] = value
+                out.extinction += grid.extinction * value
+                out.scattering += grid.scattering * value
+        return out
+
+    return sample_media_on_ray
+
+
+@functools.cache
+def phase_mixing(has_tables: bool):
+    """``mixed_phase_scattering(point: MediaPoint, media: VoxelMedia, tables, theta) -> vec3``: the sum over the
+    media at ``point`` of scattering_i P_i(theta) [1/(m sr)] (Riley Eq. 6 before dividing by the summed
+    scattering), with ``tables`` the flat phase tables (:class:`~warpsky.optics.kernels.DevicePhaseTables`
+    ``values``) and ``theta`` the scattering angle [rad]; specialised on whether any medium uses a phase table
+    (without, ``tables`` is never read). It reads no grid: the densities come from ``point``."""
+
+    @wp.func
+    def mixed_phase_scattering(
+        point: MediaPoint, media: VoxelMedia, tables: wp.array(dtype=float), theta: float
+    ) -> wp.vec3:
+        out = wp.vec3(0.0)
+        for m in range(media.count):
+            value = point.density[m]
+            if value > 0.0:
+                grid = media.grids[m]
+                phase = wp.vec3(0.0)
+                if wp.static(has_tables):
+                    phase = medium_phase(tables, grid.phase_kind, grid.phase_g, theta)
+                else:
+                    phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
+                out += wp.cw_mul(grid.scattering * value, phase)
+        return out
+
+    return mixed_phase_scattering
+
+
 @dataclass
 class VoxelMediaBuffers:
     """All voxel media of a scene uploaded to one device, expressed relative to one camera position."""
@@ -273,9 +251,6 @@ class VoxelMediaBuffers:
     ) -> VoxelMediaBuffers:
         """Upload ``media``; a medium of species ``species[i]`` uses phase table i; animated detail at ``time_s``
         [s] (see :mod:`warpsky.media.detail`)."""
-        from warpsky.media.detail import medium_details
-        from warpsky.optics.kernels import TABLE_KIND
-
         infos = []
         chunks = []
         offset = 0

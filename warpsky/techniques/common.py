@@ -69,10 +69,10 @@ def sun_disk(angular_diameter: float) -> tuple[float, float]:
     return math.cos(radius), 2.0 * math.pi * (1.0 - math.cos(radius))
 
 
-def sun_struct(sun) -> Sun:
-    """Kernel view of a :class:`~warpsky.scene.model.Sun` (or None: unlit, pointing up)."""
+def sun_struct(sun, unlit_direction: tuple[float, float, float] = (0.0, 1.0, 0.0)) -> Sun:
+    """Kernel view of a :class:`~warpsky.scene.model.Sun` (or None: unlit, pointing along ``unlit_direction``)."""
     out = Sun()
-    direction = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
+    direction = sun.direction if sun is not None else np.asarray(unlit_direction, dtype=np.float64)
     irradiance = sun.irradiance if sun is not None else np.zeros(3)
     out.direction = wp.vec3(*np.asarray(direction, dtype=np.float64).tolist())
     out.irradiance = wp.vec3(*np.asarray(irradiance, dtype=np.float64).tolist())
@@ -106,17 +106,23 @@ def camera_ray_at(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) 
 @wp.func
 def camera_ray(cam: PinholeCamera, row: int, col: int) -> wp.vec3:
     """Unit world direction through the centre of pixel (row, col); row 0 is the top of the image."""
-    sx = ((float(col) + 0.5) / float(cam.width) - 0.5) * cam.horizontal_aperture + cam.horizontal_offset
-    sy = (0.5 - (float(row) + 0.5) / float(cam.height)) * cam.vertical_aperture + cam.vertical_offset
-    return wp.normalize(cam.rotation * wp.vec3(sx, sy, -cam.focal_length))
+    return camera_ray_at(cam, row, col, 0.5, 0.5)
 
 
 @wp.func
 def one_minus_exp_over_x(x: float) -> float:
-    """(1 - exp(-x)) / x for x >= 0, by its Taylor series near 0 (truncation error < x^4/120)."""
-    if x < 1.0e-2:
+    """(1 - exp(-x)) / x, limit 1 at 0, by its Taylor series for |x| < 0.01 (truncation error < x^4/120, where the
+    quotient would lose up to 1e-4 of its value to cancellation in float32). Negative x is fine: the air's optical
+    depth along a descending ray grows as e^{-x} with x < 0."""
+    if wp.abs(x) < 1.0e-2:
         return 1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0)))
     return (1.0 - wp.exp(-x)) / x
+
+
+@wp.func
+def one_minus_exp(tau: float) -> float:
+    """1 - e^{-tau} for tau >= 0 without cancellation for tiny tau (float32 would lose it below ~1e-6)."""
+    return tau * one_minus_exp_over_x(tau)
 
 
 @wp.func

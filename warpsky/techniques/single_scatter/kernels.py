@@ -13,35 +13,44 @@ import functools
 
 import warp as wp
 
-from warpsky.media.voxel import MediumDetail, VoxelGrid, detailed_value, grid_interval, grid_value, media_sampler
+from warpsky.kernel_variants import kernel_variants
+from warpsky.media.detail import detailed_value
+from warpsky.media.voxel import VoxelMedia, grid_interval, grid_value, phase_mixing, ray_media_functions
 from warpsky.optics.kernels import scattering_angle
-from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, exp_lerp_mean3, luminance
+from warpsky.techniques.common import (
+    Ground,
+    PinholeCamera,
+    Sun,
+    camera_forward,
+    camera_ray,
+    exp3,
+    exp_lerp_mean3,
+    luminance,
+)
 
-#: Stand-in optical depth for light blocked by the ground (exp(-1e30) is exactly 0, never NaN).
-OPAQUE_DEPTH = 1.0e30
+
+@wp.struct
+class MarchSettings:
+    """Step lengths and cut-off of the eye march."""
+
+    step: float  # eye-ray step [m]
+    shadow_step: float  # shadow-ray step towards the sun [m]
+    min_transmittance: float  # stop once the luminance transmittance falls below this
 
 
 @functools.cache
 def sun_depth_function(has_detail: bool):
-    """``sun_optical_depth(values, grids, grid_count, details, t, view_dir, sun_dir, shadow_step) -> vec4``: optical
-    depth (RGB in xyz) from the point ``t`` metres along the view ray to the sun, summed over all grids, and the
-    number of grid lookups it took (w); with ``has_detail`` the media's animated detail is included."""
+    """``sun_optical_depth(media, t, view_dir, sun_dir, shadow_step) -> vec4``: optical depth (RGB in xyz) from the
+    point ``t`` metres along the view ray to the sun, summed over all grids, and the number of grid lookups it took
+    (w); with ``has_detail`` the media's animated detail is included."""
 
     @wp.func
-    def sun_optical_depth(
-        values: wp.array(dtype=float),
-        grids: wp.array(dtype=VoxelGrid),
-        grid_count: int,
-        details: wp.array(dtype=MediumDetail),
-        t: float,
-        view_dir: wp.vec3,
-        sun_dir: wp.vec3,
-        shadow_step: float,
-    ) -> wp.vec4:
+    def sun_optical_depth(media: VoxelMedia, t: float, view_dir: wp.vec3, sun_dir: wp.vec3,
+                          shadow_step: float) -> wp.vec4:
         tau = wp.vec3(0.0)
         lookups = float(0.0)
-        for m in range(grid_count):
-            grid = grids[m]
+        for m in range(media.count):
+            grid = media.grids[m]
             start = grid.eye_index + t * (grid.index_from_world * view_dir)
             toward_sun = grid.index_from_world * sun_dir  # index steps per metre towards the sun
             span = grid_interval(grid, start, toward_sun, 0.0, 1.0e30)
@@ -54,9 +63,9 @@ def sun_depth_function(has_detail: bool):
                 # (exp(-a) - exp(-b)) / (b - a), so a truncated b would brighten optically thick steps.
                 for i in range(count):
                     s = span[0] + (float(i) + 0.5) * dt
-                    value = grid_value(values, grid, start + s * toward_sun)
+                    value = grid_value(media.values, grid, start + s * toward_sun)
                     if wp.static(has_detail):
-                        value = detailed_value(value, details, m, t * view_dir + s * sun_dir)
+                        value = detailed_value(value, media.details, m, t * view_dir + s * sun_dir)
                     total += value
                 tau += grid.extinction * (total * dt)
                 lookups += float(count)
@@ -65,29 +74,40 @@ def sun_depth_function(has_detail: bool):
     return sun_optical_depth
 
 
+@wp.func
+def media_span(media: VoxelMedia, view: wp.vec3, t_near: float, t_end: float) -> wp.vec2:
+    """Union (t0, t1) of the media boxes along the eye ray ``t * view`` within [t_near, t_end] (empty: t1 <= t0)."""
+    t0 = t_end
+    t1 = t_near
+    for m in range(media.count):
+        grid = media.grids[m]
+        span = grid_interval(grid, grid.eye_index, grid.index_from_world * view, t_near, t_end)
+        if span[1] > span[0]:
+            t0 = wp.min(t0, span[0])
+            t1 = wp.max(t1, span[1])
+    return wp.vec2(t0, t1)
+
+
+@kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True))
 @functools.cache
 def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False) -> wp.Kernel:
     """The per-pixel march, specialised on whether the scene has a ground plane, tabulated species and animated
-    detail: a scene without them pays nothing for those branches."""
+    detail: a scene without them pays nothing for those branches. One loop over the eye steps, with the shadow
+    marches and the step's exact integral inline: splitting it would pass the march state (optical depths, the
+    reused shadow depth, depth moments, lookups) through every call."""
 
-    sample_media = media_sampler(has_tables, has_detail)
+    sample_media_on_ray = ray_media_functions(has_detail)
+    mixed_phase_scattering = phase_mixing(has_tables)
     sun_optical_depth = sun_depth_function(has_detail)
 
     @wp.kernel(module="unique")
     def single_scatter(
-        values: wp.array(dtype=float),
-        grids: wp.array(dtype=VoxelGrid),
-        grid_count: int,
+        media: VoxelMedia,
         phase_tables: wp.array(dtype=float),
-        details: wp.array(dtype=MediumDetail),
         cam: PinholeCamera,
-        sun_dir: wp.vec3,
-        sun_irradiance: wp.vec3,
-        ground_offset: float,
-        ground_albedo: wp.vec3,
-        step_length: float,
-        shadow_step: float,
-        min_transmittance: float,
+        sun: Sun,
+        ground: Ground,
+        march: MarchSettings,
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
         depth: wp.array2d(dtype=float),
@@ -97,10 +117,11 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
         r, col = wp.tid()
         row = r + row_offset
         view = camera_ray(cam, row, col)
-        cos_axis = -wp.dot(view, wp.vec3(cam.rotation[0, 2], cam.rotation[1, 2], cam.rotation[2, 2]))
+        cos_axis = wp.dot(view, camera_forward(cam))
         t_near = cam.near / cos_axis
         t_end = cam.far / cos_axis
-        lit = wp.max(sun_irradiance) > 0.0
+        sun_dir = sun.direction
+        lit = sun.lit != 0
         # Light travels along -sun_dir and leaves towards the eye along -view.
         theta = scattering_angle(sun_dir, view)
         hit_ground = bool(False)
@@ -108,54 +129,42 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
         if wp.static(has_ground):
             # The plane is opaque: it ends the ray and, with the sun below the horizon, shades every point above it.
             if view[1] != 0.0:
-                t_ground = ground_offset / view[1]
+                t_ground = ground.offset / view[1]
                 if t_ground > t_near and t_ground < t_end:
                     t_end = t_ground
                     hit_ground = True
             sun_blocked = sun_dir[1] < 0.0
 
-        # Union of the media boxes along the ray.
-        t0 = t_end
-        t1 = t_near
-        for m in range(grid_count):
-            grid = grids[m]
-            span = grid_interval(grid, grid.eye_index, grid.index_from_world * view, t_near, t_end)
-            if span[1] > span[0]:
-                t0 = wp.min(t0, span[0])
-                t1 = wp.max(t1, span[1])
-
+        span = media_span(media, view, t_near, t_end)
+        t0 = span[0]
+        t1 = span[1]
         light = wp.vec3(0.0)
         tau_eye = wp.vec3(0.0)
         depth_sum = float(0.0)
         weight_sum = float(0.0)
         lookups = wp.int64(0)
         if t1 > t0:
-            count = wp.max(int(wp.ceil((t1 - t0) / step_length)), 1)
+            count = wp.max(int(wp.ceil((t1 - t0) / march.step)), 1)
             dt = (t1 - t0) / float(count)
             tau_sun_a = wp.vec3(0.0)
             sun_a_known = bool(False)
             for i in range(count):
                 ta = t0 + float(i) * dt
                 tm = ta + 0.5 * dt
-                here = sample_media(values, grids, grid_count, phase_tables, details, tm, view, theta)
-                extinction = here.extinction
-                scatter = here.phase_scattering
-                lookups += wp.int64(here.lookups)
-                tau_eye_b = tau_eye + extinction * dt
+                here = sample_media_on_ray(media, tm, view)
+                scatter = mixed_phase_scattering(here, media, phase_tables, theta)
+                lookups += wp.int64(media.count)
+                tau_eye_b = tau_eye + here.extinction * dt
                 if lit and not sun_blocked and wp.max(scatter) > 0.0:
                     if not sun_a_known:
-                        shadow = sun_optical_depth(
-                            values, grids, grid_count, details, ta, view, sun_dir, shadow_step
-                        )
+                        shadow = sun_optical_depth(media, ta, view, sun_dir, march.shadow_step)
                         tau_sun_a = wp.vec3(shadow[0], shadow[1], shadow[2])
                         lookups += wp.int64(shadow[3])
-                    shadow = sun_optical_depth(
-                        values, grids, grid_count, details, ta + dt, view, sun_dir, shadow_step
-                    )
+                    shadow = sun_optical_depth(media, ta + dt, view, sun_dir, march.shadow_step)
                     tau_sun_b = wp.vec3(shadow[0], shadow[1], shadow[2])
                     lookups += wp.int64(shadow[3])
                     mean = exp_lerp_mean3(tau_eye + tau_sun_a, tau_eye_b + tau_sun_b)
-                    light += wp.cw_mul(wp.cw_mul(scatter, sun_irradiance), mean) * dt
+                    light += wp.cw_mul(wp.cw_mul(scatter, sun.irradiance), mean) * dt
                     tau_sun_a = tau_sun_b
                     sun_a_known = True
                 else:
@@ -164,19 +173,17 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                 depth_sum += opacity * tm * cos_axis
                 weight_sum += opacity
                 tau_eye = tau_eye_b
-                if luminance(exp3(tau_eye)) < min_transmittance:
+                if luminance(exp3(tau_eye)) < march.min_transmittance:
                     break
 
         trans = exp3(tau_eye)
         if wp.static(has_ground):
             if hit_ground:
                 if lit and not sun_blocked and sun_dir[1] > 0.0:
-                    shadow = sun_optical_depth(
-                        values, grids, grid_count, details, t_end, view, sun_dir, shadow_step
-                    )
+                    shadow = sun_optical_depth(media, t_end, view, sun_dir, march.shadow_step)
                     lookups += wp.int64(shadow[3])
-                    ground = wp.cw_mul(ground_albedo, sun_irradiance) * (sun_dir[1] / wp.pi)
-                    light += wp.cw_mul(wp.cw_mul(ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
+                    lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (sun_dir[1] / wp.pi)
+                    light += wp.cw_mul(wp.cw_mul(lit_ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
                 depth_sum += luminance(trans) * t_end * cos_axis
                 weight_sum += luminance(trans)
                 trans = wp.vec3(0.0)

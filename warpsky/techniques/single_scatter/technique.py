@@ -7,12 +7,18 @@ import math
 import time
 from dataclasses import dataclass
 
-import numpy as np
+import warp as wp
 
+from warpsky.device import launch_rows
 from warpsky.errors import UsageError
-from warpsky.plan import scene_species  # noqa: F401 - the techniques' render bodies import it from here
+from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
+from warpsky.optics.kernels import DevicePhaseTables
+from warpsky.optics.tables import build_tables
+from warpsky.plan import scene_species
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
+from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.single_scatter.kernels import MarchSettings, single_scatter_kernel
 
 
 @documented
@@ -74,20 +80,12 @@ class SingleScatter:
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
         """Render ``scene`` at ``width`` x ``height``; the camera is conformed to that aspect ratio here."""
-        import warp as wp
-
-        from warpsky.device import launch_rows
-        from warpsky.media.voxel import VoxelMediaBuffers
-        from warpsky.optics.kernels import DevicePhaseTables
-        from warpsky.optics.tables import build_tables
-        from warpsky.techniques.common import pinhole_camera
-        from warpsky.techniques.single_scatter.kernels import single_scatter_kernel
-
         camera = scene.camera.conformed(width, height)
         settings = self.resolved_settings(scene)
         device = self.device
         started = time.perf_counter()
         species = scene_species(scene)
+        check_field_count(scene.media, "single_scatter", " or use technique path_tracer")
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
@@ -95,30 +93,13 @@ class SingleScatter:
             transmittance = wp.zeros((height, width), dtype=wp.vec3)
             depth = wp.zeros((height, width), dtype=float)
             lookups = wp.zeros((height, width), dtype=wp.int64)
-            sun = scene.sun
-            sun_dir = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
-            sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
-            ground = scene.ground
-            kernel = single_scatter_kernel(ground is not None, bool(species), media.has_detail)
-            inputs = [
-                media.values,
-                media.grids,
-                media.count,
-                tables.values,
-                media.details,
-                pinhole_camera(camera, width, height),
-                wp.vec3(*sun_dir.tolist()),
-                wp.vec3(*sun_irradiance.tolist()),
-                float(ground.height - camera.position[1]) if ground is not None else 0.0,
-                wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist()),
-                float(settings.step_length),
-                float(settings.shadow_step_length),
-                float(settings.min_transmittance),
-                radiance,
-                transmittance,
-                depth,
-                lookups,
-            ]
+            march = MarchSettings()
+            march.step = float(settings.step_length)
+            march.shadow_step = float(settings.shadow_step_length)
+            march.min_transmittance = float(settings.min_transmittance)
+            kernel = single_scatter_kernel(scene.ground is not None, bool(species), media.has_detail)
+            inputs = [media.media, tables.values, pinhole_camera(camera, width, height), sun_struct(scene.sun),
+                      ground_struct(scene.ground, camera.position), march, radiance, transmittance, depth, lookups]
             launch_rows(kernel, height, width, inputs, device)
             wp.synchronize_device(device)
             seconds = time.perf_counter() - started

@@ -31,6 +31,8 @@ import math
 import numpy as np
 import warp as wp
 
+from warpsky.techniques.common import one_minus_exp_over_x
+
 #: Riley 2004 Table 3: sea-level scattering coefficients [1/m] at 680, 550, 440 nm (our R, G, B).
 RILEY_BETA_SEA_LEVEL = (5.8e-6, 1.35e-5, 3.31e-5)
 #: Riley's scale height 1/γ [m].
@@ -117,22 +119,6 @@ X_CUT_WP = wp.constant(X_CUT)
 
 
 @wp.func
-def e_factor_wp(x: float) -> float:
-    """(1 - e^{-x}) / x, limit 1 at 0."""
-    if wp.abs(x) < 1.0e-3:
-        return 1.0 - 0.5 * x + x * x / 6.0 - x * x * x / 24.0
-    return (1.0 - wp.exp(-x)) / x
-
-
-@wp.func
-def one_minus_exp_over(z: float) -> float:
-    """(1 - e^{-z}) / z for z >= 0, limit 1 at 0."""
-    if z < 1.0e-3:
-        return 1.0 - 0.5 * z + z * z / 6.0 - z * z * z / 24.0
-    return (1.0 - wp.exp(-z)) / z
-
-
-@wp.func
 def air_depth(beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, distance: float) -> wp.vec3:
     """Optical depth of air from altitude h0 over ``distance`` [m] (1e30 = infinity) at elevation sine view_y."""
     b = beta_sl * wp.exp(-gamma * h0)
@@ -141,7 +127,7 @@ def air_depth(beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, distance
         k = wp.min(k, X_CUT_WP / (gamma * (-view_y)))
     if view_y > 0.0 and distance >= 1.0e29:
         return b / (gamma * view_y)
-    return b * (k * e_factor_wp(gamma * view_y * k))
+    return b * (k * one_minus_exp_over_x(gamma * view_y * k))
 
 
 @wp.func
@@ -167,7 +153,7 @@ def air_inscatter(beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, sun_
         if z > 1.0:
             g = (1.0 - wp.exp(-z)) / wp.abs(q)
         else:
-            g = depth[c] * one_minus_exp_over(z)
+            g = depth[c] * one_minus_exp_over_x(z)
         out[c] = wp.exp(-exponent) * g
     return out
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import warp as wp
 
 from warpsky.optics.phase import phase_rayleigh
-from warpsky.techniques.common import PinholeCamera, camera_ray, exp3
+from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_forward, camera_ray, exp3
 from warpsky.techniques.sky.analytic import air_depth, air_inscatter
 
 INFINITE = wp.constant(1.0e30)
@@ -17,12 +17,9 @@ def sky_kernel(
     camera_altitude: float,
     beta_sl: wp.vec3,
     gamma: float,
-    sun_dir: wp.vec3,
-    sun_irradiance: wp.vec3,
-    sun_cos_radius: float,
-    sun_solid_angle: float,
+    sun: Sun,
     has_ground: int,
-    ground_offset: float,
+    ground: Ground,
     media_depth: wp.array2d(dtype=float),
     front_radiance: wp.array2d(dtype=wp.vec3),
     front_transmittance: wp.array2d(dtype=wp.vec3),
@@ -30,16 +27,16 @@ def sky_kernel(
 ):
     row, col = wp.tid()
     view = camera_ray(cam, row, col)
-    axis = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
-    cos_axis = wp.dot(view, axis)
+    cos_axis = wp.dot(view, camera_forward(cam))
+    sun_dir = sun.direction
     # where the air ends: the ground plane, else infinity
     t_end = INFINITE
     if view[1] < 0.0:
         # the air ends at sea level: below it lies a black surface unless a ground plane comes first
         t_end = wp.max(camera_altitude, 0.0) / (-view[1])
     if has_ground != 0:
-        if view[1] < 0.0 and ground_offset < 0.0:
-            t_end = wp.min(t_end, ground_offset / view[1])
+        if view[1] < 0.0 and ground.offset < 0.0:
+            t_end = wp.min(t_end, ground.offset / view[1])
     # the media's representative depth splits the air into a front and a back part (Riley §4, Fig. 7)
     split = t_end
     d = media_depth[row, col]
@@ -49,7 +46,7 @@ def sky_kernel(
     phase = phase_rayleigh(cos_theta)
     sun_y = sun_dir[1]
     front = air_inscatter(beta_sl, gamma, camera_altitude, view[1], sun_y, split)
-    front_radiance[row, col] = wp.cw_mul(sun_irradiance, front) * phase
+    front_radiance[row, col] = wp.cw_mul(sun.irradiance, front) * phase
     front_transmittance[row, col] = exp3(air_depth(beta_sl, gamma, camera_altitude, view[1], split))
     back = wp.vec3(0.0)
     if split < t_end:
@@ -57,11 +54,11 @@ def sky_kernel(
         rest = t_end
         if t_end < INFINITE:
             rest = t_end - split
-        back = wp.cw_mul(sun_irradiance, air_inscatter(beta_sl, gamma, h_split, view[1], sun_y, rest)) * phase
+        back = wp.cw_mul(sun.irradiance, air_inscatter(beta_sl, gamma, h_split, view[1], sun_y, rest)) * phase
     # the sun's disk, behind everything, through the air beyond the split (to the top of the atmosphere)
-    if t_end >= INFINITE and cos_theta >= sun_cos_radius and sun_y > 0.0:
+    if t_end >= INFINITE and cos_theta >= sun.cos_radius and sun_y > 0.0:
         beyond = wp.vec3(1.0)  # no media: the front layer's transmittance already holds all the air
         if split < INFINITE:
             beyond = exp3(air_depth(beta_sl, gamma, camera_altitude + view[1] * split, view[1], INFINITE))
-        back += wp.cw_mul(sun_irradiance, beyond) / sun_solid_angle
+        back += wp.cw_mul(sun.irradiance, beyond) / sun.solid_angle
     back_radiance[row, col] = back

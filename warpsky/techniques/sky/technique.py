@@ -5,9 +5,16 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import warp as wp
 
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer
+from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.sky.analytic import sun_transmittance
+from warpsky.techniques.sky.kernels import sky_kernel
+
+#: Direction the sky pass gives an absent sun: below the horizon.
+BELOW = (0.0, -1.0, 0.0)
 
 
 def media_altitude(scene: Scene) -> float:
@@ -35,8 +42,6 @@ def attenuated_sun(scene: Scene) -> Scene:
     """
     if scene.atmosphere is None or scene.sun is None:
         return scene
-    from warpsky.techniques.sky.analytic import sun_transmittance
-
     atm = scene.atmosphere
     t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), scene.sun.direction[1])
     return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=scene.sun.irradiance * t))
@@ -51,20 +56,10 @@ class SkyPass:
 
     def render(self, scene: Scene, width: int, height: int, media_depth: np.ndarray | None = None):
         """(front Layer, back Layer); composite as [front, media, back]."""
-        import warp as wp
-
-        from warpsky.techniques.common import pinhole_camera, sun_disk
-        from warpsky.techniques.sky.kernels import sky_kernel
-
         atm = scene.atmosphere
         camera = scene.camera.conformed(width, height)
         far = float(camera.far)
         depth = np.full((height, width), far, np.float32) if media_depth is None else media_depth
-        sun = scene.sun
-        sun_dir = sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])
-        irradiance = sun.irradiance if sun is not None else np.zeros(3)
-        cos_radius, solid_angle = sun_disk(sun.angular_diameter if sun is not None else 0.0)  # (2, 1): no disk
-        ground = scene.ground
         with wp.ScopedDevice(self.device):
             shape = (height, width)
             front = wp.zeros(shape, dtype=wp.vec3)
@@ -72,9 +67,8 @@ class SkyPass:
             back = wp.zeros(shape, dtype=wp.vec3)
             wp.launch(sky_kernel, dim=shape, inputs=[
                 pinhole_camera(camera, width, height), float(camera.position[1] + atm.altitude),
-                wp.vec3(*atm.beta_sea_level.tolist()), float(atm.gamma), wp.vec3(*np.asarray(sun_dir).tolist()),
-                wp.vec3(*np.asarray(irradiance).tolist()), float(cos_radius), float(solid_angle),
-                int(ground is not None), float(ground.height - camera.position[1]) if ground is not None else 0.0,
+                wp.vec3(*atm.beta_sea_level.tolist()), float(atm.gamma), sun_struct(scene.sun, unlit_direction=BELOW),
+                int(scene.ground is not None), ground_struct(scene.ground, camera.position),
                 wp.array(np.ascontiguousarray(depth, dtype=np.float32)), front, front_t, back,
             ])
             wp.synchronize_device(self.device)

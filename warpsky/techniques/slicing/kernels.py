@@ -17,9 +17,18 @@ import functools
 
 import warp as wp
 
-from warpsky.media.voxel import MediumDetail, VoxelGrid, detailed_value, grid_value
-from warpsky.optics.kernels import GRID_SIZE, grid_node
-from warpsky.techniques.common import PinholeCamera, camera_ray, exp3, one_minus_exp_over_x
+from warpsky.kernel_variants import kernel_variants
+from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
+from warpsky.optics.kernels import GRID_SIZE, grid_node, scattering_angle
+from warpsky.techniques.common import (
+    Ground,
+    PinholeCamera,
+    Sun,
+    camera_forward,
+    camera_ray,
+    exp3,
+    one_minus_exp,
+)
 from warpsky.techniques.single_scatter.kernels import sun_depth_function
 
 
@@ -40,11 +49,14 @@ class SliceFrame:
 
 @wp.struct
 class AmsTables:
-    """Ams_n per table (T tables, N+1 orders, 3 channels, GRID_SIZE angles) and F_n (T, N+1, 3)."""
+    """Ams_n per table (T tables, N+1 orders, 3 channels, GRID_SIZE angles), F_n (T, N+1, 3), and per medium its
+    table and Riley's back-scatter term xi."""
 
     ams: wp.array(dtype=float)
     forward: wp.array(dtype=float)
     orders: int  # N + 1
+    table_of: wp.array(dtype=int)  # table index of each medium
+    xi_of: wp.array(dtype=float)  # xi of each medium [1/sr], added to its phase in the eye gather
 
 
 @wp.func
@@ -104,108 +116,138 @@ def light_lookup(buffer: wp.array2d(dtype=wp.vec3), frame: SliceFrame, p: wp.vec
     return a * (1.0 - fy) + b * fy
 
 
-@wp.func
-def one_minus_exp(tau: float) -> float:
-    """1 - e^{-tau} without cancellation for tiny tau (float32 would lose it below ~1e-6)."""
-    return tau * one_minus_exp_over_x(tau)
-
-
 #: Scattering events of one light step evaluated one by one; the rest use the last order's forward fraction.
 MAX_EVENTS = wp.constant(64)
 
-#: Voxel fields one slicing pass combines; each sample keeps every field's density in registers (one grid read
-#: per field per sample, however many scattering orders the light update and the eye gather then evaluate).
-MAX_MEDIA = 16
-FieldDensities = wp.types.vector(length=MAX_MEDIA, dtype=float)
 
-
-@wp.struct
-class SliceSample:
-    """All media at one point: each field's density and the summed coefficients [1/m]."""
-
-    density: FieldDensities
-    extinction: wp.vec3
-    scattering: wp.vec3
-
-
-@functools.cache
-def fields_sampler(has_detail: bool):
-    """``sample_fields(values, grids, grid_count, details, p) -> SliceSample`` at the camera-relative point ``p``
-    [m]; with ``has_detail`` each field's coarse density is multiplied by its animated detail factor here, once per
-    sample, so everything downstream (extinction, scattering, mixed phases) sees the detailed density."""
-
-    @wp.func
-    def sample_fields(values: wp.array(dtype=float), grids: wp.array(dtype=VoxelGrid), grid_count: int,
-                      details: wp.array(dtype=MediumDetail), p: wp.vec3) -> SliceSample:
-        out = SliceSample()
-        out.density = FieldDensities()
-        out.extinction = wp.vec3(0.0)
-        out.scattering = wp.vec3(0.0)
-        for m in range(grid_count):
-            grid = grids[m]
-            value = grid_value(values, grid, grid.eye_index + grid.index_from_world * p)
-            if wp.static(has_detail):
-                value = detailed_value(value, details, m, p)
-            if value > 0.0:
-                out.density[m] = value
-                out.extinction += grid.extinction * value
-                out.scattering += grid.scattering * value
-        return out
-
-    return sample_fields
+@wp.func
+def mixed_forward(point: MediaPoint, media: VoxelMedia, tables: AmsTables, order: float, channel: int) -> float:
+    """alpha F_order of the media mixed at the point: sum of scattering_i F_i over the total extinction."""
+    if point.extinction[channel] <= 0.0:
+        return 0.0
+    num = float(0.0)
+    for m in range(media.count):
+        value = point.density[m]
+        if value > 0.0:
+            num += media.grids[m].scattering[channel] * value * forward_at(tables, tables.table_of[m], order, channel)
+    return num / point.extinction[channel]
 
 
 @wp.func
-def mixed_forward(
-    sample: SliceSample,
-    grids: wp.array(dtype=VoxelGrid),
-    grid_count: int,
-    table_of: wp.array(dtype=int),
-    tables: AmsTables,
-    order: float,
-    channel: int,
-) -> float:
-    """alpha F_order of the media mixed at the sample: sum of scattering_i F_i over the total extinction."""
-    if sample.extinction[channel] <= 0.0:
-        return 0.0
-    num = float(0.0)
-    for m in range(grid_count):
-        value = sample.density[m]
+def mixed_ams_scattering(point: MediaPoint, media: VoxelMedia, tables: AmsTables, order: wp.vec3,
+                         theta: float) -> wp.vec3:
+    """Sum over the media at the point of scattering_i (Ams_i of order ``order[c]`` at theta + xi_i) per channel c
+    (Riley Eq. 6 applied per order, before dividing by the summed scattering)."""
+    phase = wp.vec3(0.0)
+    for m in range(media.count):
+        value = point.density[m]
         if value > 0.0:
-            num += grids[m].scattering[channel] * value * forward_at(tables, table_of[m], order, channel)
-    return num / sample.extinction[channel]
+            s = media.grids[m].scattering * value
+            for c in range(3):
+                phase[c] = phase[c] + s[c] * (ams_at(tables, tables.table_of[m], order[c], c, theta)
+                                              + tables.xi_of[m])
+    return phase
 
 
-@functools.cache
+@wp.func
+def light_attenuated(point: MediaPoint, media: VoxelMedia, tables: AmsTables, intensity: float, n: float,
+                     tau: float, c: int) -> float:
+    """Low-albedo mode (Riley Fig. 13): the light buffer is attenuated by extinction, nothing scattered is kept."""
+    return intensity * wp.exp(-tau)
+
+
+@wp.func
+def light_continuous(point: MediaPoint, media: VoxelMedia, tables: AmsTables, intensity: float, n: float,
+                     tau: float, c: int) -> float:
+    """Channel ``c`` of the light after a step of optical depth ``tau`` by the limit both of Riley's equations
+    discretise: dI/dtau = -(1 - alpha F_{n+1}) I while n grows by alpha per unit optical depth, integrated over the
+    step by the midpoint rule on <= 64 chunks (exact for thin steps to O(tau^3): second order in the slice
+    spacing). It is also the expectation of (alpha F)^K over a Poisson number K of scattering events, where Eq. 24
+    takes K = ceil(tau)."""
+    if point.extinction[c] <= 0.0:
+        return intensity * wp.exp(-tau)
+    chunks = int(wp.ceil(wp.min(tau, float(MAX_EVENTS))))
+    chunk = tau / float(chunks)
+    albedo = point.scattering[c] / point.extinction[c]
+    exponent = float(0.0)
+    for e in range(chunks):
+        order = n + 1.0 + albedo * chunk * (float(e) + 0.5)
+        exponent += (1.0 - mixed_forward(point, media, tables, order, c)) * chunk
+    return intensity * wp.exp(-exponent)
+
+
+@wp.func
+def light_riley24(point: MediaPoint, media: VoxelMedia, tables: AmsTables, intensity: float, n: float,
+                  tau: float, c: int) -> float:
+    """Riley Eq. 24: the light scattered within the step keeps, per scattering event, its forward part alpha F_i,
+    over ceil(beta Delta) events n+1 .. n+ceil(tau) (first order in the slice spacing; beyond 64 events the rest
+    share the last one's factor)."""
+    kept = float(0.0)
+    if point.scattering[c] > 0.0:
+        events = int(wp.ceil(wp.min(tau, 1.0e6)))
+        first = n + 1.0
+        log_kept = float(0.0)
+        for e in range(wp.min(events, MAX_EVENTS)):
+            log_kept += wp.log(wp.max(mixed_forward(point, media, tables, first + float(e), c), 1.0e-30))
+        if events > MAX_EVENTS:
+            last = mixed_forward(point, media, tables, first + float(MAX_EVENTS - 1), c)
+            log_kept += float(events - MAX_EVENTS) * wp.log(wp.max(last, 1.0e-30))
+        kept = one_minus_exp(tau) * wp.exp(log_kept)
+    return intensity * (wp.exp(-tau) + kept)
+
+
+@wp.func
+def light_riley25(point: MediaPoint, media: VoxelMedia, tables: AmsTables, intensity: float, n: float,
+                  tau: float, c: int) -> float:
+    """Riley Eq. 25, his GPU shortcut: the scattered light keeps (alpha F)^(beta Delta). It loses only O(Delta^2)
+    per step against Eq. 24, so it tends to no attenuation as slices are added instead of converging."""
+    kept = float(0.0)
+    if point.scattering[c] > 0.0:
+        alpha_f = wp.clamp(mixed_forward(point, media, tables, n + 1.0 + tau, c), 0.0, 1.0)
+        if alpha_f > 0.0:
+            kept = one_minus_exp(tau) * wp.exp(tau * wp.log(alpha_f))
+    return intensity * (wp.exp(-tau) + kept)
+
+
+def light_update(low_albedo: bool, equation: int):
+    """The light-buffer update of one channel for the slicing settings (see :func:`slicing_kernels`)."""
+    if low_albedo:
+        return light_attenuated
+    return {0: light_continuous, 24: light_riley24, 25: light_riley25}[equation]
+
+
 def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = False):
     """(eye_kernel, light_kernel), specialised on Riley's low-albedo comparison mode (Fig. 13: Ams_1 only, light
     attenuated by extinction, no multiple scattering), on the light-buffer update: 0, the continuous limit of
     Riley's model solved per step (second order in the slice spacing); Riley's Eq. 24 (per-event forward
     fractions, first order) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta), which does not converge); and on
     whether any medium has animated detail (without it the samplers never touch ``details``)."""
+    return slice_eye_kernel(low_albedo, has_detail), slice_light_kernel(low_albedo, equation, has_detail)
 
-    sample_fields = fields_sampler(has_detail)
+
+@kernel_variants(low_albedo=(False, True), has_detail=(False, True))
+@functools.cache
+def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
+    """The eye gather of one slice (see :func:`slicing_kernels`)."""
+
+    sample_media = media_functions(has_detail)
 
     @wp.kernel(module="unique")
     def eye_kernel(
-        values: wp.array(dtype=float),
-        grids: wp.array(dtype=VoxelGrid),
-        grid_count: int,
-        details: wp.array(dtype=MediumDetail),
-        table_of: wp.array(dtype=int),
+        media: VoxelMedia,
         tables: AmsTables,
         cam: PinholeCamera,
         frame: SliceFrame,
         plane: float,
         light_i: wp.array2d(dtype=wp.vec3),
         light_n: wp.array2d(dtype=wp.vec3),
-        sun_dir: wp.vec3,
-        xi_of: wp.array(dtype=float),
+        sun: Sun,
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
         depth_sum: wp.array2d(dtype=wp.vec2),
         row_offset: int,
     ):
+        """Composite the slice plane ``plane`` into the eye buffers (Riley Eq. 26)."""
         r, col = wp.tid()
         row = r + row_offset
         view = camera_ray(cam, row, col)
@@ -213,31 +255,24 @@ def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = Fals
         if wp.abs(along) < 1.0e-6:
             return
         t = plane / along
-        axis_cam = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
-        cos_axis = wp.dot(view, axis_cam)
+        cos_axis = wp.dot(view, camera_forward(cam))
         if t * cos_axis < cam.near or t * cos_axis > cam.far:
             return
         p = view * t
         step = frame.spacing / wp.abs(along)
-        sample = sample_fields(values, grids, grid_count, details, p)
-        extinction = sample.extinction
-        scattering = sample.scattering
+        point = sample_media(media, p)
+        extinction = point.extinction
+        scattering = point.scattering
         if wp.max(extinction) <= 0.0:
             return
         light = light_lookup(light_i, frame, p)
         n = light_lookup(light_n, frame, p)
-        theta = wp.atan2(wp.length(wp.cross(sun_dir, view)), wp.dot(sun_dir, view))
+        theta = scattering_angle(sun.direction, view)
         # Riley Eq. 26: Ams of one more scattering than the light has had, mixed over media by scattering
-        phase = wp.vec3(0.0)
-        for m in range(grid_count):
-            value = sample.density[m]
-            if value > 0.0:
-                s = grids[m].scattering * value
-                for c in range(3):
-                    order = n[c] + 1.0
-                    if wp.static(low_albedo):
-                        order = 1.0
-                    phase[c] = phase[c] + s[c] * (ams_at(tables, table_of[m], order, c, theta) + xi_of[m])
+        order = wp.vec3(n[0] + 1.0, n[1] + 1.0, n[2] + 1.0)
+        if wp.static(low_albedo):
+            order = wp.vec3(1.0)
+        phase = mixed_ams_scattering(point, media, tables, order, theta)
         contribution = wp.vec3(0.0)
         tau = extinction * step
         keep = exp3(tau)
@@ -258,13 +293,20 @@ def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = Fals
             weight = opacity
         depth_sum[row, col] = depth_sum[row, col] + wp.vec2(weight * t * cos_axis, weight)
 
+    return eye_kernel
+
+
+@kernel_variants(low_albedo=(False, True), equation=(0, 24, 25), has_detail=(False, True))
+@functools.cache
+def slice_light_kernel(low_albedo: bool, equation: int = 0, has_detail: bool = False):
+    """The light-buffer update from one slice to the next (see :func:`slicing_kernels`)."""
+
+    sample_media = media_functions(has_detail)
+    carry_light = light_update(low_albedo, equation)
+
     @wp.kernel(module="unique")
     def light_kernel(
-        values: wp.array(dtype=float),
-        grids: wp.array(dtype=VoxelGrid),
-        grid_count: int,
-        details: wp.array(dtype=MediumDetail),
-        table_of: wp.array(dtype=int),
+        media: VoxelMedia,
         tables: AmsTables,
         frame: SliceFrame,
         plane: float,
@@ -283,60 +325,24 @@ def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = Fals
         step = advance / along
         mid = base + frame.light_dir * (a + 0.5 * step)
         n = light_n[j, i]
-        sample = sample_fields(values, grids, grid_count, details, mid)
-        extinction = sample.extinction
-        scattering = sample.scattering
+        point = sample_media(media, mid)
+        extinction = point.extinction
+        scattering = point.scattering
         if wp.max(extinction) <= 0.0:
             return
         intensity = light_i[j, i]
         out = wp.vec3(0.0)
         for c in range(3):
             tau = extinction[c] * step
-            keep = wp.exp(-tau)
-            kept = float(0.0)
-            if wp.static(not low_albedo and equation != 0):
-                if scattering[c] > 0.0 and wp.static(equation == 25):
-                    alpha_f = wp.clamp(mixed_forward(sample, grids, grid_count, table_of, tables,
-                                                     n[c] + 1.0 + tau, c), 0.0, 1.0)
-                    if alpha_f > 0.0:
-                        kept = one_minus_exp(tau) * wp.exp(tau * wp.log(alpha_f))
-                if scattering[c] > 0.0 and wp.static(equation == 24):
-                    # Riley Eq. 24: the light scattered within the step keeps, per scattering event, its forward
-                    # part alpha F_i, over ceil(beta Delta) events (Eq. 25's (alpha F)^(beta Delta) shortcut loses
-                    # only O(Delta^2) per step, so it does not converge as slices are added; see the README)
-                    events = int(wp.ceil(wp.min(tau, 1.0e6)))  # beyond 64 events the rest share one factor
-                    first = n[c] + 1.0  # Riley: events n+1 .. n+ceil(tau)
-                    log_kept = float(0.0)
-                    for e in range(wp.min(events, MAX_EVENTS)):
-                        log_kept += wp.log(wp.max(mixed_forward(sample, grids, grid_count, table_of, tables,
-                                                                first + float(e), c), 1.0e-30))
-                    if events > MAX_EVENTS:
-                        last = mixed_forward(sample, grids, grid_count, table_of, tables,
-                                             first + float(MAX_EVENTS - 1), c)
-                        log_kept += float(events - MAX_EVENTS) * wp.log(wp.max(last, 1.0e-30))
-                    kept = one_minus_exp(tau) * wp.exp(log_kept)
-            out[c] = intensity[c] * (keep + kept)
-            if wp.static(equation == 0 and not low_albedo):
-                # the limit both equations discretise: dI/dtau = -(1 - alpha F_{n+1}) I while n grows by alpha
-                # per unit optical depth, integrated over the step by the midpoint rule on <= 64 chunks (exact
-                # for thin steps to O(tau^3): second order in the slice spacing). It is also the expectation of
-                # (alpha F)^K over a Poisson number K of scattering events, where Eq. 24 takes K = ceil(tau).
-                if extinction[c] > 0.0:
-                    chunks = int(wp.ceil(wp.min(tau, float(MAX_EVENTS))))
-                    chunk = tau / float(chunks)
-                    albedo = scattering[c] / extinction[c]
-                    exponent = float(0.0)
-                    for e in range(chunks):
-                        order = n[c] + 1.0 + albedo * chunk * (float(e) + 0.5)
-                        exponent += (1.0 - mixed_forward(sample, grids, grid_count, table_of, tables, order, c)) * chunk
-                    out[c] = intensity[c] * wp.exp(-exponent)
+            out[c] = carry_light(point, media, tables, intensity[c], n[c], tau, c)
             n[c] = n[c] + (scattering[c] / extinction[c]) * tau  # Eq. 22: n = -alpha ln T
         light_i[j, i] = out
         light_n[j, i] = n
 
-    return eye_kernel, light_kernel
+    return light_kernel
 
 
+@kernel_variants(has_detail=(False, True))
 @functools.cache
 def ground_kernel(has_detail: bool = False):
     """The ground pass, specialised on animated detail (the shadow rays see the same detailed media)."""
@@ -344,16 +350,11 @@ def ground_kernel(has_detail: bool = False):
     sun_optical_depth = sun_depth_function(has_detail)
 
     @wp.kernel(module="unique")
-    def ground(
-        values: wp.array(dtype=float),
-        grids: wp.array(dtype=VoxelGrid),
-        grid_count: int,
-        details: wp.array(dtype=MediumDetail),
+    def ground_pass(
+        media: VoxelMedia,
         cam: PinholeCamera,
-        sun_dir: wp.vec3,
-        sun_irradiance: wp.vec3,
-        ground_offset: float,
-        ground_albedo: wp.vec3,
+        sun: Sun,
+        ground: Ground,
         shadow_step: float,
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
@@ -362,21 +363,21 @@ def ground_kernel(has_detail: bool = False):
         """The Lambertian ground behind the media, lit by the sun through them; it ends every ray that reaches it."""
         row, col = wp.tid()
         view = camera_ray(cam, row, col)
-        if view[1] >= 0.0 or ground_offset >= 0.0:
+        if view[1] >= 0.0 or ground.offset >= 0.0:
             return
-        t = ground_offset / view[1]
-        axis_cam = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
-        z = t * wp.dot(view, axis_cam)
+        t = ground.offset / view[1]
+        z = t * wp.dot(view, camera_forward(cam))
         if z > cam.far:
             return
+        sun_dir = sun.direction
         lit = wp.vec3(0.0)
-        if sun_dir[1] > 0.0:
-            tau = sun_optical_depth(values, grids, grid_count, details, t, view, sun_dir, shadow_step)
-            lit = wp.cw_mul(sun_irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (sun_dir[1] / wp.pi)
+        if sun.lit != 0 and sun_dir[1] > 0.0:
+            tau = sun_optical_depth(media, t, view, sun_dir, shadow_step)
+            lit = wp.cw_mul(sun.irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (sun_dir[1] / wp.pi)
         before = transmittance[row, col]
-        radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground_albedo, lit))
+        radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground.albedo, lit))
         if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
             depth[row, col] = z
         transmittance[row, col] = wp.vec3(0.0)
 
-    return ground
+    return ground_pass

@@ -9,10 +9,19 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
+from warpsky.device import launch_rows
 from warpsky.errors import UsageError
+from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
+from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
+from warpsky.optics.phase import phase_numpy
+from warpsky.optics.tables import ams_table
+from warpsky.plan import scene_species
 from warpsky.scene.model import PhaseKind, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
+from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
 
 
 class LightEquation(enum.IntEnum):
@@ -67,9 +76,6 @@ class SlicingSettings(TechniqueSettings):
 def analytic_ams(kind: PhaseKind, g: float, orders: int) -> tuple[np.ndarray, np.ndarray]:
     """Closed-form Ams_0..N (N+1, 3, M) and F_n (N+1, 3) for an analytic phase: HG(g)^{*n} = HG(g^n); Rayleigh
     (1/4pi)(1 + 5 (1/10)^n P_2); isotropic 1/4pi."""
-    from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
-    from warpsky.optics.phase import phase_numpy
-
     mu = np.cos(angle_grid())
     rows = [delta_table()]
     for n in range(1, orders + 1):
@@ -133,8 +139,6 @@ class Slicing:
 
     def _tables(self, scene: Scene, species: tuple[str, ...], orders: int):
         """One Ams table per species and per distinct analytic phase; the table index of every medium."""
-        from warpsky.optics.tables import ams_table
-
         tables, forwards, index, keys = [], [], [], {}
         for medium in scene.media:  # one table per species / analytic phase, however many media share it
             key = ("species", medium.species) if medium.species else ("phase", int(medium.phase.kind),
@@ -150,15 +154,20 @@ class Slicing:
             index.append(keys[key])
         return tables, forwards, index
 
+    def _ams_tables(self, scene: Scene, species: tuple[str, ...], orders: int, xi: float) -> AmsTables:
+        """The device Ams tables of the scene's media, with each medium's table index and xi (its own
+        ``warpsky:slicing:xi`` or the setting ``xi``)."""
+        tables, forwards, index = self._tables(scene, species, orders)
+        ams = AmsTables()
+        ams.ams = wp.array(np.stack(tables).astype(np.float32).reshape(-1), dtype=float)
+        ams.forward = wp.array(np.stack(forwards).astype(np.float32).reshape(-1), dtype=float)
+        ams.orders = orders + 1
+        ams.table_of = wp.array(np.asarray(index, dtype=np.int32), dtype=int)
+        ams.xi_of = wp.array(np.asarray([xi if m.slicing_xi is None else m.slicing_xi for m in scene.media],
+                                        dtype=np.float32), dtype=float)
+        return ams
+
     def render(self, scene: Scene, width: int, height: int) -> Layer:
-        import warp as wp
-
-        from warpsky.device import launch_rows
-        from warpsky.media.voxel import VoxelMediaBuffers
-        from warpsky.techniques.common import pinhole_camera
-        from warpsky.techniques.single_scatter.technique import scene_species
-        from warpsky.techniques.slicing.kernels import MAX_MEDIA, AmsTables, slicing_kernels
-
         settings = self.resolved_settings(scene)
         camera = scene.camera.conformed(width, height)
         device = self.device
@@ -178,19 +187,8 @@ class Slicing:
             # uploaded once for the sweep and the ground pass (with detail this also advects its noise to time_s)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
             if scene.media:
-                if len(scene.media) > MAX_MEDIA:
-                    raise UsageError(
-                        f"slicing combines at most {MAX_MEDIA} voxel fields per frame, the scene has "
-                        f"{len(scene.media)}: {', '.join(m.name for m in scene.media)}; merge fields of one species "
-                        "into one grid or use technique path_tracer")
-                tables, forwards, index = self._tables(scene, species, orders)
-                ams = AmsTables()
-                ams.ams = wp.array(np.stack(tables).astype(np.float32).reshape(-1), dtype=float)
-                ams.forward = wp.array(np.stack(forwards).astype(np.float32).reshape(-1), dtype=float)
-                ams.orders = orders + 1
-                table_of = wp.array(np.asarray(index, dtype=np.int32), dtype=int)
-                xi_of = wp.array(np.asarray([settings.xi if m.slicing_xi is None else m.slicing_xi
-                                             for m in scene.media], dtype=np.float32), dtype=float)
+                check_field_count(scene.media, "slicing", " or use technique path_tracer")
+                ams = self._ams_tables(scene, species, orders, settings.xi)
                 toward_sun = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])  # unlit: any axis
                 frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count),
                                             int(settings.light_resolution))
@@ -201,19 +199,18 @@ class Slicing:
                 eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
                                                            media.has_detail)
                 cam = pinhole_camera(camera, width, height)
-                sun_dir = wp.vec3(*np.asarray(toward_sun, dtype=np.float64).tolist())
+                sun_view = sun_struct(sun)
                 spacing = float(frame.spacing)
                 # the light enters the media's extent half a slice before the first plane: carry it there first
                 # (starting it unattenuated at the first plane is a first-order error in the slice count)
-                fields = [media.values, media.grids, media.count, media.details, table_of, ams]
                 wp.launch(light_kernel, dim=(res, res), inputs=[
-                    *fields, frame, float(planes[0]) - 0.5 * spacing, 0.5 * spacing, light_i, light_n])
+                    media.media, ams, frame, float(planes[0]) - 0.5 * spacing, 0.5 * spacing, light_i, light_n])
                 for plane in planes:
                     launch_rows(eye_kernel, height, width, [
-                        *fields, cam, frame, float(plane), light_i, light_n, sun_dir, xi_of, radiance, transmittance,
-                        depth_sum], device)
+                        media.media, ams, cam, frame, float(plane), light_i, light_n, sun_view, radiance,
+                        transmittance, depth_sum], device)
                     wp.launch(light_kernel, dim=(res, res), inputs=[
-                        *fields, frame, float(plane), spacing, light_i, light_n])
+                        media.media, ams, frame, float(plane), spacing, light_i, light_n])
                     slices += 1
             wp.synchronize_device(device)
             depth = depth_sum.numpy()
@@ -228,10 +225,6 @@ class Slicing:
     @staticmethod
     def _frame(scene: Scene, camera, toward_sun: np.ndarray, slice_count: int, light_res: int):
         """Slice axis and order (half-angle, Kniss et al.), slice planes and the light buffer's square."""
-        import warp as wp
-
-        from warpsky.techniques.slicing.kernels import SliceFrame
-
         axis, front_to_back = slice_axis(camera, toward_sun)
         light = -np.asarray(toward_sun, dtype=np.float64)  # the way light travels
         corners = media_corners(scene, camera.position)
@@ -262,21 +255,12 @@ class Slicing:
     def _ground(self, scene: Scene, camera, width: int, height: int, layer: Layer, media) -> None:
         """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel);
         ``media`` is the sweep's upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`)."""
-        import warp as wp
-
-        from warpsky.techniques.common import pinhole_camera
-        from warpsky.techniques.slicing.kernels import ground_kernel
-
-        ground, sun = scene.ground, scene.sun
         with wp.ScopedDevice(self.device):
             radiance = wp.array(layer.radiance, dtype=wp.vec3)
             transmittance = wp.array(layer.transmittance, dtype=wp.vec3)
             depth = wp.array(layer.depth, dtype=float)
-            sun_dir = sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])
-            irradiance = sun.irradiance if sun is not None else np.zeros(3)
             wp.launch(ground_kernel(media.has_detail), dim=(height, width), inputs=[
-                media.values, media.grids, media.count, media.details, pinhole_camera(camera, width, height),
-                wp.vec3(*np.asarray(sun_dir).tolist()), wp.vec3(*np.asarray(irradiance).tolist()),
-                float(ground.height - camera.position[1]), wp.vec3(*ground.albedo.tolist()),
-                float(media.min_voxel_size), radiance, transmittance, depth])
+                media.media, pinhole_camera(camera, width, height), sun_struct(scene.sun),
+                ground_struct(scene.ground, camera.position), float(media.min_voxel_size), radiance, transmittance,
+                depth])
             layer.radiance, layer.transmittance, layer.depth = radiance.numpy(), transmittance.numpy(), depth.numpy()

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.techniques.common import PinholeCamera, camera_ray
+from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_forward, camera_ray
 from warpsky.techniques.radiosity.kernels import bilinear
 from warpsky.techniques.stratiform.slab import INV_PI, MU_MIN, SlabOptics, order_energies, slab_radiance
 
@@ -68,11 +68,10 @@ def stratiform_kernel(
     tables: wp.array(dtype=float),
     params: wp.array(dtype=float),
     optics: SlabOptics,
-    sun: wp.vec3,
-    sun_irradiance: wp.vec3,
+    sun_light: Sun,
     sky_radiance: wp.vec3,
     has_ground: int,
-    ground_y: float,
+    ground: Ground,
     albedo: wp.array2d(dtype=wp.vec3),
     albedo_box: wp.vec4,  # x0, z0, sx, sz of the albedo map
     radiosity_g: wp.array2d(dtype=wp.vec3),
@@ -86,8 +85,10 @@ def stratiform_kernel(
     r, col = wp.tid()
     row = r + row_offset
     d = camera_ray(cam, row, col)
-    axis = wp.vec3(-cam.rotation[0, 2], -cam.rotation[1, 2], -cam.rotation[2, 2])
-    cos_axis = wp.dot(d, axis)
+    cos_axis = wp.dot(d, camera_forward(cam))
+    sun = sun_light.direction
+    sun_irradiance = sun_light.irradiance
+    ground_y = ground.offset
     out = wp.vec3(0.0)
     tr = wp.vec3(1.0)
     z_depth = cam.far

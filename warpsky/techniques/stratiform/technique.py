@@ -160,7 +160,7 @@ class Stratiform:
         import warp as wp
 
         from warpsky.device import launch_rows
-        from warpsky.techniques.common import pinhole_camera
+        from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
         from warpsky.techniques.stratiform.kernels import LayerGeometry, stratiform_kernel
         from warpsky.techniques.stratiform.optics import stratiform_optics
 
@@ -195,7 +195,6 @@ class Stratiform:
                 albedo = np.broadcast_to(ground.albedo if ground is not None else np.zeros(3), (2, 2, 3))
                 abox = (-1e9, -1e9, 2e9, 2e9)
             rel = lambda b: wp.vec4(b[0] - eye[0], b[1] - eye[2], b[2], b[3])  # noqa: E731
-            sun = scene.sun
             shape = (height, width)
             radiance = wp.zeros(shape, dtype=wp.vec3)
             transmittance = wp.zeros(shape, dtype=wp.vec3)
@@ -203,9 +202,8 @@ class Stratiform:
             inputs = [
                 pinhole_camera(camera, width, height), wp.array(layer.thickness, dtype=float), g, tables.values,
                 params, slab_optics,
-                wp.vec3(*(sun.direction if sun is not None else np.array([0.0, -1.0, 0.0])).tolist()),
-                wp.vec3(*(sun.irradiance if sun is not None else np.zeros(3)).tolist()), wp.vec3(*sky.tolist()),
-                int(ground is not None and draw_ground), float(ground.height - eye[1]) if ground is not None else 0.0,
+                sun_struct(scene.sun, unlit_direction=(0.0, -1.0, 0.0)), wp.vec3(*sky.tolist()),
+                int(ground is not None and draw_ground), ground_struct(ground, eye),
                 wp.array(np.ascontiguousarray(albedo, dtype=np.float32), dtype=wp.vec3), rel(abox),
                 wp.array(np.ascontiguousarray(r_g, dtype=np.float32), dtype=wp.vec3),
                 wp.array(np.ascontiguousarray(r_c, dtype=np.float32), dtype=wp.vec3), rel(box),
