@@ -22,10 +22,10 @@ import functools
 
 import warp as wp
 
-from warpsky.media.voxel import MediumDetail, VoxelGrid, detailed_value, grid_interval, grid_value
+from warpsky.media.voxel import MediumDetail, VoxelGrid, VoxelMedia, detailed_value, grid_interval, grid_value
 from warpsky.optics.kernels import GRID_SIZE, grid_angle, grid_node, medium_phase, sample_table
 from warpsky.optics.phase import INV_FOUR_PI, phase_eval, phase_rayleigh
-from warpsky.techniques.common import PinholeCamera, camera_ray, camera_ray_at
+from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_ray, camera_ray_at
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
 MAJORANT_MARGIN = wp.constant(1.0001)
@@ -41,6 +41,45 @@ class MajorantGrid:
     offset: int  # first value in the flat majorant buffer
     shape: wp.vec3i  # coarse cells along index x, y, z
     block: float  # voxels per cell edge
+
+
+@wp.struct
+class Majorants:
+    """Every medium's majorant grid: one :class:`MajorantGrid` per medium over one flat buffer of bounds [1/m]."""
+
+    grids: wp.array(dtype=MajorantGrid)
+    values: wp.array(dtype=float)
+
+
+@wp.struct
+class PhaseTables:
+    """Flat phase tables and their cumulative tables (one-value dummies without species)."""
+
+    values: wp.array(dtype=float)
+    cdf: wp.array(dtype=float)
+
+
+@wp.struct
+class PathSettings:
+    """Per-launch settings of the path tracer."""
+
+    environment: wp.vec3  # uniform radiance from every direction
+    seed: int
+    pixel_jitter: int  # 1: box-filtered pixels, 0: pixel centres
+    first_sample: int  # index of the launch's first path per pixel
+    sample_count: int  # paths per pixel in this launch
+    max_bounces: int
+
+
+@wp.struct
+class PixelSums:
+    """Per-pixel sums the launches accumulate into."""
+
+    radiance_sum: wp.array2d(dtype=wp.vec3)
+    radiance_sq: wp.array2d(dtype=wp.vec3)
+    transmittance_sum: wp.array2d(dtype=wp.vec3)
+    depth_sum: wp.array2d(dtype=wp.vec2)  # (sum of depths, hits)
+    counters: wp.array2d(dtype=wp.vec2i)  # (tracking steps, capped paths)
 
 
 @wp.struct
@@ -474,35 +513,42 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
 
     @wp.kernel(module="unique")
     def path_trace(
-        values: wp.array(dtype=float),
-        grids: wp.array(dtype=VoxelGrid),
-        grid_count: int,
-        details: wp.array(dtype=MediumDetail),
-        mgrids: wp.array(dtype=MajorantGrid),
-        majorants: wp.array(dtype=float),
-        tables: wp.array(dtype=float),
-        cdf: wp.array(dtype=float),
+        media: VoxelMedia,
+        majorant_data: Majorants,
+        phase_tables: PhaseTables,
         air: Air,
-        sun_cos_radius: float,
-        sun_solid_angle: float,
+        sun: Sun,
         cam: PinholeCamera,
-        sun_dir: wp.vec3,
-        sun_irradiance: wp.vec3,
-        environment: wp.vec3,
-        ground_offset: float,
-        ground_albedo: wp.vec3,
-        seed: int,
-        pixel_jitter: int,
-        first_sample: int,
-        sample_count: int,
-        max_bounces: int,
-        radiance_sum: wp.array2d(dtype=wp.vec3),
-        radiance_sq: wp.array2d(dtype=wp.vec3),
-        transmittance_sum: wp.array2d(dtype=wp.vec3),
-        depth_sum: wp.array2d(dtype=wp.vec2),
-        counters: wp.array2d(dtype=wp.vec2i),
+        ground: Ground,
+        settings: PathSettings,
+        sums: PixelSums,
         row_offset: int,
     ):
+        values = media.values
+        grids = media.grids
+        grid_count = media.count
+        details = media.details
+        mgrids = majorant_data.grids
+        majorants = majorant_data.values
+        tables = phase_tables.values
+        cdf = phase_tables.cdf
+        sun_cos_radius = sun.cos_radius
+        sun_solid_angle = sun.solid_angle
+        sun_dir = sun.direction
+        sun_irradiance = sun.irradiance
+        environment = settings.environment
+        ground_offset = ground.offset
+        ground_albedo = ground.albedo
+        seed = settings.seed
+        pixel_jitter = settings.pixel_jitter
+        first_sample = settings.first_sample
+        sample_count = settings.sample_count
+        max_bounces = settings.max_bounces
+        radiance_sum = sums.radiance_sum
+        radiance_sq = sums.radiance_sq
+        transmittance_sum = sums.transmittance_sum
+        depth_sum = sums.depth_sum
+        counters = sums.counters
         r, col = wp.tid()
         row = r + row_offset
         view = camera_ray(cam, row, col)

@@ -112,8 +112,17 @@ class PathTracer:
         from warpsky.media.voxel import DETAIL_Z_MAX, VoxelMediaBuffers
         from warpsky.optics.kernels import DevicePhaseTables
         from warpsky.optics.tables import build_tables
-        from warpsky.techniques.common import pinhole_camera
-        from warpsky.techniques.path_tracer.kernels import MAJORANT_MARGIN, Air, MajorantGrid, path_trace_kernel
+        from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+        from warpsky.techniques.path_tracer.kernels import (
+            MAJORANT_MARGIN,
+            Air,
+            MajorantGrid,
+            Majorants,
+            PathSettings,
+            PhaseTables,
+            PixelSums,
+            path_trace_kernel,
+        )
         from warpsky.techniques.single_scatter.technique import scene_species
 
         settings = self.resolved_settings(scene)
@@ -148,8 +157,6 @@ class PathTracer:
             depth_sum = wp.zeros(shape, dtype=wp.vec2)
             counters = wp.zeros(shape, dtype=wp.vec2i)
             sun = scene.sun
-            sun_dir = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
-            sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
             ground = scene.ground
             kernel = path_trace_kernel(ground is not None, bool(species), media.has_detail)
             air = Air()
@@ -160,26 +167,31 @@ class PathTracer:
                 air.gamma = float(atmosphere.gamma)
                 air.camera_altitude = float(camera.position[1] + atmosphere.altitude)
                 air.band = float(0.1 * atmosphere.scale_height)
-            radius = 0.5 * sun.angular_diameter if sun is not None else 0.0
-            sun_cos_radius = math.cos(radius) if radius > 0.0 else 2.0
-            sun_solid_angle = 2.0 * math.pi * (1.0 - math.cos(radius)) if radius > 0.0 else 1.0
             spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
+            majorant_data = Majorants()
+            majorant_data.grids = mgrid_array
+            majorant_data.values = majorants
+            phase = PhaseTables()
+            phase.values = tables.values
+            phase.cdf = tables.cdf
+            sums = PixelSums()
+            sums.radiance_sum = radiance_sum
+            sums.radiance_sq = radiance_sq
+            sums.transmittance_sum = transmittance_sum
+            sums.depth_sum = depth_sum
+            sums.counters = counters
             done = 0
             while done < spp:
                 count = min(per_pass, spp - done)
-                inputs = [
-                    media.values, media.grids, media.count, media.details, mgrid_array, majorants, tables.values,
-                    tables.cdf,
-                    air, float(sun_cos_radius), float(sun_solid_angle),
-                    pinhole_camera(camera, width, height),
-                    wp.vec3(*np.asarray(sun_dir, dtype=np.float64).tolist()),
-                    wp.vec3(*np.asarray(sun_irradiance, dtype=np.float64).tolist()),
-                    wp.vec3(float(settings.environment)),
-                    float(ground.height - camera.position[1]) if ground is not None else 0.0,
-                    wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist()),
-                    int(settings.seed), int(settings.pixel_jitter), done, count, int(settings.max_bounces),
-                    radiance_sum, radiance_sq, transmittance_sum, depth_sum, counters,
-                ]
+                path = PathSettings()
+                path.environment = wp.vec3(float(settings.environment))
+                path.seed = int(settings.seed)
+                path.pixel_jitter = int(settings.pixel_jitter)
+                path.first_sample = done
+                path.sample_count = count
+                path.max_bounces = int(settings.max_bounces)
+                inputs = [media.media, majorant_data, phase, air, sun_struct(sun),
+                          pinhole_camera(camera, width, height), ground_struct(ground, camera.position), path, sums]
                 launch_rows(kernel, height, width, inputs, device)
                 done += count
                 if progress is not None:
