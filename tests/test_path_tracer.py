@@ -8,7 +8,8 @@ from conftest import StageSpec, look_rotation, render_layer, write_stage
 
 from warpsky.plan import make_plan
 from warpsky.scene.usd import StageReader
-from warpsky.techniques.path_tracer.technique import PathTracer, majorant_grid
+from warpsky.techniques.path_tracer.majorants import majorant_grid
+from warpsky.techniques.path_tracer.technique import PathTracer
 
 
 def path_traced(stage, device, size, **settings):

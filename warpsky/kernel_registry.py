@@ -14,7 +14,7 @@ import warpsky.media.advection_kernels as advection_kernels
 import warpsky.media.fields as fields
 import warpsky.optics.ice_kernels as ice_kernels
 import warpsky.optics.kernels as optics
-import warpsky.techniques.path_tracer.kernels as path_tracer
+import warpsky.techniques.path_tracer.kernels  # noqa: F401  (registers its kernel factory)
 import warpsky.techniques.radiosity.kernels as radiosity
 import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its kernel factories)
 import warpsky.techniques.sky.kernels as sky
@@ -22,17 +22,11 @@ import warpsky.techniques.slicing.kernels  # noqa: F401  (registers its kernel f
 import warpsky.techniques.stratiform.kernels as stratiform_kernels
 import warpsky.techniques.stratiform.reference as stratiform_reference
 import warpsky.techniques.stratiform.slab as stratiform_slab
-from warpsky.kernel_variants import kernel_variants, variant_modules
+from warpsky.kernel_variants import variant_modules
 
 #: Modules holding plain (not factory-made) kernels.
 PLAIN_MODULES = (fields, optics, ice_kernels, sky, stratiform_slab, stratiform_reference, radiosity,
                  stratiform_kernels, advection_kernels)
-
-# The path tracer's factory is declared here until its own module carries the decorator (registration is
-# idempotent, so this line is harmless afterwards and can then be deleted).
-kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True))(
-    path_tracer.path_trace_kernel)
-
 
 def kernel_modules() -> list:
     """Warp ``Module`` objects for every kernel warpsky can launch."""

@@ -19,7 +19,6 @@ import warp as wp
 
 from warpsky.errors import UsageError
 from warpsky.media.detail import (
-    DETAIL_Z_MAX,  # noqa: F401  (the path tracer's host reads the bound here)
     MediumDetail,
     detailed_value,
     medium_details,

@@ -16,6 +16,10 @@ from warpsky.scene.model import PhaseKind
 
 INV_FOUR_PI = 1.0 / (4.0 * math.pi)
 RAYLEIGH_NORM = 3.0 / (16.0 * math.pi)
+#: Phase-model codes as kernels see them (a medium's ``phase_kind``; codes from ``TABLE_KIND`` up select a table).
+PHASE_ISOTROPIC = wp.constant(int(PhaseKind.ISOTROPIC))
+PHASE_HG = wp.constant(int(PhaseKind.HG))
+PHASE_RAYLEIGH = wp.constant(int(PhaseKind.RAYLEIGH))
 
 
 @wp.func
@@ -35,9 +39,9 @@ def phase_rayleigh(cos_theta: float) -> float:
 @wp.func
 def phase_eval(kind: int, g: float, cos_theta: float) -> float:
     """Evaluate the phase model with code ``kind`` (a :class:`PhaseKind`)."""
-    if kind == 1:
+    if kind == PHASE_HG:
         return phase_hg(cos_theta, g)
-    if kind == 2:
+    if kind == PHASE_RAYLEIGH:
         return phase_rayleigh(cos_theta)
     return INV_FOUR_PI
 

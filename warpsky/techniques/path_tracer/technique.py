@@ -8,10 +8,21 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
+from warpsky.device import launch_rows
 from warpsky.errors import UsageError
+from warpsky.media.air import air_struct
+from warpsky.media.voxel import VoxelMediaBuffers
+from warpsky.optics.kernels import DevicePhaseTables
+from warpsky.optics.phase_sampling import phase_tables_struct
+from warpsky.optics.tables import build_tables
+from warpsky.plan import scene_species
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
+from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.path_tracer.kernels import PathSettings, PixelSums, path_trace_kernel
+from warpsky.techniques.path_tracer.majorants import upload_majorants
 
 
 @documented
@@ -47,32 +58,6 @@ class PathTracerSettings(TechniqueSettings):
             raise UsageError(f"setting samples_per_pass must be >= 1, got {self.samples_per_pass}")
 
 
-def effective_block(shape: tuple[int, ...], block: int) -> int:
-    """Majorant cell edge [voxels] actually used for a grid of ``shape``: at most its largest edge."""
-    return max(1, min(int(block), max(shape)))
-
-
-def majorant_grid(density: np.ndarray, block: int) -> np.ndarray:
-    """Upper bounds of a trilinearly interpolated grid over coarse cells of ``block`` voxels.
-
-    A point in cell c interpolates voxels c*block - 1 .. (c+1)*block, so each cell takes the maximum over its
-    voxels dilated by one voxel (edge-clamped like the lookup). ``block`` is clamped to the largest grid edge
-    (:func:`effective_block`), where one cell holds the whole grid.
-    """
-    d = np.asarray(density, dtype=np.float32)
-    block = effective_block(d.shape, block)
-    dilated = d.copy()
-    for axis in range(3):
-        padded = np.pad(dilated, [(1, 1) if a == axis else (0, 0) for a in range(3)], mode="edge")
-        n = dilated.shape[axis]
-        dilated = np.maximum(np.maximum(padded.take(range(0, n), axis), padded.take(range(1, n + 1), axis)),
-                             padded.take(range(2, n + 2), axis))
-    cells = [max(1, -(-n // block)) for n in d.shape]
-    pad = [(0, c * block - n) for c, n in zip(cells, d.shape, strict=True)]
-    full = np.pad(dilated, pad, mode="edge")
-    return full.reshape(cells[0], block, cells[1], block, cells[2], block).max(axis=(1, 3, 5))
-
-
 class PathTracer:
     """Unbiased volumetric path tracing of voxel media: delta tracking with local majorants, ratio-tracked
     next-event estimation toward the sun, phase sampling from the optics tables, all media combined (Riley Eq. 6),
@@ -100,103 +85,76 @@ class PathTracer:
         return dataclasses.replace(self.settings, samples_per_pass=min(per_pass, self.settings.spp))
 
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> Layer:
-        import warp as wp
-
-        from warpsky.device import launch_rows
-        from warpsky.media.voxel import DETAIL_Z_MAX, VoxelMediaBuffers
-        from warpsky.optics.kernels import DevicePhaseTables
-        from warpsky.optics.tables import build_tables
-        from warpsky.techniques.common import pinhole_camera, sun_disk
-        from warpsky.techniques.path_tracer.kernels import MAJORANT_MARGIN, Air, MajorantGrid, path_trace_kernel
-        from warpsky.techniques.single_scatter.technique import scene_species
-
         settings = self.resolved_settings(scene)
         camera = scene.camera.conformed(width, height)
         device = self.device
         started = time.perf_counter()
         species = scene_species(scene)
-        block = int(settings.majorant_block)
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
-            mgrids, chunks, offset = [], [], 0
-            for medium in scene.media:
-                bound = majorant_grid(medium.density, block) * float(np.max(medium.extinction_scale))
-                bound *= float(MAJORANT_MARGIN)
-                if medium.detail is not None and medium.detail.active:
-                    # animated detail multiplies the density by at most 1 + DETAIL_Z_MAX amplitude
-                    bound *= 1.0 + float(DETAIL_Z_MAX) * float(medium.detail.amplitude)
-                mg = MajorantGrid()
-                mg.offset = offset
-                mg.shape = wp.vec3i(*bound.shape)
-                mg.block = float(effective_block(medium.density.shape, block))
-                mgrids.append(mg)
-                chunks.append(bound.reshape(-1))
-                offset += bound.size
-            majorants = wp.array(np.concatenate(chunks) if chunks else np.zeros(1, np.float32), dtype=float)
-            mgrid_array = wp.array(mgrids if mgrids else [MajorantGrid()], dtype=MajorantGrid)
-            shape = (height, width)
-            radiance_sum = wp.zeros(shape, dtype=wp.vec3)
-            radiance_sq = wp.zeros(shape, dtype=wp.vec3)
-            transmittance_sum = wp.zeros(shape, dtype=wp.vec3)
-            depth_sum = wp.zeros(shape, dtype=wp.vec2)
-            counters = wp.zeros(shape, dtype=wp.vec2i)
-            sun = scene.sun
-            sun_dir = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])
-            sun_irradiance = sun.irradiance if sun is not None else np.zeros(3)
-            ground = scene.ground
-            kernel = path_trace_kernel(ground is not None, bool(species), media.has_detail)
-            air = Air()
-            atmosphere = scene.atmosphere
-            air.enabled = int(atmosphere is not None)
-            if atmosphere is not None:
-                air.beta_sl = wp.vec3(*atmosphere.beta_sea_level.tolist())
-                air.gamma = float(atmosphere.gamma)
-                air.camera_altitude = float(camera.position[1] + atmosphere.altitude)
-                air.band = float(0.1 * atmosphere.scale_height)
-            sun_cos_radius, sun_solid_angle = sun_disk(sun.angular_diameter if sun is not None else 0.0)
+            majorants, cells = upload_majorants(scene.media, int(settings.majorant_block), device)
+            sums = pixel_sums((height, width), device)
+            kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail)
+            fixed = [media.media, majorants, phase_tables_struct(tables), air_struct(scene.atmosphere, camera.position),
+                     sun_struct(scene.sun), pinhole_camera(camera, width, height),
+                     ground_struct(scene.ground, camera.position)]
             spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
             done = 0
             while done < spp:
                 count = min(per_pass, spp - done)
-                inputs = [
-                    media.values, media.grids, media.count, media.details, mgrid_array, majorants, tables.values,
-                    tables.cdf,
-                    air, float(sun_cos_radius), float(sun_solid_angle),
-                    pinhole_camera(camera, width, height),
-                    wp.vec3(*np.asarray(sun_dir, dtype=np.float64).tolist()),
-                    wp.vec3(*np.asarray(sun_irradiance, dtype=np.float64).tolist()),
-                    wp.vec3(float(settings.environment)),
-                    float(ground.height - camera.position[1]) if ground is not None else 0.0,
-                    wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist()),
-                    int(settings.seed), int(settings.pixel_jitter), done, count, int(settings.max_bounces),
-                    radiance_sum, radiance_sq, transmittance_sum, depth_sum, counters,
-                ]
-                launch_rows(kernel, height, width, inputs, device)
+                launch_rows(kernel, height, width, [*fixed, path_settings(settings, done, count), sums], device)
                 done += count
                 if progress is not None:
                     progress(count)
             wp.synchronize_device(device)
             seconds = time.perf_counter() - started
-            total = radiance_sum.numpy().astype(np.float64)
-            squares = radiance_sq.numpy().astype(np.float64)
-            mean = total / spp
-            variance = np.maximum(squares / spp - mean**2, 0.0) / max(spp - 1, 1)  # of the mean
-            depth = depth_sum.numpy()
-            far = np.float32(camera.far)
-            depth_mean = np.where(depth[..., 1] > 0, depth[..., 0] / np.maximum(depth[..., 1], 1), far)
-            count_values = counters.numpy()
-        return Layer(
-            mean.astype(np.float32),
-            (transmittance_sum.numpy() / spp).astype(np.float32),
-            depth_mean.astype(np.float32),
-            stats={
-                "seconds": seconds,
-                "settings": dataclasses.asdict(settings),
-                "spp": spp,
-                "tracking_steps": int(count_values[..., 0].sum()),
-                "capped_paths": int(count_values[..., 1].sum()),
-                "majorant_cells": int(offset),
-            },
-            aovs={"variance": variance.astype(np.float32)},
-        )
+            layer = sums_layer(sums, spp, float(camera.far))
+        layer.stats = {"seconds": seconds, "settings": dataclasses.asdict(settings), "spp": spp, **layer.stats,
+                       "majorant_cells": int(cells)}
+        return layer
+
+
+def pixel_sums(shape: tuple[int, int], device) -> PixelSums:
+    """Zeroed per-pixel sums of ``shape`` (rows, columns) on ``device``."""
+    out = PixelSums()
+    out.radiance_sum = wp.zeros(shape, dtype=wp.vec3, device=device)
+    out.radiance_sq = wp.zeros(shape, dtype=wp.vec3, device=device)
+    out.transmittance_sum = wp.zeros(shape, dtype=wp.vec3, device=device)
+    out.depth_sum = wp.zeros(shape, dtype=wp.vec2, device=device)
+    out.counters = wp.zeros(shape, dtype=wp.vec2i, device=device)
+    return out
+
+
+def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int) -> PathSettings:
+    """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``."""
+    out = PathSettings()
+    out.environment = wp.vec3(float(settings.environment))
+    out.seed = int(settings.seed)
+    out.pixel_jitter = int(settings.pixel_jitter)
+    out.first_sample = int(first_sample)
+    out.sample_count = int(sample_count)
+    out.max_bounces = int(settings.max_bounces)
+    return out
+
+
+def sums_layer(sums: PixelSums, spp: int, far: float) -> Layer:
+    """The layer of ``spp`` accumulated paths per pixel: mean radiance, mean transmittance, mean depth of first
+    events (``far`` where none), the variance of the pixel mean as an AOV, and the tracking counters."""
+    total = sums.radiance_sum.numpy().astype(np.float64)
+    squares = sums.radiance_sq.numpy().astype(np.float64)
+    mean = total / spp
+    variance = np.maximum(squares / spp - mean**2, 0.0) / max(spp - 1, 1)  # of the mean
+    depth = sums.depth_sum.numpy()
+    depth_mean = np.where(depth[..., 1] > 0, depth[..., 0] / np.maximum(depth[..., 1], 1), np.float32(far))
+    count_values = sums.counters.numpy()
+    return Layer(
+        mean.astype(np.float32),
+        (sums.transmittance_sum.numpy() / spp).astype(np.float32),
+        depth_mean.astype(np.float32),
+        stats={
+            "tracking_steps": int(count_values[..., 0].sum()),
+            "capped_paths": int(count_values[..., 1].sum()),
+        },
+        aovs={"variance": variance.astype(np.float32)},
+    )

@@ -1,0 +1,191 @@
+"""Phase sampling on the device: each model's sampling and its density, and the mixture of every medium at a point.
+
+A scattering point holds several media (and the air), each with its own phase function. The path tracer samples
+the mixture in two stages: it picks one component with probability proportional to its mean scattering
+coefficient, then samples that component's phase (Henyey–Greenstein by exact inversion, tables by their inverse
+CDF, isotropic and Rayleigh uniformly). The sample's weight is the mixture's phase (Riley 2004, Eq. 6: the
+scattering-weighted phase of all components, per channel) over the mixture's pdf (the weighted sum of every
+component's sampling density), so the estimate is unbiased whatever the component picked.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from warpsky.media.voxel import MediaPoint, VoxelMedia
+from warpsky.optics.kernels import (
+    GRID_SIZE,
+    TABLE_KIND,
+    DevicePhaseTables,
+    grid_angle,
+    grid_node,
+    medium_phase,
+    sample_table,
+    scattering_angle,
+)
+from warpsky.optics.phase import INV_FOUR_PI, PHASE_HG, PHASE_RAYLEIGH, phase_eval, phase_rayleigh
+
+INV_4PI = wp.constant(INV_FOUR_PI)
+#: Tables are sampled by one channel, green (row ``table * 3 + SAMPLED_CHANNEL``); the other channels' ratio to it
+#: is carried by the sample's weight.
+SAMPLED_CHANNEL = wp.constant(1)
+
+
+@wp.struct
+class PhaseTables:
+    """Flat phase tables and their cumulative tables on one device (one-value dummies without species)."""
+
+    values: wp.array(dtype=float)
+    cdf: wp.array(dtype=float)
+
+
+def phase_tables_struct(tables: DevicePhaseTables) -> PhaseTables:
+    """Kernel view of uploaded phase tables."""
+    out = PhaseTables()
+    out.values = tables.values
+    out.cdf = tables.cdf
+    return out
+
+
+@wp.func
+def sampled_row(kind: int) -> int:
+    """Row of the cumulative tables that phase kind ``kind`` (>= TABLE_KIND) is sampled from."""
+    return (kind - TABLE_KIND) * 3 + SAMPLED_CHANNEL
+
+
+@wp.func
+def table_pdf(cdf: wp.array(dtype=float), row: int, theta: float) -> float:
+    """Density per steradian with which :func:`~warpsky.optics.kernels.sample_table` returns ``theta`` from row
+    ``row``."""
+    node = grid_node(theta)
+    i = int(node[0])
+    base = row * GRID_SIZE
+    total = cdf[base + GRID_SIZE - 1]
+    mass = cdf[base + i + 1] - cdf[base + i]
+    width = grid_angle(i + 1) - grid_angle(i)
+    return mass / total / width / (2.0 * wp.pi * wp.max(wp.sin(theta), 1.0e-12))
+
+
+@wp.func
+def hg_sample_cos(g: float, u: float) -> float:
+    """cos θ of a Henyey–Greenstein sample (exact inversion; isotropic for |g| < 1e-4)."""
+    if wp.abs(g) < 1.0e-4:
+        return 1.0 - 2.0 * u
+    s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
+    return wp.clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0)
+
+
+@wp.func
+def model_pdf(cdf: wp.array(dtype=float), kind: int, g: float, theta: float) -> float:
+    """Sampling density [1/sr] of one medium's phase sampling at ``theta``."""
+    if kind >= TABLE_KIND:
+        return table_pdf(cdf, sampled_row(kind), theta)
+    if kind == PHASE_HG:
+        return phase_eval(kind, g, wp.cos(theta))
+    return INV_4PI  # isotropic; Rayleigh is sampled uniformly too and weighted by p / pdf
+
+
+@wp.func
+def rotate_about(d: wp.vec3, cos_theta: float, phi: float) -> wp.vec3:
+    """The direction at angle acos(cos_theta) from unit ``d`` with azimuth ``phi``."""
+    helper = wp.vec3(1.0, 0.0, 0.0)
+    if wp.abs(d[0]) > 0.9:
+        helper = wp.vec3(0.0, 1.0, 0.0)
+    u = wp.normalize(wp.cross(helper, d))
+    v = wp.cross(d, u)
+    sin_theta = wp.sqrt(wp.max(1.0 - cos_theta * cos_theta, 0.0))
+    return wp.normalize(d * cos_theta + (u * wp.cos(phi) + v * wp.sin(phi)) * sin_theta)
+
+
+@wp.func
+def mean3(v: wp.vec3) -> float:
+    return (v[0] + v[1] + v[2]) / 3.0
+
+
+@wp.struct
+class PhaseSample:
+    direction: wp.vec3
+    weight: wp.vec3  # combined phase / sampling pdf, per channel
+    state: wp.uint32
+
+
+@functools.cache
+def mixture_functions(has_tables: bool):
+    """``(mixture_phase, sample_mixture)`` over the media at a point plus one Rayleigh component (the air; zero
+    scattering for none), specialised on whether any medium uses a phase table."""
+
+    @wp.func
+    def mixture_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), rayleigh: wp.vec3,
+                      theta: float) -> wp.vec3:
+        """Riley Eq. 6: the scattering-weighted phase [1/sr] at scattering angle ``theta`` of the Rayleigh component
+        of scattering ``rayleigh`` [1/m] and every medium at ``point``, summed in that order."""
+        num = rayleigh * phase_rayleigh(wp.cos(theta))
+        den = rayleigh
+        for m in range(media.count):
+            value = point.density[m]
+            if value > 0.0:
+                grid = media.grids[m]
+                phase = wp.vec3(0.0)
+                if wp.static(has_tables):
+                    phase = medium_phase(tables, grid.phase_kind, grid.phase_g, theta)
+                else:
+                    phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
+                s = grid.scattering * value
+                num += wp.cw_mul(s, phase)
+                den += s
+        out = wp.vec3(0.0)
+        for c in range(3):
+            if den[c] > 0.0:
+                out[c] = num[c] / den[c]
+        return out
+
+    @wp.func
+    def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, rayleigh: wp.vec3, d: wp.vec3,
+                       state: wp.uint32) -> PhaseSample:
+        """New direction after scattering at ``point`` from direction ``d``: pick the Rayleigh component or a medium
+        by mean scattering, sample its phase (Rayleigh: uniformly), weight by the mixture's phase over the mixture's
+        pdf. Three random draws: the component, cos θ, the azimuth."""
+        air_w = mean3(rayleigh)
+        total = air_w
+        for m in range(media.count):
+            total += mean3(media.grids[m].scattering) * point.density[m]
+        target = wp.randf(state) * total
+        use_air = target < air_w or media.count == 0
+        chosen = int(0)
+        running = air_w
+        for m in range(media.count):
+            running += mean3(media.grids[m].scattering) * point.density[m]
+            if running < target:
+                chosen = m + 1
+        chosen = wp.clamp(chosen, 0, wp.max(media.count - 1, 0))
+        u = wp.randf(state)
+        cos_theta = 1.0 - 2.0 * u
+        if not use_air:
+            grid = media.grids[chosen]
+            if grid.phase_kind >= TABLE_KIND:
+                if wp.static(has_tables):
+                    cos_theta = wp.cos(sample_table(tables.cdf, sampled_row(grid.phase_kind), u)[0])
+            elif grid.phase_kind == PHASE_HG:
+                cos_theta = hg_sample_cos(grid.phase_g, u)
+        out = PhaseSample()
+        out.direction = rotate_about(d, cos_theta, 2.0 * wp.pi * wp.randf(state))
+        theta = scattering_angle(d, out.direction)
+        pdf = air_w * INV_4PI
+        for m in range(media.count):
+            grid = media.grids[m]
+            w = mean3(grid.scattering) * point.density[m]
+            if w > 0.0:
+                if wp.static(has_tables):
+                    pdf += w * model_pdf(tables.cdf, grid.phase_kind, grid.phase_g, theta)
+                else:
+                    pdf += w * model_pdf(tables.cdf, wp.min(grid.phase_kind, PHASE_RAYLEIGH), grid.phase_g, theta)
+        pdf = pdf / wp.max(total, 1.0e-30)
+        out.state = state
+        out.weight = wp.vec3(0.0)
+        if pdf > 0.0:
+            out.weight = mixture_phase(media, point, tables.values, rayleigh, theta) / pdf
+        return out
+
+    return mixture_phase, sample_mixture

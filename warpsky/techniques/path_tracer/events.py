@@ -1,0 +1,246 @@
+"""What happens where a path's free flight ends: scattering in a medium, a bounce on the ground, or the end.
+
+At a scattering point the path takes next-event estimation toward the sun (ratio-tracked transmittance times the
+media's mixed phase) and samples a new direction from that mixture. On the Lambertian ground it takes the sun
+through the media, then a cosine-weighted bounce. A path that leaves every medium gains the uniform environment
+(after a bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black sea level.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from warpsky.media.air import Air, air_scattering, sea_level_distance
+from warpsky.media.voxel import VoxelMedia, media_functions
+from warpsky.optics.kernels import scattering_angle
+from warpsky.optics.phase_sampling import PhaseTables, mixture_functions
+from warpsky.techniques.common import Ground, Sun
+from warpsky.techniques.path_tracer.majorants import Majorants
+from warpsky.techniques.path_tracer.tracking import tracking_functions
+
+#: What ends a ray before the far distance: nothing, the ground plane, or sea level (the air's floor).
+SURFACE_NONE = wp.constant(0)
+SURFACE_GROUND = wp.constant(1)
+SURFACE_SEA = wp.constant(2)
+#: "No end": flights after the first bounce and rays toward the sun run this far [m].
+UNBOUNDED = wp.constant(1.0e30)
+#: Russian roulette starts once a path has bounced this often.
+ROULETTE_BOUNCE = wp.constant(3)
+
+
+@wp.struct
+class RayEnd:
+    t: float  # distance [m] at which the ray ends
+    surface: int  # SURFACE_* that ends it
+
+
+@wp.struct
+class PathState:
+    """One path between events."""
+
+    origin: wp.vec3  # start of the next flight (camera-relative) [m]
+    direction: wp.vec3
+    throughput: wp.vec3
+    radiance: wp.vec3  # gathered so far
+    state: wp.uint32  # the path's one random stream
+    steps: int  # tentative collisions so far (the pixel's running count)
+    alive: int
+    capped: int  # 1 when the path stopped at max_bounces
+    hit: int  # 1 when the first flight ended in a medium or on the ground
+    first_t: float  # where the first flight ended [m from the near plane]
+
+
+@wp.func
+def start_path(origin: wp.vec3, direction: wp.vec3, state: wp.uint32, steps: int) -> PathState:
+    """A path leaving ``origin`` along ``direction`` with unit throughput and no light yet."""
+    out = PathState()
+    out.origin = origin
+    out.direction = direction
+    out.throughput = wp.vec3(1.0)
+    out.radiance = wp.vec3(0.0)
+    out.state = state
+    out.steps = steps
+    out.alive = 1
+    out.capped = 0
+    out.hit = 0
+    out.first_t = 0.0
+    return out
+
+
+@wp.func
+def reaches_ground(ground: Ground, origin: wp.vec3, d: wp.vec3) -> bool:
+    return d[1] < 0.0 and origin[1] > ground.offset
+
+
+@wp.func
+def ground_distance(ground: Ground, origin: wp.vec3, d: wp.vec3) -> float:
+    """Distance [m] along ``d`` to the ground plane (for rays that reach it)."""
+    return (ground.offset - origin[1]) / d[1]
+
+
+@wp.func
+def escaped_radiance(air: Air, sun: Sun, environment: wp.vec3, d: wp.vec3, throughput: wp.vec3, bounce: int,
+                     sun_on: bool) -> wp.vec3:
+    """Light a path of ``throughput`` gains when its flight along ``d`` leaves every medium: none at a black sea
+    level (with air, downward), the environment after a bounce, the sun's disk seen directly with air (then the
+    path tracer draws it itself: the sky pass is not used)."""
+    out = wp.vec3(0.0)
+    if air.enabled != 0 and d[1] < 0.0:
+        return out
+    if bounce > 0:
+        out = wp.cw_mul(throughput, environment)
+    elif air.enabled != 0 and sun_on and wp.dot(d, sun.direction) >= sun.cos_radius:
+        out = wp.cw_mul(throughput, sun.irradiance) / sun.solid_angle
+    return out
+
+
+@wp.func
+def roulette(path: PathState, bounce: int) -> PathState:
+    """Russian roulette once a path is ``ROULETTE_BOUNCE`` bounces deep (one random draw when it may stop)."""
+    out = path
+    if bounce >= ROULETTE_BOUNCE:
+        q = wp.min(wp.max(out.throughput), 1.0)
+        if q <= 0.0:
+            out.alive = 0
+        elif q < 1.0:
+            state = out.state
+            if wp.randf(state) < q:
+                out.throughput = out.throughput / q
+            else:
+                out.alive = 0
+            out.state = state
+    return out
+
+
+@functools.cache
+def surface_functions(has_ground: bool):
+    """``(primary_end, flight_end, sun_reaches)``, specialised on a ground plane."""
+
+    @wp.func
+    def primary_end(air: Air, ground: Ground, origin: wp.vec3, view: wp.vec3, t_end: float) -> RayEnd:
+        """Where a camera ray from the near plane ends: the far plane at ``t_end``, else sea level, else the
+        ground (the nearer wins; on a tie sea level)."""
+        out = RayEnd()
+        out.t = t_end
+        out.surface = SURFACE_NONE
+        if air.enabled != 0 and view[1] < 0.0:
+            t_sea = sea_level_distance(air, origin, view)
+            if t_sea < out.t:
+                out.t = t_sea
+                out.surface = SURFACE_SEA
+        if wp.static(has_ground):
+            if reaches_ground(ground, origin, view):
+                tg = ground_distance(ground, origin, view)
+                if tg < out.t:
+                    out.t = tg
+                    out.surface = SURFACE_GROUND
+        return out
+
+    @wp.func
+    def flight_end(air: Air, ground: Ground, origin: wp.vec3, d: wp.vec3, bounce: int, first: RayEnd) -> RayEnd:
+        """Where the flight of bounce ``bounce`` ends: the camera ray's end ``first`` for bounce 0, else the ground
+        (or no end), then sea level where it is nearer (on a tie the ground)."""
+        out = RayEnd()
+        out.t = first.t
+        out.surface = SURFACE_NONE
+        if bounce > 0:
+            out.t = UNBOUNDED
+            if wp.static(has_ground):
+                if reaches_ground(ground, origin, d):
+                    out.t = ground_distance(ground, origin, d)
+                    out.surface = SURFACE_GROUND
+        elif first.surface == SURFACE_GROUND:
+            out.surface = SURFACE_GROUND
+        if air.enabled != 0 and d[1] < 0.0:
+            t_sea = sea_level_distance(air, origin, d)
+            if t_sea < out.t:
+                out.t = t_sea  # the air ends at a black sea level (no ground plane above it here)
+                out.surface = SURFACE_SEA
+        return out
+
+    @wp.func
+    def sun_reaches(sun: Sun, air: Air) -> bool:
+        """Whether the sun lights the scene: lit, and above the horizon where a ground or the air (a flat earth's
+        air hides a sun below the horizon) is there to hide it."""
+        sun_up = bool(True)
+        if wp.static(has_ground):
+            sun_up = sun.direction[1] > 0.0
+        if air.enabled != 0:
+            sun_up = sun.direction[1] > 0.0
+        return sun.lit != 0 and sun_up
+
+    return primary_end, flight_end, sun_reaches
+
+
+@wp.struct
+class DirectionSample:
+    direction: wp.vec3
+    state: wp.uint32
+
+
+@wp.func
+def cosine_up(state: wp.uint32) -> DirectionSample:
+    """A cosine-weighted direction about +y (two random draws: radius, then azimuth)."""
+    u1 = wp.randf(state)
+    phi = 2.0 * wp.pi * wp.randf(state)
+    rr = wp.sqrt(u1)
+    out = DirectionSample()
+    out.direction = wp.vec3(rr * wp.cos(phi), wp.sqrt(wp.max(1.0 - u1, 0.0)), rr * wp.sin(phi))
+    out.state = state
+    return out
+
+
+@functools.cache
+def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
+    """``(scatter_event, ground_event)``, specialised on a ground plane, tabulated species and animated detail."""
+    sample_media = media_functions(has_detail)
+    _media_at, _delta_track, ratio_track = tracking_functions(has_detail)
+    mixture_phase, sample_mixture = mixture_functions(has_tables)
+
+    @wp.func
+    def scatter_event(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
+                      sun_on: bool, path: PathState, p: wp.vec3) -> PathState:
+        """Scattering at ``p``: the sun through the media times the mixed phase, then a new direction sampled from
+        the mixture (one media lookup serves both)."""
+        out = path
+        point = sample_media(media, p)
+        rayleigh = air_scattering(air, p[1])
+        if sun_on:
+            tr_sun = ratio_track(media, majorants, air, p, sun.direction, UNBOUNDED, out.state)
+            out.state = tr_sun.state
+            out.steps = out.steps + tr_sun.steps
+            phase = mixture_phase(media, point, tables.values, rayleigh, scattering_angle(sun.direction, out.direction))
+            out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, phase),
+                                                    wp.cw_mul(sun.irradiance, tr_sun.value))
+        ps = sample_mixture(media, point, tables, rayleigh, out.direction, out.state)
+        out.state = ps.state
+        out.throughput = wp.cw_mul(out.throughput, ps.weight)
+        out.direction = ps.direction
+        out.origin = p
+        return out
+
+    @wp.func
+    def ground_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, ground: Ground, sun_on: bool,
+                     path: PathState, p: wp.vec3) -> PathState:
+        """Lambertian ground under ``p``: the sun through the media, then a cosine-weighted bounce."""
+        out = path
+        if wp.static(has_ground):
+            q = wp.vec3(p[0], ground.offset, p[2])
+            if sun_on:
+                tr_sun = ratio_track(media, majorants, air, q, sun.direction, UNBOUNDED, out.state)
+                out.state = tr_sun.state
+                out.steps = out.steps + tr_sun.steps
+                lit_ground = wp.cw_mul(sun.irradiance, tr_sun.value)
+                out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, ground.albedo), lit_ground) * (
+                    sun.direction[1] / wp.pi
+                )
+            out.throughput = wp.cw_mul(out.throughput, ground.albedo)
+            bounce = cosine_up(out.state)
+            out.direction = bounce.direction
+            out.state = bounce.state
+            out.origin = q + wp.vec3(0.0, 1.0e-4, 0.0)
+        return out
+
+    return scatter_event, ground_event

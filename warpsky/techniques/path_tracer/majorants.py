@@ -1,0 +1,153 @@
+"""Local majorants of the path tracer: coarse grids of upper bounds on each medium's extinction.
+
+Every medium carries a coarse grid of upper bounds on its extinction (one value per block of voxels,
+:class:`MajorantGrid`), and a ray advances from block boundary to block boundary with the sum of the bounds of the
+blocks it is in, so thin regions are crossed in a few steps and a thick core does not slow the rest of the cloud
+down. The air's majorant over a stretch of ray is its density at the stretch's lowest point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from warpsky.media.air import Air, air_coefficient
+from warpsky.media.detail import detail_factor_bound
+from warpsky.media.voxel import VoxelMedia, grid_interval
+from warpsky.scene.model import VoxelMedium
+
+#: Majorants are inflated by this factor so float32 interpolation never exceeds them.
+MAJORANT_MARGIN = wp.constant(1.0001)
+
+
+@wp.struct
+class MajorantGrid:
+    """Coarse upper bounds of one medium's extinction: cell (i, j, k) covers voxels [i*block, (i+1)*block)."""
+
+    offset: int  # first value in the flat majorant buffer
+    shape: wp.vec3i  # coarse cells along index x, y, z
+    block: float  # voxels per cell edge
+
+
+@wp.struct
+class Majorants:
+    """Every medium's majorant grid: one :class:`MajorantGrid` per medium over one flat buffer of bounds [1/m]."""
+
+    grids: wp.array(dtype=MajorantGrid)
+    values: wp.array(dtype=float)
+
+
+@wp.struct
+class Segment:
+    """The majorant [1/m] that holds from the current point to ``end`` [m along the ray]."""
+
+    majorant: float
+    end: float
+
+
+@wp.func
+def air_segment(air: Air, origin: wp.vec3, direction: wp.vec3, t: float, t_max: float) -> Segment:
+    """The air's majorant at ``origin + t * direction`` and where it changes (``t_max`` and 0 without air)."""
+    out = Segment()
+    out.majorant = 0.0
+    out.end = t_max
+    if air.enabled != 0:
+        y = origin[1] + t * direction[1]
+        dy = direction[1]
+        if dy == 0.0:
+            out.majorant = wp.max(air_coefficient(air, y)) * MAJORANT_MARGIN
+        else:
+            remaining = wp.max(air_coefficient(air, y)) / (air.gamma * wp.max(dy, 1.0e-30))
+            if dy < 0.0 or remaining > 1.0e-6:
+                stretch = air.band / wp.abs(dy)
+                lowest = y
+                if dy < 0.0:
+                    lowest = y + dy * wp.min(stretch, t_max - t)
+                out.majorant = wp.max(air_coefficient(air, lowest)) * MAJORANT_MARGIN
+                out.end = wp.min(out.end, t + stretch)
+    return out
+
+
+@wp.func
+def majorant_segment(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
+                     t: float, t_max: float) -> Segment:
+    """Sum of the majorants of the air and all media at ``origin + t * direction`` and where the first of them
+    changes."""
+    out = air_segment(air, origin, direction, t, t_max)
+    for m in range(media.count):
+        grid = media.grids[m]
+        mg = majorants.grids[m]
+        p0 = grid.eye_index + grid.index_from_world * origin
+        dir_index = grid.index_from_world * direction
+        span = grid_interval(grid, p0, dir_index, t, t_max)
+        if span[1] <= span[0]:
+            continue
+        if span[0] > t:
+            out.end = wp.min(out.end, span[0])  # the medium starts ahead: the majorant changes there
+            continue
+        # the cell holding the point just ahead of t (so a point on a boundary belongs to the next cell)
+        # Float rounding can put a computed cell exit a hair before t: the step forward is at least ``nudge``
+        # (1e-4 voxel, or 1e-6 of t far from the camera), so tracking always progresses.
+        reach = wp.max(wp.max(wp.abs(dir_index[0]), wp.abs(dir_index[1])), wp.abs(dir_index[2]))
+        nudge = wp.max(1.0e-4 / wp.max(reach, 1.0e-30), 1.0e-6 * wp.abs(t))
+        probe = p0 + (t + nudge) * dir_index
+        exit_t = span[1]
+        cell = wp.vec3i(0, 0, 0)
+        for a in range(3):
+            c = int(wp.floor((probe[a] + 0.5) / mg.block))
+            c = wp.clamp(c, 0, mg.shape[a] - 1)
+            cell[a] = c
+            if dir_index[a] > 0.0:
+                exit_t = wp.min(exit_t, (float(c + 1) * mg.block - 0.5 - p0[a]) / dir_index[a])
+            elif dir_index[a] < 0.0:
+                exit_t = wp.min(exit_t, (float(c) * mg.block - 0.5 - p0[a]) / dir_index[a])
+        out.majorant += majorants.values[mg.offset + (cell[0] * mg.shape[1] + cell[1]) * mg.shape[2] + cell[2]]
+        out.end = wp.min(out.end, wp.max(exit_t, t + nudge))
+    return out
+
+
+def effective_block(shape: tuple[int, ...], block: int) -> int:
+    """Majorant cell edge [voxels] actually used for a grid of ``shape``: at most its largest edge."""
+    return max(1, min(int(block), max(shape)))
+
+
+def majorant_grid(density: np.ndarray, block: int) -> np.ndarray:
+    """Upper bounds of a trilinearly interpolated grid over coarse cells of ``block`` voxels.
+
+    A point in cell c interpolates voxels c*block - 1 .. (c+1)*block, so each cell takes the maximum over its
+    voxels dilated by one voxel (edge-clamped like the lookup). ``block`` is clamped to the largest grid edge
+    (:func:`effective_block`), where one cell holds the whole grid.
+    """
+    d = np.asarray(density, dtype=np.float32)
+    block = effective_block(d.shape, block)
+    dilated = d.copy()
+    for axis in range(3):
+        padded = np.pad(dilated, [(1, 1) if a == axis else (0, 0) for a in range(3)], mode="edge")
+        n = dilated.shape[axis]
+        dilated = np.maximum(np.maximum(padded.take(range(0, n), axis), padded.take(range(1, n + 1), axis)),
+                             padded.take(range(2, n + 2), axis))
+    cells = [max(1, -(-n // block)) for n in d.shape]
+    pad = [(0, c * block - n) for c, n in zip(cells, d.shape, strict=True)]
+    full = np.pad(dilated, pad, mode="edge")
+    return full.reshape(cells[0], block, cells[1], block, cells[2], block).max(axis=(1, 3, 5))
+
+
+def upload_majorants(media: tuple[VoxelMedium, ...], block: int, device) -> tuple[Majorants, int]:
+    """Majorant grids of ``media`` (cells of ``block`` voxels, bounds on extinction times the detail bound, with
+    :data:`MAJORANT_MARGIN`) uploaded to ``device``, and the number of cells."""
+    mgrids, chunks, offset = [], [], 0
+    for medium in media:
+        bound = majorant_grid(medium.density, block) * float(np.max(medium.extinction_scale))
+        bound *= float(MAJORANT_MARGIN)
+        bound *= detail_factor_bound(medium)
+        mg = MajorantGrid()
+        mg.offset = offset
+        mg.shape = wp.vec3i(*bound.shape)
+        mg.block = float(effective_block(medium.density.shape, block))
+        mgrids.append(mg)
+        chunks.append(bound.reshape(-1))
+        offset += bound.size
+    out = Majorants()
+    out.values = wp.array(np.concatenate(chunks) if chunks else np.zeros(1, np.float32), dtype=float, device=device)
+    out.grids = wp.array(mgrids if mgrids else [MajorantGrid()], dtype=MajorantGrid, device=device)
+    return out, offset

@@ -1,0 +1,217 @@
+"""Free flights and transmittance of the path tracer: delta tracking and ratio tracking against local majorants.
+
+Both walk the same sequence of tentative collisions (:func:`next_collision`): a ray advances through majorant
+segments (:mod:`~warpsky.techniques.path_tracer.majorants`), drawing exponential steps at the segment's majorant
+and restarting at each segment end. Delta tracking decides at each collision whether to scatter; ratio tracking
+multiplies the transmittance by the null-collision probability.
+
+RGB: one path carries three channels. Tentative collisions come at the majorant rate; a collision scatters with
+probability P = Σ_c w_c σ_t,c / (μ̄ Σ_c w_c), w the path's throughput (history-aware spectral tracking, Kutz et al.
+2017), and is null otherwise; each channel's weight is multiplied by its own probability over the one used
+(σ_s,c / (μ̄ P) for scattering, (μ̄ - σ_t,c) / (μ̄ (1 - P)) for null collisions). This is unbiased for every
+channel, keeps the sum of the weights on null collisions (no blow-up in chromatic air), and is exactly 1 for grey
+media.
+
+Positions are camera-relative metres (float32-safe far from the origin, as in :mod:`warpsky.media.voxel`).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from warpsky.media.air import Air, air_coefficient
+from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
+from warpsky.techniques.path_tracer.majorants import Majorants, majorant_segment
+
+#: Hard cap on tentative collisions per tracking call (guards against non-progress; counted in the stats).
+MAX_TRACKING_STEPS = wp.constant(1000000)
+
+
+@wp.struct
+class PointMedia:
+    """Summed coefficients of the air and all media at a point [1/m]."""
+
+    extinction: wp.vec3
+    scattering: wp.vec3
+
+
+@wp.func
+def with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointMedia:
+    """Coefficients of the air at camera-relative height ``y`` plus the media at ``point``, summed air first and
+    then each medium in order (the order fixes the float32 rounding every tracking decision sees)."""
+    out = PointMedia()
+    out.extinction = point.extinction
+    out.scattering = point.scattering
+    if air.enabled != 0:
+        coefficient = air_coefficient(air, y)
+        if media.count <= 1:
+            # one medium: air + (0 + x) is the same float sum as (air + x)
+            out.extinction = coefficient + point.extinction
+            out.scattering = coefficient + point.scattering
+        else:
+            out.extinction = coefficient
+            out.scattering = coefficient
+            for m in range(media.count):
+                value = point.density[m]
+                if value > 0.0:
+                    grid = media.grids[m]
+                    out.extinction += grid.extinction * value
+                    out.scattering += grid.scattering * value
+    return out
+
+
+@wp.struct
+class Collision:
+    """Where :func:`next_collision` stopped: a tentative collision (``found`` 1) or the end of the ray."""
+
+    t: float  # distance along the ray [m]
+    majorant: float  # the majorant the collision was drawn with [1/m]
+    found: int
+    steps: int  # tentative collisions and segment crossings so far
+    state: wp.uint32
+
+
+@wp.func
+def next_collision(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
+                   t_start: float, t_max: float, steps_start: int, state: wp.uint32) -> Collision:
+    """The next tentative collision after ``t_start`` (one random draw per exponential step), or ``t_max``."""
+    t = float(t_start)
+    steps = int(steps_start)
+    found = int(0)
+    majorant = float(0.0)
+    while t < t_max and steps < MAX_TRACKING_STEPS:
+        seg = majorant_segment(media, majorants, air, origin, direction, t, t_max)
+        if seg.majorant <= 0.0:
+            if seg.end >= t_max:
+                break
+            t = wp.max(seg.end, t)
+            steps += 1
+            continue
+        step = -wp.log(1.0 - wp.randf(state)) / seg.majorant
+        steps += 1
+        if t + step >= seg.end:
+            t = seg.end
+            continue
+        t = t + step
+        found = 1
+        majorant = seg.majorant
+        break
+    out = Collision()
+    out.t = t
+    out.majorant = majorant
+    out.found = found
+    out.steps = steps
+    out.state = state
+    return out
+
+
+@wp.struct
+class Flight:
+    """Result of a free flight: where it ended, whether it scattered there, per-channel weight, cost."""
+
+    t: float
+    scattered: int
+    weight: wp.vec3
+    steps: int
+    state: wp.uint32
+
+
+@wp.struct
+class Transmittance:
+    """A ratio-tracking estimate per channel, its tentative collisions, and the advanced random state."""
+
+    value: wp.vec3
+    steps: int
+    state: wp.uint32
+
+
+@wp.func
+def positive(v: wp.vec3) -> wp.vec3:
+    return wp.vec3(wp.max(v[0], 0.0), wp.max(v[1], 0.0), wp.max(v[2], 0.0))
+
+
+@functools.cache
+def tracking_functions(has_detail: bool):
+    """``(media_at, delta_track, ratio_track)``, specialised on animated detail: with it every density lookup is
+    multiplied by the medium's detail factor (the majorant grids are scaled by its bound on the host)."""
+    sample_media = media_functions(has_detail)
+
+    @wp.func
+    def media_at(media: VoxelMedia, air: Air, p: wp.vec3) -> PointMedia:
+        """Summed extinction and scattering of the air and all media at the camera-relative point ``p``."""
+        return with_air(media, sample_media(media, p), air, p[1])
+
+    @wp.func
+    def delta_track(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
+                    t_max: float, history: wp.vec3, state: wp.uint32) -> Flight:
+        """Weighted delta tracking from ``origin`` along ``direction`` up to ``t_max`` (see the module docstring);
+        one random draw per collision after those of :func:`next_collision`."""
+        out = Flight()
+        out.scattered = 0
+        weight = wp.vec3(1.0)
+        t = float(0.0)
+        steps = int(0)
+        found = int(1)
+        while found != 0:
+            hit = next_collision(media, majorants, air, origin, direction, t, t_max, steps, state)
+            t = hit.t
+            steps = hit.steps
+            state = hit.state
+            found = hit.found
+            if found != 0:
+                point = media_at(media, air, origin + t * direction)
+                # history-aware spectral tracking (Kutz et al. 2017): scatter with the throughput-weighted
+                # probability, so the channels' weights keep their sum on null collisions and cannot blow up
+                hw = wp.cw_mul(history, weight)
+                total = hw[0] + hw[1] + hw[2]
+                p_scatter = float(0.0)
+                if total > 0.0:
+                    p_scatter = wp.clamp(wp.dot(hw, point.extinction) / (total * hit.majorant), 0.0, 1.0)
+                if wp.randf(state) < p_scatter:
+                    out.t = t
+                    out.scattered = 1
+                    out.weight = wp.cw_mul(weight, point.scattering) / (hit.majorant * p_scatter)
+                    out.steps = steps
+                    out.state = state
+                    return out
+                null = positive(hit.majorant * wp.vec3(1.0) - point.extinction)
+                weight = wp.cw_mul(weight, null) / (hit.majorant * (1.0 - p_scatter))
+        out.t = t_max
+        out.weight = weight
+        out.steps = steps
+        out.state = state
+        return out
+
+    @wp.func
+    def ratio_track(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
+                    t_max: float, state: wp.uint32) -> Transmittance:
+        """Unbiased transmittance estimate per channel along the segment (ratio tracking); a random draw for
+        Russian roulette once the estimate falls below 1e-3."""
+        tr = wp.vec3(1.0)
+        t = float(0.0)
+        steps = int(0)
+        found = int(1)
+        while found != 0:
+            hit = next_collision(media, majorants, air, origin, direction, t, t_max, steps, state)
+            t = hit.t
+            steps = hit.steps
+            state = hit.state
+            found = hit.found
+            if found != 0:
+                point = media_at(media, air, origin + t * direction)
+                tr = wp.cw_mul(tr, positive(wp.vec3(1.0) - point.extinction / hit.majorant))
+                if wp.max(tr) < 1.0e-3:
+                    # Russian roulette on a nearly opaque segment keeps the estimate unbiased and the cost bounded
+                    if wp.randf(state) < 0.5:
+                        tr = wp.vec3(0.0)
+                        break
+                    tr = tr * 2.0
+        out = Transmittance()
+        out.value = tr
+        out.steps = steps
+        out.state = state
+        return out
+
+    return media_at, delta_track, ratio_track
