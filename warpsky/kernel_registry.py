@@ -36,9 +36,9 @@ def kernel_modules() -> list:
     from warpsky.techniques.slicing.kernels import ground_kernel
 
     modules += [ground_kernel(has_detail).module for has_detail in (False, True)]
+    import warpsky.evaluation.stratiform_reference as stratiform_reference
+    import warpsky.evaluation.stratiform_slab as stratiform_slab
     import warpsky.techniques.radiosity.kernels as radiosity
-    import warpsky.techniques.stratiform.reference as stratiform_reference
-    import warpsky.techniques.stratiform.slab as stratiform_slab
 
     modules += [wp.get_module(stratiform_slab.__name__), wp.get_module(stratiform_reference.__name__),
                 wp.get_module(radiosity.__name__)]

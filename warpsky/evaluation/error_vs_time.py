@@ -26,14 +26,21 @@ import csv
 import dataclasses
 import hashlib
 import json
+import pickle
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
+import warpsky
+from warpsky.composite import composite
 from warpsky.errors import UsageError
 from warpsky.files import atomic_write, cache_dir
+from warpsky.render import render_layers
+from warpsky.techniques.base import parse_settings, technique_class
+from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
 
 #: Techniques the report knows how to walk, with their quality ladders.
 LADDERS = {
@@ -64,10 +71,6 @@ class Report:
 
 def _reference_key(scene, width, height, device, spp, seed) -> str:
     """Hash of everything the reference's pixels depend on: the scene as read (media, camera, sun, ground)."""
-    import pickle
-
-    import warpsky
-
     digest = hashlib.sha256(pickle.dumps(scene, protocol=4))
     digest.update(json.dumps([width, height, "cuda" in str(device), spp, seed, warpsky.__version__]).encode())
     return digest.hexdigest()[:20]
@@ -76,11 +79,6 @@ def _reference_key(scene, width, height, device, spp, seed) -> str:
 def render_frame_radiance(technique, scene, width: int, height: int, device: str):
     """(frame radiance (H, W, 3), transmittance, frame aovs, technique layer): the technique's layer composited with
     the sky pass when the scene has an atmosphere, so techniques compare on what a frame shows."""
-    from types import SimpleNamespace
-
-    from warpsky.composite import composite
-    from warpsky.render import render_layers
-
     layer, layers = render_layers(technique, scene, SimpleNamespace(width=width, height=height, device=device))
     frame = composite(layers, far=scene.camera.far)
     return frame.rgba[..., :3], frame.transmittance, frame.aovs, layer
@@ -88,8 +86,6 @@ def render_frame_radiance(technique, scene, width: int, height: int, device: str
 
 def reference_image(scene, width, height, device, *, spp: int, seed: int, use_cache: bool = True):
     """(radiance, transmittance, variance, seconds, cached) of the path-traced reference frame."""
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
-
     key = _reference_key(scene, width, height, device, spp, seed)
     path = cache_dir() / "reference" / f"{key}.npz"
     if use_cache and path.is_file():
@@ -140,8 +136,6 @@ def run_report(
 ) -> Report:
     """Render the reference and every technique's ladder; stop a ladder once its cumulative time passes
     ``budget`` / len(techniques) seconds."""
-    from warpsky.techniques.base import parse_settings, technique_class
-
     unknown = [t for t in techniques if t not in LADDERS]
     if unknown:
         raise UsageError(f"error-vs-time cannot measure {', '.join(unknown)} (yet); available: "
@@ -199,7 +193,7 @@ def format_table(report: Report) -> str:
 
 def write_outputs(report: Report, out_dir: Path, stem: str = "error_vs_time") -> list[Path]:
     """CSV, JSON and a log-log PNG (one curve per technique) into ``out_dir``."""
-    import matplotlib
+    import matplotlib  # heavy: loads only when the report's plot is written
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

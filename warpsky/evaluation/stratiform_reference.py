@@ -1,6 +1,7 @@
 """Photon tracing through a homogeneous plane-parallel slab with the *unmodified* Mie phase function, tallied by
 modified-Mie order (the number of S events: scattering angles >= θ_f), exit side and exit direction — the Monte
-Carlo reference of Bouthors 2006 Figs. 6, 8 and 9, used to measure the slab model.
+Carlo reference of Bouthors 2006 Figs. 6, 8 and 9, used to measure the slab model
+(:mod:`warpsky.evaluation.stratiform_compare`); no render uses it.
 
 Frame: Y up, the slab spans 0 <= y <= H, infinite in x and z; the sun lies in the +x half of the x-y plane at zenith
 angle θ_l, so photons enter the top travelling along (-sin θ_l, -cos θ_l, 0). Exit azimuth φ is measured from +x
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.optics.kernels import sample_table
+from warpsky.optics.kernels import DevicePhaseTables, sample_table
 
 ORDER_BINS = wp.constant(4)  # 0, 1, 2, 3+
 
@@ -116,8 +117,6 @@ def slab_monte_carlo(
 ) -> SlabTally:
     """Trace ``photons`` through a slab of extinction ``kappa`` [1/m] and ``thickness`` [m] with the phase table
     ``phase`` (3, M) (channel ``channel``), sun at zenith angle ``theta_l_deg``."""
-    from warpsky.optics.kernels import DevicePhaseTables
-
     theta_l = math.radians(theta_l_deg)
     threads = 256 if str(device).startswith("cpu") else 16384
     per_thread = max(1, -(-int(photons) // threads))
