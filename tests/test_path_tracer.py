@@ -4,18 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, render_layer, write_stage
+from conftest import StageSpec, look_rotation, path_traced, render_layer, write_stage
 
-from warpsky.plan import make_plan
 from warpsky.scene.usd import StageReader
 from warpsky.techniques.path_tracer.technique import PathTracer, majorant_grid
-
-
-def path_traced(stage, device, size, **settings):
-    scene = StageReader(stage).scene_at(None)
-    plan = make_plan(scene, technique="path_tracer", settings={k: str(v) for k, v in settings.items()},
-                     resolution=(size, size), device=device)
-    return PathTracer(plan.settings, device=device).render(scene, size, size)
 
 
 @pytest.fixture
