@@ -115,6 +115,7 @@ def test_cli_writes_a_variance_aov(box, tmp_path):
     assert {"variance.R", "variance.G", "variance.B"} <= set(image.channels)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("phase,g,tau", [("isotropic", None, 0.5), ("isotropic", None, 2.0), ("hg", 0.8, 4.0)])
 def test_homogeneous_slab_against_adding_doubling(tmp_path, homogeneous_npy, device, phase, g, tau):
     """A 10 m slab, 20 km wide, sun at normal incidence: radiance reflected straight up and at 60 deg, and

@@ -122,6 +122,7 @@ def test_sun_below_the_ground_lights_nothing(tmp_path, homogeneous_npy, device):
     assert layer.transmittance.min() < 0.5  # the cloud still hides what lies behind it
 
 
+@pytest.mark.slow
 def test_rain_sheet_shows_the_primary_bow(tmp_path, homogeneous_npy, species_phase, device):
     """A thin rain sheet lit from behind the camera: the radial profile of rendered radiance (per unit opacity)
     around the antisolar point peaks at the primary bow's radius, measured from pixel positions."""
@@ -146,6 +147,7 @@ def test_rain_sheet_shows_the_primary_bow(tmp_path, homogeneous_npy, species_pha
     assert 41.4 <= peak <= 42.5, peak
 
 
+@pytest.mark.slow
 def test_cirrus_sheet_shows_the_22_degree_halo(tmp_path, homogeneous_npy, species_phase, device):
     """A thin ice-crystal sheet between the camera and the sun: a ring of peak radiance 22 deg around the sun."""
     species_phase("ice")
