@@ -1,19 +1,30 @@
 # warpsky: two commands on a fresh machine.
 #   make demo   render usd_scenes/cumulus.usda to out/cumulus.0001.exr (+ PNG preview)
-#   make test   run the test suite on the CPU
+#   make test   run the test suite on the CPU (make test-fast: without the tests marked slow)
 PYTHON ?= python3
 VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test lint bench venv data clean help storm storm-data stratocumulus cumulus-wind
+.PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
+	cumulus-wind
 
 help:
-	@echo "make demo   - install into $(VENV), generate sample data, render the demo cumulus to out/"
-	@echo "make test   - install into $(VENV) and run the tests on the CPU"
-	@echo "make bench  - run benchmarks/bench_single_scatter.py (cuda too when present)"
-	@echo "make lint   - ruff"
-	@echo "make storm  - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact sheets, preview"
+	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
+	@echo "make test               - install into $(VENV) and run every test on the CPU"
+	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow')"
+	@echo "make lint               - ruff"
+	@echo "make bench              - run benchmarks/bench_single_scatter.py (cuda too when present)"
+	@echo "make venv               - create $(VENV) and install warpsky with all extras (redone when pyproject changes)"
+	@echo "make data               - generate the demo cumulus field data/cumulus.nvdb"
+	@echo "make cumulus-wind       - 48 frames of the cumulus in wind (usd_scenes/cumulus_wind.usda) to out/"
+	@echo "make stratocumulus      - stratocumulus over water, sand and snow, radiosity on and off, to out/"
+	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
+	@echo "make storm-data         - the storm's per-frame NanoVDB fields in data/storm/"
+	@echo "make storm              - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact"
+	@echo "                          sheets, preview"
+	@echo "make clean              - remove out/, data/ and .pytest_cache"
+	@echo "make help               - this list"
 
 venv: $(STAMP)
 
@@ -35,6 +46,9 @@ demo: $(STAMP) data/cumulus.nvdb
 test: $(STAMP)
 	$(PY) -m pytest -q
 
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
+
 lint: $(STAMP)
 	$(VENV)/bin/ruff check warpsky tests tools benchmarks
 
@@ -55,7 +69,6 @@ stratocumulus: $(STAMP)
 		--set stratiform.radiosity=0
 	$(PY) tools/make_stratocumulus.py --radiosity-light out
 
-.PHONY: stratocumulus-anim
 stratocumulus-anim: $(STAMP)
 	$(PY) tools/make_stratocumulus.py --out data
 	$(SC_RENDER) usd_scenes/stratocumulus_anim.usda out/stratocumulus_anim/sc.####.exr --res 256

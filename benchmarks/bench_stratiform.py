@@ -68,7 +68,7 @@ def main(argv=None) -> int:
     rows = [frame_benchmark(d, args.width, args.height, args.repeats) for d in devices]
     result = {"frames": rows}
     if args.slab_table:
-        from warpsky.techniques.stratiform.compare import compare_case, format_table
+        from warpsky.evaluation.stratiform_compare import compare_case, format_table
         from warpsky.techniques.stratiform.optics import stratiform_optics
 
         started = time.perf_counter()

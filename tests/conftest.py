@@ -1,4 +1,5 @@
-"""Shared fixtures: the devices present, and a builder that writes real USD stages in any up axis and unit."""
+"""Shared fixtures and helpers: the devices present, a builder that writes real USD stages in any up axis and unit,
+fields and atmosphere prims added to such stages, and one-call renders."""
 
 from __future__ import annotations
 
@@ -122,6 +123,39 @@ def write_stage(path: Path, spec: StageSpec, *, up: str = "Y", mpu: float = 1.0)
     return path
 
 
+def add_field(stage_path, name, npy, *, quantity=None, scale=None):
+    """Add a field ``name`` (an OpenVDBAsset on ``npy``) to the stage's /World/Cloud Volume."""
+    from pxr import Sdf, Usd, UsdVol
+
+    stage = Usd.Stage.Open(str(stage_path))
+    vol = UsdVol.Volume(stage.GetPrimAtPath("/World/Cloud"))
+    asset = UsdVol.OpenVDBAsset.Define(stage, f"/World/Cloud/{name}")
+    asset.CreateFilePathAttr(Sdf.AssetPath(str(npy)))
+    if quantity is not None:
+        asset.GetPrim().CreateAttribute("warpsky:quantity", Sdf.ValueTypeNames.Token).Set(quantity)
+    if scale is not None:
+        asset.GetPrim().CreateAttribute("warpsky:extinctionScale", Sdf.ValueTypeNames.Float).Set(scale)
+    vol.CreateFieldRelationship(name, asset.GetPath())
+    stage.Save()
+
+
+def add_atmosphere(stage_path, **attributes):
+    """Add a /World/Atmosphere prim with ``warpsky:atmosphere:<name>`` attributes (default: a scale height)."""
+    from pxr import Sdf, Usd
+
+    stage = Usd.Stage.Open(str(stage_path))
+    prim = stage.DefinePrim("/World/Atmosphere", "Scope")
+    types = {"scaleHeight": Sdf.ValueTypeNames.Float, "altitude": Sdf.ValueTypeNames.Float,
+             "betaSeaLevel": Sdf.ValueTypeNames.Color3f, "enabled": Sdf.ValueTypeNames.Bool,
+             "scaleHight": Sdf.ValueTypeNames.Float}
+    for name, value in attributes.items():
+        prim.CreateAttribute(f"warpsky:atmosphere:{name}", types[name]).Set(value)
+    if not attributes:
+        prim.CreateAttribute("warpsky:atmosphere:scaleHeight", Sdf.ValueTypeNames.Float).Set(8000.0)
+    stage.Save()
+    return stage_path
+
+
 @pytest.fixture
 def homogeneous_npy(tmp_path) -> Path:
     """A constant 4^3 grid of ones."""
@@ -140,6 +174,18 @@ def render_layer(stage_path: Path, device: str, width: int, height: int, *, time
     plan = make_plan(scene, technique="single_scatter", settings={k: str(v) for k, v in settings.items()},
                      resolution=(width, height), device=device)
     return scene, SingleScatter(plan.settings, device=device).render(scene, width, height)
+
+
+def path_traced(stage, device, size, **settings):
+    """Render a stage with the path tracer at ``size`` x ``size``; returns the layer."""
+    from warpsky.plan import make_plan
+    from warpsky.scene.usd import StageReader
+    from warpsky.techniques.path_tracer.technique import PathTracer
+
+    scene = StageReader(stage).scene_at(None)
+    plan = make_plan(scene, technique="path_tracer", settings={k: str(v) for k, v in settings.items()},
+                     resolution=(size, size), device=device)
+    return PathTracer(plan.settings, device=device).render(scene, size, size)
 
 
 @pytest.fixture(scope="session")

@@ -1,4 +1,4 @@
-"""Advected textures (issue 7): still and uniform flows, statistics over 2,000 frames, random access in time,
+"""Advected textures (Neyret 2003): still and uniform flows, statistics over 2,000 frames, random access in time,
 divergence-free curl noise, stiff and extreme cases, and the 3D detail ``@wp.func`` inside a kernel."""
 
 from __future__ import annotations

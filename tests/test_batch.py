@@ -16,6 +16,8 @@ from warpsky.output.exr import read_exr
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import make_storm  # noqa: E402
 
+pytestmark = pytest.mark.slow  # the module fixture builds four species' tables, then Dask starts workers
+
 FRAMES = 6
 FAST = ["--res", "32x22", "--device", "cpu", "--set", "slice_count=12", "--set", "light_resolution=32",
         "--set", "orders=12"]

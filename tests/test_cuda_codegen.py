@@ -12,6 +12,7 @@ from warpsky.kernel_registry import kernel_modules
 from warpsky.kernel_variants import registered_factories
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("module", kernel_modules(), ids=lambda m: m.name)
 def test_module_compiles_to_sm90_ptx(module, tmp_path):
     outputs = wp.compile_aot_module(module, arch=90, use_ptx=True, module_dir=tmp_path)

@@ -1,4 +1,4 @@
-"""Animated density detail of voxel media (issue 7 (b)): USD attributes, the has_detail kernel specialisations of
+"""Animated density detail of voxel media: USD attributes, the has_detail kernel specialisations of
 half-angle slicing and single scattering, random access in time through the whole render path, far from the
 origin."""
 

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, write_stage
+from conftest import StageSpec, add_atmosphere, look_rotation, write_stage
 
 from warpsky.errors import UsageError
 from warpsky.evaluation.error_vs_time import error_metrics, run_report, write_outputs
@@ -59,8 +59,6 @@ def test_report_refuses_unknown_techniques(tmp_path, homogeneous_npy):
 def test_report_on_a_scene_with_sky(tmp_path, homogeneous_npy, monkeypatch):
     """With an atmosphere the techniques compare on frames: single scattering + sky pass vs the path tracer that
     traces the air; the sky pixels agree, so the error comes from the cloud."""
-    from test_sky_render import add_atmosphere
-
     monkeypatch.setenv("WARPSKY_CACHE", str(tmp_path / "cache"))
     spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.02, camera_position=(0.0, 30.0, 40.0),
                      camera_rotation=look_rotation((0.0, 0.0, -1.0)), sun_direction=(0.3, 0.8, 0.5))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, write_stage
+from conftest import StageSpec, look_rotation, path_traced, write_stage
 
 from warpsky.scene.usd import StageReader
 
@@ -12,8 +12,6 @@ mitsuba = pytest.importorskip("mitsuba", reason="the compare extra (pip install 
 
 
 def test_path_tracer_agrees_with_mitsuba_volpath(tmp_path):
-    from test_path_tracer import path_traced
-
     from warpsky.evaluation import mitsuba as bridge
 
     rng = np.random.default_rng(0)

@@ -135,6 +135,7 @@ def test_same_seed_same_table_other_seed_differs(device):
     assert not np.array_equal(first.phase, other.phase)
 
 
+@pytest.mark.slow
 def test_bessel_j1_and_airy_first_dark_ring():
     # Bessel's integral J1(z) = (1/pi) int_0^pi cos(t - z sin t) dt, by a 4000-point Gauss rule (exact to 1e-12)
     z = np.linspace(0.0, 400.0, 4001)

@@ -25,7 +25,7 @@ def geometric_bow(n: float, k: int) -> float:
     return float(deviation if deviation <= 180.0 else 360.0 - deviation)
 
 
-@pytest.mark.parametrize("name", ["cloud", "rain", "stratus"])
+@pytest.mark.parametrize("name", ["cloud", pytest.param("rain", marks=pytest.mark.slow), "stratus"])
 def test_mie_tables_are_normalised_and_non_negative(species_phase, name):
     table = species_phase(name)
     assert table.shape == (3, len(DEG))

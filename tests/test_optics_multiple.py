@@ -60,6 +60,7 @@ def test_ams_2_matches_brute_force_monte_carlo(species_phase):
     assert np.max(np.abs(z)) < 5.0, z  # 26 bins: |z| < 5 fails by chance with probability ~1e-5
 
 
+@pytest.mark.slow
 def test_rain_orders_to_60_stay_normalised_and_tend_to_isotropy(species_phase):
     rain = species_phase("rain")
     ams, info = multiple.ams_tables(rain, 60, diagnostics=True)

@@ -145,7 +145,7 @@ def chi_square(samples: np.ndarray, table: np.ndarray) -> tuple[float, int]:
     return float(np.sum((observed[keep] - expected) ** 2 / expected)), int(keep.sum() - 1)
 
 
-@pytest.mark.parametrize("name", ["cloud", "rain"])
+@pytest.mark.parametrize("name", ["cloud", pytest.param("rain", marks=pytest.mark.slow)])
 def test_sampling_chi_square_for_mie_tables(device, species_phase, name):
     """The path tracer samples species by the green row's inverse CDF: chi^2 against cloud and rain Mie tables."""
     from warpsky.optics.kernels import DevicePhaseTables, sample

@@ -4,19 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, render_layer, write_stage
+from conftest import StageSpec, look_rotation, path_traced, render_layer, write_stage
 
-from warpsky.plan import make_plan
 from warpsky.scene.usd import StageReader
 from warpsky.techniques.path_tracer.majorants import majorant_grid
 from warpsky.techniques.path_tracer.technique import PathTracer
-
-
-def path_traced(stage, device, size, **settings):
-    scene = StageReader(stage).scene_at(None)
-    plan = make_plan(scene, technique="path_tracer", settings={k: str(v) for k, v in settings.items()},
-                     resolution=(size, size), device=device)
-    return PathTracer(plan.settings, device=device).render(scene, size, size)
 
 
 @pytest.fixture
@@ -124,6 +116,7 @@ def test_cli_writes_a_variance_aov(box, tmp_path):
     assert {"variance.R", "variance.G", "variance.B"} <= set(image.channels)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("phase,g,tau", [("isotropic", None, 0.5), ("isotropic", None, 2.0), ("hg", 0.8, 4.0)])
 def test_homogeneous_slab_against_adding_doubling(tmp_path, homogeneous_npy, device, phase, g, tau):
     """A 10 m slab, 20 km wide, sun at normal incidence: radiance reflected straight up and at 60 deg, and

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, render_layer, write_stage
+from conftest import StageSpec, add_field, look_rotation, render_layer, write_stage
 
 SIGMA = 0.05  # extinction of the test box [1/m]
 HALF = 10.0  # the box spans [-10, 10]^3 m
@@ -115,8 +115,6 @@ def test_ground_is_opaque_and_lambertian(tmp_path, device):
 def test_species_field_scatters_with_its_tabulated_phase(tmp_path, homogeneous_npy, species_phase, device):
     """A cloud field (Mie table) in place of the generic density: the isotropic 1/4pi of the quadrature becomes
     the cloud's phase per channel at each pixel's scattering angle; only cloud tables are built."""
-    from test_scene_usd import add_field
-
     from warpsky.optics import tables
     from warpsky.optics.grid import angle_grid
 

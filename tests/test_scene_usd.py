@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, render_layer, write_stage
+from conftest import StageSpec, add_field, look_rotation, render_layer, write_stage
 
 from warpsky.scene.usd import StageReader
 
@@ -119,21 +119,6 @@ def test_time_sampled_file_path_picks_per_frame_files(tmp_path):
     assert reader.read_media(1.0)[0].density.max() == 1.0
     assert reader.read_media(2.0)[0].density.max() == 3.0
     assert reader.read_media(7.0)[0].density.max() == 3.0  # held, not interpolated
-
-
-def add_field(stage_path, name, npy, *, quantity=None, scale=None):
-    from pxr import Sdf, Usd, UsdVol
-
-    stage = Usd.Stage.Open(str(stage_path))
-    vol = UsdVol.Volume(stage.GetPrimAtPath("/World/Cloud"))
-    asset = UsdVol.OpenVDBAsset.Define(stage, f"/World/Cloud/{name}")
-    asset.CreateFilePathAttr(Sdf.AssetPath(str(npy)))
-    if quantity is not None:
-        asset.GetPrim().CreateAttribute("warpsky:quantity", Sdf.ValueTypeNames.Token).Set(quantity)
-    if scale is not None:
-        asset.GetPrim().CreateAttribute("warpsky:extinctionScale", Sdf.ValueTypeNames.Float).Set(scale)
-    vol.CreateFieldRelationship(name, asset.GetPath())
-    stage.Save()
 
 
 def test_species_fields_become_media_with_their_cross_sections(tmp_path, homogeneous_npy):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from warpsky.techniques.sky import analytic as sky
 
@@ -49,6 +50,7 @@ def cases(count: int, seed: int = 0):
     return out
 
 
+@pytest.mark.slow
 def test_analytic_inscatter_matches_quadrature_including_degenerate_angles():
     worst = 0.0
     for h0, view_y, sun_y, distance in cases(1200):

@@ -4,26 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, write_stage
+from conftest import StageSpec, add_atmosphere, look_rotation, write_stage
 
 from warpsky.errors import SceneError
 from warpsky.scene.usd import StageReader
-
-
-def add_atmosphere(stage_path, **attributes):
-    from pxr import Sdf, Usd
-
-    stage = Usd.Stage.Open(str(stage_path))
-    prim = stage.DefinePrim("/World/Atmosphere", "Scope")
-    types = {"scaleHeight": Sdf.ValueTypeNames.Float, "altitude": Sdf.ValueTypeNames.Float,
-             "betaSeaLevel": Sdf.ValueTypeNames.Color3f, "enabled": Sdf.ValueTypeNames.Bool,
-             "scaleHight": Sdf.ValueTypeNames.Float}
-    for name, value in attributes.items():
-        prim.CreateAttribute(f"warpsky:atmosphere:{name}", types[name]).Set(value)
-    if not attributes:
-        prim.CreateAttribute("warpsky:atmosphere:scaleHeight", Sdf.ValueTypeNames.Float).Set(8000.0)
-    stage.Save()
-    return stage_path
 
 
 def frame(stage_path, device, width=16, height=16):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, render_layer, write_stage
+from conftest import StageSpec, add_field, look_rotation, render_layer, write_stage
 
 from warpsky.plan import make_plan
 from warpsky.scene.usd import StageReader
@@ -122,11 +122,10 @@ def test_sun_below_the_ground_lights_nothing(tmp_path, homogeneous_npy, device):
     assert layer.transmittance.min() < 0.5  # the cloud still hides what lies behind it
 
 
+@pytest.mark.slow
 def test_rain_sheet_shows_the_primary_bow(tmp_path, homogeneous_npy, species_phase, device):
     """A thin rain sheet lit from behind the camera: the radial profile of rendered radiance (per unit opacity)
     around the antisolar point peaks at the primary bow's radius, measured from pixel positions."""
-    from test_scene_usd import add_field
-
     species_phase("rain")  # build (or load) the rain tables in the session cache
     sun = np.array([0.0, np.sin(np.radians(10.0)), np.cos(np.radians(10.0))])
     look = -sun
@@ -148,10 +147,9 @@ def test_rain_sheet_shows_the_primary_bow(tmp_path, homogeneous_npy, species_pha
     assert 41.4 <= peak <= 42.5, peak
 
 
+@pytest.mark.slow
 def test_cirrus_sheet_shows_the_22_degree_halo(tmp_path, homogeneous_npy, species_phase, device):
     """A thin ice-crystal sheet between the camera and the sun: a ring of peak radiance 22 deg around the sun."""
-    from test_scene_usd import add_field
-
     species_phase("ice")
     sun = np.array([0.0, np.sin(np.radians(30.0)), -np.cos(np.radians(30.0))])
     spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.0, camera_position=(0.0, 0.0, 0.0),
@@ -175,8 +173,6 @@ def test_cirrus_sheet_shows_the_22_degree_halo(tmp_path, homogeneous_npy, specie
 def test_cloud_sheet_shows_the_glory(tmp_path, homogeneous_npy, species_phase, device):
     """A thin sheet of 10 um droplets lit from behind the camera: brightest (per unit opacity) at the antisolar
     point, darker a few degrees out (the glory's first dark ring)."""
-    from test_scene_usd import add_field
-
     species_phase("cloud")
     sun = np.array([0.0, np.sin(np.radians(20.0)), np.cos(np.radians(20.0))])
     look = -sun

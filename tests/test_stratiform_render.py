@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
-from warpsky.media.stratiform import GroundTexture, StratiformLayer, procedural_thickness
+from warpsky.media.stratiform import procedural_thickness
+from warpsky.scene.layers import GroundTexture, StratiformLayer
 from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
 from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
 

@@ -1,5 +1,5 @@
 """Stratiform layers through the normal pipeline: USD prims -> Scene.layers -> plan (``warpsky info``) -> the
-stratiform pass composited with the sky and voxel media -> EXR; advected thickness maps (issue 7 (a), (c))."""
+stratiform pass composited with the sky and voxel media -> EXR; advected thickness maps (Neyret 2003)."""
 
 from __future__ import annotations
 

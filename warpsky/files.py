@@ -1,12 +1,17 @@
-"""File helpers shared by outputs and caches: the cache root, and writes that are never seen half-done."""
+"""File helpers shared by outputs and caches: the cache root, writes that are never seen half-done, and the frame
+placeholder of output paths."""
 
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from pathlib import Path
 
 from warpsky.errors import WarpskyError
+
+#: The frame in an output path (usdrecord's rule): a run of ``#``, optionally ``.`` and more ``#`` for subframes.
+PLACEHOLDER = re.compile(r"#+(\.#+)?")
 
 
 class OutputError(WarpskyError):

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import warp as wp
 
+import warpsky.evaluation.stratiform_reference as stratiform_reference
+import warpsky.evaluation.stratiform_slab as evaluation_slab
 import warpsky.media.advection_kernels as advection_kernels
 import warpsky.media.fields as fields
 import warpsky.optics.ice_kernels as ice_kernels
@@ -20,12 +22,11 @@ import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its k
 import warpsky.techniques.sky.kernels as sky
 import warpsky.techniques.slicing.kernels  # noqa: F401  (registers its kernel factories)
 import warpsky.techniques.stratiform.kernels as stratiform_kernels
-import warpsky.techniques.stratiform.reference as stratiform_reference
 import warpsky.techniques.stratiform.slab as stratiform_slab
 from warpsky.kernel_variants import variant_modules
 
 #: Modules holding plain (not factory-made) kernels.
-PLAIN_MODULES = (fields, optics, ice_kernels, sky, stratiform_slab, stratiform_reference, radiosity,
+PLAIN_MODULES = (fields, optics, ice_kernels, sky, stratiform_slab, evaluation_slab, stratiform_reference, radiosity,
                  stratiform_kernels, advection_kernels)
 
 def kernel_modules() -> list:

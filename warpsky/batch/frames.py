@@ -8,12 +8,11 @@ subframes; the field width is the placeholder's length and the decimals the ``#`
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 from warpsky.errors import UsageError
+from warpsky.files import PLACEHOLDER
 
-PLACEHOLDER = re.compile(r"#+(\.#+)?")
 GRAMMAR = "examples: 1 | 1:48 | 1:48x2 | 1.5:3x0.5 | 1,5,9:12"
 
 

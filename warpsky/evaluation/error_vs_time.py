@@ -26,6 +26,7 @@ import csv
 import dataclasses
 import hashlib
 import json
+import pickle
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,8 +69,6 @@ class Report:
 
 def _reference_key(scene, width, height, device, spp, seed) -> str:
     """Hash of everything the reference's pixels depend on: the scene as read (media, camera, sun, ground)."""
-    import pickle
-
     digest = hashlib.sha256(pickle.dumps(scene, protocol=4))
     digest.update(json.dumps([width, height, "cuda" in str(device), spp, seed, warpsky.__version__]).encode())
     return digest.hexdigest()[:20]
@@ -198,7 +197,7 @@ def format_table(report: Report) -> str:
 
 def write_outputs(report: Report, out_dir: Path, stem: str = "error_vs_time") -> list[Path]:
     """CSV, JSON and a log-log PNG (one curve per technique) into ``out_dir``."""
-    import matplotlib
+    import matplotlib  # heavy: loads only when the report's plot is written
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

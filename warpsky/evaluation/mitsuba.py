@@ -24,10 +24,12 @@ from __future__ import annotations
 import glob
 import math
 import os
+import time
 
 import numpy as np
 
 from warpsky.errors import UsageError
+from warpsky.scene.model import PhaseKind
 
 #: Where Debian and Ubuntu put the LLVM shared library Dr.Jit's LLVM backend loads.
 LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM-1[5-9].so", "/usr/lib/x86_64-linux-gnu/libLLVM-2*.so",
@@ -123,8 +125,6 @@ def _relative(matrix: np.ndarray, origin: np.ndarray) -> np.ndarray:
 
 
 def _phase(medium) -> dict:
-    from warpsky.scene.model import PhaseKind
-
     if medium.species is not None:
         # tabphase's orientation convention is not verified against warpsky's tables yet
         raise UsageError(f"Mitsuba export: species phase tables ({medium.species}) are not exported yet")
@@ -137,8 +137,6 @@ def _phase(medium) -> dict:
 
 def render(scene, width: int, height: int, *, spp: int, runs: int = 16, seed: int = 0) -> tuple[np.ndarray, ...]:
     """(mean image (H, W, 3), variance of the mean, seconds) from ``runs`` independent Mitsuba renders."""
-    import time
-
     mi = import_mitsuba()
     per_run = max(1, spp // runs)
     loaded = mi.load_dict(scene_dict(scene, width, height, per_run))

@@ -8,7 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.optics.species import SPECIES_NAMES
+from warpsky.files import atomic_write
+from warpsky.optics.grid import angle_grid
+from warpsky.optics.tables import ams_table, build_tables, phase_table
+from warpsky.scene.model import SPECIES_NAMES
 
 CHANNEL_COLOURS = ("#d62728", "#2ca02c", "#1f77b4")
 
@@ -38,8 +41,6 @@ def run(args) -> int:
 
 
 def _build(args) -> int:
-    from warpsky.optics.tables import build_tables
-
     tables = build_tables(args.species, orders=args.orders)
     built = {name for name, _, _ in tables.built}
     for name in tables.species:
@@ -50,14 +51,10 @@ def _build(args) -> int:
 
 
 def _plot(args) -> int:
-    import matplotlib
+    import matplotlib  # heavy: loads only for ``warpsky optics plot``
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from warpsky.files import atomic_write
-    from warpsky.optics.grid import angle_grid
-    from warpsky.optics.tables import ams_table, phase_table
 
     degrees = np.degrees(angle_grid())
     rows = len(args.species)
@@ -94,10 +91,6 @@ def _plot(args) -> int:
 
 
 def _export(args) -> int:
-    from warpsky.files import atomic_write
-    from warpsky.optics.grid import angle_grid
-    from warpsky.optics.tables import ams_table, phase_table
-
     if args.order is None:
         table, label = phase_table(args.species), "P"
     else:

@@ -39,8 +39,12 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
+from warpsky.device import cpu_thread_count, resolve_device
 from warpsky.errors import SceneError
+from warpsky.optics import ice_kernels as kernels
+from warpsky.optics.analytic import henyey_greenstein
 from warpsky.optics.grid import angle_grid, normalise, sphere_integral, sphere_weights
 from warpsky.optics.spectrum import band_samples
 
@@ -192,11 +196,6 @@ def trace_prisms(
     Returns:
         The raw histogram and tallies.
     """
-    import warp as wp
-
-    from warpsky.device import cpu_thread_count, resolve_device
-    from warpsky.optics import ice_kernels as kernels
-
     if photons <= 0 or 3 * photons >= 2**31:
         raise SceneError(f"photons per channel must lie in 1..{(2**31 - 1) // 3}, got {photons}")
     if half_length_ratio <= 0.0:
@@ -318,8 +317,6 @@ def ice_optics(
 
 def snow_optics() -> IceOptics:
     """Smooth phase function of snow aggregates (two-term Henyey-Greenstein, g = 0.75, no halos)."""
-    from warpsky.optics.analytic import henyey_greenstein
-
     mu = np.cos(angle_grid())
     (w_peak, g_peak), (w_rays, g_rays) = SNOW_PEAK, SNOW_RAYS
     row = normalise(w_peak * henyey_greenstein(mu, g_peak) + w_rays * henyey_greenstein(mu, g_rays))

@@ -43,13 +43,14 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import numpy as np
 
 from warpsky.optics.grid import angle_grid, normalise, segment_table, sphere_integral
 from warpsky.optics.spectrum import band_samples
 
-# miepython reads this at import time; with numba it is ~60x faster for rain-sized drops (FACTS.md).
+# miepython reads this at import time; with numba it is ~60x faster for rain-sized drops.
 os.environ.setdefault("MIEPYTHON_USE_JIT", "1")
 
 _WATER_NM = np.array([400.0, 450.0, 500.0, 550.0, 600.0, 650.0, 700.0])
@@ -84,8 +85,6 @@ class LogNormal:
 
     def area_weighted_quantiles(self, u: np.ndarray) -> np.ndarray:
         """Radii [m] at quantiles ``u`` of n(r) r² (again lognormal, with ln median shifted by 2σ²)."""
-        from statistics import NormalDist
-
         z = np.array([NormalDist().inv_cdf(float(v)) for v in u])
         return np.exp(np.log(self.median) + 2.0 * self.sigma_ln**2 + self.sigma_ln * z)
 
@@ -216,7 +215,7 @@ def mie_optics(
         samples_per_band: Wavelengths per channel (the band's sub-band centres).
         sun_diameter_deg: Disk the 5°-170° part is convolved with (:func:`sun_disk_smoothing`); 0 turns it off.
     """
-    import miepython
+    import miepython  # heavy (numba JIT on import): loads only when a Mie table is built
 
     samples = default_samples(distribution) if samples is None else int(samples)
     if samples < 1:

@@ -26,10 +26,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from warpsky.errors import SceneError
+from warpsky.optics import mie
+from warpsky.optics.analytic import rayleigh
+from warpsky.optics.grid import SEGMENTS_DEG, angle_grid, normalise
+from warpsky.optics.ice import ice_optics, snow_optics
+from warpsky.scene.model import FIELD_SPECIES, SPECIES_NAMES
 
-SPECIES_NAMES = ("air", "cloud", "rain", "ice", "snow", "stratus")
-#: Species a Volume field can name (``field:cloud`` ...); ``stratus`` is the stratiform layers' droplet model.
-FIELD_SPECIES = ("cloud", "rain", "ice", "snow")
+__all__ = ["FIELD_SPECIES", "SPECIES", "SPECIES_NAMES", "Species", "get_species"]
 
 
 @dataclass(frozen=True)
@@ -54,12 +57,8 @@ class Species:
 
     def cache_key(self) -> str:
         """Hash of everything that determines this species' tables."""
-        from warpsky.optics.grid import SEGMENTS_DEG
-
         details = dict(self.params)
         if self.model == "mie":
-            from warpsky.optics import mie
-
             details["distribution_values"] = repr(getattr(mie, self.params["distribution"]))
         blob = json.dumps(
             {"name": self.name, "model": self.model, "params": details, "grid": SEGMENTS_DEG}, sort_keys=True
@@ -68,24 +67,14 @@ class Species:
 
     def build_phase(self) -> np.ndarray:
         """Compute the (3, M) phase table on the shared grid (slow for Mie and ice: use the cache)."""
-        from warpsky.optics.grid import angle_grid, normalise
-
         if self.model == "rayleigh":
-            from warpsky.optics.analytic import rayleigh
-
             return normalise(np.tile(rayleigh(np.cos(angle_grid())), (3, 1)))
         if self.model == "mie":
-            from warpsky.optics import mie
-
             distribution = getattr(mie, self.params["distribution"])
             return np.asarray(mie.mie_optics(distribution).phase, dtype=np.float64)
         if self.model == "ice":
-            from warpsky.optics.ice import ice_optics
-
             return np.asarray(ice_optics(self.params["habit"], seed=self.params["seed"]).phase, dtype=np.float64)
         if self.model == "snow":
-            from warpsky.optics.ice import snow_optics
-
             return np.asarray(snow_optics().phase, dtype=np.float64)
         raise SceneError(f"species {self.name}: unknown optics model {self.model!r}")
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.files import atomic_write, cache_dir
+from warpsky.optics.multiple import ams_tables, forward_fractions, modified_mie
 from warpsky.optics.species import get_species
 
 #: Bump when a change to the builders changes table contents.
@@ -58,8 +59,6 @@ def phase_table(species: str) -> np.ndarray:
 
 def ams_table(species: str, orders: int = DEFAULT_ORDERS) -> tuple[np.ndarray, np.ndarray]:
     """(Ams_n for n = 0..orders as (orders+1, 3, M), forward fractions F_n as (orders+1, 3)) (Riley Eqs. 20, 23)."""
-    from warpsky.optics.multiple import ams_tables, forward_fractions
-
     def build():
         ams = ams_tables(phase_table(species), orders)
         return {"ams": ams, "forward": forward_fractions(ams)}
@@ -70,8 +69,6 @@ def ams_table(species: str, orders: int = DEFAULT_ORDERS) -> tuple[np.ndarray, n
 
 def modified_mie_table(species: str, theta_f_deg: float = 5.0) -> dict[str, np.ndarray]:
     """Bouthors 2006 §4.1: forward weight P_f, P_S, P_F and P2 = P_S * P_S for forward cut ``theta_f_deg``."""
-    from warpsky.optics.multiple import modified_mie
-
     def build():
         result = modified_mie(phase_table(species), np.radians(theta_f_deg))
         return {"forward_weight": result.forward_weight, "p_s": result.p_s, "p_f": result.p_f, "p2": result.p2}

@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.errors import UsageError
-from warpsky.files import atomic_write
+from warpsky.files import PLACEHOLDER, OutputError, atomic_write
+from warpsky.output.exr import read_exr
+from warpsky.output.png import tonemap
 
 #: Isosurface colour per species (generic density fields are white).
 SPECIES_COLOURS = {"cloud": "#f2f2f2", "rain": "#4f7fd9", "ice": "#8fe3ff", "snow": "#c9b8ff", "air": "#9fc5ff"}
@@ -120,8 +122,6 @@ def stage_preview(scene, path: str | os.PathLike, *, size: tuple[int, int] = (10
 
 def frame_paths(pattern: str) -> list[tuple[float, Path]]:
     """(frame number, path) of the EXRs matching a ``####`` pattern, in frame order."""
-    from warpsky.batch.frames import PLACEHOLDER
-
     match = PLACEHOLDER.search(Path(pattern).name)
     if match is None:
         raise UsageError(f"{pattern!r} has no frame placeholder (e.g. out/storm.####.exr)")
@@ -145,10 +145,6 @@ def contact_sheet(pattern: str, path: str | os.PathLike, *, columns: int | None 
     ``exposure`` defaults to the renderer's preview exposure stored in the first frame (``previewExposure``), else
     to 1 / the first frame's 99th percentile; the whole sheet uses one exposure."""
     from PIL import Image, ImageDraw
-
-    from warpsky.files import OutputError
-    from warpsky.output.exr import read_exr
-    from warpsky.output.png import tonemap
 
     frames = frame_paths(pattern)
     columns = columns or int(np.ceil(np.sqrt(len(frames) * 1.5)))

@@ -9,14 +9,16 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from warpsky.errors import SceneError
+from warpsky.scene.layers import GroundTexture, StratiformLayer
 
-if TYPE_CHECKING:
-    from warpsky.media.stratiform import GroundTexture, StratiformLayer
+#: The particle species warpsky has optics for (:mod:`warpsky.optics.species`).
+SPECIES_NAMES = ("air", "cloud", "rain", "ice", "snow", "stratus")
+#: Species a Volume field can name (``field:cloud`` ...); ``stratus`` is the stratiform layers' droplet model.
+FIELD_SPECIES = ("cloud", "rain", "ice", "snow")
 
 #: Rec. 709 luminance weights used for alpha and for one-number summaries of RGB quantities.
 LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
@@ -194,7 +196,7 @@ class Sun:
 
 @dataclass(frozen=True)
 class DetailSpec:
-    """Animated density detail of a voxel medium (issue 7): the coarse field times an advected noise factor,
+    """Animated density detail of a voxel medium: the coarse field times an advected noise factor,
     evaluated at each sample inside the kernels (the grid is never rewritten).
 
     The factor is ``max(0, 1 + amplitude * clamp(z, -3, 3))`` with ``z`` a periodic 3D noise of unit standard
@@ -289,10 +291,8 @@ class VoxelMedium:
         if self.slicing_xi is not None and not (math.isfinite(self.slicing_xi) and self.slicing_xi >= 0.0):
             raise SceneError(f"medium {self.name}: warpsky:slicing:xi must be a finite phase value >= 0 [1/sr], "
                              f"got {self.slicing_xi}")
-        if self.species is not None:
-            from warpsky.optics.species import get_species
-
-            get_species(self.species)
+        if self.species is not None and self.species not in SPECIES_NAMES:
+            raise SceneError(f"unknown species {self.species!r}; known: {', '.join(SPECIES_NAMES)}")
         dens = np.asarray(self.density)
         if dens.ndim != 3 or min(dens.shape) < 1:
             raise SceneError(f"medium {self.name}: density must be a non-empty 3-D grid, got shape {dens.shape}")
@@ -350,7 +350,7 @@ class Ground:
         albedo: Diffuse reflectance, RGB in [0, 1].
         name: Prim path or label.
         albedo_map: Optional albedo texture (``warpsky:albedoMap``), used by the stratiform pass; see
-            :class:`~warpsky.media.stratiform.GroundTexture`.
+            :class:`~warpsky.scene.layers.GroundTexture`.
     """
 
     height: float = 0.0

@@ -26,8 +26,15 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
 
 from warpsky.scene.model import LUMINANCE_WEIGHTS
+from warpsky.techniques.radiosity.kernels import (
+    downsample_kernel,
+    exact_gather_kernel,
+    ground_direct_kernel,
+    ring_gather_kernel,
+)
 
 
 class RadiosityWarning(UserWarning):
@@ -111,10 +118,6 @@ class Radiosity:
 
     # ------------------------------------------------------------------------------------------------ gathers
     def _gather(self, source, reflectance, received, emitted, exchanged):
-        import warp as wp
-
-        from warpsky.techniques.radiosity.kernels import downsample_kernel, exact_gather_kernel, ring_gather_kernel
-
         shape = source.shape
         exchanged.zero_()
         if self.method == "exact":
@@ -135,8 +138,6 @@ class Radiosity:
 
     def gather(self, exitance) -> np.ndarray:
         """One pass: irradiance (nu, nv, 3) received from the other plane's ``exitance`` (nu, nv[, 3])."""
-        import warp as wp
-
         shape = np.asarray(exitance).shape[:2]
         self._scratch = {}
         with wp.ScopedDevice(self.device):
@@ -156,8 +157,6 @@ class Radiosity:
             ground_direct: S_G^d (nu, nv, 3) [irradiance].
             cloud_source: S_C (nu, nv, 3) downward diffuse exitance of the cloud base, or None.
         """
-        import warp as wp
-
         direct = np.asarray(ground_direct, dtype=np.float32)
         shape = direct.shape[:2]
         if self.method == "rings":
@@ -210,10 +209,6 @@ def ground_direct(cloud_transmittance, *, pixel: float, h: float, sun_direction,
                   device: str = "cpu") -> np.ndarray:
     """S_G^d on the shared grid: E_sun μ_l T_C at the cloud-base point the sun ray crossed, h tan θ_l towards the
     sun (grid axis 0 = world x, axis 1 = world z). No sun below the horizon."""
-    import warp as wp
-
-    from warpsky.techniques.radiosity.kernels import ground_direct_kernel
-
     tc = _rgb(cloud_transmittance, np.asarray(cloud_transmittance).shape[:2])
     sun = np.asarray(sun_direction, dtype=np.float64)
     if sun[1] <= 0.0:

@@ -10,8 +10,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
+from warpsky.optics.grid import angle_grid, sphere_integral
+from warpsky.optics.kernels import DevicePhaseTables
+from warpsky.optics.tables import modified_mie_table, phase_table
 from warpsky.techniques.stratiform.model1d import APPENDIX_B, KAPPA_REFERENCE
+from warpsky.techniques.stratiform.slab import SlabOptics
 
 #: Bouthors' forward cut θ_f [deg] (§4.1).
 FORWARD_CUT_DEG = 5.0
@@ -51,11 +56,6 @@ class StratiformOptics:
 
     def device_inputs(self, device):
         """(SlabOptics struct, DevicePhaseTables of [P_S, P²], Appendix B as a flat float array) on ``device``."""
-        import warp as wp
-
-        from warpsky.optics.kernels import DevicePhaseTables
-        from warpsky.techniques.stratiform.slab import SlabOptics
-
         optics = SlabOptics()
         optics.kappa = float(self.kappa)
         optics.kappa_s = wp.vec3(*self.kappa_s.tolist())
@@ -68,9 +68,6 @@ class StratiformOptics:
 
 def stratiform_optics(number_density: float = 3.0e8, effective_radius: float = 7.0e-6) -> StratiformOptics:
     """Optics of droplets with ``number_density`` [1/m³] and ``effective_radius`` [m] (tables cached on disk)."""
-    from warpsky.optics.grid import angle_grid, sphere_integral
-    from warpsky.optics.tables import modified_mie_table, phase_table
-
     split = modified_mie_table("stratus", FORWARD_CUT_DEG)
     theta = angle_grid()
     msq = sphere_integral(split["p_f"] * theta[None, :] ** 2)

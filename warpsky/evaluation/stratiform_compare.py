@@ -1,5 +1,6 @@
-"""The slab model against the Monte Carlo slab (:mod:`.reference`): per order, energies and exit radiance in the
-same direction bins. Used by the tests and ``benchmarks/bench_stratiform.py``."""
+"""The stratiform slab model against the Monte Carlo slab (:mod:`warpsky.evaluation.stratiform_reference`): per
+order, energies and exit radiance in the same direction bins. Used by the tests and
+``benchmarks/bench_stratiform.py``."""
 
 from __future__ import annotations
 
@@ -7,10 +8,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
+from warpsky.evaluation.stratiform_reference import SlabTally, slab_monte_carlo
+from warpsky.evaluation.stratiform_slab import slab_radiance_kernel
 from warpsky.techniques.stratiform.model1d import order_energies, reference_thickness
 from warpsky.techniques.stratiform.optics import StratiformOptics
-from warpsky.techniques.stratiform.reference import SlabTally, slab_monte_carlo
 
 ORDER_NAMES = ("0", "1", "2", "3+")
 
@@ -25,10 +28,6 @@ def model_energies(optics: StratiformOptics, thickness: float, theta_l_deg: floa
 def model_radiance(optics: StratiformOptics, thickness: float, theta_l_deg: float, mu_edges, phi_edges, *,
                    samples: int = 6, channel: int = 1, device: str = "cpu") -> np.ndarray:
     """(2, 4, mu_bins, phi_bins) slab-kernel radiance averaged over each bin with weight μ dΩ (as the tally)."""
-    import warp as wp
-
-    from warpsky.techniques.stratiform.slab import slab_radiance_kernel
-
     mu_edges, phi_edges = np.asarray(mu_edges), np.asarray(phi_edges)
     nm, nphi = len(mu_edges) - 1, len(phi_edges) - 1
     frac = (np.arange(samples) + 0.5) / samples

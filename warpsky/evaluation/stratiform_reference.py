@@ -1,6 +1,7 @@
 """Photon tracing through a homogeneous plane-parallel slab with the *unmodified* Mie phase function, tallied by
 modified-Mie order (the number of S events: scattering angles >= θ_f), exit side and exit direction — the Monte
-Carlo reference of Bouthors 2006 Figs. 6, 8 and 9, used to measure the slab model.
+Carlo reference of Bouthors 2006 Figs. 6, 8 and 9, used to measure the slab model
+(:mod:`warpsky.evaluation.stratiform_compare`); no render uses it.
 
 Frame: Y up, the slab spans 0 <= y <= H, infinite in x and z; the sun lies in the +x half of the x-y plane at zenith
 angle θ_l, so photons enter the top travelling along (-sin θ_l, -cos θ_l, 0). Exit azimuth φ is measured from +x
@@ -16,21 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.optics.kernels import sample_table
+from warpsky.optics.kernels import DevicePhaseTables, sample_table
+from warpsky.optics.phase_sampling import rotate_about
 
 ORDER_BINS = wp.constant(4)  # 0, 1, 2, 3+
-
-
-@wp.func
-def turn(d: wp.vec3, cos_theta: float, phi: float) -> wp.vec3:
-    """The unit direction at angle acos(cos_theta) from unit ``d``, azimuth ``phi`` about it."""
-    helper = wp.vec3(1.0, 0.0, 0.0)
-    if wp.abs(d[0]) > 0.9:
-        helper = wp.vec3(0.0, 1.0, 0.0)
-    u = wp.normalize(wp.cross(helper, d))
-    v = wp.cross(d, u)
-    sin_theta = wp.sqrt(wp.max(1.0 - cos_theta * cos_theta, 0.0))
-    return wp.normalize(d * cos_theta + (u * wp.cos(phi) + v * wp.sin(phi)) * sin_theta)
 
 
 @wp.kernel
@@ -77,7 +67,7 @@ def slab_photon_kernel(
                 sample = sample_table(cdf, row, wp.randf(state))
                 if sample[0] >= theta_f:
                     s_events += 1
-                d = turn(d, wp.cos(sample[0]), 2.0 * wp.pi * wp.randf(state))
+                d = rotate_about(d, wp.cos(sample[0]), 2.0 * wp.pi * wp.randf(state))
                 events += 1
         wp.atomic_add(counters, 0, events)
 
@@ -116,8 +106,6 @@ def slab_monte_carlo(
 ) -> SlabTally:
     """Trace ``photons`` through a slab of extinction ``kappa`` [1/m] and ``thickness`` [m] with the phase table
     ``phase`` (3, M) (channel ``channel``), sun at zenith angle ``theta_l_deg``."""
-    from warpsky.optics.kernels import DevicePhaseTables
-
     theta_l = math.radians(theta_l_deg)
     threads = 256 if str(device).startswith("cpu") else 16384
     per_thread = max(1, -(-int(photons) // threads))

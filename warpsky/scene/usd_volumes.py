@@ -1,0 +1,173 @@
+"""Voxel media from ``UsdVolVolume`` prims: one :class:`~warpsky.scene.model.VoxelMedium` per rendered field
+(``field:density`` with an analytic phase, ``field:cloud|rain|ice|snow`` with species tables), the Volume's
+``warpsky:detail:*`` animated detail, and the field files (``.vdb``, ``.nvdb``, dense ``.npy``) behind them.
+
+pxr is imported inside the methods (a heavy import).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from warpsky.errors import SceneError
+from warpsky.media.fields import load_field
+from warpsky.optics.species import get_species
+from warpsky.scene.model import FIELD_SPECIES, DetailSpec, PhaseKind, PhaseModel, VoxelMedium
+from warpsky.scene.usd_prims import StagePrims
+
+PHASE_TOKENS = {"isotropic": PhaseKind.ISOTROPIC, "hg": PhaseKind.HG, "rayleigh": PhaseKind.RAYLEIGH}
+DENSITY_FIELD = "density"
+#: Field relationship names warpsky renders: the generic one (analytic phase) and one per species (tables).
+SPECIES_FIELDS = FIELD_SPECIES
+RENDERED_FIELDS = (DENSITY_FIELD, *SPECIES_FIELDS)
+QUANTITIES = ("extinction", "concentration")
+
+
+class VolumeReading(StagePrims):
+    """The stage reader's voxel media."""
+
+    def read_media(self, time=None) -> tuple[VoxelMedium, ...]:
+        from pxr import UsdVol
+
+        tc = self._time(time)
+        media = []
+        for prim in self._prims_of(UsdVol.Volume):
+            if self._visible(prim, tc):
+                media.extend(self._read_volume(prim, tc))
+        return tuple(media)
+
+    def _read_volume(self, prim, tc) -> list[VoxelMedium]:
+        """One medium per rendered field of the Volume (``field:density`` and ``field:<species>``)."""
+        from pxr import UsdVol
+
+        volume = UsdVol.Volume(prim)
+        path = str(prim.GetPath())
+        fields = {str(name): field_path for name, field_path in volume.GetFieldPaths().items()}
+        expected = ", ".join(f"field:{n}" for n in RENDERED_FIELDS)
+        if not fields:
+            raise SceneError(f"Volume {path} has no fields; expected one of {expected}")
+        rendered = [name for name in RENDERED_FIELDS if name in fields]
+        if not rendered:
+            raise SceneError(
+                f"Volume {path} has fields {', '.join(sorted(fields))} but none that warpsky renders ({expected})"
+            )
+        volume_world = self._world(prim, tc)
+        phase_token = self._token_attr(prim, "warpsky:phase", tc, "hg")
+        if phase_token not in PHASE_TOKENS:
+            raise SceneError(f"{path}.warpsky:phase must be one of {', '.join(PHASE_TOKENS)}, got {phase_token!r}")
+        g = self._float_attr(prim, "warpsky:phase:g", tc, 0.85)
+        volume_albedo = self._float_attr(prim, "warpsky:albedo", tc, 1.0)
+        slicing_xi = self._float_attr(prim, "warpsky:slicing:xi", tc, math.nan)  # nan: not authored
+        slicing_xi = None if math.isnan(slicing_xi) else slicing_xi
+        detail = self._read_detail(prim, tc)
+        media = []
+        for name in rendered:
+            field_prim = self.stage.GetPrimAtPath(fields[name])
+            if not field_prim or not field_prim.IsA(UsdVol.OpenVDBAsset):
+                raise SceneError(f"Volume {path}: field:{name} targets {fields[name]}, which is not an OpenVDBAsset")
+            grid = self._load_field(field_prim, tc)
+            if grid.local_from_index is None:
+                local_from_index = self._extent_placement(prim, tc, grid.values.shape)
+            else:
+                local_from_index = grid.local_from_index
+            species = None if name == DENSITY_FIELD else name
+            scale = np.full(3, self._float_attr(field_prim, "warpsky:extinctionScale", tc, 1.0))
+            quantity = self._token_attr(field_prim, "warpsky:quantity", tc, "extinction")
+            if quantity not in QUANTITIES:
+                raise SceneError(
+                    f"{field_prim.GetPath()}.warpsky:quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}"
+                )
+            if quantity == "concentration":
+                if species is None:
+                    raise SceneError(
+                        f"{field_prim.GetPath()}: warpsky:quantity = concentration needs a species field "
+                        f"(field:{'|'.join(SPECIES_FIELDS)}), not field:{DENSITY_FIELD}"
+                    )
+                scale = scale * np.array(get_species(species).extinction_cross_section)
+            albedo = self._float_attr(field_prim, "warpsky:albedo", tc, volume_albedo)
+            try:
+                media.append(VoxelMedium(
+                    f"{path}:{name}" if species else path, grid.values, volume_world @ local_from_index, scale,
+                    albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi, detail,
+                ))
+            except SceneError as exc:
+                raise SceneError(f"Volume {path}: {exc}") from None
+        return media
+
+    def _read_detail(self, prim, tc) -> DetailSpec | None:
+        """``warpsky:detail:*`` of a Volume (see DetailSpec); None when absent or amplitude 0 (detail off)."""
+        path = str(prim.GetPath())
+        names = {a.GetName() for a in prim.GetAttributes() if a.GetName().startswith("warpsky:detail:")}
+        if not names:
+            return None
+        known = {f"warpsky:detail:{n}" for n in ("amplitude", "scale", "wind", "curlSpeed", "period", "seed")}
+        unknown = sorted(names - known)
+        if unknown:
+            raise SceneError(f"Volume {path}: unknown attribute(s) {', '.join(unknown)}; known: "
+                             f"{', '.join(sorted(known))}")
+        defaults = DetailSpec()
+        kwargs = {"name": f"Volume {path}"}
+        for attr, key in (("amplitude", "amplitude"), ("scale", "scale"), ("curlSpeed", "curl_speed"),
+                          ("period", "period")):
+            kwargs[key] = self._float_attr(prim, f"warpsky:detail:{attr}", tc, getattr(defaults, key))
+        seed = prim.GetAttribute("warpsky:detail:seed")
+        if seed.HasAuthoredValue():
+            value = seed.Get(tc)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise SceneError(f"{path}.warpsky:detail:seed must be an int >= 0, got {value!r}")
+            kwargs["seed"] = int(value)
+        vector = self._vector_attr(prim, "warpsky:detail:wind", tc, 3, "a float3 [m/s]", "3 finite speeds [m/s]")
+        if vector is not None:
+            # stage axes -> warpsky's Y-up axes; a speed in m/s is not rescaled by metersPerUnit
+            kwargs["wind"] = tuple((self.world_from_stage[:3, :3] / self.meters_per_unit @ vector).tolist())
+        spec = DetailSpec(**kwargs)  # validates ranges; its SceneError names the Volume and the attribute
+        return spec if spec.active else None
+
+    def _extent_placement(self, prim, tc, shape) -> np.ndarray:
+        """Index-to-local matrix of a dense grid filling the Volume's authored extent, cell-centred."""
+        from pxr import UsdGeom
+
+        extent = UsdGeom.Boundable(prim).GetExtentAttr().Get(tc)
+        if extent is None or len(extent) != 2:
+            raise SceneError(
+                f"Volume {prim.GetPath()}: a dense .npy field needs an authored extent (float3[] extent = "
+                "[(min), (max)]) to place it"
+            )
+        lo, hi = np.array(extent[0], dtype=np.float64), np.array(extent[1], dtype=np.float64)
+        if not np.all(hi > lo):
+            raise SceneError(
+                f"Volume {prim.GetPath()}.extent must have min < max on every axis, got {lo.tolist()} .. {hi.tolist()}"
+            )
+        cell = (hi - lo) / np.array(shape, dtype=np.float64)
+        local_from_index = np.diag([*cell, 1.0])
+        local_from_index[:3, 3] = lo + 0.5 * cell
+        return local_from_index
+
+    def _load_field(self, field_prim, tc):
+        from pxr import UsdVol
+
+        asset = UsdVol.OpenVDBAsset(field_prim)
+        field_path = str(field_prim.GetPath())
+        asset_path = asset.GetFilePathAttr().Get(tc)
+        if asset_path is None or not asset_path.path:
+            raise SceneError(f"field {field_path}: filePath is not authored")
+        resolved = asset_path.resolvedPath
+        if not resolved:
+            layer = field_prim.GetStage().GetRootLayer().realPath
+            raise SceneError(f"field {field_path}: file {asset_path.path!r} not found (relative to {layer})")
+        grid_name = asset.GetFieldNameAttr().Get(tc)
+        grid_name = str(grid_name) if grid_name else None
+        try:
+            stat = os.stat(resolved)
+        except OSError as exc:
+            raise SceneError(f"field {field_path}: cannot read {resolved}: {exc.strerror}") from None
+        key = (resolved, grid_name, stat.st_mtime_ns, stat.st_size)
+        if key not in self._field_cache:
+            try:
+                self._field_cache[key] = load_field(resolved, grid_name=grid_name)
+            except SceneError as exc:
+                raise SceneError(f"field {field_path}: {exc}") from None
+        return self._field_cache[key]
