@@ -58,7 +58,6 @@ def breakdown(stage: Path, frame: float, options) -> dict:
     from warpsky.media.voxel import VoxelMediaBuffers
     from warpsky.optics.tables import ams_table
     from warpsky.output.exr import write_exr
-    from warpsky.plan import scene_species
     from warpsky.render import plan_frame, render_frame, render_layers
     from warpsky.scene.usd import StageReader
 
@@ -70,11 +69,11 @@ def breakdown(stage: Path, frame: float, options) -> dict:
         scene, plan = plan_frame(StageReader(stage), frame, options)
         times["stage load + plan"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        for species in scene_species(scene):
+        for species in scene.species:
             ams_table(species, int(plan.settings.orders))
         times["optics tables (cached)"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        VoxelMediaBuffers.upload(scene.media, scene.camera.position, plan.device, scene_species(scene))
+        VoxelMediaBuffers.upload(scene.media, scene.camera.position, plan.device, scene.species)
         wp.synchronize_device(plan.device)
         times["media upload"] = time.perf_counter() - t0
         technique = plan.renderer

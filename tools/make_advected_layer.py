@@ -1,4 +1,4 @@
-"""Write an animated stratocumulus thickness-map sequence made with advected textures (issue 7, Neyret 2003).
+"""Write an animated stratocumulus thickness-map sequence made with advected textures (Neyret 2003).
 
 Each frame is the 512² base texture advected by wind plus curl noise (3 layers, period 5 min: about two strain
 times of the flow), computed on its own (random access): frames can be written in any order or split across

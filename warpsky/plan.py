@@ -77,11 +77,6 @@ class RenderPlan:
         return "\n".join(lines)
 
 
-def scene_species(scene: Scene) -> tuple[str, ...]:
-    """Species present in the scene, in first-seen order (the order of their phase tables on the device)."""
-    return tuple(dict.fromkeys(m.species for m in scene.media if m.species is not None))
-
-
 def _fmt(value) -> str:
     if isinstance(value, bool):
         return str(int(value))
@@ -161,7 +156,7 @@ def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) 
         unused = f" (unused: {', '.join(LAYER_SETTING_PREFIX + k for k in layer_values)})" if layer_values else ""
         features["layers"] = ('no layers (no prim with warpsky:kind = "stratiformLayer"): stratiform pass and '
                               "radiosity not built" + unused)
-    species = scene_species(scene)
+    species = scene.species
     if species:
         states = [f"{name} ({'cached' if is_cached(name) else 'to build'})" for name in species]
         features["optics"] = "phase tables for " + ", ".join(states)

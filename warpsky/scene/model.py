@@ -151,17 +151,6 @@ class Camera:
         d = self.rotation @ np.array([sx, sy, -self.focal_length])
         return d / np.linalg.norm(d)
 
-    def project(self, point, width: int, height: int) -> tuple[float, float]:
-        """Pixel coordinates (x right, y down, continuous) of a world point in front of the camera."""
-        local = self.rotation.T @ (np.asarray(point, dtype=np.float64) - self.position)
-        if local[2] >= 0.0:
-            raise ValueError("point is behind the camera")
-        sx = -local[0] / local[2] * self.focal_length
-        sy = -local[1] / local[2] * self.focal_length
-        x = ((sx - self.horizontal_aperture_offset) / self.horizontal_aperture + 0.5) * width
-        y = (0.5 - (sy - self.vertical_aperture_offset) / self.vertical_aperture) * height
-        return float(x), float(y)
-
 
 @dataclass(frozen=True)
 class Sun:
@@ -446,3 +435,8 @@ class Scene:
     def time_s(self) -> float:
         """Scene time [s]: ``time_code / time_codes_per_second`` (0 at the default time code)."""
         return 0.0 if math.isnan(self.time_code) else self.time_code / self.time_codes_per_second
+
+    @property
+    def species(self) -> tuple[str, ...]:
+        """Species of the voxel media, in first-seen order (the order of their phase tables on the device)."""
+        return tuple(dict.fromkeys(m.species for m in self.media if m.species is not None))

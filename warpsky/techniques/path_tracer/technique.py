@@ -17,7 +17,6 @@ from warpsky.media.voxel import VoxelMediaBuffers
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.phase_sampling import phase_tables_struct
 from warpsky.optics.tables import build_tables
-from warpsky.plan import scene_species
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
@@ -89,7 +88,7 @@ class PathTracer:
         camera = scene.camera.conformed(width, height)
         device = self.device
         started = time.perf_counter()
-        species = scene_species(scene)
+        species = scene.species
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)

@@ -14,7 +14,6 @@ from warpsky.errors import UsageError
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.tables import build_tables
-from warpsky.plan import scene_species
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
@@ -84,7 +83,7 @@ class SingleScatter:
         settings = self.resolved_settings(scene)
         device = self.device
         started = time.perf_counter()
-        species = scene_species(scene)
+        species = scene.species
         check_field_count(scene.media, "single_scatter", " or use technique path_tracer")
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)

@@ -156,11 +156,3 @@ def air_inscatter(beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, sun_
             g = depth[c] * one_minus_exp_over_x(z)
         out[c] = wp.exp(-exponent) * g
     return out
-
-
-@wp.func
-def sun_transmittance_wp(beta_sl: wp.vec3, gamma: float, h: float, sun_y: float) -> wp.vec3:
-    if sun_y <= 0.0:
-        return wp.vec3(0.0)
-    d = beta_sl * (wp.exp(-gamma * h) / (gamma * sun_y))
-    return wp.vec3(wp.exp(-d[0]), wp.exp(-d[1]), wp.exp(-d[2]))

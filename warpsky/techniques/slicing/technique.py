@@ -17,7 +17,6 @@ from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
 from warpsky.optics.phase import phase_numpy
 from warpsky.optics.tables import ams_table
-from warpsky.plan import scene_species
 from warpsky.scene.model import PhaseKind, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
@@ -183,7 +182,7 @@ class Slicing:
             slices = 0
             # a sun below the ground plane lights nothing, but the media still hide what lies behind them
             ground_hides_sun = scene.ground is not None and sun is not None and sun.direction[1] <= 0.0
-            species = scene_species(scene)
+            species = scene.species
             # uploaded once for the sweep and the ground pass (with detail this also advects its noise to time_s)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
             if scene.media:

@@ -9,10 +9,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.stratiform import GroundTexture, StratiformLayer, at_time
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
+from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.radiosity.solver import Radiosity, ground_direct, pyramid_shape
+from warpsky.techniques.sky.analytic import inscatter, rayleigh
+from warpsky.techniques.stratiform.kernels import LayerGeometry, stratiform_kernel
+from warpsky.techniques.stratiform.model1d import order_energies, reference_thickness
+from warpsky.techniques.stratiform.optics import stratiform_optics
 
 
 @documented
@@ -56,8 +63,6 @@ def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray
     the stage's y = 0] as the analytic Riley sky above it; 0 without an atmosphere or sun."""
     if scene.atmosphere is None or scene.sun is None or scene.sun.direction[1] <= 0.0:
         return np.zeros(3)
-    from warpsky.techniques.sky.analytic import inscatter, rayleigh
-
     atm = scene.atmosphere
     zen = (np.arange(samples) + 0.5) / samples * 0.5 * np.pi
     az = (np.arange(2 * samples) + 0.5) / (2 * samples) * 2 * np.pi
@@ -75,8 +80,6 @@ def radiosity_grid(layer: StratiformLayer, ground_height: float, detail: int):
     """The radiosity buffers' placement for ``layer`` over a ground at ``ground_height`` [m]: (x0, z0) [m], texel
     size [m] = h / 2^detail with h the ground-to-base height, and (nu, nv) texels covering the layer plus an 8 h
     margin, rounded up for the MIP pyramid."""
-    from warpsky.techniques.radiosity.solver import pyramid_shape
-
     h = layer.base_altitude - ground_height
     pixel = h / 2**detail
     margin = 8.0 * h
@@ -109,9 +112,6 @@ class Stratiform:
     def radiosity_inputs(self, scene: Scene, layer: StratiformLayer, texture: GroundTexture | None, optics,
                          sky: np.ndarray):
         """(grid box (x0, z0, sx, sz), R_G, R_C, RadiosityResult or None) on the shared low-resolution grid."""
-        from warpsky.techniques.radiosity.solver import Radiosity, ground_direct
-        from warpsky.techniques.stratiform.model1d import order_energies, reference_thickness
-
         s = self.settings
         ground = scene.ground
         h = layer.base_altitude - ground.height
@@ -158,11 +158,6 @@ class Stratiform:
         (default: the ground's ``albedo_map``). ``draw_ground=False`` leaves the ground out of the image (another
         layer draws it) while the radiosity still lights this layer's base."""
         import warp as wp
-
-        from warpsky.device import launch_rows
-        from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
-        from warpsky.techniques.stratiform.kernels import LayerGeometry, stratiform_kernel
-        from warpsky.techniques.stratiform.optics import stratiform_optics
 
         started = time.perf_counter()
         layer = at_time(layer, self.device)
