@@ -22,12 +22,11 @@ import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its k
 import warpsky.techniques.sky.kernels as sky
 import warpsky.techniques.slicing.kernels  # noqa: F401  (registers its kernel factories)
 import warpsky.techniques.stratiform.kernels as stratiform_kernels
-import warpsky.techniques.stratiform.slab as stratiform_slab
 from warpsky.kernel_variants import variant_modules
 
 #: Modules holding plain (not factory-made) kernels.
-PLAIN_MODULES = (fields, optics, ice_kernels, sky, stratiform_slab, evaluation_slab, stratiform_reference, radiosity,
-                 stratiform_kernels, advection_kernels)
+PLAIN_MODULES = (fields, optics, ice_kernels, sky, evaluation_slab, stratiform_reference, radiosity, stratiform_kernels,
+                 advection_kernels)
 
 def kernel_modules() -> list:
     """Warp ``Module`` objects for every kernel warpsky can launch."""

@@ -23,8 +23,7 @@ from warpsky.media.detail import (
     detailed_value,
     medium_details,
 )
-from warpsky.optics.kernels import TABLE_KIND, medium_phase
-from warpsky.optics.phase import phase_eval
+from warpsky.optics.kernels import TABLE_KIND
 from warpsky.scene.model import VoxelMedium
 
 
@@ -165,61 +164,6 @@ def media_functions(has_detail: bool):
         return out
 
     return sample_media
-
-
-@functools.cache
-def ray_media_functions(has_detail: bool):
-    """``sample_media_on_ray(media: VoxelMedia, t: float, view: vec3) -> MediaPoint``: :func:`media_functions`'s
-    ``sample_media(media, t * view)``, with each grid position rounded as ``eye_index + t (index_from_world view)``
-    (the eye march's own arithmetic, shared with the shadow rays' start; rounding ``t * view`` first moves
-    single-scatter images by up to 1e-6 of their peak)."""
-
-    @wp.func
-    def sample_media_on_ray(media: VoxelMedia, t: float, view: wp.vec3) -> MediaPoint:
-        out = MediaPoint()
-        out.density = FieldDensities()
-        out.extinction = wp.vec3(0.0)
-        out.scattering = wp.vec3(0.0)
-        for m in range(media.count):
-            grid = media.grids[m]
-            value = grid_value(media.values, grid, grid.eye_index + t * (grid.index_from_world * view))
-            if wp.static(has_detail):
-                value = detailed_value(value, media.details, m, t * view)
-            if value > 0.0:
-                out.density[m] = value
-                out.extinction += grid.extinction * value
-                out.scattering += grid.scattering * value
-        return out
-
-    return sample_media_on_ray
-
-
-@functools.cache
-def phase_mixing(has_tables: bool):
-    """``mixed_phase_scattering(point: MediaPoint, media: VoxelMedia, tables, theta) -> vec3``: the sum over the
-    media at ``point`` of scattering_i P_i(theta) [1/(m sr)] (Riley Eq. 6 before dividing by the summed
-    scattering), with ``tables`` the flat phase tables (:class:`~warpsky.optics.kernels.DevicePhaseTables`
-    ``values``) and ``theta`` the scattering angle [rad]; specialised on whether any medium uses a phase table
-    (without, ``tables`` is never read). It reads no grid: the densities come from ``point``."""
-
-    @wp.func
-    def mixed_phase_scattering(
-        point: MediaPoint, media: VoxelMedia, tables: wp.array(dtype=float), theta: float
-    ) -> wp.vec3:
-        out = wp.vec3(0.0)
-        for m in range(media.count):
-            value = point.density[m]
-            if value > 0.0:
-                grid = media.grids[m]
-                phase = wp.vec3(0.0)
-                if wp.static(has_tables):
-                    phase = medium_phase(tables, grid.phase_kind, grid.phase_g, theta)
-                else:
-                    phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
-                out += wp.cw_mul(grid.scattering * value, phase)
-        return out
-
-    return mixed_phase_scattering
 
 
 @dataclass

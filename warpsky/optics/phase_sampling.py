@@ -112,17 +112,17 @@ class PhaseSample:
 
 
 @functools.cache
-def mixture_functions(has_tables: bool):
-    """``(mixture_phase, sample_mixture)`` over the media at a point plus one Rayleigh component (the air; zero
-    scattering for none), specialised on whether any medium uses a phase table."""
+def phase_sum_function(has_tables: bool):
+    """``scattered_phase(media, point, tables, start, theta) -> vec3``: ``start`` plus the sum over the media at
+    ``point`` of scattering_i P_i(theta) [1/(m sr)], in medium order (Riley Eq. 6 before dividing by the summed
+    scattering); ``tables`` are the flat phase tables, ``theta`` the scattering angle [rad]. Specialised on whether
+    any medium uses a phase table (without, ``tables`` is never read). It reads no grid: the densities come from
+    ``point``."""
 
     @wp.func
-    def mixture_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), rayleigh: wp.vec3,
-                      theta: float) -> wp.vec3:
-        """Riley Eq. 6: the scattering-weighted phase [1/sr] at scattering angle ``theta`` of the Rayleigh component
-        of scattering ``rayleigh`` [1/m] and every medium at ``point``, summed in that order."""
-        num = rayleigh * phase_rayleigh(wp.cos(theta))
-        den = rayleigh
+    def scattered_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), start: wp.vec3,
+                        theta: float) -> wp.vec3:
+        out = start
         for m in range(media.count):
             value = point.density[m]
             if value > 0.0:
@@ -132,9 +132,30 @@ def mixture_functions(has_tables: bool):
                     phase = medium_phase(tables, grid.phase_kind, grid.phase_g, theta)
                 else:
                     phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
-                s = grid.scattering * value
-                num += wp.cw_mul(s, phase)
-                den += s
+                out += wp.cw_mul(grid.scattering * value, phase)
+        return out
+
+    return scattered_phase
+
+
+@functools.cache
+def mixture_functions(has_tables: bool):
+    """``(mixture_phase, sample_mixture)`` over the media at a point plus one Rayleigh component (the air; zero
+    scattering for none), specialised on whether any medium uses a phase table."""
+
+    scattered_phase = phase_sum_function(has_tables)
+
+    @wp.func
+    def mixture_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), rayleigh: wp.vec3,
+                      theta: float) -> wp.vec3:
+        """Riley Eq. 6: the scattering-weighted phase [1/sr] at scattering angle ``theta`` of the Rayleigh component
+        of scattering ``rayleigh`` [1/m] and every medium at ``point``, summed in that order."""
+        num = scattered_phase(media, point, tables, rayleigh * phase_rayleigh(wp.cos(theta)), theta)
+        den = rayleigh
+        for m in range(media.count):
+            value = point.density[m]
+            if value > 0.0:
+                den += media.grids[m].scattering * value
         out = wp.vec3(0.0)
         for c in range(3):
             if den[c] > 0.0:

@@ -15,8 +15,9 @@ import warp as wp
 
 from warpsky.kernel_variants import kernel_variants
 from warpsky.media.detail import detailed_value
-from warpsky.media.voxel import VoxelMedia, grid_interval, grid_value, phase_mixing, ray_media_functions
+from warpsky.media.voxel import VoxelMedia, grid_interval, grid_value, media_functions
 from warpsky.optics.kernels import scattering_angle
+from warpsky.optics.phase_sampling import phase_sum_function
 from warpsky.techniques.common import (
     Ground,
     PinholeCamera,
@@ -96,8 +97,8 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
     marches and the step's exact integral inline: splitting it would pass the march state (optical depths, the
     reused shadow depth, depth moments, lookups) through every call."""
 
-    sample_media_on_ray = ray_media_functions(has_detail)
-    mixed_phase_scattering = phase_mixing(has_tables)
+    sample_media = media_functions(has_detail)
+    scattered_phase = phase_sum_function(has_tables)
     sun_optical_depth = sun_depth_function(has_detail)
 
     @wp.kernel(module="unique")
@@ -151,8 +152,8 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
             for i in range(count):
                 ta = t0 + float(i) * dt
                 tm = ta + 0.5 * dt
-                here = sample_media_on_ray(media, tm, view)
-                scatter = mixed_phase_scattering(here, media, phase_tables, theta)
+                here = sample_media(media, tm * view)
+                scatter = scattered_phase(media, here, phase_tables, wp.vec3(0.0), theta)
                 lookups += wp.int64(media.count)
                 tau_eye_b = tau_eye + here.extinction * dt
                 if lit and not sun_blocked and wp.max(scatter) > 0.0:
