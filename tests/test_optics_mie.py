@@ -35,6 +35,7 @@ def test_mie_tables_are_normalised_and_non_negative(species_phase, name):
     assert np.all(np.argmax(table, axis=1) == 0)
 
 
+@pytest.mark.slow
 def test_rain_primary_and_secondary_rainbows(species_phase):
     rain = species_phase("rain")
     green = rain[1]

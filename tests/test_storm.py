@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from warpsky.cli import main
 from warpsky.output.exr import read_exr
@@ -14,6 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import make_storm  # noqa: E402
 
 
+@pytest.mark.slow
 def test_storm_stage_renders_with_slicing_by_default(tmp_path, species_phase, capsys):
     for name in ("cloud", "rain", "snow", "ice"):
         species_phase(name)  # tables from the session cache
