@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
 
 
 def main(argv=None) -> int:
@@ -53,7 +52,7 @@ def main(argv=None) -> int:
             rows.append({"device": device, "width": width, "height": height, "ms": 1e3 * best,
                          "ns_per_pixel": 1e9 * best / (width * height)})
     # float32 kernel vs float64 quadrature
-    from test_sky import BETA, GAMMA, cases, quadrature
+    from warpsky.evaluation.sky_quadrature import BETA, GAMMA, cases, quadrature
 
     table = cases(600, seed=5)
     want = np.array([quadrature(*c) for c in table])
