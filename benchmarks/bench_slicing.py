@@ -46,11 +46,12 @@ def main(argv=None) -> int:
         if name == "cumulus.usda" and not (ROOT / "data" / "cumulus.nvdb").exists():
             print("data/cumulus.nvdb is missing: run `python tools/make_cumulus.py` (or `make data`)", file=sys.stderr)
             return 2
-        if name == "storm.usda" and not (ROOT / "data" / "storm" / "ice.0048.nvdb").exists():
+        frame = int(float(when)) if when else 1
+        if name == "storm.usda" and not (ROOT / "data" / "storm" / f"cloud.{frame:04d}.nvdb").exists():
             sys.path.insert(0, str(ROOT / "tools"))
             import make_storm
 
-            make_storm.write_frames(ROOT / "data" / "storm", 48)
+            make_storm.write_frames(ROOT / "data" / "storm", 48, res=64, only=[frame])  # the stage's resolution
         scenes.append((item, StageReader(ROOT / "usd_scenes" / name).scene_at(float(when) if when else None)))
     devices = ["cpu"] + [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]
     rows = []
