@@ -21,16 +21,23 @@ import make_goldens  # noqa: E402
 TOLERANCE = 1e-6
 
 
+def _params():
+    """Every case; the storm's are marked slow (they build the rain, snow and ice tables)."""
+    return [pytest.param(c, id=c.name, marks=[pytest.mark.slow] if c.stage == "storm" else [])
+            for c in make_goldens.CASES]
+
+
 @pytest.fixture(scope="module")
-def golden_inputs(tmp_path_factory, species_phase):
-    for name in make_goldens.SPECIES:
-        species_phase(name)  # tables from the session cache
+def golden_inputs(tmp_path_factory, optics_cache):
     folder = tmp_path_factory.mktemp("golden")
     return folder, make_goldens.write_inputs(folder)
 
 
-@pytest.mark.parametrize("case", make_goldens.CASES, ids=lambda c: c.name)
-def test_golden_image(case, golden_inputs):
+@pytest.mark.parametrize("case", _params())
+def test_golden_image(case, golden_inputs, species_phase):
+    if case.stage == "storm":
+        for name in make_goldens.SPECIES:
+            species_phase(name)  # tables from the session cache
     folder, stages = golden_inputs
     stored = dict(np.load(make_goldens.GOLDEN / f"{case.name}.npz"))
     actual = make_goldens.render_case(case, stages, folder)
