@@ -101,6 +101,26 @@ def _resolution(text: str) -> tuple[int, int | None]:
     return width, height
 
 
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 < value < 1.0:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"expected a relative error between 0 and 1 (0.05 = 5%), got {text!r}")
+    return value
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
+
+
 def _setting(text: str) -> tuple[str, str]:
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
@@ -119,8 +139,14 @@ def _add_render_options(parser: argparse.ArgumentParser) -> None:
                         help=f"rendering technique (default: {DEFAULT_TECHNIQUE})")
     parser.add_argument("--set", dest="settings", type=_setting, action="append", default=[], metavar="NAME=VALUE",
                         help="technique setting, repeatable (see below)")
-    parser.add_argument("--spp", type=int, metavar="N", help="path_tracer: samples per pixel (= --set spp=N)")
-    parser.add_argument("--seed", type=int, metavar="S", help="path_tracer: random seed (= --set seed=S)")
+    parser.add_argument("--spp", type=int, metavar="N", help="path_tracer: samples per pixel; hybrid: most "
+                        "multiple-scattering paths per pixel (= --set spp=N)")
+    parser.add_argument("--seed", type=int, metavar="S", help="path_tracer, hybrid: random seed (= --set seed=S)")
+    parser.add_argument("--target-error", type=_fraction, metavar="E",
+                        help="hybrid: add paths until the frame's estimated relative RMSE is below E, in (0, 1) "
+                        "(= --set target_error=E; default 0.05)")
+    parser.add_argument("--time-budget", type=_seconds, metavar="S",
+                        help="hybrid: stop adding paths after S seconds per frame (= --set time_budget=S)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -218,12 +244,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _settings(args) -> dict[str, str]:
-    """--set pairs plus the --spp / --seed shorthands."""
+    """--set pairs plus the --spp / --seed / --target-error / --time-budget shorthands."""
     settings = dict(args.settings)
-    for name in ("spp", "seed"):
+    for name in ("spp", "seed", "target_error", "time_budget"):
         value = getattr(args, name, None)
-        if value is not None:
-            settings[name] = str(value)
+        if value is None:
+            continue
+        if name in ("target_error", "time_budget") and args.technique != "hybrid":
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{flag} applies to technique hybrid only (this render uses {args.technique})")
+        settings[name] = repr(value) if isinstance(value, float) else str(value)
     return settings
 
 

@@ -21,6 +21,9 @@ from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
 from warpsky.techniques.sky.technique import SkyPass
 
+#: Figures of a Monte Carlo render that go into the EXR header (camelCase) and the batch log, where present.
+QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths")
+
 #: Channels every warpsky EXR holds.
 EXR_CHANNELS = ("R", "G", "B", "A", "transmittance.R", "transmittance.G", "transmittance.B", "depth.Z")
 
@@ -66,6 +69,7 @@ class FrameResult:
     time_code: float | None
     plan: RenderPlan
     timings: dict[str, float] = field(default_factory=dict)
+    quality: dict = field(default_factory=dict)
 
 
 def preview_exposure(scene: Scene, stops: float = 0.0) -> float:
@@ -158,7 +162,26 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
                         exposure=preview_exposure(scene, options.exposure))
     timings["write"] = _time.perf_counter() - started - timings["passes"] - timings["composite"]
     return FrameResult(Path(exr), png, timings.get("plan", 0.0) + _time.perf_counter() - started,
-                       float(layer.stats.get("seconds", 0.0)), time_code, plan, timings)
+                       float(layer.stats.get("seconds", 0.0)), time_code, plan, timings, quality_stats(layer))
+
+
+def quality_stats(layer: Layer) -> dict:
+    """The layer's :data:`QUALITY_STATS` (from the technique's layer, or the media's part of a merged one)."""
+    sources = [layer.stats, *[part for part in layer.stats.get("parts", []) if isinstance(part, dict)]]
+    out = {}
+    for stats in sources:
+        for key in QUALITY_STATS:
+            if key in stats and key not in out:
+                value = stats[key]
+                if isinstance(value, float) and not np.isfinite(value):
+                    continue  # no estimate yet (a single pass): left out rather than written as inf
+                out[key] = value
+    return out
+
+
+def _camel(name: str) -> str:
+    head, *rest = name.split("_")
+    return head + "".join(word.title() for word in rest)
 
 
 def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Layer, *, stage, time_code) -> dict:
@@ -175,6 +198,8 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
         "renderSeconds": float(layer.stats.get("seconds", 0.0)),
         "lookups": int(layer.stats.get("lookups", 0)),
     }
+    for key, value in quality_stats(layer).items():
+        metadata[_camel(key)] = value
     if scene.sun is not None:
         metadata["sun"] = scene.sun.name
     metadata["previewExposure"] = float(preview_exposure(scene, options.exposure))  # contact sheets reuse it

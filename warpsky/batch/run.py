@@ -62,6 +62,7 @@ class FrameRecord:
     png: str | None = None  # the preview written beside the EXR, if asked for
     retryable: bool = False  # errors in the input (a missing file, a bad attribute) fail the same way again
     timings: dict = field(default_factory=dict)
+    quality: dict = field(default_factory=dict)  # Monte Carlo figures: spp, passes, error estimate, capped paths
 
 
 _READERS: dict[tuple[str, float], object] = {}
@@ -111,6 +112,7 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
         result = write_frame(scene, plan, Path(job.out), job.options, stage=reader.path, time_code=job.time_code)
         record.timings.update(result.timings)
         record.timings["technique"] = result.render_seconds
+        record.quality = result.quality
         record.png = str(result.png) if result.png is not None else None
         record.status = "done"
     except WarpskyError as exc:

@@ -76,6 +76,7 @@ _REGISTRY: dict[str, str] = {
     "single_scatter": "warpsky.techniques.single_scatter.technique:SingleScatter",
     "path_tracer": "warpsky.techniques.path_tracer.technique:PathTracer",
     "slicing": "warpsky.techniques.slicing.technique:Slicing",
+    "hybrid": "warpsky.techniques.hybrid.technique:Hybrid",
 }
 
 

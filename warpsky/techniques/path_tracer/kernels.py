@@ -50,6 +50,7 @@ class PathSettings:
     first_sample: int  # index of the launch's first path per pixel
     sample_count: int  # paths per pixel in this launch
     max_bounces: int
+    multiple_only: int  # 1: leave out single scattering (the sun at the first event) and the primary transmittance
 
 
 @wp.struct
@@ -75,7 +76,9 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
     def trace_path(media: VoxelMedia, majorants: Majorants, phase_tables: PhaseTables, air: Air, sun: Sun,
                    ground: Ground, settings: PathSettings, sun_on: bool, start: PathState, first: RayEnd) -> PathState:
         """One path from the camera ray ``start`` (which ends at ``first``): per bounce a free flight, then a
-        scattering event, a ground bounce, or the end (environment, sun disk, sea level), then roulette."""
+        scattering event, a ground bounce, or the end (environment, sun disk, sea level), then roulette. With
+        ``settings.multiple_only`` the first event takes no sunlight: the path carries light scattered at least
+        twice (media or ground), the part an exact single-scattering march leaves out."""
         path = start
         bounce = int(0)
         while path.alive != 0:
@@ -93,13 +96,15 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
                                                                  path.throughput, bounce, sun_on)
                 break
             p = path.origin + flight.t * path.direction
+            lit = sun_on
             if bounce == 0:
                 path.hit = 1
                 path.first_t = flight.t
+                lit = sun_on and settings.multiple_only == 0
             if flight.scattered == 1:
-                path = scatter_event(media, majorants, phase_tables, air, sun, sun_on, path, p)
+                path = scatter_event(media, majorants, phase_tables, air, sun, lit, path, p)
             else:
-                path = ground_event(media, majorants, air, sun, ground, sun_on, path, p)
+                path = ground_event(media, majorants, air, sun, ground, lit, path, p)
             bounce += 1
             path = roulette(path, bounce)
         return path
@@ -139,7 +144,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
             t_far = cam.far / cos_axis
             origin = view * t_near
             first = primary_end(air, ground, origin, view, t_far - t_near)
-            if first.surface == SURFACE_NONE:
+            if first.surface == SURFACE_NONE and settings.multiple_only == 0:
                 tr = ratio_track(media, majorants, air, origin, view, first.t, state)
                 state = tr.state
                 sums.transmittance_sum[row, col] = sums.transmittance_sum[row, col] + tr.value

@@ -85,33 +85,72 @@ class PathTracer:
 
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> Layer:
         settings = self.resolved_settings(scene)
-        camera = scene.camera.conformed(width, height)
-        device = self.device
         started = time.perf_counter()
+        tracing = PathTracing(scene, width, height, settings, self.device)
+        sums = pixel_sums((height, width), self.device)
+        spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
+        done = 0
+        while done < spp:
+            count = min(per_pass, spp - done)
+            tracing.launch(sums, done, count)
+            done += count
+            if progress is not None:
+                progress(count)
+        wp.synchronize_device(self.device)
+        seconds = time.perf_counter() - started
+        layer = sums_layer(sums, spp, float(tracing.camera.far))
+        layer.stats = {"seconds": seconds, "settings": dataclasses.asdict(settings), "spp": spp, **layer.stats,
+                       "majorant_cells": tracing.majorant_cells}
+        return layer
+
+
+class PathTracing:
+    """The path tracer set up for one frame: tables, media, majorants and the specialised kernel uploaded once;
+    :meth:`launch` adds paths per pixel to a :class:`PixelSums` (progressive passes reuse everything).
+
+    ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
+    at least twice, for techniques that march single scattering exactly."""
+
+    def __init__(self, scene: Scene, width: int, height: int, settings: PathTracerSettings, device: str, *,
+                 air: bool = True, multiple_only: bool = False, scale: int = 1):
+        self.settings = settings
+        self.device = device
+        camera = scene.camera.conformed(width, height)
+        if scale > 1:
+            camera, width, height = coarse_camera(camera, width, height, scale)
+        self.width, self.height = width, height
+        self.multiple_only = multiple_only
+        self.camera = camera
         species = scene.species
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
-            majorants, cells = upload_majorants(scene.media, int(settings.majorant_block), device)
-            sums = pixel_sums((height, width), device)
-            kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail)
-            fixed = [media.media, majorants, phase_tables_struct(tables), air_struct(scene.atmosphere, camera.position),
-                     sun_struct(scene.sun), pinhole_camera(camera, width, height),
-                     ground_struct(scene.ground, camera.position)]
-            spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
-            done = 0
-            while done < spp:
-                count = min(per_pass, spp - done)
-                launch_rows(kernel, height, width, [*fixed, path_settings(settings, done, count), sums], device)
-                done += count
-                if progress is not None:
-                    progress(count)
-            wp.synchronize_device(device)
-            seconds = time.perf_counter() - started
-            layer = sums_layer(sums, spp, float(camera.far))
-        layer.stats = {"seconds": seconds, "settings": dataclasses.asdict(settings), "spp": spp, **layer.stats,
-                       "majorant_cells": int(cells)}
-        return layer
+            majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device)
+        self.kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail)
+        self._keep = (tables, media)  # the structs below point into these buffers
+        self.fixed = [media.media, majorants, phase_tables_struct(tables),
+                      air_struct(scene.atmosphere if air else None, camera.position), sun_struct(scene.sun),
+                      pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position)]
+
+    def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:
+        """Add paths ``first_sample .. first_sample + count - 1`` of every pixel to ``sums`` (asynchronous on
+        GPUs)."""
+        launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only)
+        launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums], self.device)
+
+
+def coarse_camera(camera, width: int, height: int, scale: int):
+    """(camera, width, height) of a film whose pixel (r, c) covers pixels [r s, r s + s) x [c s, c s + s) of
+    ``camera`` (already conformed to ``width`` x ``height``): the same top-left corner, ceil(width / s) x
+    ceil(height / s) pixels, so the last row and column may reach past the frame's edge."""
+    coarse_w, coarse_h = -(-width // scale), -(-height // scale)
+    h_ap = camera.horizontal_aperture * coarse_w * scale / width
+    v_ap = camera.vertical_aperture * coarse_h * scale / height
+    return dataclasses.replace(
+        camera, horizontal_aperture=h_ap, vertical_aperture=v_ap,
+        horizontal_aperture_offset=camera.horizontal_aperture_offset + 0.5 * (h_ap - camera.horizontal_aperture),
+        vertical_aperture_offset=camera.vertical_aperture_offset - 0.5 * (v_ap - camera.vertical_aperture),
+    ), coarse_w, coarse_h
 
 
 def pixel_sums(shape: tuple[int, int], device) -> PixelSums:
@@ -125,7 +164,8 @@ def pixel_sums(shape: tuple[int, int], device) -> PixelSums:
     return out
 
 
-def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int) -> PathSettings:
+def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int, *,
+                  multiple_only: bool = False) -> PathSettings:
     """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``."""
     out = PathSettings()
     out.environment = wp.vec3(float(settings.environment))
@@ -134,6 +174,7 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     out.first_sample = int(first_sample)
     out.sample_count = int(sample_count)
     out.max_bounces = int(settings.max_bounces)
+    out.multiple_only = int(multiple_only)
     return out
 
 

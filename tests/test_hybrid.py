@@ -1,0 +1,161 @@
+"""The hybrid technique: exact single scattering + path-traced multiple scattering, denoised, to a target error."""
+
+from __future__ import annotations
+
+import builtins
+
+import numpy as np
+import pytest
+from conftest import StageSpec, look_rotation, path_traced, render_layer, write_stage
+
+from warpsky.errors import UsageError
+from warpsky.plan import make_plan
+from warpsky.scene.usd import StageReader
+from warpsky.techniques.hybrid.denoise import box_sum, keep_local_mean, sanitise
+from warpsky.techniques.hybrid.technique import Hybrid, HybridSettings
+
+STEP = {"step_length": 0.05, "shadow_step_length": 0.05}
+
+
+@pytest.fixture
+def box(tmp_path, homogeneous_npy):
+    def make(**overrides):
+        spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.15, camera_position=(3.0, 4.0, 42.0),
+                         camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.4, 0.8, 0.3))
+        for key, value in overrides.items():
+            setattr(spec, key, value)
+        return write_stage(tmp_path / f"box{len(list(tmp_path.glob('*.usda')))}.usda", spec)
+
+    return make
+
+
+def hybrid(stage, device, size, **settings):
+    scene = StageReader(stage).scene_at(None)
+    plan = make_plan(scene, technique="hybrid", settings={k: str(v) for k, v in settings.items()},
+                     resolution=(size, size), device=device)
+    return plan.renderer.render(scene, size, size)
+
+
+def test_without_multiple_scattering_it_is_single_scatter(box, device):
+    stage = box(ground=(-12.0, 0.3))
+    _, single = render_layer(stage, device, 16, 16)
+    layer = hybrid(stage, device, 16, multiple_scattering=0)
+    np.testing.assert_array_equal(layer.radiance, single.radiance)
+    np.testing.assert_array_equal(layer.transmittance, single.transmittance)
+    np.testing.assert_array_equal(layer.depth, single.depth)
+    assert not layer.aovs["multiple_scatter"].any()
+
+
+@pytest.mark.parametrize("ground", [None, (-12.0, 0.5)])
+def test_single_plus_multiple_equals_the_path_tracer(box, device, ground):
+    """Undenoised, single + multiple scattering is an unbiased estimate of the whole light: per-pixel and image-sum
+    z-tests against the path tracer (the march's discretisation error is far below the noise at 0.05 m steps)."""
+    stage = box(ground=ground, albedo=0.95, phase="hg", g=0.6)
+    layer = hybrid(stage, device, 12, spp=1024, target_error=0, denoise=0, seed=3, **STEP)
+    full = path_traced(stage, device, 12, spp=1024, seed=11)
+    variance = layer.aovs["variance"] + full.aovs["variance"]
+    covered = variance > 0.0
+    assert covered.sum() > 100
+    z = (layer.radiance - full.radiance)[covered] / np.sqrt(variance[covered])
+    assert np.max(np.abs(z)) < 5.0  # a few hundred values: a false alarm has probability ~1e-4
+    z_sum = (layer.radiance - full.radiance).sum() / np.sqrt(variance.sum())
+    assert abs(z_sum) < 4.0
+    assert layer.aovs["multiple_scatter"].sum() > 0.2 * layer.radiance.sum()  # the test sees multiple scattering
+
+
+def test_denoiser_switch_and_seed(box, device):
+    stage = box()
+    settings = {"spp": 8, "target_error": 0, "seed": 5}
+    noisy = hybrid(stage, device, 16, denoise=0, **settings)
+    again = hybrid(stage, device, 16, denoise=0, **settings)
+    np.testing.assert_array_equal(noisy.radiance, again.radiance)
+    denoised = hybrid(stage, device, 16, **settings)
+    denoised_again = hybrid(stage, device, 16, **settings)
+    np.testing.assert_array_equal(denoised.radiance, denoised_again.radiance)
+    assert not np.array_equal(noisy.radiance, denoised.radiance)
+    np.testing.assert_array_equal(noisy.aovs["single_scatter"], denoised.aovs["single_scatter"])
+    other = hybrid(stage, device, 16, denoise=0, spp=8, target_error=0, seed=6)
+    assert not np.array_equal(noisy.radiance, other.radiance)
+
+
+def test_target_error_is_met_and_honest(box, device):
+    """Rendering to a 10% target stops early, below the target by its own estimate, and the frame is within about
+    the target of a 4096-path undenoised render of the same scene."""
+    stage = box(extinction_scale=0.3)
+    layer = hybrid(stage, device, 16, target_error=0.1, spp=512, seed=1)
+    assert layer.stats["stopped_by"] == "target"
+    assert layer.stats["error_estimate"] <= 0.1
+    assert layer.stats["spp"] < 512
+    truth = hybrid(stage, device, 16, spp=4096, target_error=0, denoise=0, seed=2, samples_per_pass=256)
+    covered = layer.transmittance.mean(axis=-1) < 0.99
+    error = np.sqrt(np.mean((layer.radiance - truth.radiance)[covered] ** 2)) / truth.radiance[covered].mean()
+    assert error < 0.2
+
+
+def test_time_budget_stops_and_says_so(box, device, capsys):
+    stage = box(extinction_scale=0.3)
+    layer = hybrid(stage, device, 16, target_error=0.001, time_budget=0.05, spp=100000, seed=1)
+    assert layer.stats["stopped_by"] == "time_budget"
+    assert layer.stats["spp"] < 100000
+    assert np.isfinite(layer.stats["error_estimate"]) and layer.stats["error_estimate"] > 0.001
+    err = capsys.readouterr().err
+    assert "time budget" in err and "0.1%" in err and "estimated" in err
+
+
+def test_all_sky_frame_and_unlit_scene(box, device):
+    """A camera that sees no medium: nothing covered, the first estimate is 0, the frame is black and finite."""
+    stage = box(camera_rotation=look_rotation((0.0, 0.0, 1.0)))
+    layer = hybrid(stage, device, 8)
+    assert layer.stats["stopped_by"] == "target" and layer.stats["error_estimate"] == 0.0
+    assert np.all(layer.radiance == 0.0) and np.all(layer.transmittance == 1.0)
+    dark = hybrid(box(sun_direction=None), device, 8)
+    assert np.all(dark.radiance == 0.0)
+
+
+def test_stiff_thick_cloud_is_finite_and_reports_capped_paths(box, device):
+    """Optical depth 300 per box at albedo exactly 1: long random walks, capped at 64 bounces and reported."""
+    stage = box(extinction_scale=15.0)
+    layer = hybrid(stage, device, 8, spp=4, target_error=0, max_bounces=64)
+    assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
+    assert layer.stats["capped_paths"] > 0
+
+
+def test_missing_denoiser_names_the_extra(box, monkeypatch):
+    real_import = builtins.__import__
+
+    def no_pyoidn(name, *args, **kwargs):
+        if name == "pyoidn":
+            raise ImportError("No module named 'pyoidn'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_pyoidn)
+    with pytest.raises(UsageError, match=r"warpsky\[denoise\].*denoise=0"):
+        hybrid(box(), "cpu", 8)
+    assert hybrid(box(), "cpu", 8, denoise=0, spp=2, target_error=0).radiance.shape == (8, 8, 3)
+
+
+@pytest.mark.parametrize("name,value", [("target_error", 1.0), ("target_error", -0.1), ("target_error", float("nan")),
+                                        ("time_budget", 0.0), ("spp", 0), ("mean_radius", -2)])
+def test_bad_settings_name_the_setting(name, value):
+    with pytest.raises(UsageError, match=name):
+        HybridSettings(**{name: value})
+
+
+def test_sanitise_and_local_mean():
+    image = np.ones((6, 6, 3), np.float32)
+    image[0, 0] = np.nan
+    image[1, 1, 0] = -1.0
+    image[2, 2, 2] = np.inf
+    clean, count = sanitise(image)
+    assert count == 5 and np.all(np.isfinite(clean)) and clean.min() == 0.0
+    # box sums: closed form for a constant image (clipped boxes at the corners)
+    assert box_sum(np.ones((5, 5)), 1)[0, 0] == 4.0 and box_sum(np.ones((5, 5)), 1)[2, 2] == 9.0
+    noisy = np.random.default_rng(0).random((16, 16, 3)).astype(np.float32)
+    biased = np.full_like(noisy, 1.2 * noisy.mean())
+    fixed = keep_local_mean(biased, noisy, np.ones((16, 16)), 3)
+    assert fixed.mean() == pytest.approx(noisy.mean(), rel=0.02)
+    np.testing.assert_array_equal(keep_local_mean(biased, noisy, np.ones((16, 16)), -1), biased)
+
+
+def test_hybrid_is_listed():
+    assert Hybrid.name == "hybrid" and not Hybrid.traces_air and Hybrid.renders_layers

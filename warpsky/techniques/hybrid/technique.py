@@ -1,0 +1,233 @@
+"""The default technique: exact single scattering plus denoised Monte Carlo multiple scattering.
+
+Light reaching the eye after one scattering event is marched exactly and without noise (the
+:mod:`~warpsky.techniques.single_scatter` kernel: sun -> shadow march -> scattering -> eye). Light scattered at
+least twice is path traced (the :mod:`~warpsky.techniques.path_tracer` kernel with the sunlight at the first
+event left out, so the two parts never count the same light twice), then denoised with Intel Open Image Denoise
+(:mod:`~warpsky.techniques.hybrid.denoise`). Passes of paths are added until the frame's estimated relative error
+falls below ``target_error``, or ``time_budget`` or ``spp`` is reached.
+
+The error estimate splits the paths into two independent halves A and B (alternate passes). Denoised separately,
+their difference has about twice the variance of the denoised whole, so RMS(D(A) - D(B)) / 2 over the covered
+pixels, divided by the mean of the frame there, estimates the relative RMSE of the denoised frame. It measures
+noise, not the denoiser's blur, which the local-mean correction keeps small; without denoising the estimate is the
+variance of each pixel's mean.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from warpsky.errors import UsageError
+from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
+from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
+from warpsky.techniques.hybrid.denoise import (
+    bilinear_upsample,
+    block_mean,
+    denoise,
+    guided_upsample,
+    require_denoiser,
+)
+from warpsky.techniques.path_tracer.technique import PathTracerSettings, PathTracing, pixel_sums
+from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
+
+#: Pixels whose luminance transmittance is below this count as covered by the media (or an opaque surface).
+COVERED_BELOW = 0.99
+
+
+@documented
+@dataclass(frozen=True)
+class HybridSettings(TechniqueSettings):
+    """Settings of the hybrid technique."""
+
+    technique = "hybrid"
+    target_error: float = setting(0.05, range="[0, 1)", help="stop adding paths once the frame's estimated "
+                                  "relative RMSE over covered pixels is below this; 0 = exactly spp paths")
+    time_budget: float | None = setting(None, unit="s", range="> 0", help="stop adding paths after this long "
+                                        "(the estimate reached goes into the stats)", auto="no limit")
+    spp: int = setting(256, range=">= 1", help="most multiple-scattering paths per pixel (exactly this many with "
+                       "target_error = 0)")
+    samples_per_pass: int | None = setting(None, range=">= 1", help="paths per pixel per pass; passes alternate "
+                                           "between the two halves of the error estimate",
+                                           auto="2 on the CPU, 16 on GPUs (at most spp)")
+    seed: int = setting(0, range=">= 0", help="random seed; a seed gives the same image on the same device")
+    multiple_scattering: bool = setting(True, help="0: single scattering only (equals single_scatter)")
+    denoise: bool = setting(True, help="denoise the multiple-scattering part with Open Image Denoise (pyoidn)")
+    mean_radius: int = setting(6, unit="pixel", range=">= -1", help="box radius over which the denoised image "
+                               "keeps the noisy image's local mean; -1 = off")
+    max_bounces: int = setting(1024, range=">= 1", help="cap on scattering events per path; capped paths are "
+                               "counted (capped_paths)")
+    majorant_block: int = setting(8, unit="voxel", range=">= 1", help="edge of the coarse majorant cells")
+    ms_scale: int = setting(1, unit="pixel", range="1..8", help="trace multiple scattering on pixels this many "
+                            "times larger (box-filtered), upsampled with the exact coverage as guide")
+    step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering eye-ray step",
+                                        auto="0.5 x the smallest voxel edge")
+    shadow_step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering shadow step",
+                                               auto="1 x the smallest voxel edge")
+
+    def __post_init__(self):
+        self.normalise()
+        if not (math.isfinite(self.target_error) and 0.0 <= self.target_error < 1.0):
+            raise UsageError(f"setting target_error must lie in [0, 1), got {self.target_error}")
+        if self.time_budget is not None and not (math.isfinite(self.time_budget) and self.time_budget > 0.0):
+            raise UsageError(f"setting time_budget must be a positive number of seconds, got {self.time_budget}")
+        for name in ("spp", "max_bounces", "majorant_block"):
+            if getattr(self, name) < 1:
+                raise UsageError(f"setting {name} must be a whole number >= 1, got {getattr(self, name)}")
+        if self.samples_per_pass is not None and self.samples_per_pass < 1:
+            raise UsageError(f"setting samples_per_pass must be >= 1, got {self.samples_per_pass}")
+        if not 1 <= self.ms_scale <= 8:
+            raise UsageError(f"setting ms_scale must be a whole number in 1..8, got {self.ms_scale}")
+        if self.mean_radius < -1:
+            raise UsageError(f"setting mean_radius must be >= -1, got {self.mean_radius}")
+        for name in ("step_length", "shadow_step_length"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0.0):
+                raise UsageError(f"setting {name} must be a positive length in metres, got {value}")
+
+    def single_scatter(self) -> SingleScatterSettings:
+        return SingleScatterSettings(step_length=self.step_length, shadow_step_length=self.shadow_step_length)
+
+    def path_tracer(self) -> PathTracerSettings:
+        return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,
+                                  majorant_block=self.majorant_block, samples_per_pass=self.samples_per_pass,
+                                  pixel_jitter=self.ms_scale > 1)
+
+
+class Hybrid:
+    """Exact single scattering plus path-traced, denoised multiple scattering, rendered to a target error.
+
+    Every species, the ground (its direct sunlight marched, its bounces traced) and the stratiform and sky passes
+    work as with ``single_scatter``: the atmosphere is drawn by the sky pass around the media's layer. AOVs:
+    ``single_scatter`` and ``multiple_scatter`` radiance, ``variance`` of the noisy multiple-scattering mean.
+    """
+
+    name = "hybrid"
+    Settings = HybridSettings
+    traces_air = False
+    renders_layers = True
+
+    def __init__(self, settings: HybridSettings | None = None, *, device: str = "cpu"):
+        self.settings = settings or HybridSettings()
+        self.device = device
+
+    def resolved_settings(self, scene: Scene) -> HybridSettings:
+        s = self.settings
+        march = SingleScatter(s.single_scatter(), device=self.device).resolved_settings(scene)
+        per_pass = s.samples_per_pass or (2 if str(self.device).startswith("cpu") else 16)
+        return dataclasses.replace(s, step_length=march.step_length, shadow_step_length=march.shadow_step_length,
+                                   samples_per_pass=min(per_pass, s.spp))
+
+    def render(self, scene: Scene, width: int, height: int) -> Layer:
+        settings = self.resolved_settings(scene)
+        if settings.multiple_scattering and settings.denoise:
+            require_denoiser()
+        started = time.perf_counter()
+        single = SingleScatter(settings.single_scatter(), device=self.device).render(scene, width, height)
+        stats = {"single_scatter_seconds": single.stats["seconds"], "lookups": single.stats["lookups"]}
+        multiple = np.zeros_like(single.radiance)
+        variance = np.zeros_like(single.radiance)
+        if settings.multiple_scattering and scene.sun is not None and scene.media:
+            multiple, variance, ms_stats = MultipleScattering(scene, width, height, settings, self.device).run(
+                single, started)
+            stats.update(ms_stats)
+        stats["seconds"] = time.perf_counter() - started
+        stats["settings"] = dataclasses.asdict(settings)
+        return Layer(single.radiance + multiple, single.transmittance, single.depth, stats=stats,
+                     aovs={"single_scatter": single.radiance, "multiple_scatter": multiple, "variance": variance})
+
+
+class MultipleScattering:
+    """Progressive passes of multiple-scattering paths into two halves, the error estimate, and the denoising."""
+
+    def __init__(self, scene: Scene, width: int, height: int, settings: HybridSettings, device: str):
+        self.settings = settings
+        self.device = device
+        self.scale = int(settings.ms_scale)
+        self.tracing = PathTracing(scene, width, height, settings.path_tracer(), device, air=False,
+                                   multiple_only=True, scale=self.scale)
+        shape = (self.tracing.height, self.tracing.width)
+        self.halves = [pixel_sums(shape, device), pixel_sums(shape, device)]
+        self.counts = [0, 0]
+
+    def run(self, single: Layer, started: float) -> tuple[np.ndarray, np.ndarray, dict]:
+        """(denoised multiple scattering, variance of its noisy mean, stats), given the single-scattering layer."""
+        s = self.settings
+        fine_coverage = np.clip(1.0 - single.transmittance, 0.0, 1.0)
+        coverage = block_mean(fine_coverage, self.scale) if self.scale > 1 else fine_coverage
+        single_radiance = block_mean(single.radiance, self.scale) if self.scale > 1 else single.radiance
+        covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
+        per_pass, done, passes = int(s.samples_per_pass), 0, 0
+        estimate, stop = math.inf, "spp"
+        while done < s.spp:
+            count = min(per_pass, s.spp - done)
+            half = passes % 2
+            self.tracing.launch(self.halves[half], done, count)  # path indices, hence streams, never repeat
+            self.counts[half] += count
+            done += count
+            passes += 1
+            if s.target_error > 0.0 and passes % 2 == 0:
+                estimate = self.estimate(single_radiance, coverage, covered)
+                if estimate <= s.target_error:
+                    stop = "target"
+                    break
+            if s.time_budget is not None and time.perf_counter() - started >= s.time_budget:
+                stop = "time_budget"
+                break
+        wp.synchronize_device(self.device)
+        mean, variance, counters = self.mean_and_variance()
+        image, denoise_seconds, sanitised = mean, 0.0, 0
+        if s.denoise:
+            result = denoise(mean, coverage, radius=s.mean_radius)
+            image, denoise_seconds, sanitised = result.image, result.seconds, result.sanitised
+        if self.scale > 1:
+            height, width = fine_coverage.shape[:2]
+            image = guided_upsample(image, fine_coverage, self.scale)
+            variance = bilinear_upsample(variance, self.scale, height, width)
+        if s.target_error > 0.0 and stop != "target":
+            estimate = self.estimate(single_radiance, coverage, covered) if min(self.counts) > 0 else math.inf
+            reason = "the time budget" if stop == "time_budget" else f"the path cap (spp = {s.spp})"
+            print(f"warpsky: warning: hybrid stopped by {reason} after {done} paths per pixel with an estimated "
+                  f"error of {estimate:.1%}, above the target {s.target_error:.1%}", file=sys.stderr)
+        stats = {"spp": done, "passes": passes, "stopped_by": stop, "error_estimate": estimate,
+                 "target_error": s.target_error, "denoise_seconds": denoise_seconds,
+                 "sanitised_values": sanitised, "tracking_steps": int(counters[..., 0].sum()),
+                 "capped_paths": int(counters[..., 1].sum())}
+        return image, variance, stats
+
+    def half_mean(self, half: int) -> np.ndarray:
+        return self.halves[half].radiance_sum.numpy() / max(self.counts[half], 1)
+
+    def mean_and_variance(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(mean of every path, variance of that mean, summed (steps, capped) counters)."""
+        n = sum(self.counts)
+        total = sum(h.radiance_sum.numpy().astype(np.float64) for h in self.halves)
+        squares = sum(h.radiance_sq.numpy().astype(np.float64) for h in self.halves)
+        mean = total / max(n, 1)
+        variance = np.maximum(squares / max(n, 1) - mean**2, 0.0) / max(n - 1, 1)
+        counters = sum(h.counters.numpy() for h in self.halves)
+        return mean.astype(np.float32), variance.astype(np.float32), counters
+
+    def estimate(self, single: np.ndarray, coverage: np.ndarray, covered: np.ndarray) -> float:
+        """Estimated relative RMSE of the frame over ``covered`` pixels (0 when nothing is covered)."""
+        if not covered.any():
+            return 0.0
+        a, b = self.half_mean(0), self.half_mean(1)
+        if self.settings.denoise:
+            radius = self.settings.mean_radius
+            a, b = denoise(a, coverage, radius=radius).image, denoise(b, coverage, radius=radius).image
+            spread = 0.5 * (a - b)
+        else:
+            _, variance, _ = self.mean_and_variance()
+            spread = np.sqrt(variance)
+        level = float((single[covered] + 0.5 * (a[covered] + b[covered])).mean())
+        if level <= 0.0:
+            return 0.0
+        return float(np.sqrt(np.mean(spread[covered].astype(np.float64) ** 2)) / level)
