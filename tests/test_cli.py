@@ -54,8 +54,8 @@ def test_float_output_and_single_frame_without_placeholder(tmp_path, good_stage,
 def test_info_prints_stage_and_plan(good_stage, capsys):
     code, stdout, _ = run(["info", good_stage, "--device", "cpu"], capsys)
     assert code == 0
-    for text in ("upAxis Y", "/World/Camera", "/World/Cloud", "technique   slicing", "slice_count", "xi=0.1",
-                 "ground      off"):
+    for text in ("upAxis Y", "/World/Camera", "/World/Cloud", "technique   hybrid", "target_error=0.05",
+                 "denoise=1", "ground      off"):
         assert text in stdout
 
 

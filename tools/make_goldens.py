@@ -27,6 +27,9 @@ sys.path.insert(0, str(ROOT / "tools"))
 WIDTH = 32
 #: Path tracer settings of the goldens: few samples, fixed seed (the image is noisy but exactly reproducible).
 PATH_TRACER = ("spp=4", "seed=3")
+#: Hybrid settings of the goldens: 4 multiple-scattering paths, no denoiser (Open Image Denoise's output depends on
+#: the processor's instruction set, the Warp kernels' does not).
+HYBRID = ("spp=4", "seed=3", "target_error=0", "denoise=0")
 
 
 @dataclass(frozen=True)
@@ -44,10 +47,11 @@ class Case:
 def _cases() -> list[Case]:
     cases = []
     for stage, time in (("cumulus", 1), ("storm", 40), ("stratocumulus", 1), ("sunrise", 12)):
-        for technique in ("single_scatter", "slicing", "path_tracer"):
-            if stage == "stratocumulus" and technique == "path_tracer":
-                continue  # the path tracer does not render stratiform layers
-            cases.append(Case(stage, technique, time, PATH_TRACER if technique == "path_tracer" else ()))
+        for technique in ("single_scatter", "slicing", "path_tracer", "hybrid"):
+            if stage == "stratocumulus" and technique in ("path_tracer", "hybrid"):
+                continue  # the path tracer does not render stratiform layers; hybrid's media part is single_scatter
+            settings = {"path_tracer": PATH_TRACER, "hybrid": HYBRID}.get(technique, ())
+            cases.append(Case(stage, technique, time, settings))
     return cases
 
 

@@ -68,9 +68,10 @@ class Technique(Protocol):
         ...
 
 
-#: The technique ``warpsky render`` uses unless told otherwise: half-angle slicing (Riley 2004), one sweep with
-#: multiple-scattering phase functions; ``single_scatter`` and ``path_tracer`` remain for comparison and reference.
-DEFAULT_TECHNIQUE = "slicing"
+#: The technique ``warpsky render`` uses unless told otherwise: exact single scattering plus denoised, path-traced
+#: multiple scattering, rendered to a target error (``hybrid``). ``slicing`` is the interactive technique (Riley
+#: 2004's half-angle slicing), ``single_scatter`` and ``path_tracer`` the references.
+DEFAULT_TECHNIQUE = "hybrid"
 
 _REGISTRY: dict[str, str] = {
     "single_scatter": "warpsky.techniques.single_scatter.technique:SingleScatter",

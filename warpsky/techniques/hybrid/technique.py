@@ -144,6 +144,15 @@ class Hybrid:
                      aovs={"single_scatter": single.radiance, "multiple_scatter": multiple, "variance": variance})
 
 
+def next_check(passes: int, estimate: float, target: float) -> int:
+    """The (even) pass count at which to estimate the error again: where noise falling as 1/sqrt(paths) would meet
+    the target (10% beyond), at least two passes on and at most twice as many as now, so a few estimates suffice
+    and a wrong guess costs at most a doubling."""
+    wanted = passes * (estimate / target) ** 2 * 1.1 if math.isfinite(estimate) else 2 * passes
+    step = int(math.ceil(min(max(wanted, passes + 2), 2 * passes)))
+    return step + step % 2
+
+
 class MultipleScattering:
     """Progressive passes of multiple-scattering paths into two halves, the error estimate, and the denoising."""
 
@@ -164,7 +173,7 @@ class MultipleScattering:
         coverage = block_mean(fine_coverage, self.scale) if self.scale > 1 else fine_coverage
         single_radiance = block_mean(single.radiance, self.scale) if self.scale > 1 else single.radiance
         covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
-        per_pass, done, passes = int(s.samples_per_pass), 0, 0
+        per_pass, done, passes, check_at = int(s.samples_per_pass), 0, 0, 2
         estimate, stop = math.inf, "spp"
         while done < s.spp:
             count = min(per_pass, s.spp - done)
@@ -173,11 +182,12 @@ class MultipleScattering:
             self.counts[half] += count
             done += count
             passes += 1
-            if s.target_error > 0.0 and passes % 2 == 0:
+            if s.target_error > 0.0 and passes == check_at:
                 estimate = self.estimate(single_radiance, coverage, covered)
                 if estimate <= s.target_error:
                     stop = "target"
                     break
+                check_at = next_check(passes, estimate, s.target_error)
             if s.time_budget is not None and time.perf_counter() - started >= s.time_budget:
                 stop = "time_budget"
                 break

@@ -87,13 +87,21 @@ class PathTracer:
         settings = self.resolved_settings(scene)
         started = time.perf_counter()
         tracing = PathTracing(scene, width, height, settings, self.device)
-        sums = pixel_sums((height, width), self.device)
+        lanes = gpu_lanes(self.device, width * height, int(settings.spp) // int(settings.samples_per_pass))
+        sums = [pixel_sums((height, width), self.device) for _ in range(lanes)]
+        streams = [wp.Stream(self.device) for _ in range(lanes)] if lanes > 1 else []
         spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
-        done = 0
+        done = passes = 0
         while done < spp:
             count = min(per_pass, spp - done)
-            tracing.launch(sums, done, count)
+            lane = passes % lanes
+            if streams:
+                with wp.ScopedStream(streams[lane]):
+                    tracing.launch(sums[lane], done, count)
+            else:
+                tracing.launch(sums[lane], done, count)
             done += count
+            passes += 1
             if progress is not None:
                 progress(count)
         wp.synchronize_device(self.device)
@@ -178,19 +186,31 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     return out
 
 
-def sums_layer(sums: PixelSums, spp: int, far: float) -> Layer:
-    """The layer of ``spp`` accumulated paths per pixel: mean radiance, mean transmittance, mean depth of first
-    events (``far`` where none), the variance of the pixel mean as an AOV, and the tracking counters."""
-    total = sums.radiance_sum.numpy().astype(np.float64)
-    squares = sums.radiance_sq.numpy().astype(np.float64)
+def gpu_lanes(device: str, pixels: int, passes: int) -> int:
+    """How many CUDA streams progressive passes spread over: enough threads in flight to fill a GPU (about
+    2^18 resident threads on a large one) when the frame alone has too few pixels; 1 on the CPU."""
+    if str(device).startswith("cpu"):
+        return 1
+    return max(1, min(16, passes, (1 << 18) // max(pixels, 1)))
+
+
+def sums_layer(sums: list[PixelSums], spp: int, far: float) -> Layer:
+    """The layer of ``spp`` paths per pixel accumulated in ``sums`` (one per stream): mean radiance, mean
+    transmittance, mean depth of first events (``far`` where none), the variance of the pixel mean as an AOV, and
+    the tracking counters."""
+    def total_of(name):
+        return sum(getattr(s, name).numpy().astype(np.float64) for s in sums)
+
+    total = total_of("radiance_sum")
+    squares = total_of("radiance_sq")
     mean = total / spp
     variance = np.maximum(squares / spp - mean**2, 0.0) / max(spp - 1, 1)  # of the mean
-    depth = sums.depth_sum.numpy()
+    depth = total_of("depth_sum")
     depth_mean = np.where(depth[..., 1] > 0, depth[..., 0] / np.maximum(depth[..., 1], 1), np.float32(far))
-    count_values = sums.counters.numpy()
+    count_values = sum(s.counters.numpy() for s in sums)
     return Layer(
         mean.astype(np.float32),
-        (sums.transmittance_sum.numpy() / spp).astype(np.float32),
+        (total_of("transmittance_sum") / spp).astype(np.float32),
         depth_mean.astype(np.float32),
         stats={
             "tracking_steps": int(count_values[..., 0].sum()),
