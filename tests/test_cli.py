@@ -285,3 +285,31 @@ def test_render_help_lists_every_setting_with_its_metadata(capsys):
         assert all(f.name in out for f in dataclasses.fields(technique_class(name).Settings))
     assert all(f"stratiform.{f.name}" in out for f in dataclasses.fields(StratiformSettings))
     assert "256 texel" in out and "samples (paths) per pixel" in out and "auto: 8 on the CPU" in out
+
+
+@pytest.mark.parametrize("flags,message", [
+    (["--target-error", "0"], "--target-error"), (["--target-error", "nan"], "--target-error"),
+    (["--target-error", "1"], "--target-error"), (["--target-error", "-0.1"], "--target-error"),
+    (["--time-budget", "0"], "--time-budget"), (["--time-budget", "-3"], "--time-budget"),
+    (["--technique", "slicing", "--target-error", "0.1"], "--target-error applies to technique hybrid only"),
+])
+def test_bad_target_flags_exit_2_naming_the_flag(tmp_path, good_stage, capsys, flags, message):
+    out = tmp_path / "out" / "f.exr"
+    try:
+        code = main([str(a) for a in ["render", good_stage, out, "--res", "8", "--device", "cpu", *flags]])
+    except SystemExit as stop:  # argparse rejects a bad value itself
+        code = stop.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_default_render_is_hybrid_with_its_figures_in_the_header(tmp_path, good_stage, capsys):
+    out = tmp_path / "h.exr"
+    code, _, _ = run(["render", good_stage, out, "--res", "16", "--device", "cpu", "--target-error", "0.2",
+                      "--float"], capsys)
+    assert code == 0
+    meta = read_exr(out).metadata
+    assert meta["technique"] == "hybrid" and meta["stoppedBy"] in ("target", "spp")
+    assert meta["targetError"] == pytest.approx(0.2) and meta["spp"] >= 2 and meta["cappedPaths"] == 0
+    assert meta["errorEstimate"] <= 0.2 or meta["stoppedBy"] == "spp"
