@@ -24,6 +24,7 @@ from warpsky.batch.run import (
 from warpsky.device import init_warp, resolve_device
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
+from warpsky.evaluation.family import format_family_table, run_family, write_family_outputs
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
 from warpsky.output.preview import contact_sheet, stage_preview
@@ -199,18 +200,27 @@ def build_parser() -> argparse.ArgumentParser:
         description="Render a converged path-traced reference of STAGE (cached under $WARPSKY_CACHE/reference), "
         "then each technique along its quality ladder (march steps 4..0.25 voxels, spp 1..256), and report "
         "relative RMSE, mean and 95th-percentile relative error over covered pixels, and bias, against the "
-        "render time (first compiles excluded). Writes CSV, JSON and a log-log PNG.",
+        "render time (first compiles excluded). Writes CSV, JSON and a log-log PNG. With --family DIR instead of "
+        "STAGE: the same on every stage of a validation family, aggregated (see below).",
+        epilog=EPILOG_FAMILY, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    evt.add_argument("stage", type=Path, help="USD stage")
+    evt.add_argument("stage", type=Path, nargs="?", help="USD stage (or give --family)")
+    evt.add_argument("--family", type=Path, metavar="DIR", help="a validation family directory (family.json, "
+                     "written by tools/make_validation_family.py) instead of STAGE")
+    evt.add_argument("--half", choices=("tune", "test", "all"), default="test",
+                     help="--family: which half to measure (default test)")
+    evt.add_argument("--references-only", action="store_true",
+                     help="--family: only render and cache the references, one line per stage")
     evt.add_argument("--techniques", default="single_scatter,path_tracer",
                      help="comma-separated techniques (default: single_scatter,path_tracer)")
     evt.add_argument("--budget", type=float, default=60.0, metavar="SECONDS",
-                     help="total seconds for the ladders, shared between techniques (default 60)")
+                     help="seconds for the ladders, shared between techniques (default 60); with --family, per "
+                     "stage")
     evt.add_argument("--reference-spp", type=int, default=1024, metavar="N", help="reference samples per pixel")
-    evt.add_argument("--time", type=float, default=None, help="time code (default: earliest)")
-    evt.add_argument("--camera", metavar="PATH", help="camera prim path")
-    evt.add_argument("--res", type=_resolution, default=(128, None), metavar="WxH",
-                     help="image size (default 128 wide, the camera's aspect)")
+    evt.add_argument("--time", type=float, default=None, help="time code (default: earliest; STAGE only)")
+    evt.add_argument("--camera", metavar="PATH", help="camera prim path (STAGE only)")
+    evt.add_argument("--res", type=_resolution, default=None, metavar="WxH",
+                     help="image size (default 128 wide: the camera's aspect for STAGE, 128x128 for --family)")
     evt.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
     evt.add_argument("--no-cache", action="store_true", help="render the reference even if it is cached")
     evt.add_argument("-o", "--output-dir", type=Path, default=Path("out"), help="where the CSV/JSON/PNG go")
@@ -293,18 +303,78 @@ def cmd_render(args) -> int:
     return 0
 
 
+EPILOG_FAMILY = """\
+the validation family (--family DIR):
+  A seeded set of stages (tools/make_validation_family.py, make family: data/family): isolated cumulus,
+  broken stratocumulus, towering cell with anvil, thin cirrus and a camera inside a cloud, spanning peak optical
+  depth 0.1..300, albedo 1 and 0.9, hg / Mie cloud / isotropic phase, sun elevation 2..90 deg front-, side-
+  and back-lit, with and without ground and atmosphere. Members alternate between a tune and a test half:
+  choose settings on --half tune, report them on --half test. References are cached under
+  $WARPSKY_CACHE/reference/family/ by a hash of the member's files, size, spp and seed, not of the device:
+  render them on a GPU with --references-only and copy the .npz files over.
+  Covered pixels: where the media alone (single_scatter, no ground, no air) transmit < 0.99 of the light.
+
+family columns (per technique and ladder rung, over the stages that reached it):
+  stages     stages measured at this rung (a ladder stops on a stage once it passes budget / techniques)
+  median     median relative RMSE: sqrt(mean((x - r)^2)) / mean(r) over covered pixels of the frame radiance
+  p90, worst 90th percentile and largest relative RMSE over the stages
+  med bias   median of the stages' bias (mean(x) - mean(r)) / mean(r); mean bias: their mean
+  median s   median render time per stage [s], first compiles excluded
+  The CSV holds one row per stage, technique and rung (error names a failed measurement); the JSON adds the
+  aggregate and the references; the PNG plots median (solid) and p90 (dashed) relative RMSE against time.
+
+examples:
+  warpsky bench error-vs-time usd_scenes/cumulus.usda --techniques single_scatter,slicing,path_tracer
+  warpsky bench error-vs-time --family data/family --references-only --device cuda --reference-spp 4096
+  warpsky bench error-vs-time --family data/family --half tune --res 64 -o out/family_tune
+"""
+
+
+def _log_progress(text: str) -> None:
+    print(text, file=sys.stderr)
+
+
 def cmd_bench(args) -> int:
+    if (args.stage is None) == (args.family is None):
+        given = f"both STAGE ({args.stage}) and --family ({args.family})" if args.stage else "neither"
+        raise UsageError(f"bench error-vs-time measures exactly one of STAGE or --family DIR; got {given}")
+    techniques = [t.strip() for t in args.techniques.split(",") if t.strip()]
+    device = resolve_device(args.device)
+    log = _log_progress  # progress to stderr, tables to stdout
+    if args.family is not None:
+        return _bench_family(args, techniques, device, log)
+    if args.references_only:
+        raise UsageError("--references-only needs --family DIR")
     reader = StageReader(args.stage)
     scene = reader.scene_at(args.time, camera_path=args.camera)
-    device = resolve_device(args.device)
-    width, height = resolve_resolution(scene, args.res)
+    width, height = resolve_resolution(scene, args.res or (128, None))
     report = run_report(
-        scene, techniques=[t.strip() for t in args.techniques.split(",") if t.strip()], width=width,
-        height=height, device=device, budget=args.budget, reference_spp=args.reference_spp,
-        use_cache=not args.no_cache, log=lambda text: print(text, file=sys.stderr),
+        scene, techniques=techniques, width=width, height=height, device=device, budget=args.budget,
+        reference_spp=args.reference_spp, use_cache=not args.no_cache, log=log,
     )
     print(format_table(report))
     for path in write_outputs(report, args.output_dir):
+        print(path)
+    return 0
+
+
+def _bench_family(args, techniques: list[str], device: str, log) -> int:
+    """``bench error-vs-time --family DIR``: the family report, or only its references."""
+    if args.camera is not None or args.time is not None:
+        raise UsageError("--camera and --time apply to a STAGE; a family's stages use their own camera and time")
+    width, height = args.res or (128, 128)
+    height = height or width
+    report = run_family(
+        args.family, techniques, width, height, device, half=args.half, reference_spp=args.reference_spp,
+        budget_per_stage=args.budget, use_cache=not args.no_cache, references_only=args.references_only, log=log,
+    )
+    if args.references_only:
+        for ref in report.references:
+            state = "cached" if ref["cached"] else f"{ref['seconds']:.1f} s"
+            print(f"{ref['stage']:<24} {ref['half']:<4} {state:>10}  {ref['key']}")
+        return 0
+    print(format_family_table(report))
+    for path in write_family_outputs(report, args.output_dir):
         print(path)
     return 0
 
