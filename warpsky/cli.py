@@ -197,11 +197,12 @@ def build_parser() -> argparse.ArgumentParser:
     bench_verbs = bench.add_subparsers(dest="bench_command", metavar="VERB", required=True)
     evt = bench_verbs.add_parser(
         "error-vs-time", help="each technique's error against a converged path-traced reference, and its time",
-        description="Render a converged path-traced reference of STAGE (cached under $WARPSKY_CACHE/reference), "
-        "then each technique along its quality ladder (march steps 4..0.25 voxels, spp 1..256), and report "
-        "relative RMSE, mean and 95th-percentile relative error over covered pixels, and bias, against the "
-        "render time (first compiles excluded). Writes CSV, JSON and a log-log PNG. With --family DIR instead of "
-        "STAGE: the same on every stage of a validation family, aggregated (see below).",
+        description=textwrap.fill(
+            "Render a converged path-traced reference of STAGE (cached under $WARPSKY_CACHE/reference), then each "
+            "technique along its quality ladder (march steps 4..0.25 voxels, spp 1..256), and report relative "
+            "RMSE, mean and 95th-percentile relative error over covered pixels, and bias, against the render time "
+            "(first compiles excluded). Writes CSV, JSON and a log-log PNG. With --family DIR instead of STAGE: the "
+            "same on every stage of a validation family, aggregated (see below).", 112),
         epilog=EPILOG_FAMILY, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     evt.add_argument("stage", type=Path, nargs="?", help="USD stage (or give --family)")
@@ -325,7 +326,7 @@ family columns (per technique and ladder rung, over the stages that reached it):
 
 examples:
   warpsky bench error-vs-time usd_scenes/cumulus.usda --techniques single_scatter,slicing,path_tracer
-  warpsky bench error-vs-time --family data/family --references-only --device cuda --reference-spp 4096
+  warpsky bench error-vs-time --family data/family --half all --references-only --device cuda
   warpsky bench error-vs-time --family data/family --half tune --res 64 -o out/family_tune
 """
 
