@@ -24,7 +24,7 @@ from warpsky.batch.run import (
 from warpsky.device import init_warp, resolve_device
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
-from warpsky.evaluation.family import format_family_table, run_family, write_family_outputs
+from warpsky.evaluation.family import FAMILY_HELP, format_family_table, run_family, write_family_outputs
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
 from warpsky.output.preview import contact_sheet, stage_preview
@@ -192,6 +192,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_optics(sub)
 
+    _add_bench(sub)
+    return parser
+
+
+def _add_bench(sub) -> None:
+    """``warpsky bench error-vs-time``: one STAGE or a validation family."""
     bench = sub.add_parser("bench", help="measure techniques: error against a path-traced reference vs time",
                            description="Benchmarks that read a stage.")
     bench_verbs = bench.add_subparsers(dest="bench_command", metavar="VERB", required=True)
@@ -203,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
             "RMSE, mean and 95th-percentile relative error over covered pixels, and bias, against the render time "
             "(first compiles excluded). Writes CSV, JSON and a log-log PNG. With --family DIR instead of STAGE: the "
             "same on every stage of a validation family, aggregated (see below).", 112),
-        epilog=EPILOG_FAMILY, formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=FAMILY_HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     evt.add_argument("stage", type=Path, nargs="?", help="USD stage (or give --family)")
     evt.add_argument("--family", type=Path, metavar="DIR", help="a validation family directory (family.json, "
@@ -225,7 +231,6 @@ def build_parser() -> argparse.ArgumentParser:
     evt.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
     evt.add_argument("--no-cache", action="store_true", help="render the reference even if it is cached")
     evt.add_argument("-o", "--output-dir", type=Path, default=Path("out"), help="where the CSV/JSON/PNG go")
-    return parser
 
 
 def _settings(args) -> dict[str, str]:
@@ -302,33 +307,6 @@ def cmd_render(args) -> int:
     if result.failed:  # each failure was already reported as it happened
         return 1 if any(r.retryable for r in result.failed) else 2
     return 0
-
-
-EPILOG_FAMILY = """\
-the validation family (--family DIR):
-  A seeded set of stages (tools/make_validation_family.py, make family: data/family): isolated cumulus,
-  broken stratocumulus, towering cell with anvil, thin cirrus and a camera inside a cloud, spanning peak optical
-  depth 0.1..300, albedo 1 and 0.9, hg / Mie cloud / isotropic phase, sun elevation 2..90 deg front-, side-
-  and back-lit, with and without ground and atmosphere. Members alternate between a tune and a test half:
-  choose settings on --half tune, report them on --half test. References are cached under
-  $WARPSKY_CACHE/reference/family/ by a hash of the member's files, size, spp and seed, not of the device:
-  render them on a GPU with --references-only and copy the .npz files over.
-  Covered pixels: where the media alone (single_scatter, no ground, no air) transmit < 0.99 of the light.
-
-family columns (per technique and ladder rung, over the stages that reached it):
-  stages     stages measured at this rung (a ladder stops on a stage once it passes budget / techniques)
-  median     median relative RMSE: sqrt(mean((x - r)^2)) / mean(r) over covered pixels of the frame radiance
-  p90, worst 90th percentile and largest relative RMSE over the stages
-  med bias   median of the stages' bias (mean(x) - mean(r)) / mean(r); mean bias: their mean
-  median s   median render time per stage [s], first compiles excluded
-  The CSV holds one row per stage, technique and rung (error names a failed measurement); the JSON adds the
-  aggregate and the references; the PNG plots median (solid) and p90 (dashed) relative RMSE against time.
-
-examples:
-  warpsky bench error-vs-time usd_scenes/cumulus.usda --techniques single_scatter,slicing,path_tracer
-  warpsky bench error-vs-time --family data/family --half all --references-only --device cuda
-  warpsky bench error-vs-time --family data/family --half tune --res 64 -o out/family_tune
-"""
 
 
 def _log_progress(text: str) -> None:

@@ -58,8 +58,35 @@ from warpsky.render import render_layers
 from warpsky.scene.model import LUMINANCE_WEIGHTS
 from warpsky.techniques.base import technique_class
 
-__all__ = ["FamilyReport", "FamilyRow", "aggregate", "covered_pixels", "family_reference_key",
+__all__ = ["FAMILY_HELP", "FamilyReport", "FamilyRow", "aggregate", "covered_pixels", "family_reference_key",
            "family_reference_path", "format_family_table", "make_family", "run_family", "write_family_outputs"]
+
+#: The family part of ``warpsky bench error-vs-time --help``.
+FAMILY_HELP = """\
+the validation family (--family DIR):
+  A seeded set of stages (tools/make_validation_family.py, make family: data/family): isolated cumulus,
+  broken stratocumulus, towering cell with anvil, thin cirrus and a camera inside a cloud, spanning peak optical
+  depth 0.1..300, albedo 1 and 0.9, hg / Mie cloud / isotropic phase, sun elevation 2..90 deg front-, side-
+  and back-lit, with and without ground and atmosphere. Members alternate between a tune and a test half:
+  choose settings on --half tune, report them on --half test. References are cached under
+  $WARPSKY_CACHE/reference/family/ by a hash of the member's files, size, spp and seed, not of the device:
+  render them on a GPU with --references-only and copy the .npz files over.
+  Covered pixels: where the media alone (single_scatter, no ground, no air) transmit < 0.99 of the light.
+
+family columns (per technique and ladder rung, over the stages that reached it):
+  stages     stages measured at this rung (a ladder stops on a stage once it passes budget / techniques)
+  median     median relative RMSE: sqrt(mean((x - r)^2)) / mean(r) over covered pixels of the frame radiance
+  p90, worst 90th percentile and largest relative RMSE over the stages
+  med bias   median of the stages' bias (mean(x) - mean(r)) / mean(r); mean bias: their mean
+  median s   median render time per stage [s], first compiles excluded
+  The CSV holds one row per stage, technique and rung (error names a failed measurement); the JSON adds the
+  aggregate and the references; the PNG plots median (solid) and p90 (dashed) relative RMSE against time.
+
+examples:
+  warpsky bench error-vs-time usd_scenes/cumulus.usda --techniques single_scatter,slicing,path_tracer
+  warpsky bench error-vs-time --family data/family --half all --references-only --device cuda
+  warpsky bench error-vs-time --family data/family --half tune --res 64 -o out/family_tune
+"""
 
 #: Luminance transmittance of the media below which a pixel counts as covered.
 COVERED_TRANSMITTANCE = 0.99
