@@ -7,7 +7,7 @@ PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind
+	cumulus-wind family
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
@@ -17,6 +17,7 @@ help:
 	@echo "make bench              - run benchmarks/bench_single_scatter.py (cuda too when present)"
 	@echo "make venv               - create $(VENV) and install warpsky with all extras (redone when pyproject changes)"
 	@echo "make data               - generate the demo cumulus field data/cumulus.nvdb"
+	@echo "make family             - generate the 24-stage validation family (seed 2026) in data/family"
 	@echo "make cumulus-wind       - 48 frames of the cumulus in wind (usd_scenes/cumulus_wind.usda) to out/"
 	@echo "make stratocumulus      - stratocumulus over water, sand and snow, radiosity on and off, to out/"
 	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
@@ -39,6 +40,13 @@ data/cumulus.nvdb: tools/make_cumulus.py $(STAMP)
 	$(PY) tools/make_cumulus.py --out data
 
 data: data/cumulus.nvdb
+
+# The validation family: 24 seeded stages, tune and test halves (warpsky bench error-vs-time --family data/family).
+data/family/family.json: tools/make_validation_family.py warpsky/evaluation/family_stages.py \
+		warpsky/evaluation/family_shapes.py $(STAMP)
+	$(PY) tools/make_validation_family.py --out data/family
+
+family: data/family/family.json
 
 demo: $(STAMP) data/cumulus.nvdb
 	$(VENV)/bin/warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png

@@ -45,6 +45,7 @@ LADDERS = {
     "slicing": [{"slice_count": n} for n in (16, 32, 64, 128, 256, 512)],
     "single_scatter": [{"step_length": k, "shadow_step_length": k} for k in (4.0, 2.0, 1.0, 0.5, 0.25)],
     "path_tracer": [{"spp": n} for n in (1, 2, 4, 8, 16, 32, 64, 128, 256)],
+    "hybrid": [{"spp": n, "target_error": 0.0} for n in (1, 2, 4, 8, 16, 32, 64)],
 }
 #: Ladder settings given in voxel edges (multiplied by the scene's smallest voxel edge).
 VOXEL_SETTINGS = ("step_length", "shadow_step_length")
@@ -90,10 +91,11 @@ def render_frame_radiance(plan: RenderPlan, scene):
     return frame.rgba[..., :3], frame.transmittance, frame.aovs, layer
 
 
-def reference_image(scene, width, height, device, *, spp: int, seed: int, use_cache: bool = True):
-    """(radiance, transmittance, variance, seconds, cached) of the path-traced reference frame."""
-    key = _reference_key(scene, width, height, device, spp, seed)
-    path = cache_dir() / "reference" / f"{key}.npz"
+def reference_image(scene, width, height, device, *, spp: int, seed: int, use_cache: bool = True,
+                    cache_path: Path | None = None):
+    """(radiance, transmittance, variance, seconds, cached) of the path-traced reference frame, cached at
+    ``cache_path`` (default: under ``$WARPSKY_CACHE/reference`` by a hash of the scene and the device kind)."""
+    path = cache_path or cache_dir() / "reference" / f"{_reference_key(scene, width, height, device, spp, seed)}.npz"
     if use_cache and path.is_file():
         with np.load(path) as data:
             return data["radiance"], data["transmittance"], data["variance"], float(data["seconds"]), True
@@ -123,7 +125,7 @@ def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray)
     }
 
 
-def _setting_label(values: dict) -> str:
+def setting_label(values: dict) -> str:
     return ", ".join(f"{k}={v:g}" for k, v in values.items() if k != "shadow_step_length")
 
 
@@ -172,7 +174,7 @@ def run_report(
             radiance, _, _, _ = render_frame_radiance(plan, scene)
             seconds = time.perf_counter() - started
             spent += seconds
-            row = Row(name, _setting_label(rung), seconds, **error_metrics(radiance, radiance_ref, covered))
+            row = Row(name, setting_label(rung), seconds, **error_metrics(radiance, radiance_ref, covered))
             rows.append(row)
             log(f"  {name:<15} {row.setting:<22} {seconds:8.3f} s  rel RMSE {row.rel_rmse:.4f}")
             if spent > share:

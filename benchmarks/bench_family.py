@@ -1,0 +1,66 @@
+"""Benchmark: every technique's error against a path-traced reference across the test half of the validation
+family, aggregated per ladder rung (median, p90 and worst relative RMSE, bias, median time).
+
+Generates the family into data/family when it is missing (tools/make_validation_family.py defaults). Measures
+single_scatter, slicing and path_tracer, plus hybrid once it is registered, on the CPU and on every CUDA device
+present; writes the table, CSV, JSON and PNG per device under out/bench_family/DEVICE/. References are cached
+under $WARPSKY_CACHE/reference/family/ independently of the device, so the first device's references serve the
+others (render them on a GPU first: ``warpsky bench error-vs-time --family data/family --half all
+--references-only --device cuda``). Timings exclude first compiles. No pass/fail: goals are read by people.
+
+Run:  python benchmarks/bench_family.py [--family data/family] [--res 128] [--reference-spp 1024] [--budget 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--family", type=Path, default=ROOT / "data" / "family")
+    parser.add_argument("--out", type=Path, default=ROOT / "out" / "bench_family")
+    parser.add_argument("--half", choices=("tune", "test", "all"), default="test")
+    parser.add_argument("--res", type=int, default=128, help="square image size (default 128)")
+    parser.add_argument("--reference-spp", type=int, default=1024)
+    parser.add_argument("--budget", type=float, default=60.0, help="seconds of ladders per stage (default 60)")
+    parser.add_argument("--techniques", default=None, help="comma-separated (default: single_scatter, slicing, "
+                        "path_tracer and hybrid when registered)")
+    parser.add_argument("--devices", default=None, help="comma-separated Warp devices (default: cpu + all cuda)")
+    args = parser.parse_args(argv)
+
+    import warp as wp
+
+    from warpsky.device import init_warp
+    from warpsky.evaluation.family import format_family_table, make_family, run_family, write_family_outputs
+    from warpsky.techniques.base import technique_names
+
+    init_warp()
+    if not (args.family / "family.json").is_file():
+        print(f"generating the validation family into {args.family}", file=sys.stderr)
+        make_family(args.family)
+    if args.techniques:
+        techniques = args.techniques.split(",")
+    else:
+        techniques = ["single_scatter", "slicing", "path_tracer"]
+        techniques += ["hybrid"] if "hybrid" in technique_names() else []
+    devices = args.devices.split(",") if args.devices else ["cpu"] + [
+        f"cuda:{i}" for i in range(wp.get_cuda_device_count())
+    ]
+    for device in devices:
+        report = run_family(args.family, techniques, args.res, args.res, device, half=args.half,
+                            reference_spp=args.reference_spp, budget_per_stage=args.budget,
+                            log=lambda text: print(text, file=sys.stderr))
+        print(format_family_table(report))
+        for path in write_family_outputs(report, args.out / device.replace(":", "")):
+            print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
