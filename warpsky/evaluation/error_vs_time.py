@@ -26,6 +26,7 @@ import csv
 import dataclasses
 import hashlib
 import json
+import math
 import pickle
 import time
 from dataclasses import dataclass, field
@@ -60,6 +61,7 @@ class Row:
     mean_rel: float
     p95_rel: float
     bias: float
+    net_rmse: float = math.nan
 
 
 @dataclass
@@ -107,8 +109,12 @@ def reference_image(scene, width, height, device, *, spp: int, seed: int, use_ca
     return radiance, transmittance, aovs["variance"], layer.stats["seconds"], False
 
 
-def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray) -> dict:
-    """The report's error columns for ``image`` against ``reference`` over ``covered`` pixels (H, W) bool."""
+def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray,
+                  reference_variance: np.ndarray | None = None) -> dict:
+    """The report's error columns for ``image`` against ``reference`` over ``covered`` pixels (H, W) bool. With
+    the reference's per-pixel ``reference_variance`` (of its mean), ``net_rmse`` is the relative RMSE with the
+    reference's own noise taken out: sqrt(max(MSE - mean variance, 0)) / mean(r), an estimate of the error
+    against the exact image (NaN without it)."""
     x = image[covered].astype(np.float64)
     r = reference[covered].astype(np.float64)
     if r.size == 0:
@@ -117,12 +123,17 @@ def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray)
     if mean_r <= 0.0:
         raise UsageError("the reference is black over the covered pixels: is the sun below the horizon?")
     rel = np.abs(x - r) / np.maximum(r, 1e-2 * mean_r)
-    return {
+    out = {
         "rel_rmse": float(np.sqrt(np.mean((x - r) ** 2)) / mean_r),
         "mean_rel": float(rel.mean()),
         "p95_rel": float(np.percentile(rel, 95)),
         "bias": float((x.mean() - mean_r) / mean_r),
+        "net_rmse": math.nan,
     }
+    if reference_variance is not None:
+        mse = float(np.mean((x - r) ** 2)) - float(np.mean(reference_variance[covered].astype(np.float64)))
+        out["net_rmse"] = math.sqrt(max(mse, 0.0)) / mean_r
+    return out
 
 
 def setting_label(values: dict) -> str:

@@ -79,6 +79,8 @@ family columns (per technique and ladder rung, over the stages that reached it):
   p90, worst 90th percentile and largest relative RMSE over the stages
   med bias   median of the stages' bias (mean(x) - mean(r)) / mean(r); mean bias: their mean
   median s   median render time per stage [s], first compiles excluded
+  net med/p90 the median and p90 of the relative RMSE with the reference's own noise taken out,
+             sqrt(max(MSE - mean reference variance, 0)) / mean(r): the error against the exact image
   The CSV holds one row per stage, technique and rung (error names a failed measurement); the JSON adds the
   aggregate and the references; the PNG plots median (solid) and p90 (dashed) relative RMSE against time.
 
@@ -108,6 +110,7 @@ class FamilyRow:
     mean_rel: float
     p95_rel: float
     bias: float
+    net_rmse: float = math.nan  # rel_rmse with the reference's own noise taken out
     error: str = ""
 
 
@@ -152,7 +155,7 @@ def _members(family: dict, half: str) -> list[dict]:
 
 
 def _walk_ladder(scene, member: dict, name: str, width: int, height: int, device: str, share: float,
-                 reference: np.ndarray, covered: np.ndarray, log) -> list[FamilyRow]:
+                 reference: np.ndarray, covered: np.ndarray, log, reference_variance=None) -> list[FamilyRow]:
     """``name``'s ladder on one member, after an untimed warm-up; stops once its time passes ``share``."""
     voxel = min(float(m.voxel_size.min()) for m in scene.media)
     rows, spent = [], 0.0
@@ -166,9 +169,9 @@ def _walk_ladder(scene, member: dict, name: str, width: int, height: int, device
         seconds = time.perf_counter() - started
         spent += seconds
         try:
-            metrics, error = error_metrics(radiance, reference, covered), ""
+            metrics, error = error_metrics(radiance, reference, covered, reference_variance), ""
         except UsageError as exc:
-            metrics, error = dict.fromkeys(("rel_rmse", "mean_rel", "p95_rel", "bias"), math.nan), str(exc)
+            metrics, error = dict.fromkeys(("rel_rmse", "mean_rel", "p95_rel", "bias", "net_rmse"), math.nan), str(exc)
         row = FamilyRow(member["name"], member["half"], member["kind"], name, setting_label(rung), rung_index,
                         seconds, **metrics, error=error)
         rows.append(row)
@@ -233,7 +236,8 @@ def run_family(
         info.update(covered_pixels=int(covered.sum()), mean_radiance=mean_r,
                     rel_noise_per_pixel=float(np.sqrt(var_ref[covered].mean()) / mean_r) if mean_r > 0 else math.nan)
         for name in techniques:
-            rows += _walk_ladder(scene, member, name, width, height, device, share, radiance_ref, covered, log)
+            rows += _walk_ladder(scene, member, name, width, height, device, share, radiance_ref, covered, log,
+                                 var_ref)
     settings = {"family": str(family_dir), "half": half, "stages": len(members), "width": width, "height": height,
                 "device": device, "techniques": list(techniques), "reference_spp": reference_spp,
                 "reference_seed": reference_seed, "budget_per_stage": budget_per_stage}
@@ -254,6 +258,9 @@ def aggregate(rows: list[FamilyRow]) -> list[dict]:
                  "errors": len(members) - len(good)}
         if good:
             worst = good[int(np.argmax(errors))]
+            net = np.array([r.net_rmse for r in good])
+            stats.update(median_net_rmse=float(np.nanmedian(net)) if np.isfinite(net).any() else math.nan,
+                         p90_net_rmse=float(np.nanpercentile(net, 90)) if np.isfinite(net).any() else math.nan)
             stats.update(median_rel_rmse=float(np.median(errors)), p90_rel_rmse=float(np.percentile(errors, 90)),
                          worst_rel_rmse=float(errors.max()), worst_stage=worst.stage,
                          median_bias=float(np.median(bias)), mean_bias=float(bias.mean()),
@@ -268,14 +275,15 @@ def format_family_table(report: FamilyReport) -> str:
     lines = [f"family {s['family']}, {s['half']} half: {s['stages']} stages at {s['width']}x{s['height']} on "
              f"{s['device']}; reference path_tracer {s['reference_spp']} spp",
              f"{'technique':<15} {'setting':<28} {'stages':>6} {'median':>8} {'p90':>8} {'worst':>8} "
-             f"{'med bias':>9} {'mean bias':>9} {'median s':>9}"]
+             f"{'med bias':>9} {'mean bias':>9} {'median s':>9} {'net med':>8} {'net p90':>8}"]
     for a in report.aggregate:
         if a["stages"] == 0:
             lines.append(f"{a['technique']:<15} {a['setting']:<28} {0:>6}   (no measurement: {a['errors']} errors)")
             continue
         lines.append(f"{a['technique']:<15} {a['setting']:<28} {a['stages']:>6} {a['median_rel_rmse']:>8.4f} "
                      f"{a['p90_rel_rmse']:>8.4f} {a['worst_rel_rmse']:>8.4f} {a['median_bias']:>+9.4f} "
-                     f"{a['mean_bias']:>+9.4f} {a['median_seconds']:>9.3f}")
+                     f"{a['mean_bias']:>+9.4f} {a['median_seconds']:>9.3f} {a['median_net_rmse']:>8.4f} "
+                     f"{a['p90_net_rmse']:>8.4f}")
     noise = [r["rel_noise_per_pixel"] for r in report.references if math.isfinite(r.get("rel_noise_per_pixel",
                                                                                              math.nan))]
     if noise:
