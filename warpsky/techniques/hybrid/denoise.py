@@ -6,8 +6,8 @@ silhouette. Open Image Denoise reads an "albedo" guide in [0, 1]; coverage is on
 partly transparent and 1 on opaque surfaces.
 
 A neural denoiser is not unbiased: on path-traced clouds it shifts the image's mean by several per cent. The
-denoised image is therefore rescaled so that its local means, over a box of ``(2 r + 1)^2`` pixels weighted by
-coverage, equal those of the noisy input, which are unbiased: the denoiser keeps the fine structure, the noisy
+denoised image is therefore rescaled so that its local means, over a box of ``(2 r + 1)^2`` pixels, equal those
+of the noisy input, which are unbiased: the denoiser keeps the fine structure, the noisy
 image the level. ``r`` is a trade between that bias and the noise of the local means (the noise of a mean over
 n pixels falls as 1/sqrt(n)).
 """
@@ -89,8 +89,7 @@ def denoise(image: np.ndarray, coverage: np.ndarray, *, radius: int, quality: st
     scaled = np.ascontiguousarray(color / level, dtype=np.float32)
     out = pyoidn.denoise(scaled, np.ascontiguousarray(guide), hdr=True, clean_aux=True, quality=quality) * level
     out, _ = sanitise(out)
-    weight = guide.max(axis=-1)
-    out = keep_local_mean(out, color, weight, radius)
+    out = keep_local_mean(out, color, np.ones(color.shape[:2]), radius)
     return Denoised(out, time.perf_counter() - started, count)
 
 

@@ -37,6 +37,7 @@ from warpsky.techniques.hybrid.denoise import (
 )
 from warpsky.techniques.path_tracer.technique import PathTracerSettings, PathTracing, pixel_sums
 from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
+from warpsky.techniques.sky.technique import SkyPass, unattenuated_sun
 
 #: Pixels whose luminance transmittance is below this count as covered by the media (or an opaque surface).
 COVERED_BELOW = 0.99
@@ -60,8 +61,9 @@ class HybridSettings(TechniqueSettings):
     seed: int = setting(0, range=">= 0", help="random seed; a seed gives the same image on the same device")
     multiple_scattering: bool = setting(True, help="0: single scattering only (equals single_scatter)")
     denoise: bool = setting(True, help="denoise the multiple-scattering part with Open Image Denoise (pyoidn)")
-    mean_radius: int = setting(6, unit="pixel", range=">= -1", help="box radius over which the denoised image "
-                               "keeps the noisy image's local mean; -1 = off")
+    mean_radius: int = setting(-1, unit="pixel", range=">= -1", help="box radius over which the denoised image "
+                               "keeps the noisy image's local mean; -1 = off (chosen on the validation family's "
+                               "tune half: the correction added noise and no accuracy there)")
     max_bounces: int = setting(1024, range=">= 1", help="cap on scattering events per path; capped paths are "
                                "counted (capped_paths)")
     majorant_block: int = setting(8, unit="voxel", range=">= 1", help="edge of the coarse majorant cells")
@@ -105,7 +107,10 @@ class Hybrid:
     """Exact single scattering plus path-traced, denoised multiple scattering, rendered to a target error.
 
     Every species, the ground (its direct sunlight marched, its bounces traced) and the stratiform and sky passes
-    work as with ``single_scatter``: the atmosphere is drawn by the sky pass around the media's layer. AOVs:
+    work as with ``single_scatter``: the sky pass draws the air's single scattering around the media's layer,
+    while the paths are traced through the air too (skylight on the media, light between air, media and ground,
+    the air's own multiple scattering). Next to stratiform layers the front-air correction uses the media's own
+    depth. AOVs:
     ``single_scatter`` and ``multiple_scatter`` radiance, ``variance`` of the noisy multiple-scattering mean.
     """
 
@@ -138,6 +143,9 @@ class Hybrid:
             multiple, variance, ms_stats = MultipleScattering(scene, width, height, settings, self.device).run(
                 single, started)
             stats.update(ms_stats)
+            if scene.atmosphere is not None:
+                multiple, variance = behind_front_air(scene, width, height, single.depth, multiple, variance,
+                                                      self.device)
         stats["seconds"] = time.perf_counter() - started
         stats["settings"] = dataclasses.asdict(settings)
         return Layer(single.radiance + multiple, single.transmittance, single.depth, stats=stats,
@@ -153,6 +161,16 @@ def next_check(passes: int, estimate: float, target: float) -> int:
     return step + step % 2
 
 
+def behind_front_air(scene: Scene, width: int, height: int, depth: np.ndarray, multiple: np.ndarray,
+                     variance: np.ndarray, device: str) -> tuple[np.ndarray, np.ndarray]:
+    """Multiple scattering traced through the air already carries the air between the camera and each event;
+    the frame's composite multiplies the media's layer by the sky pass's front transmittance T_f, so the layer
+    holds multiple / T_f (and its variance / T_f^2). T_f is the sky pass's own, at the media's depth."""
+    front, _ = SkyPass(device=device).render(scene, width, height, media_depth=depth)
+    t_front = np.maximum(front.transmittance, 1e-4)
+    return (multiple / t_front).astype(np.float32), (variance / t_front**2).astype(np.float32)
+
+
 class MultipleScattering:
     """Progressive passes of multiple-scattering paths into two halves, the error estimate, and the denoising."""
 
@@ -160,8 +178,10 @@ class MultipleScattering:
         self.settings = settings
         self.device = device
         self.scale = int(settings.ms_scale)
-        self.tracing = PathTracing(scene, width, height, settings.path_tracer(), device, air=False,
-                                   multiple_only=True, scale=self.scale)
+        # With air, paths are traced through it from the sun at the top of the atmosphere: they carry skylight on
+        # the media and the air's own multiple scattering; its single scattering is the sky pass's.
+        self.tracing = PathTracing(unattenuated_sun(scene), width, height, settings.path_tracer(), device,
+                                   air=scene.atmosphere is not None, multiple_only=True, scale=self.scale)
         shape = (self.tracing.height, self.tracing.width)
         self.halves = [pixel_sums(shape, device), pixel_sums(shape, device)]
         self.counts = [0, 0]

@@ -26,6 +26,9 @@ SURFACE_GROUND = wp.constant(1)
 SURFACE_SEA = wp.constant(2)
 #: "No end": flights after the first bounce and rays toward the sun run this far [m].
 UNBOUNDED = wp.constant(1.0e30)
+#: A ground plane at sea level and sea level itself are one surface: distances within this relative difference
+#: (rounding of two formulas) count as a tie, which the ground wins.
+SURFACE_TIE = wp.constant(1.0e-5)
 #: Russian roulette starts once a path has bounced this often.
 ROULETTE_BOUNCE = wp.constant(3)
 
@@ -121,7 +124,7 @@ def surface_functions(has_ground: bool):
     @wp.func
     def primary_end(air: Air, ground: Ground, origin: wp.vec3, view: wp.vec3, t_end: float) -> RayEnd:
         """Where a camera ray from the near plane ends: the far plane at ``t_end``, else sea level, else the
-        ground (the nearer wins; on a tie sea level)."""
+        ground (the nearer wins; a ground at sea level wins within ``SURFACE_TIE`` of the distance)."""
         out = RayEnd()
         out.t = t_end
         out.surface = SURFACE_NONE
@@ -133,7 +136,7 @@ def surface_functions(has_ground: bool):
         if wp.static(has_ground):
             if reaches_ground(ground, origin, view):
                 tg = ground_distance(ground, origin, view)
-                if tg < out.t:
+                if tg < out.t or (out.surface == SURFACE_SEA and tg <= out.t * (1.0 + SURFACE_TIE)):
                     out.t = tg
                     out.surface = SURFACE_GROUND
         return out
@@ -141,7 +144,7 @@ def surface_functions(has_ground: bool):
     @wp.func
     def flight_end(air: Air, ground: Ground, origin: wp.vec3, d: wp.vec3, bounce: int, first: RayEnd) -> RayEnd:
         """Where the flight of bounce ``bounce`` ends: the camera ray's end ``first`` for bounce 0, else the ground
-        (or no end), then sea level where it is nearer (on a tie the ground)."""
+        (or no end), then sea level where it is nearer (within ``SURFACE_TIE`` the ground)."""
         out = RayEnd()
         out.t = first.t
         out.surface = SURFACE_NONE
@@ -155,7 +158,7 @@ def surface_functions(has_ground: bool):
             out.surface = SURFACE_GROUND
         if air.enabled != 0 and d[1] < 0.0:
             t_sea = sea_level_distance(air, origin, d)
-            if t_sea < out.t:
+            if t_sea < out.t * (1.0 - SURFACE_TIE):
                 out.t = t_sea  # the air ends at a black sea level (no ground plane above it here)
                 out.surface = SURFACE_SEA
         return out

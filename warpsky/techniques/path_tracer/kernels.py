@@ -77,8 +77,9 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
                    ground: Ground, settings: PathSettings, sun_on: bool, start: PathState, first: RayEnd) -> PathState:
         """One path from the camera ray ``start`` (which ends at ``first``): per bounce a free flight, then a
         scattering event, a ground bounce, or the end (environment, sun disk, sea level), then roulette. With
-        ``settings.multiple_only`` the first event takes no sunlight: the path carries light scattered at least
-        twice (media or ground), the part an exact single-scattering march leaves out."""
+        ``settings.multiple_only`` the first event takes no sunlight and a camera ray does not see the sun's disk:
+        the path carries light scattered at least twice (media, air or ground), the part that an exact
+        single-scattering march and the analytic sky leave out."""
         path = start
         bounce = int(0)
         while path.alive != 0:
@@ -91,16 +92,17 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
             path.state = flight.state
             path.steps = path.steps + flight.steps
             path.throughput = wp.cw_mul(path.throughput, flight.weight)
+            lit = sun_on
+            if bounce == 0:
+                lit = sun_on and settings.multiple_only == 0
             if flight.scattered == 0 and end.surface != SURFACE_GROUND:
                 path.radiance = path.radiance + escaped_radiance(air, sun, settings.environment, path.direction,
-                                                                 path.throughput, bounce, sun_on)
+                                                                 path.throughput, bounce, lit)
                 break
             p = path.origin + flight.t * path.direction
-            lit = sun_on
             if bounce == 0:
                 path.hit = 1
                 path.first_t = flight.t
-                lit = sun_on and settings.multiple_only == 0
             if flight.scattered == 1:
                 path = scatter_event(media, majorants, phase_tables, air, sun, lit, path, p)
             else:

@@ -47,6 +47,17 @@ def attenuated_sun(scene: Scene) -> Scene:
     return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=scene.sun.irradiance * t))
 
 
+def unattenuated_sun(scene: Scene) -> Scene:
+    """The inverse of :func:`attenuated_sun`: ``scene`` with the sun as it arrives at the top of the atmosphere,
+    for a technique that traces the air itself (unlit where no sunlight reached the media)."""
+    if scene.atmosphere is None or scene.sun is None:
+        return scene
+    atm = scene.atmosphere
+    t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), scene.sun.direction[1])
+    irradiance = np.where(t > 1e-30, scene.sun.irradiance / np.maximum(t, 1e-30), 0.0)
+    return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=irradiance))
+
+
 class SkyPass:
     """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk): the
     ``sky`` pass of a frame, run when the scene has an atmosphere and the technique does not trace the air."""
