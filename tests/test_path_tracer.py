@@ -175,3 +175,24 @@ def test_zero_density_gives_exactly_nothing(tmp_path, device):
     layer = path_traced(stage, device, 8, spp=4, environment=1.0)
     assert np.all(layer.radiance == 0.0) and np.all(layer.transmittance == 1.0)
     assert layer.stats["tracking_steps"] <= 8 * 8 * 4 * 5  # segment crossings only: no tentative collisions
+
+
+def test_ground_at_sea_level_is_drawn_with_air(tmp_path, homogeneous_npy, device):
+    """A ground plane at sea level (y = 0, atmosphere altitude 0) is one surface with the air's floor: camera rays
+    end on the lit ground, not on the black sea. Looking straight down from 50 m through 50 m of air, each pixel is
+    the Lambertian ground in the sun: albedo E T_sun / pi, T_sun the air's transmittance from the top of the
+    atmosphere (Riley Eq. 12), times > 0.99 of air up to the camera; the ratio-tracked T_sun is noisy per pixel."""
+    from conftest import add_atmosphere
+
+    from warpsky.techniques.sky.analytic import sun_transmittance
+
+    spec = StageSpec(volume_file=homogeneous_npy, volume_translate=(500.0, 40.0, 0.0), extinction_scale=0.1,
+                     camera_position=(0.0, 50.0, 0.0), camera_rotation=look_rotation((0.0, -1.0, 0.0001)),
+                     sun_direction=(0.0, 1.0, 0.0), ground=(0.0, 0.5))
+    stage = add_atmosphere(write_stage(tmp_path / "sea.usda", spec), scaleHeight=8000.0, altitude=0.0)
+    layer = path_traced(stage, device, 8, spp=16, max_bounces=1)
+    atmosphere = StageReader(stage).scene_at(None).atmosphere
+    lambert = 0.5 / np.pi * sun_transmittance(atmosphere.beta_sea_level, atmosphere.gamma, 0.0, 1.0)
+    np.testing.assert_allclose(layer.radiance.mean(axis=(0, 1)), lambert, rtol=0.05)
+    np.testing.assert_allclose(layer.radiance, np.broadcast_to(lambert, layer.radiance.shape), rtol=0.2)
+    assert np.all(layer.transmittance == 0.0)  # the opaque ground, not the far plane
