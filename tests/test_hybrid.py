@@ -159,3 +159,21 @@ def test_sanitise_and_local_mean():
 
 def test_hybrid_is_listed():
     assert Hybrid.name == "hybrid" and not Hybrid.traces_air and Hybrid.renders_layers
+
+
+def test_a_frame_with_one_lit_pixel(box, device):
+    """The 20 m box 3 km away, on the axis, covers the centre pixel of a 15-pixel frame: the denoiser gets a single
+    bright pixel in a black frame. The frame stays finite and non-negative, the exact single scattering is kept,
+    and the multiple scattering, which Open Image Denoise takes for a firefly and mostly removes, comes back with
+    the local-mean correction."""
+    stage = box(camera_position=(0.0, 0.0, 3000.0), camera_rotation=look_rotation((0.0, 0.0, -1.0)),
+                extinction_scale=2.0)
+    layer = hybrid(stage, device, 15, spp=64, target_error=0, seed=4)
+    noisy = hybrid(stage, device, 15, spp=64, target_error=0, seed=4, denoise=0)
+    assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
+    lit = (layer.transmittance < 0.999).any(axis=-1)
+    assert lit.sum() == 1
+    assert np.all(layer.radiance >= layer.aovs["single_scatter"])
+    assert noisy.aovs["multiple_scatter"].sum() > noisy.aovs["single_scatter"].sum()  # most light is multiple
+    kept = hybrid(stage, device, 15, spp=64, target_error=0, seed=4, mean_radius=2)
+    assert kept.radiance.sum() == pytest.approx(noisy.radiance.sum(), rel=0.05)
