@@ -57,6 +57,8 @@ batches, resume and farms:
 examples:
   warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
   warpsky render shot.usda out/shot.####.exr --frames 1:48x2 --res 1280x720 --device cuda
+  warpsky render usd_scenes/cumulus.usda out/fine.####.exr --frames 1 --target-error 0.02 --time-budget 60
+  warpsky render usd_scenes/cumulus.usda out/fast.####.exr --frames 1 --technique slicing
   warpsky render usd_scenes/cumulus.usda out/ref.####.exr --frames 1 --technique path_tracer --spp 256 --seed 7
   warpsky render usd_scenes/storm.usda out/storm.####.exr --res 256 --workers 2
   warpsky render usd_scenes/storm.usda /shared/storm.####.exr --scheduler tcp://farm:8786
@@ -65,6 +67,9 @@ examples:
 
 #: What the settings tables leave out: the shorthands of the command line and what a technique adds to the EXR.
 SETTINGS_NOTES = {
+    "hybrid": "--target-error E, --time-budget S, --spp N and --seed S are shorthands for --set target_error=E / "
+              "time_budget=S / spp=N / seed=S. Writes single_scatter.RGB, multiple_scatter.RGB and variance.RGB AOVs; "
+              "the header holds errorEstimate, spp, passes, stoppedBy, targetError and cappedPaths.",
     "path_tracer": "--spp N and --seed S are shorthands for --set spp=N / seed=S. Writes a variance.RGB AOV "
                    "(variance of each pixel's mean).",
 }
