@@ -87,7 +87,7 @@ def settings_help() -> str:
         if name in SETTINGS_NOTES:
             sections.append(textwrap.fill(SETTINGS_NOTES[name], 114, initial_indent="    ", subsequent_indent="    "))
         if name == DEFAULT_TECHNIQUE:
-            sections.append("  stratiform layers (prefix stratiform., also with single_scatter):\n"
+            sections.append("  stratiform layers (prefix stratiform., also with slicing and single_scatter):\n"
                             + settings_table(StratiformSettings, indent=4))
     return ("technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default; whole numbers for\n"
             "counts, 0/1 or true/false for switches):\n" + "\n".join(sections) + "\n")

@@ -63,7 +63,7 @@ class HybridSettings(TechniqueSettings):
     denoise: bool = setting(True, help="denoise the multiple-scattering part with Open Image Denoise (pyoidn)")
     mean_radius: int = setting(-1, unit="pixel", range=">= -1", help="box radius over which the denoised image "
                                "keeps the noisy image's local mean; -1 = off (chosen on the validation family's "
-                               "tune half: the correction added noise and no accuracy there)")
+                               "tune half: the correction raised the p90 error there)")
     max_bounces: int = setting(1024, range=">= 1", help="cap on scattering events per path; capped paths are "
                                "counted (capped_paths)")
     majorant_block: int = setting(8, unit="voxel", range=">= 1", help="edge of the coarse majorant cells")
