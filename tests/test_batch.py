@@ -19,8 +19,8 @@ import make_storm  # noqa: E402
 pytestmark = pytest.mark.slow  # the module fixture builds four species' tables, then Dask starts workers
 
 FRAMES = 6
-FAST = ["--res", "32x22", "--device", "cpu", "--set", "slice_count=12", "--set", "light_resolution=32",
-        "--set", "orders=12"]
+FAST = ["--res", "32x22", "--device", "cpu", "--technique", "slicing", "--set", "slice_count=12",
+        "--set", "light_resolution=32", "--set", "orders=12"]
 
 
 @pytest.fixture(scope="module")

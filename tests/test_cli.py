@@ -206,7 +206,8 @@ def test_usage_errors_exit_2(tmp_path, good_stage, capsys):
     assert exc.value.code == 2
     code, _, err = run(["render", good_stage, tmp_path / "a.png"], capsys)
     assert code == 2 and "a.png" in err
-    code, _, err = run(["render", good_stage, tmp_path / "a.exr", "--set", "slice_count=-1"], capsys)
+    code, _, err = run(["render", good_stage, tmp_path / "a.exr", "--technique", "slicing", "--set",
+                        "slice_count=-1"], capsys)
     assert code == 2 and "slice_count" in err
     code, _, err = run(["render", good_stage, tmp_path / "a.exr", "--set", "bogus=1"], capsys)
     assert code == 2 and "bogus" in err
@@ -253,7 +254,7 @@ def test_settings_are_parsed_by_their_declared_types(tmp_path, good_stage, capsy
 
     s = parse_settings(SlicingSettings, {"slice_count": "12", "low_albedo": "true", "light_equation": "eq24",
                                          "xi": "auto", "orders": "8.0"})
-    assert (s.slice_count, s.low_albedo, s.light_equation, s.xi, s.orders) == (12, True, LightEquation.EQ24, 0.1, 8)
+    assert (s.slice_count, s.low_albedo, s.light_equation, s.xi, s.orders) == (12, True, LightEquation.EQ24, 0.01, 8)
     assert type(s.slice_count) is int and type(s.orders) is int
     assert parse_settings(SlicingSettings, {"slice_count": "auto", "light_equation": "25"}).slice_count is None
     assert PathTracerSettings(spp=16.0, pixel_jitter=1) == PathTracerSettings(spp=16, pixel_jitter=True)

@@ -42,7 +42,7 @@ def test_stage_preview_draws_something(stage, tmp_path, capsys):
 def test_contact_sheet_tiles_frames_and_flags_broken_ones(stage, tmp_path, capsys):
     out = tmp_path / "out" / "f.####.exr"
     assert main(["render", str(stage), str(out), "--frames", "1:3", "--res", "16x12", "--device", "cpu",
-                 "--set", "slice_count=8", "--set", "orders=8"]) == 0
+                 "--technique", "slicing", "--set", "slice_count=8", "--set", "orders=8"]) == 0
     broken = tmp_path / "out" / "f.0004.exr"
     broken.write_bytes((tmp_path / "out" / "f.0003.exr").read_bytes()[:100])
     sheet = tmp_path / "sheet.png"
