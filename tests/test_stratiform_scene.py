@@ -120,7 +120,7 @@ def test_info_prints_the_layer_and_radiosity(tmp_path, capsys, homogeneous_npy):
     assert f"map {MAP}x{MAP}" in out and "static map" in out
     # buffers: 20 km + 2 x 8 h margin at 1 texel per h = 1 km -> 36, rounded up to a multiple of 8
     assert "radiosity   on: ground <-> cloud base, buffers 40x40 texels of 1000 m" in out
-    assert "media       none: slicing does not run" in out
+    assert "media       none: hybrid does not run" in out
     code, out, _ = run(["info", stage, "--device", "cpu", "--set", "stratiform.radiosity=0"], capsys)
     assert code == 0 and "radiosity   off (stratiform.radiosity=0)" in out
     no_ground = write_layer_stage(tmp_path / "n.usda", ground=False)
