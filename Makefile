@@ -1,4 +1,4 @@
-# warpsky: two commands on a fresh machine.
+# warpsky: two commands on a fresh machine (times on a 2-core CPU: README, "Quickstart").
 #   make demo   render usd_scenes/cumulus.usda to out/cumulus.0001.exr (+ PNG preview)
 #   make test   run the test suite on the CPU (make test-fast: without the tests marked slow)
 PYTHON ?= python3
@@ -11,8 +11,9 @@ STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
-	@echo "make test               - install into $(VENV) and run every test on the CPU"
-	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow')"
+	@echo "                          (the render: about 1 min on 2 CPU cores)"
+	@echo "make test               - install into $(VENV) and run every test on the CPU (about 8 min on 2 idle cores)"
+	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; under 3 min)"
 	@echo "make lint               - ruff"
 	@echo "make bench              - run benchmarks/bench_single_scatter.py (cuda too when present)"
 	@echo "make venv               - create $(VENV) and install warpsky with all extras (redone when pyproject changes)"
@@ -23,7 +24,7 @@ help:
 	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
 	@echo "make storm-data         - the storm's per-frame NanoVDB fields in data/storm/"
 	@echo "make storm              - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact"
-	@echo "                          sheets, preview"
+	@echo "                          sheets, preview (about 3 min once the optics tables are cached)"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 
@@ -83,9 +84,11 @@ stratocumulus-anim: $(STAMP)
 
 # The storm: per-frame NanoVDB fields (tools/make_storm.py), two shots rendered as batches (resumable: rerun to
 # finish an interrupted one), a contact sheet per shot and a 3-D preview. STORM_WORKERS=0 renders in-process.
-STORM_WORKERS ?= 2
-STORM_RES     ?= 256
-STORM_BATCH    = $(if $(filter 0,$(STORM_WORKERS)),,--workers $(STORM_WORKERS))
+# Slicing renders a storm frame in seconds on a CPU; STORM_TECHNIQUE=hybrid takes minutes per frame there.
+STORM_WORKERS   ?= 2
+STORM_RES       ?= 256
+STORM_TECHNIQUE ?= slicing
+STORM_BATCH      = --technique $(STORM_TECHNIQUE) $(if $(filter 0,$(STORM_WORKERS)),,--workers $(STORM_WORKERS))
 
 data/storm/.complete: tools/make_storm.py $(STAMP)
 	$(PY) tools/make_storm.py --out data/storm --frames 48

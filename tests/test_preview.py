@@ -39,6 +39,22 @@ def test_stage_preview_draws_something(stage, tmp_path, capsys):
     assert len(np.unique(image.reshape(-1, 3), axis=0)) > 50  # background gradient, isosurface, frustum, legend
 
 
+def test_preview_legend_lies_inside_the_image(stage, tmp_path, capsys):
+    """The legend's dark box keeps a margin to every edge (pyvista's own placement ran off the right edge)."""
+    pytest.importorskip("pyvista", reason="the preview extra (pyvista) is not installed")
+    out = tmp_path / "preview.png"
+    try:
+        assert main(["preview", str(stage), "-o", str(out), "--size", "400x300"]) == 0
+    except RuntimeError as exc:
+        pytest.skip(f"no offscreen OpenGL (EGL) context on this machine: {exc}")
+    image = _png(out).astype(int)
+    box = np.abs(image - np.array([20, 23, 26])).max(axis=-1) <= 2  # the legend's background (0.08, 0.09, 0.1)
+    rows, columns = np.nonzero(box)
+    assert columns.size > 0  # the legend is there
+    assert columns.min() >= 2 and rows.min() >= 2 and columns.max() <= 400 - 3 and rows.max() <= 300 - 3
+    assert columns.max() - columns.min() >= 0.4 * 400  # at its full width, not clipped
+
+
 def test_contact_sheet_tiles_frames_and_flags_broken_ones(stage, tmp_path, capsys):
     out = tmp_path / "out" / "f.####.exr"
     assert main(["render", str(stage), str(out), "--frames", "1:3", "--res", "16x12", "--device", "cpu",

@@ -19,6 +19,7 @@ from warpsky.batch.run import (
     check_writable,
     format_summary,
     log_path_for,
+    plan_first_frame,
     run_batch,
 )
 from warpsky.device import init_warp, resolve_device
@@ -69,9 +70,11 @@ examples:
 SETTINGS_NOTES = {
     "hybrid": "--target-error E, --time-budget S, --spp N and --seed S are shorthands for --set target_error=E / "
               "time_budget=S / spp=N / seed=S. Writes single_scatter.RGB, multiple_scatter.RGB and variance.RGB AOVs; "
-              "the header holds errorEstimate, spp, passes, stoppedBy, targetError and cappedPaths.",
+              "the header holds errorEstimate, spp, passes, stoppedBy, targetError, paths and cappedPaths (a warning "
+              "above 0.1%).",
     "path_tracer": "--spp N and --seed S are shorthands for --set spp=N / seed=S. Writes a variance.RGB AOV "
-                   "(variance of each pixel's mean).",
+                   "(variance of each pixel's mean); the header holds spp, paths and cappedPaths (a warning above "
+                   "0.1%).",
 }
 
 
@@ -322,10 +325,11 @@ def cmd_render(args) -> int:
               f"{' ...' if len(outside) > 8 else ''} lie outside the stage's time range {span.start:g}..{span.end:g}; "
               "rendering them anyway (time samples hold their end values)", file=sys.stderr)
     outputs = [pattern.path_for(t) if t is not None and pattern.has_placeholder else Path(args.output) for t in times]
-    for directory in dict.fromkeys(p.parent for p in outputs):
-        check_writable(directory)
     jobs = [FrameJob(str(args.stage), t, str(out), options, args.overwrite) for t, out in zip(times, outputs,
                                                                                             strict=True)]
+    plan_first_frame(jobs[0], keep_reader=not (args.scheduler or args.workers))  # input errors: nothing written
+    for directory in dict.fromkeys(p.parent for p in outputs):
+        check_writable(directory)
     if args.scheduler:
         executor = DaskExecutor(address=args.scheduler, timeout=args.scheduler_timeout)
     elif args.workers:

@@ -22,7 +22,11 @@ from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
 from warpsky.techniques.sky.technique import SkyPass
 
 #: Figures of a Monte Carlo render that go into the EXR header (camelCase) and the batch log, where present.
-QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths")
+QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths", "paths")
+
+#: Fraction of a frame's Monte Carlo paths stopped at ``max_bounces`` above which the render warns: their light is
+#: missing from the image (a bias that more samples do not remove).
+CAPPED_PATHS_WARNING = 1e-3
 
 #: Channels every warpsky EXR holds.
 EXR_CHANNELS = ("R", "G", "B", "A", "transmittance.R", "transmittance.G", "transmittance.B", "depth.Z")
@@ -70,6 +74,17 @@ class FrameResult:
     plan: RenderPlan
     timings: dict[str, float] = field(default_factory=dict)
     quality: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+
+def capped_paths_warning(quality: dict, plan: RenderPlan) -> str | None:
+    """One line when more than :data:`CAPPED_PATHS_WARNING` of the frame's paths stopped at ``max_bounces``."""
+    capped, paths = int(quality.get("capped_paths", 0)), int(quality.get("paths", 0))
+    if paths <= 0 or capped <= CAPPED_PATHS_WARNING * paths:
+        return None
+    cap = getattr(plan.settings, "max_bounces", "max_bounces")
+    return (f"{capped:,} of {paths:,} paths ({capped / paths:.2%}) stopped at max_bounces = {cap} scattering events; "
+            "their light is missing from the frame (raise it with --set max_bounces=N)")
 
 
 def preview_exposure(scene: Scene, stops: float = 0.0) -> float:
@@ -161,8 +176,10 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
         png = write_png(Path(out_path).with_suffix(".png"), frame.rgba[..., :3],
                         exposure=preview_exposure(scene, options.exposure))
     timings["write"] = _time.perf_counter() - started - timings["passes"] - timings["composite"]
+    quality = quality_stats(layer)
+    warnings = [w for w in [capped_paths_warning(quality, plan)] if w]
     return FrameResult(Path(exr), png, timings.get("plan", 0.0) + _time.perf_counter() - started,
-                       float(layer.stats.get("seconds", 0.0)), time_code, plan, timings, quality_stats(layer))
+                       float(layer.stats.get("seconds", 0.0)), time_code, plan, timings, quality, warnings)
 
 
 def quality_stats(layer: Layer) -> dict:

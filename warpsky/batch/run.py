@@ -63,6 +63,7 @@ class FrameRecord:
     retryable: bool = False  # errors in the input (a missing file, a bad attribute) fail the same way again
     timings: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)  # Monte Carlo figures: spp, passes, error estimate, capped paths
+    warnings: list = field(default_factory=list)  # one line each, printed by the client as the frame finishes
 
 
 _READERS: dict[tuple[str, float], object] = {}
@@ -75,6 +76,15 @@ def _reader(stage: str):
         _READERS.clear()
         _READERS[key] = StageReader(stage)
     return _READERS[key]
+
+
+def plan_first_frame(job: FrameJob, *, keep_reader: bool = True) -> None:
+    """Read the stage and plan ``job``'s frame here, before anything is written: an input error that every frame
+    shares (no camera, a bad setting) is raised once, as a :class:`WarpskyError`, and leaves no output directory
+    and no log behind. ``keep_reader``: keep the stage read for frames rendered in this process."""
+    plan_frame(_reader(job.stage), job.time_code, job.options)
+    if not keep_reader:
+        _READERS.clear()
 
 
 def _hook_fails(time_code: float | None, attempt: int) -> bool:
@@ -113,6 +123,7 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
         record.timings.update(result.timings)
         record.timings["technique"] = result.render_seconds
         record.quality = result.quality
+        record.warnings = result.warnings
         record.png = str(result.png) if result.png is not None else None
         record.status = "done"
     except WarpskyError as exc:
@@ -241,8 +252,10 @@ def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, l
             i = index_of[id(job)]
             run["frames"].append(dataclasses.asdict(record))
             _write_log(log, history, run)
+            label = "" if job.time_code is None else f" {job.time_code:g}"
+            for warning in record.warnings:
+                bar.write(f"warpsky: {f'frame{label}: ' if label else ''}warning: {warning}", file=sys.stderr)
             if record.status == "failed":
-                label = "" if job.time_code is None else f" {job.time_code:g}"
                 will_retry = attempt <= retries and record.retryable
                 bar.write(f"warpsky: frame{label}: error: {record.error}"
                           + (f" (retrying, attempt {attempt + 1} of {retries + 1})" if will_retry else ""),

@@ -63,6 +63,16 @@ def _medium_mesh(pv, medium, level: float):
     return surface.transform(np.asarray(medium.world_from_index, dtype=np.float64), inplace=False)
 
 
+def _add_legend(plotter, entries: list) -> None:
+    """The legend in the image's upper right corner, wholly inside it. The box is placed here rather than by
+    pyvista's ``loc``, which (0.49) offsets it from the right edge by its height instead of its width."""
+    margin = 0.02  # of the image's width and height
+    width, height = 0.5, min(0.045 * len(entries), 1.0 - 2 * margin)
+    actor = plotter.add_legend(entries, bcolor=(0.08, 0.09, 0.1), size=(width, height), face="rectangle")
+    actor.SetPosition(1.0 - width - margin, 1.0 - height - margin)
+    actor.SetPosition2(width, height)
+
+
 def stage_preview(scene, path: str | os.PathLike, *, size: tuple[int, int] = (1024, 768), level: float = 0.2) -> Path:
     """Write a PNG overview of ``scene`` (see the module docstring); returns its path."""
     pv = _pyvista()
@@ -109,8 +119,7 @@ def stage_preview(scene, path: str | os.PathLike, *, size: tuple[int, int] = (10
         plotter.add_mesh(arrow, color="#ff9a2e")
         legend.append([f"{scene.sun.name} (sun at {np.degrees(scene.sun.elevation):.1f} deg)", "#ff9a2e"])
     if legend:
-        plotter.add_legend(legend, bcolor=(0.08, 0.09, 0.1), size=(0.5, 0.045 * len(legend)), face="rectangle",
-                           loc="upper right")
+        _add_legend(plotter, legend)
     plotter.camera_position = [tuple(centre + extent * np.array([1.1, 0.8, 1.4])), tuple(centre), (0.0, 1.0, 0.0)]
     plotter.add_axes()
     image = plotter.screenshot(return_img=True)

@@ -31,6 +31,7 @@ import numpy as np
 
 from warpsky.errors import SceneError
 from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
+from warpsky.scene.usd_layers import composition_problem, open_layers, tf_message
 from warpsky.scene.usd_surfaces import SurfaceReading
 from warpsky.scene.usd_volumes import VolumeReading
 
@@ -60,12 +61,18 @@ class StageReader(VolumeReading, SurfaceReading):
         if not self.path.is_file():
             raise SceneError(f"stage file {self.path} does not exist")
         try:
-            stage = Usd.Stage.Open(str(self.path))
+            self._layers = open_layers(self.path)  # held open: the stage reuses them instead of parsing again
+            stage = Usd.Stage.Open(self._layers[0])
+        except SceneError as exc:  # the message names the file at fault, often the stage itself
+            named = str(exc).startswith(str(self.path))
+            raise SceneError(f"cannot open stage{':' if named else f' {self.path}:'} {exc}") from None
         except Tf.ErrorException as exc:
-            detail = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unreadable"
-            raise SceneError(f"cannot open stage {self.path}: {detail}") from None
+            raise SceneError(f"cannot open stage {self.path}: {tf_message(exc) or 'unreadable'}") from None
         if stage is None:
             raise SceneError(f"cannot open stage {self.path}")
+        problem = composition_problem(stage)
+        if problem is not None:
+            raise SceneError(f"stage {self.path}: {problem}")
         self.stage = stage
         self.up_axis = str(UsdGeom.GetStageUpAxis(stage))
         self.meters_per_unit = float(UsdGeom.GetStageMetersPerUnit(stage))

@@ -229,7 +229,7 @@ class MultipleScattering:
         stats = {"spp": done, "passes": passes, "stopped_by": stop, "error_estimate": estimate,
                  "target_error": s.target_error, "denoise_seconds": denoise_seconds,
                  "sanitised_values": sanitised, "tracking_steps": int(counters[..., 0].sum()),
-                 "capped_paths": int(counters[..., 1].sum())}
+                 "capped_paths": int(counters[..., 1].sum()), "paths": done * counters.shape[0] * counters.shape[1]}
         return image, variance, stats
 
     def half_mean(self, half: int) -> np.ndarray:

@@ -215,6 +215,7 @@ def sums_layer(sums: list[PixelSums], spp: int, far: float) -> Layer:
         stats={
             "tracking_steps": int(count_values[..., 0].sum()),
             "capped_paths": int(count_values[..., 1].sum()),
+            "paths": int(spp) * count_values.shape[0] * count_values.shape[1],
         },
         aovs={"variance": variance.astype(np.float32)},
     )

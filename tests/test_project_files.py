@@ -1,0 +1,56 @@
+"""The project's own files: ``make help`` lists every target, ``make test-fast`` leaves out the slow tests,
+pyproject's license is an SPDX string, and the README says how long the long targets take."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _makefile() -> str:
+    return (ROOT / "Makefile").read_text().replace("\\\n", " ")  # continuation lines joined
+
+
+def test_make_help_lists_every_target():
+    text = _makefile()
+    phony = set(re.search(r"^\.PHONY:(.*)$", text, re.M).group(1).split())
+    rules = {m.group(1) for m in re.finditer(r"^([A-Za-z][\w.-]*)\s*:(?!=)", text, re.M)}
+    assert rules == phony, "every plain-named rule is .PHONY and every .PHONY target has a rule"
+    if shutil.which("make") is None:
+        pytest.skip("make is not installed")
+    out = subprocess.run(["make", "-s", "-C", str(ROOT), "help"], capture_output=True, text=True, check=True).stdout
+    listed = {line.split()[1] for line in out.splitlines() if line.startswith("make ")}
+    assert listed == phony
+
+
+def test_make_test_fast_leaves_out_the_slow_tests():
+    recipe = re.search(r"^test-fast:.*\n\t(.*)$", _makefile(), re.M).group(1)
+    assert "pytest" in recipe and re.search(r"-m ['\"]not slow['\"]", recipe)
+    tomllib = pytest.importorskip("tomllib")
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert any(m.startswith("slow:") for m in config["tool"]["pytest"]["ini_options"]["markers"])
+
+
+def test_license_is_an_spdx_string():
+    tomllib = pytest.importorskip("tomllib")
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert config["project"]["license"] == "Apache-2.0"  # the table form is deprecated by setuptools
+    setuptools = [r for r in config["build-system"]["requires"] if r.startswith("setuptools")]
+    assert setuptools and int(re.search(r">=\s*(\d+)", setuptools[0]).group(1)) >= 77  # first with SPDX strings
+    for path in config["project"].get("license-files", []):
+        assert list(ROOT.glob(path)), path
+
+
+def test_readme_says_how_long_the_long_targets_take():
+    readme = (ROOT / "README.md").read_text()
+    quickstart = readme[readme.index("## Quickstart"): readme.index("## Rendering")]
+    assert "2-core" in quickstart
+    for target in ("make demo", "make test", "make test-fast", "make storm"):
+        mentions = re.findall(rf"`{target}`[^\n]*(?:\n  [^\n]*)*", quickstart)  # with a list item's lines
+        assert any(re.search(r"\d+ minutes?\b", text) for text in mentions), target
