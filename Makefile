@@ -97,10 +97,9 @@ data/storm/.complete: tools/make_storm.py $(STAMP)
 storm-data: data/storm/.complete
 
 storm: $(STAMP) data/storm/.complete
-	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm/rainbow.####.exr --technique slicing \
-		--res $(STORM_RES) $(STORM_BATCH)
+	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm/rainbow.####.exr --res $(STORM_RES) $(STORM_BATCH)
 	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm/anvil.####.exr --camera /World/AnvilCam \
-		--technique slicing --res $(STORM_RES) $(STORM_BATCH)
+		--res $(STORM_RES) $(STORM_BATCH)
 	$(VENV)/bin/warpsky contact-sheet out/storm/rainbow.####.exr -o out/storm/rainbow_sheet.png
 	$(VENV)/bin/warpsky contact-sheet out/storm/anvil.####.exr -o out/storm/anvil_sheet.png
 	$(VENV)/bin/warpsky preview usd_scenes/storm.usda -o out/storm/preview.png --frame 40

@@ -1,7 +1,7 @@
 """Frames per hour for the storm sequence in-process and on a Dask LocalCluster, and one frame's breakdown.
 
 Renders the 48-frame storm (``usd_scenes/storm.usda``; its fields from ``data/storm``, written first by
-``tools/make_storm.py`` when missing) at 256 wide with the default technique (slicing), once in this process and
+``tools/make_storm.py`` when missing) at 256 wide with slicing, once in this process and
 once with ``--workers N`` (a Dask LocalCluster of N single-threaded processes), every frame rendered afresh
 (``overwrite``). Wall time includes the cluster's start and each worker's first kernel load. Then times one frame's
 stages separately: stage load + plan, optics tables (cached load), media upload, the slicing sweep, sky and
