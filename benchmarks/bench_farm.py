@@ -109,7 +109,7 @@ def main(argv=None) -> int:
 
     init_warp()
     stage = ensure_storm(args.frames)
-    options = RenderOptions(resolution=(args.res, None), device=resolve_device(args.device))
+    options = RenderOptions(technique="slicing", resolution=(args.res, None), device=resolve_device(args.device))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         rows.append(batch(stage, args.frames, options, Path(tmp) / "a", InProcessExecutor()))
