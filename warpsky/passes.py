@@ -18,20 +18,22 @@ from warpsky.techniques.base import Layer
 from warpsky.techniques.sky.analytic import sun_transmittance
 from warpsky.techniques.sky.technique import attenuated_sun
 from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
+from warpsky.techniques.sunlight import light_elevation_sine, visible_sun
 
 
 def media_scene(scene: Scene, passes: tuple[str, ...]) -> Scene:
     """The scene the voxel technique renders.
 
     With a sky pass, the media see sunlight reddened by the air above them. Next to stratiform layers, the media
-    are rendered without the ground and the layers (the lowest stratiform layer draws the ground), and without a
-    sun below the horizon when a ground would hide it. Not modelled: shadows between voxel media and layers, and
-    of voxel media on the ground.
+    are rendered without the ground and the layers (the lowest stratiform layer draws the ground); where the ground
+    was the only horizon, the sun becomes the light of its disk's visible part
+    (:func:`~warpsky.techniques.sunlight.visible_sun`), so the ground still hides what has set. Not modelled:
+    shadows between voxel media and layers, and of voxel media on the ground.
     """
     if "stratiform" in passes:
         media_only = dataclasses.replace(scene, ground=None, layers=())
-        if scene.ground is not None and scene.sun is not None and scene.sun.direction[1] <= 0.0:
-            media_only = dataclasses.replace(media_only, sun=None)  # the ground hides a sun below the horizon
+        if scene.ground is not None and scene.atmosphere is None:
+            media_only = dataclasses.replace(media_only, sun=visible_sun(scene.sun))
         scene = media_only
     return attenuated_sun(scene) if "sky" in passes else scene
 
@@ -41,7 +43,7 @@ def sun_at_altitude(scene: Scene, altitude: float) -> Scene:
     if scene.atmosphere is None or scene.sun is None:
         return scene
     atm = scene.atmosphere
-    t = sun_transmittance(atm.beta_sea_level, atm.gamma, altitude + atm.altitude, scene.sun.direction[1])
+    t = sun_transmittance(atm.beta_sea_level, atm.gamma, altitude + atm.altitude, light_elevation_sine(scene.sun))
     return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=scene.sun.irradiance * t))
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.scene.model import Camera
+from warpsky.techniques.sunlight import Sunlight
 
 
 @wp.struct
@@ -44,12 +45,17 @@ def pinhole_camera(camera: Camera, width: int, height: int) -> PinholeCamera:
 
 @wp.struct
 class Sun:
-    """The sun as kernels see it (``lit`` 0: no sun, or no light from it)."""
+    """The sunlight as kernels see it (:class:`~warpsky.techniques.sunlight.Sunlight`; ``lit`` 0: none arrives).
 
-    direction: wp.vec3  # unit vector towards the sun (world axes)
-    irradiance: wp.vec3  # at normal incidence, RGB
+    Kernels light with ``irradiance`` along ``direction`` wherever ``lit`` is set, whatever the elevation: the
+    horizon has already been folded in on the host."""
+
+    direction: wp.vec3  # unit vector towards the light: the centroid of the disk's visible part (world axes)
+    irradiance: wp.vec3  # of the visible part, at normal incidence, RGB
+    air_sine: float  # the air's optical depth towards the sun is its vertical column / air_sine (finite air mass)
+    disk_direction: wp.vec3  # unit vector towards the disk's centre
+    disk_radiance: wp.vec3  # of the disk where it is seen, RGB [irradiance/sr] (0 for a sun without a disk)
     cos_radius: float  # cosine of the disk's angular radius (2: no disk)
-    solid_angle: float  # of the disk [sr] (1 when it has none, so dividing by it is safe)
     lit: int
 
 
@@ -69,15 +75,21 @@ def sun_disk(angular_diameter: float) -> tuple[float, float]:
     return math.cos(radius), 2.0 * math.pi * (1.0 - math.cos(radius))
 
 
-def sun_struct(sun, unlit_direction: tuple[float, float, float] = (0.0, 1.0, 0.0)) -> Sun:
-    """Kernel view of a :class:`~warpsky.scene.model.Sun` (or None: unlit, pointing along ``unlit_direction``)."""
+def sun_struct(light: Sunlight | None, unlit_direction: tuple[float, float, float] = (0.0, 1.0, 0.0)) -> Sun:
+    """Kernel view of a :class:`~warpsky.techniques.sunlight.Sunlight` (or None: unlit, pointing along
+    ``unlit_direction``)."""
     out = Sun()
-    direction = sun.direction if sun is not None else np.asarray(unlit_direction, dtype=np.float64)
-    irradiance = sun.irradiance if sun is not None else np.zeros(3)
+    unlit = np.asarray(unlit_direction, dtype=np.float64)
+    direction = light.direction if light is not None else unlit
+    irradiance = light.irradiance if light is not None else np.zeros(3)
     out.direction = wp.vec3(*np.asarray(direction, dtype=np.float64).tolist())
     out.irradiance = wp.vec3(*np.asarray(irradiance, dtype=np.float64).tolist())
-    out.cos_radius, out.solid_angle = sun_disk(sun.angular_diameter if sun is not None else 0.0)
-    out.lit = int(float(np.max(irradiance)) > 0.0)
+    out.air_sine = float(light.air_sine) if light is not None else float(unlit[1])
+    out.disk_direction = wp.vec3(*np.asarray(light.disk_direction if light is not None else unlit).tolist())
+    out.cos_radius, solid_angle = sun_disk(light.angular_diameter if light is not None else 0.0)
+    disk = light.disk_irradiance / solid_angle if light is not None and out.cos_radius <= 1.0 else np.zeros(3)
+    out.disk_radiance = wp.vec3(*np.asarray(disk, dtype=np.float64).tolist())
+    out.lit = int(light is not None and light.lit)
     return out
 
 

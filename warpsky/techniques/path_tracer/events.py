@@ -1,9 +1,10 @@
 """What happens where a path's free flight ends: scattering in a medium, a bounce on the ground, or the end.
 
-At a scattering point the path takes next-event estimation toward the sun (ratio-tracked transmittance times the
-media's mixed phase) and samples a new direction from that mixture. On the Lambertian ground it takes the sun
-through the media, then a cosine-weighted bounce. A path that leaves every medium gains the uniform environment
-(after a bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black sea level.
+At a scattering point the path takes next-event estimation toward the sunlight (the light of the disk's visible
+part, :mod:`warpsky.techniques.sunlight`; ratio-tracked transmittance times the media's mixed phase) and samples a
+new direction from that mixture. On the Lambertian ground it takes the sun through the media, then a
+cosine-weighted bounce. A path that leaves every medium gains the uniform environment (after a bounce) or, with
+air, the sun's disk seen directly; with air a downward path ends at a black sea level.
 """
 
 from __future__ import annotations
@@ -12,13 +13,13 @@ import functools
 
 import warp as wp
 
-from warpsky.media.air import Air, air_scattering, sea_level_distance
+from warpsky.media.air import Air, air_coefficient, air_scattering, sea_level_distance
 from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import scattering_angle
 from warpsky.optics.phase_sampling import PhaseTables, mixture_functions
 from warpsky.techniques.common import Ground, Sun
 from warpsky.techniques.path_tracer.majorants import Majorants
-from warpsky.techniques.path_tracer.tracking import tracking_functions
+from warpsky.techniques.path_tracer.tracking import Transmittance, tracking_functions
 
 #: What ends a ray before the far distance: nothing, the ground plane, or sea level (the air's floor).
 SURFACE_NONE = wp.constant(0)
@@ -94,8 +95,8 @@ def escaped_radiance(air: Air, sun: Sun, environment: wp.vec3, d: wp.vec3, throu
         return out
     if bounce > 0:
         out = wp.cw_mul(throughput, environment)
-    elif air.enabled != 0 and sun_on and wp.dot(d, sun.direction) >= sun.cos_radius:
-        out = wp.cw_mul(throughput, sun.irradiance) / sun.solid_angle
+    elif air.enabled != 0 and sun_on and wp.dot(d, sun.disk_direction) >= sun.cos_radius:
+        out = wp.cw_mul(throughput, sun.disk_radiance)  # the horizon clips the disk: d[1] >= 0 here
     return out
 
 
@@ -165,14 +166,9 @@ def surface_functions(has_ground: bool):
 
     @wp.func
     def sun_reaches(sun: Sun, air: Air) -> bool:
-        """Whether the sun lights the scene: lit, and above the horizon where a ground or the air (a flat earth's
-        air hides a sun below the horizon) is there to hide it."""
-        sun_up = bool(True)
-        if wp.static(has_ground):
-            sun_up = sun.direction[1] > 0.0
-        if air.enabled != 0:
-            sun_up = sun.direction[1] > 0.0
-        return sun.lit != 0 and sun_up
+        """Whether the sun lights the scene: ``lit``, which the host sets from the part of the disk above the
+        horizon where a ground or the air is there to hide it (:mod:`warpsky.techniques.sunlight`)."""
+        return sun.lit != 0
 
     return primary_end, flight_end, sun_reaches
 
@@ -203,6 +199,22 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
     mixture_phase, sample_mixture = mixture_functions(has_tables)
 
     @wp.func
+    def transmittance_to_sun(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, p: wp.vec3,
+                             state: wp.uint32) -> Transmittance:
+        """Transmittance from ``p`` to the sun. Above the grazing elevations the air is ratio-tracked with the
+        media along the flat earth's ray; at grazing ones (``air_sine`` above the direction's sine) the media are
+        tracked alone and the air's optical depth is its vertical column over ``air_sine`` in closed form (the
+        finite grazing air mass every other technique uses)."""
+        if air.enabled != 0 and sun.air_sine > sun.direction[1]:
+            no_air = Air()
+            no_air.enabled = 0
+            out = ratio_track(media, majorants, no_air, p, sun.direction, UNBOUNDED, state)
+            column = air_coefficient(air, p[1]) / (air.gamma * sun.air_sine)
+            out.value = wp.cw_mul(out.value, wp.vec3(wp.exp(-column[0]), wp.exp(-column[1]), wp.exp(-column[2])))
+            return out
+        return ratio_track(media, majorants, air, p, sun.direction, UNBOUNDED, state)
+
+    @wp.func
     def scatter_event(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
                       sun_on: bool, path: PathState, p: wp.vec3) -> PathState:
         """Scattering at ``p``: the sun through the media times the mixed phase, then a new direction sampled from
@@ -211,7 +223,7 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
         point = sample_media(media, p)
         rayleigh = air_scattering(air, p[1])
         if sun_on:
-            tr_sun = ratio_track(media, majorants, air, p, sun.direction, UNBOUNDED, out.state)
+            tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state)
             out.state = tr_sun.state
             out.steps = out.steps + tr_sun.steps
             phase = mixture_phase(media, point, tables.values, rayleigh, scattering_angle(sun.direction, out.direction))
@@ -232,12 +244,12 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
         if wp.static(has_ground):
             q = wp.vec3(p[0], ground.offset, p[2])
             if sun_on:
-                tr_sun = ratio_track(media, majorants, air, q, sun.direction, UNBOUNDED, out.state)
+                tr_sun = transmittance_to_sun(media, majorants, air, sun, q, out.state)
                 out.state = tr_sun.state
                 out.steps = out.steps + tr_sun.steps
                 lit_ground = wp.cw_mul(sun.irradiance, tr_sun.value)
                 out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, ground.albedo), lit_ground) * (
-                    sun.direction[1] / wp.pi
+                    wp.max(sun.direction[1], 0.0) / wp.pi
                 )
             out.throughput = wp.cw_mul(out.throughput, ground.albedo)
             bounce = cosine_up(out.state)

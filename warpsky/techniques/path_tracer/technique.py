@@ -22,6 +22,7 @@ from warpsky.techniques.base import Layer, TechniqueSettings, documented, settin
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.path_tracer.kernels import PathSettings, PixelSums, path_trace_kernel
 from warpsky.techniques.path_tracer.majorants import upload_majorants
+from warpsky.techniques.sunlight import sunlight
 
 
 @documented
@@ -137,7 +138,7 @@ class PathTracing:
         self.kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail)
         self._keep = (tables, media)  # the structs below point into these buffers
         self.fixed = [media.media, majorants, phase_tables_struct(tables),
-                      air_struct(scene.atmosphere if air else None, camera.position), sun_struct(scene.sun),
+                      air_struct(scene.atmosphere if air else None, camera.position), sun_struct(sunlight(scene)),
                       pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position)]
 
     def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:

@@ -126,15 +126,13 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
         # Light travels along -sun_dir and leaves towards the eye along -view.
         theta = scattering_angle(sun_dir, view)
         hit_ground = bool(False)
-        sun_blocked = bool(False)
         if wp.static(has_ground):
-            # The plane is opaque: it ends the ray and, with the sun below the horizon, shades every point above it.
+            # The plane is opaque: it ends the ray (the part of the sun below it is already out of sun.irradiance).
             if view[1] != 0.0:
                 t_ground = ground.offset / view[1]
                 if t_ground > t_near and t_ground < t_end:
                     t_end = t_ground
                     hit_ground = True
-            sun_blocked = sun_dir[1] < 0.0
 
         span = media_span(media, view, t_near, t_end)
         t0 = span[0]
@@ -156,7 +154,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                 scatter = scattered_phase(media, here, phase_tables, wp.vec3(0.0), theta)
                 lookups += wp.int64(media.count)
                 tau_eye_b = tau_eye + here.extinction * dt
-                if lit and not sun_blocked and wp.max(scatter) > 0.0:
+                if lit and wp.max(scatter) > 0.0:
                     if not sun_a_known:
                         shadow = sun_optical_depth(media, ta, view, sun_dir, march.shadow_step)
                         tau_sun_a = wp.vec3(shadow[0], shadow[1], shadow[2])
@@ -180,10 +178,10 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
         trans = exp3(tau_eye)
         if wp.static(has_ground):
             if hit_ground:
-                if lit and not sun_blocked and sun_dir[1] > 0.0:
+                if lit:
                     shadow = sun_optical_depth(media, t_end, view, sun_dir, march.shadow_step)
                     lookups += wp.int64(shadow[3])
-                    lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (sun_dir[1] / wp.pi)
+                    lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (wp.max(sun_dir[1], 0.0) / wp.pi)
                     light += wp.cw_mul(wp.cw_mul(lit_ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
                 depth_sum += luminance(trans) * t_end * cos_axis
                 weight_sum += luminance(trans)

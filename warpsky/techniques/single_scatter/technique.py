@@ -18,6 +18,7 @@ from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.single_scatter.kernels import MarchSettings, single_scatter_kernel
+from warpsky.techniques.sunlight import sunlight
 
 
 @documented
@@ -97,7 +98,7 @@ class SingleScatter:
             march.shadow_step = float(settings.shadow_step_length)
             march.min_transmittance = float(settings.min_transmittance)
             kernel = single_scatter_kernel(scene.ground is not None, bool(species), media.has_detail)
-            inputs = [media.media, tables.values, pinhole_camera(camera, width, height), sun_struct(scene.sun),
+            inputs = [media.media, tables.values, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
                       ground_struct(scene.ground, camera.position), march, radiance, transmittance, depth, lookups]
             launch_rows(kernel, height, width, inputs, device)
             wp.synchronize_device(device)

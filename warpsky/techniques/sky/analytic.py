@@ -5,7 +5,8 @@ observer at altitude h0 looking along v (elevation sine v_y), with the sun along
 
 * optical depth to distance K (Eq. 11):  τ(K) = B K E(x),  B = β_sl e^{-γh0},  x = γ v_y K,
   E(x) = (1 - e^{-x}) / x  (E(0) = 1: a horizontal ray sees constant density);
-* sun transmittance at altitude h (Eq. 12):  exp(-β_sl e^{-γh} / (γ l_y))  (0 when l_y <= 0: night);
+* sun transmittance at altitude h (Eq. 12):  exp(-β_sl e^{-γh} / (γ l_y)), with l_y replaced near the horizon by
+  :func:`~warpsky.techniques.sunlight.air_sine` (a finite air mass: Riley's 1 / l_y diverges there);
 * in-scattered radiance over [0, K] (Eq. 8 with Eqs. 10-12), integrated exactly:
 
       L = I P(θ) B K E(x) exp(-min(τ_s0, τ_s0 + Δ)) F(|Δ|),
@@ -20,8 +21,10 @@ observer at altitude h0 looking along v (elevation sine v_y), with the sun along
 Rays looking down are cut where x < -X_CUT (the optical depth there exceeds 1e9 for any air: nothing beyond is
 visible), so nothing overflows in float32.
 
-Twilight: on a flat earth the sun below the horizon lights nothing; the sky is black at night (no twilight glow,
-which would need a spherical earth).
+Sunset: the part of the sun's disk below the horizon lights nothing (:mod:`warpsky.techniques.sunlight`: the
+irradiance is the visible part's, and the in-scatter formula takes l_y = air_sine, which is exact for a sun whose
+optical depth at every altitude is the vertical column times one air mass). The sky is black once the whole disk
+has set (no twilight glow, which would need a round earth's air lit from below the horizon).
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.techniques.common import one_minus_exp_over_x
+from warpsky.techniques.sunlight import air_sine
 
 #: Riley 2004 Table 3: sea-level scattering coefficients [1/m] at 680, 550, 440 nm (our R, G, B).
 RILEY_BETA_SEA_LEVEL = (5.8e-6, 1.35e-5, 3.31e-5)
@@ -79,7 +83,8 @@ def _depth_times_f(depth, q):
 
 
 def inscatter(beta_sl, gamma, h0, view_y, sun_y, distance) -> np.ndarray:
-    """∫_0^K β(h) T_eye T_sun dt per channel (multiply by I_s P(θ) for radiance); float64, broadcasting."""
+    """∫_0^K β(h) T_eye T_sun dt per channel (multiply by I_s P(θ) for radiance); float64, broadcasting.
+    ``sun_y`` is Riley's sun elevation sine, or a sunlight's ``air_sine`` (0 for ``sun_y <= 0``)."""
     sun_y = np.asarray(sun_y, dtype=np.float64)
     view_y = np.asarray(view_y, dtype=np.float64)
     b, depth = _depth(beta_sl, gamma, h0, view_y, distance)
@@ -103,10 +108,12 @@ def transmittance(beta_sl, gamma, h0, view_y, distance) -> np.ndarray:
 
 
 def sun_transmittance(beta_sl, gamma, h, sun_y) -> np.ndarray:
-    """Transmittance of sunlight from outside the atmosphere down to altitude h (Eq. 12); 0 at night."""
-    sun_y = np.asarray(sun_y, dtype=np.float64)
+    """Transmittance of sunlight from outside the atmosphere down to altitude h (Eq. 12) for sunlight from
+    elevation sine ``sun_y``: the vertical column over :func:`~warpsky.techniques.sunlight.air_sine`, finite and
+    positive at every elevation and continuous through the horizon (the disk's visible fraction, not this, makes
+    the night black)."""
     b = np.asarray(beta_sl, dtype=np.float64) * np.exp(-gamma * np.asarray(h, dtype=np.float64))
-    return np.where(sun_y > 0.0, np.exp(-b / (gamma * np.where(sun_y > 0.0, sun_y, 1.0))), 0.0)
+    return np.exp(-b / (gamma * air_sine(sun_y, gamma)))
 
 
 def rayleigh(cos_theta) -> np.ndarray:
@@ -132,7 +139,8 @@ def air_depth(beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, distance
 
 @wp.func
 def air_inscatter(beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, sun_y: float, distance: float) -> wp.vec3:
-    """In-scatter integral over [0, distance] per channel (see the module docstring); 0 at night."""
+    """In-scatter integral over [0, distance] per channel (see the module docstring) for a sun of air sine
+    ``sun_y`` (the sunlight's ``air_sine``); 0 for ``sun_y <= 0``."""
     out = wp.vec3(0.0)
     if sun_y <= 0.0:
         return out

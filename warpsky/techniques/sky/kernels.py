@@ -44,7 +44,7 @@ def sky_kernel(
         split = wp.min(d / cos_axis, t_end)
     cos_theta = wp.dot(sun_dir, view)  # light travels along -sun, leaves towards the eye along -view
     phase = phase_rayleigh(cos_theta)
-    sun_y = sun_dir[1]
+    sun_y = sun.air_sine  # the sun's optical depth at height h is the vertical column over air_sine
     front = air_inscatter(beta_sl, gamma, camera_altitude, view[1], sun_y, split)
     front_radiance[row, col] = wp.cw_mul(sun.irradiance, front) * phase
     front_transmittance[row, col] = exp3(air_depth(beta_sl, gamma, camera_altitude, view[1], split))
@@ -55,10 +55,11 @@ def sky_kernel(
         if t_end < INFINITE:
             rest = t_end - split
         back = wp.cw_mul(sun.irradiance, air_inscatter(beta_sl, gamma, h_split, view[1], sun_y, rest)) * phase
-    # the sun's disk, behind everything, through the air beyond the split (to the top of the atmosphere)
-    if t_end >= INFINITE and cos_theta >= sun.cos_radius and sun_y > 0.0:
+    # the sun's disk, behind everything, through the air beyond the split (to the top of the atmosphere); the
+    # horizon clips it where the view ray ends on the ground or at sea level
+    if t_end >= INFINITE and wp.dot(sun.disk_direction, view) >= sun.cos_radius and sun.lit != 0:
         beyond = wp.vec3(1.0)  # no media: the front layer's transmittance already holds all the air
         if split < INFINITE:
             beyond = exp3(air_depth(beta_sl, gamma, camera_altitude + view[1] * split, view[1], INFINITE))
-        back += wp.cw_mul(sun.irradiance, beyond) / sun.solid_angle
+        back += wp.cw_mul(sun.disk_radiance, beyond)
     back_radiance[row, col] = back

@@ -12,6 +12,7 @@ from warpsky.techniques.base import Layer
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.sky.analytic import sun_transmittance
 from warpsky.techniques.sky.kernels import sky_kernel
+from warpsky.techniques.sunlight import light_elevation_sine, sunlight
 
 #: Direction the sky pass gives an absent sun: below the horizon.
 BELOW = (0.0, -1.0, 0.0)
@@ -38,12 +39,14 @@ def attenuated_sun(scene: Scene) -> Scene:
     """``scene`` with its sun's irradiance reduced by the air above the media (Eq. 12); night leaves it unlit.
 
     One transmittance per scene, taken at the media's centre altitude: the variation across a cloud is below 1%
-    for clouds a few km tall at sun elevations above ~5 deg, and documented as an approximation.
+    for clouds a few km tall at sun elevations above ~5 deg, and documented as an approximation. Its elevation is
+    the sunlight's (:func:`~warpsky.techniques.sunlight.light_elevation_sine`), so a setting sun stays lit down to
+    the last sliver of its disk, which the kernels then weigh by its visible fraction.
     """
     if scene.atmosphere is None or scene.sun is None:
         return scene
     atm = scene.atmosphere
-    t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), scene.sun.direction[1])
+    t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), light_elevation_sine(scene.sun))
     return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=scene.sun.irradiance * t))
 
 
@@ -53,7 +56,7 @@ def unattenuated_sun(scene: Scene) -> Scene:
     if scene.atmosphere is None or scene.sun is None:
         return scene
     atm = scene.atmosphere
-    t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), scene.sun.direction[1])
+    t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), light_elevation_sine(scene.sun))
     irradiance = np.where(t > 1e-30, scene.sun.irradiance / np.maximum(t, 1e-30), 0.0)
     return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=irradiance))
 
@@ -78,7 +81,8 @@ class SkyPass:
             back = wp.zeros(shape, dtype=wp.vec3)
             wp.launch(sky_kernel, dim=shape, inputs=[
                 pinhole_camera(camera, width, height), float(camera.position[1] + atm.altitude),
-                wp.vec3(*atm.beta_sea_level.tolist()), float(atm.gamma), sun_struct(scene.sun, unlit_direction=BELOW),
+                wp.vec3(*atm.beta_sea_level.tolist()), float(atm.gamma),
+                sun_struct(sunlight(scene), unlit_direction=BELOW),
                 int(scene.ground is not None), ground_struct(scene.ground, camera.position),
                 wp.array(np.ascontiguousarray(depth, dtype=np.float32)), front, front_t, back,
             ])

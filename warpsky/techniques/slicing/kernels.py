@@ -371,9 +371,9 @@ def ground_kernel(has_detail: bool = False):
             return
         sun_dir = sun.direction
         lit = wp.vec3(0.0)
-        if sun.lit != 0 and sun_dir[1] > 0.0:
+        if sun.lit != 0:
             tau = sun_optical_depth(media, t, view, sun_dir, shadow_step)
-            lit = wp.cw_mul(sun.irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (sun_dir[1] / wp.pi)
+            lit = wp.cw_mul(sun.irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (wp.max(sun_dir[1], 0.0) / wp.pi)
         before = transmittance[row, col]
         radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground.albedo, lit))
         if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows

@@ -21,6 +21,7 @@ from warpsky.scene.model import PhaseKind, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
+from warpsky.techniques.sunlight import sunlight
 
 
 class LightEquation(enum.IntEnum):
@@ -130,7 +131,8 @@ class Slicing:
             return self.settings
         count = self.AUTO_SLICES[0]
         if scene.media:
-            toward_sun = scene.sun.direction if scene.sun is not None else np.array([0.0, 1.0, 0.0])
+            light = sunlight(scene)
+            toward_sun = light.direction if light is not None else np.array([0.0, 1.0, 0.0])
             axis, _ = slice_axis(scene.camera, toward_sun)
             along = media_corners(scene, scene.camera.position) @ axis
             finest = min(float(m.voxel_size.min()) for m in scene.media)
@@ -175,14 +177,12 @@ class Slicing:
         orders = int(settings.orders)
         shape = (height, width)
         far = np.float32(camera.far)
-        sun = scene.sun
+        sun = sunlight(scene)
         with wp.ScopedDevice(device):
             radiance = wp.zeros(shape, dtype=wp.vec3)
             transmittance = wp.full(shape, wp.vec3(1.0, 1.0, 1.0), dtype=wp.vec3)
             depth_sum = wp.zeros(shape, dtype=wp.vec2)
             slices = 0
-            # a sun below the ground plane lights nothing, but the media still hide what lies behind them
-            ground_hides_sun = scene.ground is not None and sun is not None and sun.direction[1] <= 0.0
             species = scene.species
             # uploaded once for the sweep and the ground pass (with detail this also advects its noise to time_s)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
@@ -193,7 +193,8 @@ class Slicing:
                 frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count),
                                             int(settings.light_resolution))
                 res = int(settings.light_resolution)
-                start = np.zeros(3) if ground_hides_sun or sun is None else sun.irradiance
+                # a sun set behind the horizon lights nothing, but the media still hide what lies behind them
+                start = sun.irradiance if sun is not None and sun.lit else np.zeros(3)
                 light_i = wp.full((res, res), wp.vec3(*np.asarray(start, dtype=np.float64).tolist()), dtype=wp.vec3)
                 light_n = wp.zeros((res, res), dtype=wp.vec3)
                 eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
@@ -260,7 +261,7 @@ class Slicing:
             transmittance = wp.array(layer.transmittance, dtype=wp.vec3)
             depth = wp.array(layer.depth, dtype=float)
             wp.launch(ground_kernel(media.has_detail), dim=(height, width), inputs=[
-                media.media, pinhole_camera(camera, width, height), sun_struct(scene.sun),
+                media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
                 ground_struct(scene.ground, camera.position), float(media.min_voxel_size), radiance, transmittance,
                 depth])
             layer.radiance, layer.transmittance, layer.depth = radiance.numpy(), transmittance.numpy(), depth.numpy()

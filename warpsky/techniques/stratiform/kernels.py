@@ -92,7 +92,7 @@ def stratiform_kernel(
     out = wp.vec3(0.0)
     tr = wp.vec3(1.0)
     z_depth = cam.far
-    lit = sun[1] > 0.0
+    lit = sun_light.lit != 0  # the horizon is folded into sun_light on the host
     kappa_ref_s = optics.kappa_s[1] / optics.to_reference
     mu_sun = wp.max(sun[1], MU_MIN)
     # ---- the cloud layer

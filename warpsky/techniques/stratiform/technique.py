@@ -20,6 +20,7 @@ from warpsky.techniques.sky.analytic import inscatter, rayleigh
 from warpsky.techniques.stratiform.kernels import LayerGeometry, stratiform_kernel
 from warpsky.techniques.stratiform.model1d import order_energies, reference_thickness
 from warpsky.techniques.stratiform.optics import stratiform_optics
+from warpsky.techniques.sunlight import sunlight
 
 
 @documented
@@ -60,17 +61,18 @@ class StratiformSettings(TechniqueSettings):
 
 def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray:
     """Uniform radiance [sun units/sr] with the same irradiance on a horizontal surface at ``altitude`` [m above
-    the stage's y = 0] as the analytic Riley sky above it; 0 without an atmosphere or sun."""
-    if scene.atmosphere is None or scene.sun is None or scene.sun.direction[1] <= 0.0:
+    the stage's y = 0] as the analytic Riley sky above it; 0 without an atmosphere or sunlight."""
+    light = sunlight(scene)
+    if scene.atmosphere is None or light is None or not light.lit:
         return np.zeros(3)
     atm = scene.atmosphere
     zen = (np.arange(samples) + 0.5) / samples * 0.5 * np.pi
     az = (np.arange(2 * samples) + 0.5) / (2 * samples) * 2 * np.pi
     z, a = np.meshgrid(zen, az, indexing="ij")
     dirs = np.stack([np.sin(z) * np.cos(a), np.cos(z), np.sin(z) * np.sin(a)], -1)
-    cos_theta = dirs @ scene.sun.direction
-    radiance = np.stack([scene.sun.irradiance[c] * rayleigh(cos_theta) * inscatter(
-        atm.beta_sea_level[c], atm.gamma, altitude + atm.altitude, dirs[..., 1], scene.sun.direction[1], np.inf)
+    cos_theta = dirs @ light.direction
+    radiance = np.stack([light.irradiance[c] * rayleigh(cos_theta) * inscatter(
+        atm.beta_sea_level[c], atm.gamma, altitude + atm.altitude, dirs[..., 1], light.air_sine, np.inf)
         for c in range(3)], -1)
     weight = (np.cos(z) * np.sin(z))[..., None] * (0.5 * np.pi / samples) * (2 * np.pi / (2 * samples))
     return (radiance * weight).sum(axis=(0, 1)) / np.pi
@@ -126,8 +128,9 @@ class Stratiform:
         inside = ((X >= layer.origin[0]) & (X <= layer.origin[0] + layer.size[0]) & (Z >= layer.origin[1])
                   & (Z <= layer.origin[1] + layer.size[1]))
         thick = np.where(inside, _sample(layer.thickness, layer.origin, layer.size, X, Z), 0.0)
-        sun = scene.sun.direction if scene.sun is not None else np.array([0.0, 1.0, 0.0])
-        irradiance = scene.sun.irradiance if scene.sun is not None and sun[1] > 0 else np.zeros(3)
+        light = sunlight(scene)
+        sun = light.direction if light is not None else np.array([0.0, 1.0, 0.0])
+        irradiance = light.irradiance if light is not None and light.lit else np.zeros(3)
         mu_l = max(float(sun[1]), 1e-6)
         e = order_energies(reference_thickness(thick, optics.kappa), np.degrees(np.arccos(min(mu_l, 1.0))),
                            float(optics.kappa_s[1] / optics.to_reference))
@@ -197,7 +200,7 @@ class Stratiform:
             inputs = [
                 pinhole_camera(camera, width, height), wp.array(layer.thickness, dtype=float), g, tables.values,
                 params, slab_optics,
-                sun_struct(scene.sun, unlit_direction=(0.0, -1.0, 0.0)), wp.vec3(*sky.tolist()),
+                sun_struct(sunlight(scene), unlit_direction=(0.0, -1.0, 0.0)), wp.vec3(*sky.tolist()),
                 int(ground is not None and draw_ground), ground_struct(ground, eye),
                 wp.array(np.ascontiguousarray(albedo, dtype=np.float32), dtype=wp.vec3), rel(abox),
                 wp.array(np.ascontiguousarray(r_g, dtype=np.float32), dtype=wp.vec3),
