@@ -13,10 +13,12 @@ import numpy as np
 
 import warpsky
 from warpsky.composite import composite, merge_by_depth
+from warpsky.errors import WarpskyError
 from warpsky.output.exr import write_exr
 from warpsky.output.png import write_png
 from warpsky.passes import StratiformPass, media_scene
 from warpsky.plan import RenderPlan, make_plan
+from warpsky.resources import ResourceError, check_resources
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
 from warpsky.techniques.sky.technique import SkyPass
@@ -41,6 +43,8 @@ class RenderOptions:
         half: Write RGBA as half floats (False: 32-bit float).
         png: Also write a tone-mapped PNG preview next to the EXR.
         exposure: Preview exposure in stops, on top of the automatic sun-based normalisation.
+        max_memory: Most bytes a frame may allocate on the host and on the device each (None: what is free).
+        work_limit: Refuse frames whose worst-case work exceeds :mod:`warpsky.resources`' bounds.
     """
 
     technique: str = DEFAULT_TECHNIQUE
@@ -51,6 +55,8 @@ class RenderOptions:
     half: bool = True
     png: bool = False
     exposure: float = 0.0
+    max_memory: int | None = None
+    work_limit: bool = True
 
 
 @dataclass
@@ -79,9 +85,10 @@ def preview_exposure(scene: Scene, stops: float = 0.0) -> float:
     return np.pi / float(scene.sun.irradiance @ LUMINANCE_WEIGHTS) * 2.0**stops
 
 
-def plan_frame(reader, time_code, options: RenderOptions) -> tuple[Scene, RenderPlan]:
+def plan_frame(reader, time_code, options: RenderOptions, *, check: bool = True) -> tuple[Scene, RenderPlan]:
     """Read the stage at ``time_code`` once and plan the frame: technique built, settings resolved, passes chosen,
-    settings hash computed (``plan.settings_hash``)."""
+    settings hash computed (``plan.settings_hash``); with ``check``, a frame over the memory or work limits is
+    refused here (:class:`~warpsky.resources.ResourceError`), before anything is allocated."""
     scene = reader.scene_at(time_code, camera_path=options.camera)
     plan = make_plan(
         scene,
@@ -91,7 +98,20 @@ def plan_frame(reader, time_code, options: RenderOptions) -> tuple[Scene, Render
         device=options.device,
     )
     plan.settings_hash = settings_hash(plan, options, scene)
+    if check:
+        check_resources(plan, max_memory=options.max_memory, work_limit=options.work_limit)
     return scene, plan
+
+
+def check_limits(reader, time_code, options: RenderOptions) -> None:
+    """Plan the frame at ``time_code`` only to refuse it when it is over the memory or work limits (a batch's first
+    frame, before any output exists); other input errors are left to the frame's own render."""
+    try:
+        plan_frame(reader, time_code, options)
+    except ResourceError:
+        raise
+    except WarpskyError:
+        pass
 
 
 def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None = None) -> str:
