@@ -1,6 +1,7 @@
 """The ``warpsky`` command: render USD stages to EXR frames, and show what a stage holds and how it will render.
 
-Exit codes: 0 success, 2 bad input or usage (the message names the culprit), 1 internal error.
+Exit codes: 0 success, 2 bad input or usage (the message names the culprit), 1 internal error, 130 interrupted
+(Ctrl-C).
 """
 
 from __future__ import annotations
@@ -26,11 +27,13 @@ from warpsky.device import init_warp, resolve_device
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
 from warpsky.evaluation.family import FAMILY_HELP, format_family_table, run_family, write_family_outputs
+from warpsky.interrupt import Interrupted, report_interrupt, sigint_stops_renders
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
 from warpsky.output.preview import contact_sheet, stage_preview
 from warpsky.plan import resolve_resolution
 from warpsky.render import RenderOptions, plan_frame
+from warpsky.resources import parse_size, resource_lines
 from warpsky.scene.usd import StageReader
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, settings_table, technique_class, technique_names
 from warpsky.techniques.stratiform.technique import StratiformSettings
@@ -53,6 +56,11 @@ batches, resume and farms:
   identical whatever the executor. GPU farms: start one worker per GPU with dask-cuda
   (`dask cuda worker tcp://HOST:PORT`, or LocalCUDACluster in Python), which sets CUDA_VISIBLE_DEVICES per
   worker, and render with --device cuda.
+
+memory, work and Ctrl-C:
+  A frame estimated above the free memory (--max-memory SIZE) or above 1e8 kernel iterations per pixel or 1e13 per
+  frame (--no-work-limit) is refused with exit code 2 before anything is allocated; `warpsky info` prints the
+  estimates. Ctrl-C stops a render within about a second, writes no EXR and exits with 130.
 
 {settings}
 examples:
@@ -130,6 +138,13 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _size(text: str) -> int:
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _setting(text: str) -> tuple[str, str]:
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
@@ -156,6 +171,10 @@ def _add_render_options(parser: argparse.ArgumentParser) -> None:
                         "(= --set target_error=E; default 0.05)")
     parser.add_argument("--time-budget", type=_seconds, metavar="S",
                         help="hybrid: stop adding paths after S seconds per frame (= --set time_budget=S)")
+    parser.add_argument("--max-memory", type=_size, metavar="SIZE", help="most memory a frame may use on the "
+                        "host and on a GPU each, e.g. 8G or 512M (default: what is free)")
+    parser.add_argument("--no-work-limit", dest="work_limit", action="store_false", help="render frames whose "
+                        "worst-case work exceeds 1e8 kernel iterations per pixel or 1e13 per frame")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -291,6 +310,8 @@ def _render_options(args) -> object:
         half=not getattr(args, "full_float", False),
         png=getattr(args, "png", False),
         exposure=getattr(args, "exposure", 0.0),
+        max_memory=args.max_memory,
+        work_limit=args.work_limit,
     )
 
 
@@ -424,7 +445,7 @@ def cmd_info(args) -> int:
     reader = StageReader(args.stage)
     span = reader.time_range()
     options = _render_options(args)
-    scene, plan = plan_frame(reader, args.time, options)
+    scene, plan = plan_frame(reader, args.time, options, check=False)
     out = [
         f"stage       {reader.path}",
         f"units       upAxis {reader.up_axis}, metersPerUnit {reader.meters_per_unit:g}",
@@ -457,6 +478,7 @@ def cmd_info(args) -> int:
                        f"period {d.period:g} s")
     out.append("plan:")
     out += ["  " + line for line in plan.describe().splitlines()]
+    out += ["  " + line for line in resource_lines(plan, options.max_memory)]
     print("\n".join(out))
     return 0
 
@@ -473,13 +495,13 @@ def main(argv: list[str] | None = None) -> int:
             return run_optics(args)
         commands = {"render": cmd_render, "info": cmd_info, "bench": cmd_bench, "preview": cmd_preview,
                     "contact-sheet": cmd_contact_sheet}
-        return commands[args.command](args)
+        with sigint_stops_renders():
+            return commands[args.command](args)
     except WarpskyError as exc:
         print(f"warpsky: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print("warpsky: interrupted", file=sys.stderr)
-        return 130
+    except (KeyboardInterrupt, Interrupted):
+        return report_interrupt(exit_now=argv is None)  # the program itself, not a caller in Python: exit at once
     except Exception:  # noqa: BLE001 - anything else is our bug: show it, exit 1
         import traceback
 

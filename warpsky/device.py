@@ -3,18 +3,22 @@
 Warp runs one CPU launch on one thread but releases the GIL while it runs, so a frame split into row bands and
 launched from several Python threads uses all cores (measured on two cores: 2.92 s instead of 5.76 s). On CUDA a
 single launch covers the frame. Kernels that want this take ``row_offset`` as their last input and index rows as
-``row_offset + tid``.
+``row_offset + tid``. The bands are sized by time (:data:`BAND_SECONDS`), not by count, so that a stop request
+(:mod:`warpsky.interrupt`) is honoured within a fraction of a second however long the whole launch takes.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import warp as wp
 
 from warpsky.errors import UsageError
+from warpsky.interrupt import check_stop, current_scope, stop_requested
 
 DEVICE_CHOICES = ("auto", "cpu", "cuda")
 
@@ -61,29 +65,93 @@ def cpu_thread_count() -> int:
     return max(1, int(value)) if value else max(1, os.cpu_count() or 1)
 
 
+#: Seconds a CPU row band is sized to take. A stop (Ctrl-C) waits for the bands already running, so about this long.
+BAND_SECONDS = 0.1
+#: The largest CPU row band, as a fraction of the frame's rows per thread (bounds a band sized on cheap rows that
+#: lands on costly ones).
+BAND_SHARE = 4
+
+#: Longest time per row [s] seen for a kernel at a frame size, so that the next launch (the next slice, the next
+#: pass of paths) sizes its bands right away.
+_ROW_SECONDS: dict[tuple, float] = {}
+
+
 def launch_rows(kernel, height: int, width: int, inputs: list, device: str) -> None:
     """Launch a per-pixel kernel over ``height`` rows, in parallel row bands on the CPU.
 
-    ``inputs`` are the kernel's arguments without the trailing ``row_offset``.
+    ``inputs`` are the kernel's arguments without the trailing ``row_offset``. On the CPU the bands are sized from
+    the time per row measured so far to take about :data:`BAND_SECONDS`, and a band starts only while no stop was
+    asked for (:mod:`warpsky.interrupt`); a launch that was stopped raises
+    :class:`~warpsky.interrupt.Interrupted`, as its output is incomplete.
     """
+    check_stop()
     if height <= 0 or width <= 0:
         return
     if not str(device).startswith("cpu"):
         wp.launch(kernel, dim=(height, width), inputs=[*inputs, 0], device=device)
         return
-    bands = min(cpu_thread_count() * 4, height)
-    edges = [round(i * height / bands) for i in range(bands + 1)]
+    # Compile or load the module once, here, not by racing threads, and outside the timed bands.
+    wp.load_module(kernel.module, device=device)
+    threads = min(cpu_thread_count(), height)
+    key = (kernel, height, width)
+    bands = RowBands(height, threads, _ROW_SECONDS.get(key), stop_token=current_scope())
 
-    def run(band: int) -> None:
-        rows = edges[band + 1] - edges[band]
-        if rows > 0:
-            wp.launch(kernel, dim=(rows, width), inputs=[*inputs, edges[band]], device=device)
+    def work() -> None:
+        while (band := bands.take()) is not None:
+            first, rows = band
+            started = time.perf_counter()
+            try:
+                wp.launch(kernel, dim=(rows, width), inputs=[*inputs, first], device=device)
+            except BaseException:
+                bands.failed = True
+                raise
+            bands.record(rows, time.perf_counter() - started)
 
-    # The first band runs alone so that the module is compiled or loaded once, not by racing threads.
-    run(0)
-    if bands == 1 or cpu_thread_count() == 1:
-        for band in range(1, bands):
-            run(band)
-        return
-    with ThreadPoolExecutor(max_workers=cpu_thread_count()) as pool:
-        list(pool.map(run, range(1, bands)))
+    try:
+        if threads == 1:
+            work()
+        else:
+            with ThreadPoolExecutor(max_workers=threads) as pool:
+                for future in [pool.submit(work) for _ in range(threads)]:
+                    future.result()
+    finally:
+        if bands.row_seconds is not None:
+            _ROW_SECONDS[key] = bands.row_seconds
+    check_stop(bands.stop_token)
+
+
+class RowBands:
+    """Rows of one launch handed out in bands: the first band per thread is one row (a probe) unless an earlier
+    launch measured the time per row; then each band is sized from the longest time per row seen to take about
+    :data:`BAND_SECONDS`, growing at most fourfold over the largest band so far and at most 1 / BAND_SHARE of the
+    rows per thread. No band is handed out once a stop was asked for or a band failed."""
+
+    def __init__(self, height: int, threads: int, row_seconds: float | None = None, *, stop_token: str | None = None):
+        self.height = height
+        self.stop_token = stop_token
+        self.threads = threads
+        self.row_seconds = row_seconds
+        self.next_row = 0
+        self.largest = 0 if row_seconds is None else height
+        self.failed = False
+        self._lock = threading.Lock()
+
+    def take(self) -> tuple[int, int] | None:
+        """(first row, row count) of the next band, or None when there is none to run."""
+        with self._lock:
+            if self.failed or self.next_row >= self.height or stop_requested(self.stop_token):
+                return None
+            rows = 1
+            if self.row_seconds is not None:
+                rows = int(BAND_SECONDS / max(self.row_seconds, 1e-9))
+                rows = min(rows, 4 * max(self.largest, 1), -(-self.height // (self.threads * BAND_SHARE)))
+            rows = max(1, min(rows, self.height - self.next_row))
+            first = self.next_row
+            self.next_row += rows
+            return first, rows
+
+    def record(self, rows: int, seconds: float) -> None:
+        """A band of ``rows`` rows took ``seconds``."""
+        with self._lock:
+            self.row_seconds = max(self.row_seconds or 0.0, seconds / rows)
+            self.largest = max(self.largest, rows)

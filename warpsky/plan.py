@@ -14,6 +14,7 @@ import numpy as np
 
 from warpsky.errors import UsageError
 from warpsky.optics.tables import is_cached
+from warpsky.resources import MemoryEstimate, WorkEstimate, frame_memory, frame_work
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique, parse_settings, technique_class
 from warpsky.techniques.stratiform.technique import StratiformSettings, radiosity_grid
@@ -42,6 +43,8 @@ class RenderPlan:
         layer_settings: StratiformSettings when the scene has stratiform layers, else None.
         settings_hash: Hash of what changes the frame's pixels, set by :func:`warpsky.render.plan_frame` (the
             batch's resume check and the EXR metadata share it); empty until then.
+        memory: Bytes the frame will allocate, by part (:func:`warpsky.resources.frame_memory`).
+        work: Worst-case kernel iterations of the frame (:func:`warpsky.resources.frame_work`).
     """
 
     technique: str
@@ -54,6 +57,8 @@ class RenderPlan:
     features: dict[str, str] = field(default_factory=dict)
     layer_settings: StratiformSettings | None = None
     settings_hash: str = ""
+    memory: MemoryEstimate = field(default_factory=MemoryEstimate)
+    work: WorkEstimate = field(default_factory=WorkEstimate)
 
     def settings_dict(self) -> dict:
         return dataclasses.asdict(self.settings)
@@ -108,8 +113,8 @@ def make_plan(
     device: str = "cpu",
 ) -> RenderPlan:
     """Plan a frame of ``scene``: parse the settings (``stratiform.``-prefixed ones go to the stratiform pass),
-    build the technique once with its settings resolved for the scene, decide the passes and describe the
-    features."""
+    build the technique once with its settings resolved for the scene, decide the passes, describe the features
+    and estimate the frame's memory and work (nothing is allocated)."""
     cls = technique_class(technique)
     settings = dict(settings or {})
     layer_values = {k[len(LAYER_SETTING_PREFIX):]: settings.pop(k) for k in list(settings)
@@ -128,8 +133,10 @@ def make_plan(
         ("stratiform", bool(scene.layers)),
         ("sky", scene.atmosphere is not None and not cls.traces_air),
     ) if runs)
-    return RenderPlan(technique, renderer.settings, device, width, height, renderer, passes,
+    plan = RenderPlan(technique, renderer.settings, device, width, height, renderer, passes,
                       _features(scene, technique, layer_settings, layer_values), layer_settings)
+    plan.memory, plan.work = frame_memory(scene, plan), frame_work(scene, plan)
+    return plan
 
 
 def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) -> dict[str, str]:

@@ -17,6 +17,7 @@ from warpsky.output.exr import write_exr
 from warpsky.output.png import write_png
 from warpsky.passes import StratiformPass, media_scene
 from warpsky.plan import RenderPlan, make_plan
+from warpsky.resources import check_resources
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
 from warpsky.techniques.sky.technique import SkyPass
@@ -45,6 +46,8 @@ class RenderOptions:
         half: Write RGBA as half floats (False: 32-bit float).
         png: Also write a tone-mapped PNG preview next to the EXR.
         exposure: Preview exposure in stops, on top of the automatic sun-based normalisation.
+        max_memory: Most bytes a frame may allocate on the host and on the device each (None: what is free).
+        work_limit: Refuse frames whose worst-case work exceeds :mod:`warpsky.resources`' bounds.
     """
 
     technique: str = DEFAULT_TECHNIQUE
@@ -55,6 +58,8 @@ class RenderOptions:
     half: bool = True
     png: bool = False
     exposure: float = 0.0
+    max_memory: int | None = None
+    work_limit: bool = True
 
 
 @dataclass
@@ -94,9 +99,10 @@ def preview_exposure(scene: Scene, stops: float = 0.0) -> float:
     return np.pi / float(scene.sun.irradiance @ LUMINANCE_WEIGHTS) * 2.0**stops
 
 
-def plan_frame(reader, time_code, options: RenderOptions) -> tuple[Scene, RenderPlan]:
+def plan_frame(reader, time_code, options: RenderOptions, *, check: bool = True) -> tuple[Scene, RenderPlan]:
     """Read the stage at ``time_code`` once and plan the frame: technique built, settings resolved, passes chosen,
-    settings hash computed (``plan.settings_hash``)."""
+    settings hash computed (``plan.settings_hash``); with ``check``, a frame over the memory or work limits is
+    refused here (:class:`~warpsky.resources.ResourceError`), before anything is allocated."""
     scene = reader.scene_at(time_code, camera_path=options.camera)
     plan = make_plan(
         scene,
@@ -106,6 +112,8 @@ def plan_frame(reader, time_code, options: RenderOptions) -> tuple[Scene, Render
         device=options.device,
     )
     plan.settings_hash = settings_hash(plan, options, scene)
+    if check:
+        check_resources(plan, max_memory=options.max_memory, work_limit=options.work_limit)
     return scene, plan
 
 

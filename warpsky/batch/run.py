@@ -21,6 +21,7 @@ import os
 import socket
 import sys
 import time
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,6 +29,7 @@ from warpsky.batch.frames import PLACEHOLDER
 from warpsky.device import init_warp
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.files import atomic_write
+from warpsky.interrupt import Interrupted, request_stop, sigint_ignored, stop_requested, stop_scope
 from warpsky.output.exr import validate_exr
 from warpsky.render import EXR_CHANNELS, plan_frame, write_frame
 from warpsky.scene.usd import StageReader
@@ -128,12 +130,20 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
         record.status = "done"
     except WarpskyError as exc:
         record.error = f"{type(exc).__name__}: {exc}"
+    except Interrupted:  # the batch is being stopped: nothing to report or retry
+        raise
     except Exception as exc:  # a worker must report, not die: the client decides about retries
         record.error = f"{type(exc).__name__}: {exc}"
         record.retryable = True
     finally:
         record.seconds = time.perf_counter() - started
     return record
+
+
+def run_frame_in_scope(job: FrameJob, attempt: int, stop_token: str) -> FrameRecord:
+    """:func:`run_frame` that stops when its batch's client calls ``request_stop(stop_token)`` on the worker."""
+    with stop_scope(stop_token):
+        return run_frame(job, attempt)
 
 
 # ------------------------------------------------------------------------------------------------ executors
@@ -152,7 +162,11 @@ class InProcessExecutor:
 
 class DaskExecutor:
     """Frames as Dask futures: a ``LocalCluster`` of ``workers`` single-threaded processes, or an existing
-    scheduler at ``address``. Workers load the stage and the optics cache themselves (shared storage)."""
+    scheduler at ``address``. Workers load the stage and the optics cache themselves (shared storage).
+
+    Ctrl-C reaches only this process (the LocalCluster's workers ignore SIGINT); :meth:`close` after it stops this
+    batch's frames on every worker (``request_stop`` of the batch's token), cancels the rest and shuts down
+    quietly."""
 
     def __init__(self, *, workers: int | None = None, address: str | None = None, timeout: float = 10.0):
         try:
@@ -160,6 +174,8 @@ class DaskExecutor:
         except ImportError:
             raise UsageError("--workers/--scheduler need Dask distributed: pip install 'warpsky[farm]'") from None
         self.cluster = None
+        self.stop_token = uuid.uuid4().hex
+        self.futures: list = []
         if address is not None:
             self.name = f"dask scheduler {address}"
             try:
@@ -173,15 +189,20 @@ class DaskExecutor:
             # the cores shared out: each worker's CPU launches use its share (pixels do not depend on it)
             threads = max(1, (os.cpu_count() or 1) // workers)
             self.name = f"dask LocalCluster, {workers} worker process(es) x {threads} CPU thread(s)"
-            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR,
-                                        env={"WARPSKY_CPU_THREADS": str(threads)})
-            self.client = Client(self.cluster)
+            # SIGINT ignored while the workers start, which inherit it (a Ctrl-C in these seconds is lost); the
+            # HTTP server on a free port, so that another cluster on 8787 prints no warning
+            with sigint_ignored():
+                self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                            dashboard_address=":0", silence_logs=logging.ERROR,
+                                            env={"WARPSKY_CPU_THREADS": str(threads)})
+                self.client = Client(self.cluster)
 
     def map(self, jobs: list[FrameJob], attempt: int):
         from dask.distributed import as_completed
 
-        futures = {self.client.submit(run_frame, job, attempt, pure=False): job for job in jobs}
+        futures = {self.client.submit(run_frame_in_scope, job, attempt, self.stop_token, pure=False): job
+                   for job in jobs}
+        self.futures += list(futures)
         for future in as_completed(futures):
             job = futures[future]
             try:
@@ -192,9 +213,29 @@ class DaskExecutor:
             yield job, record
 
     def close(self) -> None:
+        if stop_requested():
+            with sigint_ignored():
+                self._close_interrupted()
+            return
         self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+
+    def _close_interrupted(self) -> None:
+        """Stop this batch's frames where they run, cancel the others and shut down without Dask's log noise (the
+        cluster's teardown errors on the tasks it cuts short)."""
+        import logging
+
+        for name in ("distributed", "tornado", "asyncio"):
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+        try:
+            self.client.run(request_stop, self.stop_token, on_error="ignore")
+            self.client.cancel(self.futures, force=True)
+            self.client.close(timeout=5)
+            if self.cluster is not None:
+                self.cluster.close(timeout=10)
+        except Exception:  # noqa: BLE001 - already stopping: a cluster that does not answer is left to its timeouts
+            pass
 
 
 # --------------------------------------------------------------------------------------------------- batch

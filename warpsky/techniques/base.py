@@ -16,6 +16,7 @@ from typing import ClassVar, Protocol
 import numpy as np
 
 from warpsky.errors import UsageError
+from warpsky.resources import MemoryEstimate, WorkItem
 from warpsky.scene.model import Scene
 
 
@@ -65,6 +66,15 @@ class Technique(Protocol):
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
         """Render ``scene`` at ``width`` x ``height`` pixels (the camera conformed to that aspect ratio)."""
+        ...
+
+    def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
+        """Bytes a render of ``scene`` at ``width`` x ``height`` allocates on the host and the device, by part, as
+        an upper bound, without allocating anything (:mod:`warpsky.resources`)."""
+        ...
+
+    def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
+        """Worst-case kernel iterations of that render, by kind, with the settings that set them."""
         ...
 
 

@@ -26,6 +26,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.errors import UsageError
+from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, march_work
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.hybrid.denoise import (
@@ -35,7 +36,13 @@ from warpsky.techniques.hybrid.denoise import (
     guided_upsample,
     require_denoiser,
 )
-from warpsky.techniques.path_tracer.technique import PathTracerSettings, PathTracing, pixel_sums
+from warpsky.techniques.path_tracer.technique import (
+    PathTracerSettings,
+    PathTracing,
+    path_tracing_memory,
+    path_work,
+    pixel_sums,
+)
 from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
 from warpsky.techniques.sky.technique import SkyPass, unattenuated_sun
 
@@ -129,6 +136,41 @@ class Hybrid:
         per_pass = s.samples_per_pass or (2 if str(self.device).startswith("cpu") else 16)
         return dataclasses.replace(s, step_length=march.step_length, shadow_step_length=march.shadow_step_length,
                                    samples_per_pass=min(per_pass, s.spp))
+
+    #: Bytes per pixel of the multiple-scattering film on the host: float64 sums, squares, mean and variance of
+    #: both halves (128), the float32 mean and variance (24), the denoiser's input, guide and output for the
+    #: estimate's two halves (72) and Open Image Denoise's own buffers (about 256, measured).
+    COARSE_HOST_BYTES = 480
+    #: Bytes per frame pixel on the host besides the single-scattering layer: coverage, the multiple-scattering
+    #: image and variance, upsampled, divided by the front air's transmittance (96), the layer's sum (12).
+    FINE_HOST_BYTES = 108
+
+    def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
+        """Bytes a frame allocates: the single-scattering march's, two halves of :class:`PixelSums` on the
+        ``ms_scale`` film with their host sums and denoiser copies, the frame-size multiple-scattering images,
+        the front-air sky pass and three AOVs."""
+        s = self.resolved_settings(scene)
+        pixels = width * height
+        estimate = SingleScatter(s.single_scatter(), device=self.device).memory_estimate(scene, width, height)
+        if not (s.multiple_scattering and scene.media):
+            return estimate
+        scale = int(s.ms_scale)
+        coarse = -(-width // scale) * -(-height // scale)
+        estimate.merge(path_tracing_memory(scene, 2 * coarse, int(s.majorant_block), self.device))
+        estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
+        if scene.atmosphere is not None:
+            estimate.add("sky", host=pixels * 64, device=pixels * 40)
+        return estimate.add("AOVs", host=3 * pixels * AOV_BYTES)
+
+    def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
+        """Worst-case grid lookups of the march and path events of the spp cap on the ``ms_scale`` film (none
+        counted with a time budget, which bounds them)."""
+        s = self.resolved_settings(scene)
+        items = march_work(scene, width * height, float(s.step_length), float(s.shadow_step_length))
+        if s.multiple_scattering and scene.media and s.time_budget is None:
+            scale = int(s.ms_scale)
+            items.append(path_work(s.path_tracer(), -(-width // scale) * -(-height // scale)))
+        return items
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
         settings = self.resolved_settings(scene)

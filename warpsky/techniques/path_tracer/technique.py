@@ -17,6 +17,7 @@ from warpsky.media.voxel import VoxelMediaBuffers
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.phase_sampling import phase_tables_struct
 from warpsky.optics.tables import build_tables
+from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
@@ -84,6 +85,21 @@ class PathTracer:
         per_pass = given or (8 if str(self.device).startswith("cpu") else 64)
         return dataclasses.replace(self.settings, samples_per_pass=min(per_pass, self.settings.spp))
 
+    def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
+        """Bytes a frame allocates: one :class:`PixelSums` per stream, the float64 sums of :func:`sums_layer`, the
+        variance AOV, and the media with their majorants."""
+        settings = self.resolved_settings(scene)
+        pixels = width * height
+        lanes = gpu_lanes(self.device, pixels, int(settings.spp) // int(settings.samples_per_pass))
+        return (path_tracing_memory(scene, pixels * lanes, int(settings.majorant_block), self.device)
+                .add("images", host=pixels * SUMS_LAYER_BYTES)
+                .add("AOVs", host=pixels * AOV_BYTES))
+
+    def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
+        """Worst-case path events: every path runs to the bounce cap."""
+        settings = self.resolved_settings(scene)
+        return [path_work(settings, width * height)]
+
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> Layer:
         settings = self.resolved_settings(scene)
         started = time.perf_counter()
@@ -146,6 +162,31 @@ class PathTracing:
         GPUs)."""
         launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only)
         launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums], self.device)
+
+
+#: Bytes per pixel of a :class:`PixelSums` (radiance sum and sum of squares, transmittance RGB, depth vec2, counters).
+PIXEL_SUMS_BYTES = 52
+#: Bytes per pixel :func:`sums_layer` holds at once: float64 sums, squares, mean and variance (96), transmittance and
+#: depth sums (40), counters (8), the float32 outputs (40).
+SUMS_LAYER_BYTES = 184
+
+
+def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int, device: str) -> MemoryEstimate:
+    """Bytes of :class:`PathTracing` and ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device
+    (and their host copies on a GPU), the media and their majorant grids (built on the host from a copy)."""
+    copies = 0 if str(device).startswith("cpu") else 1
+    grids = grid_bytes(scene)
+    majorants = sum(4 * math.prod(-(-n // majorant_block) for n in m.shape) for m in scene.media)
+    return (MemoryEstimate()
+            .add("path sums", host=copies * pixel_sums_count * PIXEL_SUMS_BYTES,
+                 device=pixel_sums_count * PIXEL_SUMS_BYTES)
+            .add("grids", host=2 * grids, device=grids + majorants))
+
+
+def path_work(settings: PathTracerSettings, pixels: int) -> WorkItem:
+    """Worst-case path events of ``settings.spp`` paths per pixel that all reach ``settings.max_bounces``."""
+    spp, bounces = int(settings.spp), int(settings.max_bounces)
+    return WorkItem("path events", float(spp) * bounces, pixels, f"spp={spp} x max_bounces={bounces}")
 
 
 def coarse_camera(camera, width: int, height: int, scale: int):

@@ -14,6 +14,7 @@ from warpsky.errors import UsageError
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.tables import build_tables
+from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes, march_work
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
@@ -77,6 +78,23 @@ class SingleScatter:
             return self.settings
         sizes = [float(m.voxel_size.min()) for m in scene.media]
         return self.settings.resolved(min(sizes) if sizes else 1.0)
+
+    #: Bytes per pixel of the outputs: radiance and transmittance RGB, depth (float32) and lookups (int64).
+    PIXEL_BYTES = 36
+
+    def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
+        """Bytes a frame allocates: the per-pixel outputs and the media's upload on the device (their host copies
+        too when the device is a GPU; the upload's concatenated host copy)."""
+        pixels = width * height
+        copies = 0 if str(self.device).startswith("cpu") else 1
+        return (MemoryEstimate()
+                .add("images", host=copies * pixels * self.PIXEL_BYTES, device=pixels * self.PIXEL_BYTES)
+                .add("grids", host=grid_bytes(scene), device=grid_bytes(scene)))
+
+    def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
+        """Worst-case grid lookups of the march (:func:`~warpsky.resources.march_work`)."""
+        settings = self.resolved_settings(scene)
+        return march_work(scene, width * height, float(settings.step_length), float(settings.shadow_step_length))
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
         """Render ``scene`` at ``width`` x ``height``; the camera is conformed to that aspect ratio here."""

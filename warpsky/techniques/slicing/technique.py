@@ -17,11 +17,15 @@ from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
 from warpsky.optics.phase import phase_numpy
 from warpsky.optics.tables import ams_table
+from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import PhaseKind, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
 from warpsky.techniques.sunlight import sunlight
+
+#: Bytes per pixel of the ground pass's device copy of the layer.
+LAYER_DEVICE_BYTES = 28
 
 
 class LightEquation(enum.IntEnum):
@@ -138,6 +142,34 @@ class Slicing:
             finest = min(float(m.voxel_size.min()) for m in scene.media)
             count = int(np.clip(np.ceil((along.max() - along.min()) / finest), *self.AUTO_SLICES))
         return dataclasses.replace(self.settings, slice_count=count)
+
+    #: Bytes per pixel: radiance, transmittance (RGB) and depth moments (vec2) on the device; on the host the
+    #: layer, its depth division and the ground pass's copies.
+    PIXEL_BYTES = 32
+    HOST_PIXEL_BYTES = 72
+
+    def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
+        """Bytes a frame allocates: the eye buffers, the two light buffers (``light_resolution``^2 RGB each) and the
+        media's upload."""
+        res = int(self.settings.light_resolution)
+        pixels = width * height
+        copies = 0 if str(self.device).startswith("cpu") else 1
+        return (MemoryEstimate()
+                .add("images", host=pixels * (self.HOST_PIXEL_BYTES + copies * self.PIXEL_BYTES),
+                     device=pixels * (self.PIXEL_BYTES + LAYER_DEVICE_BYTES))
+                .add("light buffers", device=2 * res * res * 12)
+                .add("grids", host=grid_bytes(scene), device=grid_bytes(scene)))
+
+    def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
+        """Lookups per pixel (one per medium and slice) and per light-buffer texel (the same)."""
+        if not scene.media:
+            return []
+        settings = self.resolved_settings(scene)
+        slices, res = int(settings.slice_count), int(settings.light_resolution)
+        per_pixel = float(slices * len(scene.media))
+        return [WorkItem("slice lookups", per_pixel, width * height, f"slice_count={slices}"),
+                WorkItem("light-buffer lookups", per_pixel, res * res,
+                         f"slice_count={slices}, light_resolution={res}")]
 
     def _tables(self, scene: Scene, species: tuple[str, ...], orders: int):
         """One Ams table per species and per distinct analytic phase; the table index of every medium."""
