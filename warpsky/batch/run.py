@@ -275,11 +275,33 @@ def check_writable(directory: Path) -> None:
         raise UsageError(f"output directory {directory} is not writable: {exc.strerror or exc}") from None
 
 
+def prepare_batch(jobs: list[FrameJob]) -> None:
+    """Plan the first frame here, before any frame is dispatched: build the optics tables it needs, so that workers
+    load them from the cache instead of each building them at once, and say when its technique's kernels will be
+    compiled for the first time. A frame whose input is at fault is left to report it when it runs; frames that
+    need other tables still build them themselves."""
+    if not jobs or all(Path(job.out).is_file() and not job.overwrite for job in jobs):
+        return  # nothing to render unless a finished frame is stale, which then builds what it needs itself
+    from warpsky.kernel_cache import compile_notice
+    from warpsky.optics.prepare import prepare_tables
+
+    job = jobs[0]
+    try:
+        scene, plan = plan_frame(_reader(job.stage), job.time_code, job.options)
+    except (WarpskyError, OSError):
+        return
+    prepare_tables(scene, plan)
+    notice = compile_notice(plan.technique)
+    if notice is not None:
+        print(f"warpsky: {notice}", file=sys.stderr, flush=True)
+
+
 def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, log: Path) -> BatchResult:
     """Run ``jobs`` on ``executor``, retrying failures; append this run to ``log`` after every frame."""
     from tqdm import tqdm
 
     started = time.perf_counter()
+    prepare_batch(jobs)
     run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "stage": str(Path(stage).resolve()),
            "executor": executor.name, "argv": sys.argv[1:], "frames": []}
     history = _read_log(log)

@@ -1,5 +1,12 @@
-"""Stratiform cloud layers at work (Bouthors 2006): procedural and file thickness maps, and the map at a time,
-advected by wind and curl noise (Neyret 2003, :mod:`warpsky.media.advection`).
+"""Stratiform cloud layers at work (Bouthors 2006): procedural and file thickness maps, how a map is sampled, and
+the map at a time, advected by wind and curl noise (Neyret 2003, :mod:`warpsky.media.advection`).
+
+Texel footprint: texel (i, j) of an (nx, nz) map over ``size`` from ``origin`` is the thickness at its centre,
+``origin + ((i + 0.5) sx / nx, (j + 0.5) sz / nz)``; between centres the thickness is bilinear, the outer half
+texel keeps the edge texel's value and outside the map it is 0. A clear texel (0 m) next to cloudy ones first
+takes minus their mean (:func:`signed_thickness`) and the bilinear value is clamped at 0, so a hole's outline
+runs halfway between clear and cloudy texel centres, crossing texels diagonally where the field does, instead of
+along the edges of the clear texels' squares.
 
 The layers themselves (:class:`StratiformLayer`, :class:`ThicknessAdvection`, :class:`GroundTexture`) are plain
 data in :mod:`warpsky.scene.layers`, re-exported here; :mod:`warpsky.scene.usd` reads them from USD prims.
@@ -20,7 +27,7 @@ from warpsky.output.exr import read_exr
 from warpsky.scene.layers import GroundTexture, StratiformLayer, ThicknessAdvection
 
 __all__ = ["PROCEDURAL_RESOLUTION", "GroundTexture", "StratiformLayer", "ThicknessAdvection", "at_time",
-           "load_map", "procedural_thickness", "thickness_at_time"]
+           "load_map", "procedural_thickness", "sample_thickness", "signed_thickness", "thickness_at_time"]
 
 #: Texels per side of the procedural map a layer prim without ``thicknessMap`` gets.
 PROCEDURAL_RESOLUTION = 256
@@ -73,6 +80,49 @@ def load_map(path: str | Path, *, channels: int = 1) -> np.ndarray:
     if channels == 1 and data.ndim != 2 or channels == 3 and (data.ndim != 3 or data.shape[2] != 3):
         raise SceneError(f"map {path}: expected {'(nx, nz)' if channels == 1 else '(nx, nz, 3)'}, got {data.shape}")
     return data
+
+
+# ------------------------------------------------------------------------------------------------- sampling
+def signed_thickness(thickness: np.ndarray) -> np.ndarray:
+    """The (nx, nz) map [m] extended into its holes for bilinear sampling: every clear texel with cloudy neighbours
+    along the axes takes minus their mean thickness (with cloudy neighbours only diagonally, minus theirs), so the
+    interpolated thickness crosses 0 halfway between a cloudy and a clear texel centre. Cloudy texels and clear
+    texels away from any cloud keep their values."""
+    cloudy = thickness > 0.0
+    values = np.where(cloudy, thickness, 0.0).astype(np.float64)
+    padded, weights = np.pad(values, 1), np.pad(cloudy.astype(np.float64), 1)
+    nx, nz = values.shape
+
+    def neighbours(offsets):
+        total, count = np.zeros_like(values), np.zeros_like(values)
+        for di, dj in offsets:
+            total += padded[1 + di:1 + di + nx, 1 + dj:1 + dj + nz]
+            count += weights[1 + di:1 + di + nx, 1 + dj:1 + dj + nz]
+        return total, count
+
+    side_total, side_count = neighbours(((1, 0), (-1, 0), (0, 1), (0, -1)))
+    corner_total, corner_count = neighbours(((1, 1), (1, -1), (-1, 1), (-1, -1)))
+    out = values.copy()
+    side = ~cloudy & (side_count > 0)
+    out[side] = -side_total[side] / side_count[side]
+    corner = ~cloudy & (side_count == 0) & (corner_count > 0)
+    out[corner] = -corner_total[corner] / corner_count[corner]
+    return out.astype(np.float32)
+
+
+def sample_thickness(signed: np.ndarray, origin, size, xs: np.ndarray, zs: np.ndarray) -> np.ndarray:
+    """Thickness [m] at world points (``xs``, ``zs``) from a :func:`signed_thickness` map placed at ``origin`` with
+    extent ``size``: bilinear between texel centres, clamped at 0, 0 outside the map (as the kernels sample it)."""
+    nx, nz = signed.shape
+    u = np.clip((xs - origin[0]) / size[0] * nx - 0.5, 0.0, nx - 1)
+    v = np.clip((zs - origin[1]) / size[1] * nz - 0.5, 0.0, nz - 1)
+    i0 = np.minimum(u.astype(int), nx - 2)
+    j0 = np.minimum(v.astype(int), nz - 2)
+    fu, fv = u - i0, v - j0
+    value = ((signed[i0, j0] * (1 - fu) + signed[i0 + 1, j0] * fu) * (1 - fv)
+             + (signed[i0, j0 + 1] * (1 - fu) + signed[i0 + 1, j0 + 1] * fu) * fv)
+    inside = (xs >= origin[0]) & (xs <= origin[0] + size[0]) & (zs >= origin[1]) & (zs <= origin[1] + size[1])
+    return np.where(inside, np.maximum(value, 0.0), 0.0)
 
 
 # ---------------------------------------------------------------------------------------------- advected maps

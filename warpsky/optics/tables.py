@@ -3,11 +3,13 @@
 Each table is stored as ``$WARPSKY_CACHE/optics/<species>-<kind>-<hash>.npz`` (default cache ``~/.cache/warpsky``),
 where the hash covers the species' parameters, the angular grid and :data:`CACHE_VERSION`. Files are written to a
 temporary name and renamed, so concurrent farm workers never read half a table. :data:`BUILD_LOG` records what this
-process computed (as opposed to loaded), so tests and ``warpsky optics build`` can tell a build from a load.
+process computed (as opposed to loaded), so tests and ``warpsky optics build`` can tell a build from a load. A table
+being built prints a line to stderr first (:func:`build_progress`): a build takes seconds to minutes, once.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +27,28 @@ CACHE_VERSION = 1
 DEFAULT_ORDERS = 60
 #: (species, kind, seconds) of every table computed (not loaded) in this process.
 BUILD_LOG: list[tuple[str, str, float]] = []
+#: Seconds each table took to build into an empty cache on a 2-core machine shared with other work (load average
+#: 3-6), one table after another, for the progress line; Ams tables at 60 orders, after their phase table (the
+#: time grows with the orders; rain's and ice's took 28-65 s and 41-53 s as the load varied, here their means).
+#: The storm's four species for slicing: about 3 minutes; phase tables only (the other techniques): about 70 s.
+#: ``benchmarks/bench_optics.py`` measured them on an idle machine: rain's phase 36 s, the four Ams tables 16 s.
+BUILD_SECONDS = {
+    ("cloud", "phase"): 8, ("cloud", "ams"): 2, ("rain", "phase"): 51, ("rain", "ams"): 45,
+    ("ice", "phase"): 11, ("ice", "ams"): 45, ("snow", "phase"): 0.1, ("snow", "ams"): 3,
+    ("stratus", "phase"): 4, ("stratus", "bouthors"): 21,
+}
+#: How the progress line names each kind of table.
+KIND_NAMES = {"phase": "phase", "ams": "multiple-scattering (Ams)", "bouthors": "modified Mie"}
+
+
+def build_progress(species: str, kind: str, orders: int | None = None) -> str:
+    """The line printed before a table is built: ``building rain phase table (≈ 51 s, once)``."""
+    seconds = BUILD_SECONDS.get((species, kind))
+    if seconds is not None and orders is not None:
+        seconds *= orders / DEFAULT_ORDERS
+    estimate = "" if seconds is None else (f"≈ {seconds:.0f} s, " if seconds >= 1.5 else "about a second, ")
+    return (f"building {species} {KIND_NAMES.get(kind, kind)} table ({estimate}once; then loaded from "
+            f"{cache_dir() / 'optics'})")
 
 
 def _path(species: str, kind: str, extra: str = "") -> Path:
@@ -32,7 +56,7 @@ def _path(species: str, kind: str, extra: str = "") -> Path:
     return cache_dir() / "optics" / f"{species}-{kind}{extra}-v{CACHE_VERSION}-{key}.npz"
 
 
-def _cached(species: str, kind: str, build, extra: str = "") -> dict[str, np.ndarray]:
+def _cached(species: str, kind: str, build, extra: str = "", *, orders: int | None = None) -> dict[str, np.ndarray]:
     path = _path(species, kind, extra)
     if path.is_file():
         try:
@@ -40,6 +64,7 @@ def _cached(species: str, kind: str, build, extra: str = "") -> dict[str, np.nda
                 return {k: data[k] for k in data.files}
         except (OSError, ValueError, EOFError):
             pass  # unreadable cache entry: rebuild and overwrite it
+    print(f"warpsky: {build_progress(species, kind, orders)}", file=sys.stderr, flush=True)
     started = time.perf_counter()
     arrays = build()
     BUILD_LOG.append((species, kind, time.perf_counter() - started))
@@ -63,7 +88,7 @@ def ams_table(species: str, orders: int = DEFAULT_ORDERS) -> tuple[np.ndarray, n
         ams = ams_tables(phase_table(species), orders)
         return {"ams": ams, "forward": forward_fractions(ams)}
 
-    data = _cached(species, "ams", build, extra=f"{orders}")
+    data = _cached(species, "ams", build, extra=f"{orders}", orders=orders)
     return data["ams"], data["forward"]
 
 

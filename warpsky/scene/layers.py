@@ -100,8 +100,10 @@ class StratiformLayer:
     ignored. A layer prim that is invisible or inactive is not rendered.
 
     Attributes:
-        thickness: (nx, nz) float32 thickness [m] >= 0, axis 0 along world x, axis 1 along world z; sampled
-            bilinearly between texel centres. With ``advection``, the map at time 0 (the advected source).
+        thickness: (nx, nz) float32 thickness [m] >= 0, axis 0 along world x, axis 1 along world z; texel (i, j)
+            is the thickness at its centre, sampled bilinearly between centres, and a hole's edge runs halfway
+            between clear and cloudy texel centres (see :mod:`warpsky.media.stratiform`). With ``advection``, the
+            map at time 0 (the advected source).
         base_altitude: World y of the cloud base [m].
         origin: World (x, z) of the map's corner at texel (0, 0)'s outer edge [m].
         size: Extent (x, z) [m].

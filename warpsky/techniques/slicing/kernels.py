@@ -2,9 +2,12 @@
 
 Positions are camera-relative metres. Slices are the planes dot(s, x) = c_k perpendicular to the slice axis s; the
 host walks them in increasing c, which always moves away from the sun. Per slice, :func:`eye_kernel` composites the
-slice into the eye buffer (front to back or back to front, Eq. 26) reading the light buffer, then
-:func:`light_kernel` carries the light buffer to the next slice (Eq. 25). The light buffer is a square grid in the
-plane perpendicular to the light, so a texel follows its own light ray from slice to slice (no resampling).
+slice's slab (half a spacing either side of its plane) into the eye buffer (front to back or back to front, Eq. 26)
+reading the light buffer, then :func:`light_kernel` carries the light buffer to the next slice (Eq. 25). The eye
+samples each slab's piece of its ray, cut to the media's boxes, at a fraction of a voxel: one sample per plane
+would count a thin sheet in whole slices, a count that changes from one image row to the next. The light buffer
+is a square grid in the plane perpendicular to the light, so a texel follows its own light ray from slice to slice
+(no resampling).
 
 Every medium has a table of multiple-scattering distributions Ams_n (n = 0..N) and forward fractions F_n: species
 from :mod:`warpsky.optics.tables`, analytic phases in closed form (HG(g)^{*n} = HG(g^n)). Several media at a
@@ -29,7 +32,7 @@ from warpsky.techniques.common import (
     exp3,
     one_minus_exp,
 )
-from warpsky.techniques.single_scatter.kernels import sun_depth_function
+from warpsky.techniques.single_scatter.kernels import media_span, sun_depth_function
 
 
 @wp.struct
@@ -115,6 +118,9 @@ def light_lookup(buffer: wp.array2d(dtype=wp.vec3), frame: SliceFrame, p: wp.vec
     b = buffer[j1, i0] * (1.0 - fx) + buffer[j1, i1] * fx
     return a * (1.0 - fy) + b * fy
 
+
+#: Most samples of the eye ray inside one slice's slab (bounds the cost of few, thick slices).
+MAX_EYE_SAMPLES = wp.constant(64)
 
 #: Scattering events of one light step evaluated one by one; the rest use the last order's forward fraction.
 MAX_EVENTS = wp.constant(64)
@@ -232,6 +238,32 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
 
     sample_media = media_functions(has_detail)
 
+    @wp.func
+    def gather_sample(media: VoxelMedia, tables: AmsTables, frame: SliceFrame, light_i: wp.array2d(dtype=wp.vec3),
+                      light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3, theta: float, length: float):
+        """(light scattered towards the eye, optical depth), RGB, of the piece of the eye ray of ``length`` [m]
+        centred on ``p``."""
+        point = sample_media(media, p)
+        extinction = point.extinction
+        scattering = point.scattering
+        tau = extinction * length
+        out = wp.vec3(0.0)
+        if wp.max(extinction) <= 0.0:
+            return out, tau
+        light = light_lookup(light_i, frame, p)
+        n = light_lookup(light_n, frame, p)
+        # Riley Eq. 26: Ams of one more scattering than the light has had, mixed over media by scattering
+        order = wp.vec3(n[0] + 1.0, n[1] + 1.0, n[2] + 1.0)
+        if wp.static(low_albedo):
+            order = wp.vec3(1.0)
+        phase = mixed_ams_scattering(point, media, tables, order, theta)
+        for c in range(3):
+            if scattering[c] > 0.0:
+                p_c = phase[c] / scattering[c]  # xi included, per medium
+                # scattering integrated exactly over the piece: (1 - e^-tau) albedo instead of beta_s * length
+                out[c] = light[c] * p_c * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
+        return out, tau
+
     @wp.kernel(module="unique")
     def eye_kernel(
         media: VoxelMedia,
@@ -242,12 +274,16 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
         light_i: wp.array2d(dtype=wp.vec3),
         light_n: wp.array2d(dtype=wp.vec3),
         sun: Sun,
+        spans: wp.array2d(dtype=wp.vec2),
+        sample_length: float,
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
         depth_sum: wp.array2d(dtype=wp.vec2),
         row_offset: int,
     ):
-        """Composite the slice plane ``plane`` into the eye buffers (Riley Eq. 26)."""
+        """Composite the slab of the slice plane ``plane`` (half a spacing either side) into the eye buffers (Riley
+        Eq. 26), sampling the pixel's eye ray inside it and inside its ``spans`` at most ``sample_length`` [m]
+        apart."""
         r, col = wp.tid()
         row = r + row_offset
         view = camera_ray(cam, row, col)
@@ -255,32 +291,26 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
         if wp.abs(along) < 1.0e-6:
             return
         t = plane / along
+        half = 0.5 * frame.spacing / wp.abs(along)
         cos_axis = wp.dot(view, camera_forward(cam))
-        if t * cos_axis < cam.near or t * cos_axis > cam.far:
+        # the slab's piece of the eye ray, relative to the plane (an uncut slab's one sample lies on the plane)
+        inside = spans[row, col]
+        lo = wp.max(-half, inside[0] - t)
+        hi = wp.min(half, inside[1] - t)
+        if hi <= lo:
             return
-        p = view * t
-        step = frame.spacing / wp.abs(along)
-        point = sample_media(media, p)
-        extinction = point.extinction
-        scattering = point.scattering
-        if wp.max(extinction) <= 0.0:
-            return
-        light = light_lookup(light_i, frame, p)
-        n = light_lookup(light_n, frame, p)
+        count = wp.min(int(wp.ceil((hi - lo) / sample_length)), MAX_EYE_SAMPLES)
+        length = (hi - lo) / float(count)
         theta = scattering_angle(sun.direction, view)
-        # Riley Eq. 26: Ams of one more scattering than the light has had, mixed over media by scattering
-        order = wp.vec3(n[0] + 1.0, n[1] + 1.0, n[2] + 1.0)
-        if wp.static(low_albedo):
-            order = wp.vec3(1.0)
-        phase = mixed_ams_scattering(point, media, tables, order, theta)
         contribution = wp.vec3(0.0)
-        tau = extinction * step
-        keep = exp3(tau)
-        for c in range(3):
-            if scattering[c] > 0.0:
-                p_c = phase[c] / scattering[c]  # xi included, per medium
-                # scattering integrated exactly over the step: (1 - e^-tau) albedo instead of beta_s * step
-                contribution[c] = light[c] * p_c * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
+        keep = wp.vec3(1.0)
+        for k in range(count):  # front to back inside the slab
+            p = view * (t + (lo + (float(k) + 0.5) * length))
+            scattered, tau = gather_sample(media, tables, frame, light_i, light_n, p, theta, length)
+            contribution += wp.cw_mul(keep, scattered)
+            keep = wp.cw_mul(keep, exp3(tau))
+        if keep[0] >= 1.0 and keep[1] >= 1.0 and keep[2] >= 1.0:
+            return
         before = transmittance[row, col]
         if frame.front_to_back != 0:
             radiance[row, col] = radiance[row, col] + wp.cw_mul(before, contribution)
@@ -294,6 +324,16 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
         depth_sum[row, col] = depth_sum[row, col] + wp.vec2(weight * t * cos_axis, weight)
 
     return eye_kernel
+
+
+@wp.kernel
+def eye_span_kernel(media: VoxelMedia, cam: PinholeCamera, spans: wp.array2d(dtype=wp.vec2)):
+    """Each pixel's eye-ray interval [m] inside the media's boxes and the clipping range (empty: y <= x). The eye
+    gather samples only there, so a box face cuts a slab's samples where it lies instead of at whole samples."""
+    row, col = wp.tid()
+    view = camera_ray(cam, row, col)
+    cos_axis = wp.dot(view, camera_forward(cam))
+    spans[row, col] = media_span(media, view, cam.near / cos_axis, cam.far / cos_axis)
 
 
 @kernel_variants(low_albedo=(False, True), equation=(0, 24, 25), has_detail=(False, True))

@@ -21,7 +21,13 @@ from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import PhaseKind, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
-from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
+from warpsky.techniques.slicing.kernels import (
+    AmsTables,
+    SliceFrame,
+    eye_span_kernel,
+    ground_kernel,
+    slicing_kernels,
+)
 from warpsky.techniques.sunlight import sunlight
 
 #: Bytes per pixel of the ground pass's device copy of the layer.
@@ -56,6 +62,11 @@ class SlicingSettings(TechniqueSettings):
                                       "their thickness)", auto="one per voxel edge of the finest field across that "
                                       "extent, clamped to 32..512")
     light_resolution: int = setting(256, unit="texel", range=">= 2", help="edge of the square light buffer")
+    eye_samples: float = setting(2.0, unit="1/voxel", range="> 0", help="samples of each eye ray per voxel edge "
+                                 "of the finest field inside every slice's slab (at least one per slab). One per "
+                                 "slice striped thin sheets seen obliquely row by row (a uniform 4-voxel sheet seen "
+                                 "as the storm's anvil is: rows 1.1% off a smooth profile); 1: 0.4%, 2: 0.1%, "
+                                 "more gains nothing")
     xi: float = setting(0.01, unit="1/sr", range=">= 0", help="Riley's back-scatter term added to the phase in the "
                         "eye gather, for media without their own warpsky:slicing:xi; 0.01 lowered the median, p90 "
                         "and worst error together on the validation family's tune half (0.1 tripled the p90)")
@@ -74,6 +85,8 @@ class SlicingSettings(TechniqueSettings):
                 continue
             if not (math.isfinite(value) and value >= low and float(value).is_integer()):
                 raise UsageError(f"setting {name} must be a whole number >= {low}, got {value}")
+        if not (math.isfinite(self.eye_samples) and self.eye_samples > 0.0):
+            raise UsageError(f"setting eye_samples must be a finite number > 0 [1/voxel], got {self.eye_samples}")
         if not (math.isfinite(self.xi) and self.xi >= 0.0):
             raise UsageError(f"setting xi must be a finite phase value >= 0 [1/sr], got {self.xi}")
 
@@ -234,14 +247,17 @@ class Slicing:
                 cam = pinhole_camera(camera, width, height)
                 sun_view = sun_struct(sun)
                 spacing = float(frame.spacing)
+                sample_length = float(media.min_voxel_size) / float(settings.eye_samples)
+                spans = wp.empty(shape, dtype=wp.vec2)
+                wp.launch(eye_span_kernel, dim=shape, inputs=[media.media, cam, spans])
                 # the light enters the media's extent half a slice before the first plane: carry it there first
                 # (starting it unattenuated at the first plane is a first-order error in the slice count)
                 wp.launch(light_kernel, dim=(res, res), inputs=[
                     media.media, ams, frame, float(planes[0]) - 0.5 * spacing, 0.5 * spacing, light_i, light_n])
                 for plane in planes:
                     launch_rows(eye_kernel, height, width, [
-                        media.media, ams, cam, frame, float(plane), light_i, light_n, sun_view, radiance,
-                        transmittance, depth_sum], device)
+                        media.media, ams, cam, frame, float(plane), light_i, light_n, sun_view, spans,
+                        sample_length, radiance, transmittance, depth_sum], device)
                     wp.launch(light_kernel, dim=(res, res), inputs=[
                         media.media, ams, frame, float(plane), spacing, light_i, light_n])
                     slices += 1

@@ -40,6 +40,9 @@ def map_coord(x: float, origin: float, size: float, n: int) -> float:
 
 @wp.func
 def thickness_at(thickness: wp.array2d(dtype=float), g: LayerGeometry, x: float, z: float) -> float:
+    """Thickness [m] at camera-relative (x, z) from a :func:`~warpsky.media.stratiform.signed_thickness` map:
+    bilinear between texel centres, clamped at 0 (a hole's edge lies where the signed values cross 0), the edge
+    texels' values out to the map's border and 0 beyond it."""
     if x < g.x0 or z < g.z0 or x > g.x0 + g.sx or z > g.z0 + g.sz:
         return 0.0
     nu = thickness.shape[0]
@@ -50,8 +53,8 @@ def thickness_at(thickness: wp.array2d(dtype=float), g: LayerGeometry, x: float,
     j0 = wp.min(int(v), nv - 2)
     fu = u - float(i0)
     fv = v - float(j0)
-    return (thickness[i0, j0] * (1.0 - fu) + thickness[i0 + 1, j0] * fu) * (1.0 - fv) + (
-        thickness[i0, j0 + 1] * (1.0 - fu) + thickness[i0 + 1, j0 + 1] * fu) * fv
+    return wp.max((thickness[i0, j0] * (1.0 - fu) + thickness[i0 + 1, j0] * fu) * (1.0 - fv) + (
+        thickness[i0, j0 + 1] * (1.0 - fu) + thickness[i0 + 1, j0 + 1] * fu) * fv, 0.0)
 
 
 @wp.func
@@ -143,15 +146,19 @@ def stratiform_kernel(
         e = order_energies(params, h * optics.to_reference, mu_sun, kappa_ref_s)
         t_ms = e.t_ms
         r_ms = 1.0 - t_ms
+        unscattered = wp.exp(-optics.kappa * h / mu_v)
+        # T_ms counts the unscattered light too, which reaches the eye from behind the layer through its
+        # transmittance; only the scattered rest is added here, so a thinning edge fades into what lies behind
+        t_scattered = wp.max(t_ms - unscattered, 0.0)
         c_ground = grid_lookup(radiosity_c, p[0], p[2], grid_box[0], grid_box[1], grid_box[2], grid_box[3]) * INV_PI
         sun_part = wp.vec3(0.0)
         if lit:
             sun_part = wp.cw_mul(shade.i0 + shade.i1 + shade.i2 + shade.i3, sun_irradiance)
         if below:
-            out = sun_part + sky_radiance * t_ms + c_ground * r_ms
+            out = sun_part + sky_radiance * t_scattered + c_ground * r_ms
         else:
-            out = sun_part + sky_radiance * r_ms + c_ground * t_ms
-        tr = wp.vec3(wp.exp(-optics.kappa * h / mu_v))
+            out = sun_part + sky_radiance * r_ms + c_ground * t_scattered
+        tr = wp.vec3(unscattered)
         z_depth = t_hit * cos_axis
     # ---- the ground, seen through the cloud
     if has_ground != 0 and d[1] < 0.0 and ground_y < 0.0:

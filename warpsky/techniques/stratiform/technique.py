@@ -11,7 +11,7 @@ import numpy as np
 
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
-from warpsky.media.stratiform import GroundTexture, StratiformLayer, at_time
+from warpsky.media.stratiform import GroundTexture, StratiformLayer, at_time, sample_thickness, signed_thickness
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
@@ -91,7 +91,7 @@ def radiosity_grid(layer: StratiformLayer, ground_height: float, detail: int):
 
 
 def _sample(map2d: np.ndarray, origin, size, xs: np.ndarray, zs: np.ndarray) -> np.ndarray:
-    """Nearest-texel lookup of a (nx, nz[, C]) map at world points (clamped; 0 outside for thickness maps)."""
+    """Nearest-texel lookup of a (nx, nz[, C]) map at world points (clamped at its edges)."""
     nx, nz = map2d.shape[:2]
     i = np.clip(((xs - origin[0]) / size[0] * nx).astype(int), 0, nx - 1)
     j = np.clip(((zs - origin[1]) / size[1] * nz).astype(int), 0, nz - 1)
@@ -125,9 +125,7 @@ class Stratiform:
         xs = x0 + (np.arange(shape[0])[:, None] + sub[None, :]).reshape(-1) * pixel
         zs = z0 + (np.arange(shape[1])[:, None] + sub[None, :]).reshape(-1) * pixel
         X, Z = np.meshgrid(xs, zs, indexing="ij")
-        inside = ((X >= layer.origin[0]) & (X <= layer.origin[0] + layer.size[0]) & (Z >= layer.origin[1])
-                  & (Z <= layer.origin[1] + layer.size[1]))
-        thick = np.where(inside, _sample(layer.thickness, layer.origin, layer.size, X, Z), 0.0)
+        thick = sample_thickness(signed_thickness(layer.thickness), layer.origin, layer.size, X, Z)
         light = sunlight(scene)
         sun = light.direction if light is not None else np.array([0.0, 1.0, 0.0])
         irradiance = light.irradiance if light is not None and light.lit else np.zeros(3)
@@ -198,8 +196,8 @@ class Stratiform:
             transmittance = wp.zeros(shape, dtype=wp.vec3)
             depth = wp.zeros(shape, dtype=float)
             inputs = [
-                pinhole_camera(camera, width, height), wp.array(layer.thickness, dtype=float), g, tables.values,
-                params, slab_optics,
+                pinhole_camera(camera, width, height), wp.array(signed_thickness(layer.thickness), dtype=float), g,
+                tables.values, params, slab_optics,
                 sun_struct(sunlight(scene), unlit_direction=(0.0, -1.0, 0.0)), wp.vec3(*sky.tolist()),
                 int(ground is not None and draw_ground), ground_struct(ground, eye),
                 wp.array(np.ascontiguousarray(albedo, dtype=np.float32), dtype=wp.vec3), rel(abox),
