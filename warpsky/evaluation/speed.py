@@ -50,14 +50,15 @@ DEFAULT_SPP = 16
 DEFAULT_STAGES = ("usd_scenes/cumulus.usda", "usd_scenes/stratocumulus.usda")
 #: Columns of :func:`format_table`, in order.
 COLUMNS = ("device", "threads", "stage", "technique", "size", "cold ms", "cold kernels", "warm ms", "fps",
-           "kernel ms", "copy ms", "peak MiB", "Mpaths/s", "settings")
+           "CPU/wall", "kernel ms", "copy ms", "peak MiB", "Mpaths/s", "settings")
 LEFT_ALIGNED = ("device", "stage", "technique", "cold kernels", "settings")
 ROW_MARKER = "WARPSKY_SPEED_ROW "
 #: What the columns measure (under the table and in the JSON).
 NOTE = ("cold: plan + first frame of a fresh process (kernels compiled or loaded from Warp's cache, as 'cold kernels' "
-        "says); warm: median frame after it; kernel/copy ms: CUDA events of one more frame (n/a on the CPU); "
-        "peak MiB: CUDA mempool high-water mark on GPUs, process peak RSS on the CPU; Mpaths/s: the Monte Carlo part "
-        "only (hybrid: frame time less single scattering and denoising).")
+        "says); warm: median frame after it; CPU/wall: process CPU time over wall time of the warm frames (the "
+        "cores kept busy; a GPU row counts the host thread); kernel/copy ms: CUDA events of one more frame (n/a on "
+        "the CPU); peak MiB: CUDA mempool high-water mark on GPUs, process peak RSS on the CPU; Mpaths/s: the Monte "
+        "Carlo part only (hybrid: frame time less single scattering and denoising).")
 
 
 @dataclass
@@ -236,13 +237,14 @@ def _frame(scene, spec: RowSpec):
     return (lambda: render_layers(plan.renderer, scene, plan)[0]), plan
 
 
-def _timed(render) -> tuple[float, object]:
+def _timed(render) -> tuple[float, object, float]:
+    """(wall ms, the frame's layer, process CPU ms: every thread's, so CPU / wall is the cores the frame kept busy)."""
     import warp as wp
 
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     layer = render()
     wp.synchronize()
-    return 1e3 * (time.perf_counter() - started), layer
+    return 1e3 * (time.perf_counter() - started), layer, 1e3 * (time.process_time() - cpu_started)
 
 
 def monte_carlo(layer) -> tuple[int, float] | None:
@@ -309,9 +311,10 @@ def measure_row(spec: RowSpec) -> dict:
         warm = [_timed(render) for _ in range(max(1, spec.frames))]
         activity = cuda_activity(render, spec.device) if spec.device.startswith("cuda") else {}
         peak, peak_kind = peak_memory(spec.device)
-    traced = [mc for mc in (monte_carlo(layer) for _, layer in warm) if mc is not None and mc[1] > 0.0]
-    warm_frames_ms = [ms for ms, _ in warm]
+    traced = [mc for mc in (monte_carlo(layer) for _, layer, _ in warm) if mc is not None and mc[1] > 0.0]
+    warm_frames_ms = [ms for ms, _, _ in warm]
     warm_ms = statistics.median(warm_frames_ms)
+    cores_busy = sum(cpu for _, _, cpu in warm) / sum(warm_frames_ms)
     return {
         **dataclasses.asdict(spec),
         "width": plan.width,
@@ -326,6 +329,7 @@ def measure_row(spec: RowSpec) -> dict:
         "warm_ms": warm_ms,
         "warm_frames_ms": warm_frames_ms,
         "fps": 1e3 / warm_ms,
+        "cores_busy": cores_busy,
         "kernel_ms": activity.get("kernel_ms"),
         "copy_ms": activity.get("copy_ms"),
         "cuda_activity": activity or None,
@@ -353,6 +357,7 @@ def table_cells(row: dict) -> list[str]:
     paths = row.get("paths_per_s")
     return head + [
         f"{row['cold_ms']:.0f}", row["cold_kernels"], f"{row['warm_ms']:.1f}", f"{row['fps']:.2f}",
+        _cell(row.get("cores_busy"), ".2f", "-"),
         _cell(row.get("kernel_ms"), ".2f", gpu_missing), _cell(row.get("copy_ms"), ".2f", gpu_missing),
         _cell(row.get("peak_mib"), ".0f", "-"), "-" if paths is None else f"{paths / 1e6:.2f}", settings,
     ]
