@@ -27,6 +27,7 @@ from warpsky.device import init_warp, resolve_device
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
 from warpsky.evaluation.family import FAMILY_HELP, format_family_table, run_family, write_family_outputs
+from warpsky.evaluation.speed import add_speed_parser, run_speed_command
 from warpsky.interrupt import Interrupted, report_interrupt, sigint_stops_renders
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
@@ -250,8 +251,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_bench(sub) -> None:
-    """``warpsky bench error-vs-time``: one STAGE or a validation family."""
-    bench = sub.add_parser("bench", help="measure techniques: error against a path-traced reference vs time",
+    """``warpsky bench error-vs-time`` (one STAGE or a validation family) and ``warpsky bench speed``."""
+    bench = sub.add_parser("bench", help="measure techniques: error against a path-traced reference vs time, speed",
                            description="Benchmarks that read a stage.")
     bench_verbs = bench.add_subparsers(dest="bench_command", metavar="VERB", required=True)
     evt = bench_verbs.add_parser(
@@ -284,6 +285,7 @@ def _add_bench(sub) -> None:
     evt.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
     evt.add_argument("--no-cache", action="store_true", help="render the reference even if it is cached")
     evt.add_argument("-o", "--output-dir", type=Path, default=Path("out"), help="where the CSV/JSON/PNG go")
+    add_speed_parser(bench_verbs, _resolution)
 
 
 def _settings(args) -> dict[str, str]:
@@ -374,6 +376,8 @@ def _log_progress(text: str) -> None:
 
 
 def cmd_bench(args) -> int:
+    if args.bench_command == "speed":
+        return run_speed_command(args, log=_log_progress)
     if (args.stage is None) == (args.family is None):
         given = f"both STAGE ({args.stage}) and --family ({args.family})" if args.stage else "neither"
         raise UsageError(f"bench error-vs-time measures exactly one of STAGE or --family DIR; got {given}")
