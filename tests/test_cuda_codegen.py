@@ -3,20 +3,39 @@
 from __future__ import annotations
 
 import ast
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pytest
 import warp as wp
 
-from warpsky.kernel_registry import kernel_modules
+from warpsky.kernel_registry import compile_ptx, kernel_modules
 from warpsky.kernel_variants import registered_factories
+
+MODULES = kernel_modules()
+
+
+@pytest.fixture(scope="module")
+def ptx_builds(request, tmp_path_factory):
+    """The selected modules' sm_90 compiles, started at once on a pool of processes (one per core, at most 4): each
+    NVRTC compile uses one core, so the suite's longest part runs side by side. Each test then waits for its own."""
+    selected = {item.callspec.params["module"].name for item in request.session.items
+                if getattr(item, "originalname", "") == "test_module_compiles_to_sm90_ptx"}
+    folder = tmp_path_factory.mktemp("ptx")
+    pool = ProcessPoolExecutor(max(1, min(os.cpu_count() or 1, 4)), mp_context=multiprocessing.get_context("spawn"))
+    futures = {m.name: pool.submit(compile_ptx, i, str(folder / str(i))) for i, m in enumerate(MODULES)
+               if m.name in selected}
+    yield futures
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("module", kernel_modules(), ids=lambda m: m.name)
-def test_module_compiles_to_sm90_ptx(module, tmp_path):
-    outputs = wp.compile_aot_module(module, arch=90, use_ptx=True, module_dir=tmp_path)
-    ptx = [p for p in outputs if str(p).endswith(".ptx")]
+@pytest.mark.parametrize("module", MODULES, ids=lambda m: m.name)
+def test_module_compiles_to_sm90_ptx(module, ptx_builds):
+    outputs = ptx_builds[module.name].result()
+    ptx = [Path(p) for p in outputs if str(p).endswith(".ptx")]
     assert ptx, f"no PTX produced for {module.name}: {outputs}"
     text = ptx[0].read_text()
     assert ".target sm_90" in text and ".entry" in text

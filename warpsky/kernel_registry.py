@@ -31,3 +31,10 @@ PLAIN_MODULES = (fields, optics, ice_kernels, sky, evaluation_slab, stratiform_r
 def kernel_modules() -> list:
     """Warp ``Module`` objects for every kernel warpsky can launch."""
     return [wp.get_module(m.__name__) for m in PLAIN_MODULES] + variant_modules()
+
+
+def compile_ptx(index: int, folder: str, arch: int = 90) -> list[str]:
+    """Compile ``kernel_modules()[index]`` to PTX for ``arch`` into ``folder``; the output paths. A function of
+    plain arguments, so that separate processes can compile modules side by side (NVRTC uses one core)."""
+    module = kernel_modules()[index]
+    return [str(p) for p in wp.compile_aot_module(module, arch=arch, use_ptx=True, module_dir=folder)]
