@@ -117,8 +117,8 @@ class Hybrid:
     work as with ``single_scatter``: the sky pass draws the air's single scattering around the media's layer,
     while the paths are traced through the air too (skylight on the media, light between air, media and ground,
     the air's own multiple scattering). Next to stratiform layers the front-air correction uses the media's own
-    depth. AOVs:
-    ``single_scatter`` and ``multiple_scatter`` radiance, ``variance`` of the noisy multiple-scattering mean.
+    depth. AOVs: ``single_scatter`` and ``multiple_scatter`` radiance, ``variance`` of the noisy
+    multiple-scattering mean.
     """
 
     name = "hybrid"
