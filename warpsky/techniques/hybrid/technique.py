@@ -42,6 +42,7 @@ from warpsky.techniques.path_tracer.technique import (
     path_tracing_memory,
     path_work,
     pixel_sums,
+    sums_layer,
 )
 from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
 from warpsky.techniques.sky.technique import SkyPass, unattenuated_sun
@@ -254,7 +255,8 @@ class MultipleScattering:
                 stop = "time_budget"
                 break
         wp.synchronize_device(self.device)
-        mean, variance, counters = self.mean_and_variance()
+        film = self.film()
+        mean, variance = film.radiance, film.aovs["variance"]
         image, denoise_seconds, sanitised = mean, 0.0, 0
         if s.denoise:
             result = denoise(mean, coverage, radius=s.mean_radius)
@@ -270,22 +272,17 @@ class MultipleScattering:
                   f"error of {estimate:.1%}, above the target {s.target_error:.1%}", file=sys.stderr)
         stats = {"spp": done, "passes": passes, "stopped_by": stop, "error_estimate": estimate,
                  "target_error": s.target_error, "denoise_seconds": denoise_seconds,
-                 "sanitised_values": sanitised, "tracking_steps": int(counters[..., 0].sum()),
-                 "capped_paths": int(counters[..., 1].sum()), "paths": done * counters.shape[0] * counters.shape[1]}
+                 "sanitised_values": sanitised, "tracking_steps": film.stats["tracking_steps"],
+                 "capped_paths": film.stats["capped_paths"], "paths": done * mean.shape[0] * mean.shape[1]}
         return image, variance, stats
 
     def half_mean(self, half: int) -> np.ndarray:
         return self.halves[half].radiance_sum.numpy() / max(self.counts[half], 1)
 
-    def mean_and_variance(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(mean of every path, variance of that mean, summed (steps, capped) counters)."""
-        n = sum(self.counts)
-        total = sum(h.radiance_sum.numpy().astype(np.float64) for h in self.halves)
-        squares = sum(h.radiance_sq.numpy().astype(np.float64) for h in self.halves)
-        mean = total / max(n, 1)
-        variance = np.maximum(squares / max(n, 1) - mean**2, 0.0) / max(n - 1, 1)
-        counters = sum(h.counters.numpy() for h in self.halves)
-        return mean.astype(np.float32), variance.astype(np.float32), counters
+    def film(self) -> Layer:
+        """Both halves' paths as the path tracer reports its own: their mean, the variance of that mean
+        (``aovs["variance"]``) and the tracking counters (``stats``)."""
+        return sums_layer(self.halves, sum(self.counts), far=0.0)
 
     def estimate(self, single: np.ndarray, coverage: np.ndarray, covered: np.ndarray) -> float:
         """Estimated relative RMSE of the frame over ``covered`` pixels (0 when nothing is covered)."""
@@ -297,8 +294,7 @@ class MultipleScattering:
             a, b = denoise(a, coverage, radius=radius).image, denoise(b, coverage, radius=radius).image
             spread = 0.5 * (a - b)
         else:
-            _, variance, _ = self.mean_and_variance()
-            spread = np.sqrt(variance)
+            spread = np.sqrt(self.film().aovs["variance"])
         level = float((single[covered] + 0.5 * (a[covered] + b[covered])).mean())
         if level <= 0.0:
             return 0.0
