@@ -16,31 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from warpsky.evaluation.family_shapes import fbm
+
 #: Cloud footprint [m] along x and z, and height [m] along y; the grid spans this box.
 EXTENT_XZ = 2400.0
 EXTENT_Y = 1600.0
 BASE_HEIGHT = 1000.0  # cloud base above the ground [m]
-
-
-def value_noise(points: np.ndarray, rng: np.random.Generator, cells: int) -> np.ndarray:
-    """Smooth periodic value noise in [0, 1] at ``points`` in [0, 1]^3 with ``cells`` lattice cells per axis."""
-    lattice = rng.random((cells, cells, cells))
-    scaled = points * cells
-    base = np.floor(scaled).astype(np.int64)
-    frac = scaled - base
-    smooth = frac * frac * (3.0 - 2.0 * frac)
-    result = np.zeros(points.shape[:-1])
-    for dx in (0, 1):
-        for dy in (0, 1):
-            for dz in (0, 1):
-                idx = (base + np.array([dx, dy, dz])) % cells
-                w = (
-                    (smooth[..., 0] if dx else 1.0 - smooth[..., 0])
-                    * (smooth[..., 1] if dy else 1.0 - smooth[..., 1])
-                    * (smooth[..., 2] if dz else 1.0 - smooth[..., 2])
-                )
-                result += w * lattice[idx[..., 0], idx[..., 1], idx[..., 2]]
-    return result
 
 
 def cumulus_density(resolution: int = 96, seed: int = 7) -> tuple[np.ndarray, float]:
@@ -70,8 +51,7 @@ def cumulus_density(resolution: int = 96, seed: int = 7) -> tuple[np.ndarray, fl
         shape = np.maximum(shape, np.clip(1.0 - d, 0.0, None))
     flat_base = np.clip(Y / 100.0, 0.0, 1.0)
     points = np.stack([(X + EXTENT_XZ / 2) / EXTENT_XZ, Y / EXTENT_Y, (Z + EXTENT_XZ / 2) / EXTENT_XZ], axis=-1)
-    fbm = sum(0.5**o * value_noise(points, rng, 6 * 2**o) for o in range(4)) / sum(0.5**o for o in range(4))
-    density = np.clip((shape * 3.0 - 0.8 * fbm) * flat_base, 0.0, 1.0)
+    density = np.clip((shape * 3.0 - 0.8 * fbm(points, rng, 6)) * flat_base, 0.0, 1.0)
     # Zero the outermost voxels so every format (clamped .npy, background-padded VDB) agrees at the edges.
     density[[0, -1], :, :] = 0.0
     density[:, [0, -1], :] = 0.0

@@ -52,7 +52,8 @@ class CloudShape:
 
 
 def value_noise(points: np.ndarray, rng: np.random.Generator, cells: int) -> np.ndarray:
-    """Smooth periodic value noise in [0, 1] at ``points`` in [0, 1]^3 with ``cells`` lattice cells per axis."""
+    """Smooth periodic value noise in [0, 1] at ``points`` in [0, 1]^3 with ``cells`` lattice cells per axis (also
+    the demo cumulus's, through :func:`fbm`, in ``tools/make_cumulus.py``)."""
     lattice = rng.random((cells, cells, cells))
     scaled = points * cells
     base = np.floor(scaled).astype(np.int64)
