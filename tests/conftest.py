@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from warpsky.device import init_warp
+from warpsky.evaluation.family_stages import rotation_towards
 
 init_warp()
 
@@ -24,16 +25,6 @@ def _devices() -> list[str]:
 def device(request) -> str:
     """Every test taking ``device`` runs on the CPU and on each CUDA device present."""
     return request.param
-
-
-def rotation_towards(direction) -> np.ndarray:
-    """A rotation whose +Z axis points along ``direction``."""
-    z = np.asarray(direction, dtype=np.float64)
-    z = z / np.linalg.norm(z)
-    helper = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z])
 
 
 def look_rotation(forward) -> np.ndarray:
