@@ -208,6 +208,20 @@ def format_table(report: Report) -> str:
     return "\n".join(lines)
 
 
+def write_rows_csv(path: Path, row_type, rows) -> None:
+    """``rows`` (dataclasses of ``row_type``) as a CSV with one column per field, written atomically."""
+    columns = [f.name for f in dataclasses.fields(row_type)]
+
+    def write(tmp):
+        with open(tmp, "w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(columns)
+            for r in rows:
+                writer.writerow([getattr(r, c) for c in columns])
+
+    atomic_write(path, write)
+
+
 def write_outputs(report: Report, out_dir: Path, stem: str = "error_vs_time") -> list[Path]:
     """CSV, JSON and a log-log PNG (one curve per technique) into ``out_dir``."""
     import matplotlib  # heavy: loads only when the report's plot is written
@@ -218,16 +232,7 @@ def write_outputs(report: Report, out_dir: Path, stem: str = "error_vs_time") ->
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / f"{stem}.csv", out_dir / f"{stem}.json", out_dir / f"{stem}.png"]
-    columns = [f.name for f in dataclasses.fields(Row)]
-
-    def write_csv(tmp):
-        with open(tmp, "w", newline="") as handle:
-            writer = csv.writer(handle)
-            writer.writerow(columns)
-            for r in report.rows:
-                writer.writerow([getattr(r, c) for c in columns])
-
-    atomic_write(paths[0], write_csv)
+    write_rows_csv(paths[0], Row, report.rows)
     blob = json.dumps({"rows": [dataclasses.asdict(r) for r in report.rows], "reference": report.reference,
                        "note": "seconds exclude first-compile time"}, indent=2)
     atomic_write(paths[1], lambda tmp: Path(tmp).write_text(blob))

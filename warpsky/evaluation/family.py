@@ -30,7 +30,6 @@ median_s            median render time [s], first compiles excluded
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import hashlib
 import json
@@ -51,6 +50,7 @@ from warpsky.evaluation.error_vs_time import (
     reference_image,
     render_frame_radiance,
     setting_label,
+    write_rows_csv,
 )
 from warpsky.evaluation.family_stages import HALVES, load_family, make_family
 from warpsky.files import atomic_write, cache_dir
@@ -312,16 +312,7 @@ def write_family_outputs(report: FamilyReport, out_dir: str | Path, stem: str = 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / f"{stem}.csv", out_dir / f"{stem}.json", out_dir / f"{stem}.png"]
-    columns = [f.name for f in dataclasses.fields(FamilyRow)]
-
-    def write_csv(tmp):
-        with open(tmp, "w", newline="") as handle:
-            writer = csv.writer(handle)
-            writer.writerow(columns)
-            for r in report.rows:
-                writer.writerow([getattr(r, c) for c in columns])
-
-    atomic_write(paths[0], write_csv)
+    write_rows_csv(paths[0], FamilyRow, report.rows)
     rows = [{k: _finite(v) for k, v in dataclasses.asdict(r).items()} for r in report.rows]
     references = [{k: _finite(v) for k, v in r.items()} for r in report.references]
     blob = json.dumps({"settings": report.settings, "aggregate": report.aggregate, "rows": rows,
