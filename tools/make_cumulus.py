@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.evaluation.family_shapes import fbm
+from warpsky.evaluation.family_shapes import fbm, soft_spheres, with_turrets
 
 #: Cloud footprint [m] along x and z, and height [m] along y; the grid spans this box.
 EXTENT_XZ = 2400.0
@@ -34,21 +34,9 @@ def cumulus_density(resolution: int = 96, seed: int = 7) -> tuple[np.ndarray, fl
     y = (np.arange(ny) + 0.5) * voxel
     z = (np.arange(nz) + 0.5) * voxel - EXTENT_XZ / 2
     X, Y, Z = np.meshgrid(x, y, z, indexing="ij")
-    # Soft spheres: a big central tower, shoulders around it, all sitting on the base at y = 0.
-    shape = np.zeros_like(X)
+    # Soft spheres: a big central tower, shoulders around it, all sitting on the base at y = 0, and turrets.
     blobs = [(0.0, 420.0, 0.0, 480.0), (-380.0, 260.0, 120.0, 330.0), (360.0, 240.0, -80.0, 320.0)]
-    # Cauliflower: smaller turrets whose centres sit on the surface of the big ones, biased upwards.
-    for _ in range(28):
-        cx, cy, cz, r = blobs[rng.integers(0, 3)]
-        direction = rng.normal(size=3)
-        direction[1] = abs(direction[1]) * 1.5
-        direction /= np.linalg.norm(direction)
-        radius = rng.uniform(0.25, 0.45) * r
-        centre = np.array([cx, cy, cz]) + direction * r * 0.85
-        blobs.append((centre[0], max(centre[1], radius * 0.6), centre[2], radius))
-    for cx, cy, cz, r in blobs:
-        d = np.sqrt((X - cx) ** 2 + (Y - cy) ** 2 + (Z - cz) ** 2) / r
-        shape = np.maximum(shape, np.clip(1.0 - d, 0.0, None))
+    shape = soft_spheres(X, Y, Z, with_turrets(rng, blobs, 28))
     flat_base = np.clip(Y / 100.0, 0.0, 1.0)
     points = np.stack([(X + EXTENT_XZ / 2) / EXTENT_XZ, Y / EXTENT_Y, (Z + EXTENT_XZ / 2) / EXTENT_XZ], axis=-1)
     density = np.clip((shape * 3.0 - 0.8 * fbm(points, rng, 6)) * flat_base, 0.0, 1.0)

@@ -99,12 +99,28 @@ def _unit_points(X, Y, Z, size) -> np.ndarray:
     return np.stack([X / size[0], Y / size[1], Z / size[2]], axis=-1)
 
 
-def _soft_spheres(X, Y, Z, blobs) -> np.ndarray:
+def soft_spheres(X, Y, Z, blobs) -> np.ndarray:
+    """Union (max) of cones 1 - distance / r of the spheres ``blobs`` (cx, cy, cz, r) at the points X, Y, Z."""
     shape = np.zeros_like(X)
     for cx, cy, cz, r in blobs:
         d = np.sqrt((X - cx) ** 2 + (Y - cy) ** 2 + (Z - cz) ** 2) / r
         shape = np.maximum(shape, np.clip(1.0 - d, 0.0, None))
     return shape
+
+
+def with_turrets(rng, blobs: list, count: int) -> list:
+    """``blobs`` (cx, cy, cz, r) and ``count`` smaller turrets whose centres sit on the surfaces of the first three,
+    biased upwards: a cauliflower top."""
+    blobs = list(blobs)
+    for _ in range(count):
+        cx, cy, cz, r = blobs[rng.integers(0, 3)]
+        direction = rng.normal(size=3)
+        direction[1] = abs(direction[1]) * 1.5
+        direction /= np.linalg.norm(direction)
+        radius = rng.uniform(0.25, 0.45) * r
+        centre = np.array([cx, cy, cz]) + direction * r * 0.85
+        blobs.append((centre[0], max(centre[1], radius * 0.6), centre[2], radius))
+    return blobs
 
 
 def cumulus(rng, footprint: float, base: float, resolution: int) -> CloudShape:
@@ -114,15 +130,7 @@ def cumulus(rng, footprint: float, base: float, resolution: int) -> CloudShape:
     f, c = footprint, footprint / 2
     blobs = [(c, 0.26 * f, c, 0.3 * f), (c - 0.22 * f, 0.16 * f, c + 0.07 * f, 0.21 * f),
              (c + 0.21 * f, 0.15 * f, c - 0.05 * f, 0.2 * f)]
-    for _ in range(24):
-        cx, cy, cz, r = blobs[rng.integers(0, 3)]
-        direction = rng.normal(size=3)
-        direction[1] = abs(direction[1]) * 1.5
-        direction /= np.linalg.norm(direction)
-        radius = rng.uniform(0.25, 0.45) * r
-        centre = np.array([cx, cy, cz]) + direction * r * 0.85
-        blobs.append((centre[0], max(centre[1], radius * 0.6), centre[2], radius))
-    shape = _soft_spheres(X, Y, Z, blobs)
+    shape = soft_spheres(X, Y, Z, with_turrets(rng, blobs, 24))
     flat_base = np.clip(Y / (0.04 * f), 0.0, 1.0)
     noise = fbm(_unit_points(X, Y, Z, size), rng, 5)
     lower = np.array([-c, base, -c])
@@ -165,7 +173,7 @@ def towering(rng, footprint: float, base: float, resolution: int) -> CloudShape:
     for level in np.linspace(0.1, 0.75, 7):
         wobble = rng.normal(scale=0.15 * column_radius, size=2)
         blobs.append((c + wobble[0], level * height, c + wobble[1], column_radius * rng.uniform(1.0, 1.3)))
-    column = _soft_spheres(X, Y, Z, blobs)
+    column = soft_spheres(X, Y, Z, blobs)
     anvil_thickness = rng.uniform(0.1, 0.15) * height
     anvil_centre = np.array([c + 0.08 * footprint, height - 1.2 * anvil_thickness, c])
     radial = np.hypot(X - anvil_centre[0], Z - anvil_centre[2]) / (0.4 * footprint)
@@ -206,7 +214,7 @@ def inside(rng, footprint: float, base: float, resolution: int) -> CloudShape:
         radius = rng.uniform(0.15, 0.25) * footprint
         centre = c + direction * np.array([0.3, 0.15, 0.3]) * footprint
         blobs.append((*centre, radius))
-    shape = _soft_spheres(X, Y, Z, blobs)
+    shape = soft_spheres(X, Y, Z, blobs)
     noise = fbm(_unit_points(X, Y, Z, size), rng, 5)
     lower = np.array([-c[0], base, -c[2]])
     return _finish(shape * 3.0 - 0.8 * noise, lower, size)
