@@ -236,7 +236,7 @@ class MultipleScattering:
         coverage = block_mean(fine_coverage, self.scale) if self.scale > 1 else fine_coverage
         single_radiance = block_mean(single.radiance, self.scale) if self.scale > 1 else single.radiance
         covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
-        per_pass, done, passes, check_at = int(s.samples_per_pass), 0, 0, 2
+        per_pass, done, passes, check_at, estimated_at = int(s.samples_per_pass), 0, 0, 2, 0
         estimate, stop = math.inf, "spp"
         while done < s.spp:
             count = min(per_pass, s.spp - done)
@@ -246,7 +246,7 @@ class MultipleScattering:
             done += count
             passes += 1
             if s.target_error > 0.0 and passes == check_at:
-                estimate = self.estimate(single_radiance, coverage, covered)
+                estimate, estimated_at = self.estimate(single_radiance, coverage, covered), passes
                 if estimate <= s.target_error:
                     stop = "target"
                     break
@@ -266,7 +266,8 @@ class MultipleScattering:
             image = guided_upsample(image, fine_coverage, self.scale)
             variance = bilinear_upsample(variance, self.scale, height, width)
         if s.target_error > 0.0 and stop != "target":
-            estimate = self.estimate(single_radiance, coverage, covered) if min(self.counts) > 0 else math.inf
+            if estimated_at != passes:  # paths were added since the last estimate (or there was none)
+                estimate = self.estimate(single_radiance, coverage, covered) if min(self.counts) > 0 else math.inf
             reason = "the time budget" if stop == "time_budget" else f"the path cap (spp = {s.spp})"
             print(f"warpsky: warning: hybrid stopped by {reason} after {done} paths per pixel with an estimated "
                   f"error of {estimate:.1%}, above the target {s.target_error:.1%}", file=sys.stderr)
