@@ -2,21 +2,29 @@
 
 The format is told by the file's magic bytes, not its extension. OpenVDB files are converted once with
 ``nanovdb_convert`` (Debian package ``libnanovdb-tools``) and cached by content hash under
-``$WARPSKY_CACHE/nanovdb`` (default ``~/.cache/warpsky/nanovdb``). NanoVDB grids are loaded by Warp and copied
-into a dense array over their allocated voxels, padded by one voxel of background (zero) on each side so that
-trilinear interpolation fades out at the grid's edge exactly as OpenVDB's sampler does.
+``$WARPSKY_CACHE/nanovdb`` (default ``~/.cache/warpsky/nanovdb``); the conversion keeps every grid in file order, so
+one cached file serves every grid name and index. NanoVDB grids are loaded by Warp and copied into a dense array
+over their allocated voxels, padded by one voxel of background (zero) on each side so that trilinear interpolation
+fades out at the grid's edge exactly as OpenVDB's sampler does.
+
+A grid is picked by name and by index among the grids of that name (UsdVol's ``fieldName`` and ``fieldIndex``;
+without a name the index counts every grid in the file). Only scalar float fog volumes render: a level set (grid
+class ``GRID_LEVEL_SET``, which ``nanovdb_convert`` carries over from OpenVDB) or a vector grid is refused with the
+command that converts it.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import shlex
 import shutil
 import struct
 import subprocess
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import warp as wp
@@ -30,6 +38,16 @@ OPENVDB_MAGIC = struct.pack("<i", 0x56444220)
 _NVDB_HEADER = struct.Struct("<QIHH")  # magic, version, grid count, codec
 _NVDB_META_SIZE = 176  # sizeof(nanovdb::io::FileMetaData), followed by the grid name
 _NVDB_CODEC_OFFSET = 168
+_NVDB_TYPE_OFFSET = 32  # nanovdb::GridType, then nanovdb::GridClass (uint32 each)
+GRID_CLASS_LEVEL_SET = 1  # nanovdb::GridClass::LevelSet
+
+
+class NanoGrid(NamedTuple):
+    """One grid of a NanoVDB file, re-framed as an uncompressed single-grid file that Warp's loader accepts."""
+
+    name: str
+    blob: bytes
+    grid_class: int  # nanovdb::GridClass (0 unknown, 1 level set, 2 fog volume, ...)
 
 
 @dataclass(frozen=True)
@@ -66,17 +84,38 @@ def sniff_format(path: Path) -> str:
     raise SceneError(f"field file {path} is not a .npy, NanoVDB or OpenVDB file (unrecognised magic bytes {head!r})")
 
 
-def load_field(path: str | os.PathLike, *, grid_name: str | None = None) -> FieldGrid:
-    """Load one scalar grid from ``path``; ``grid_name`` picks a grid in a multi-grid VDB file."""
+def load_field(path: str | os.PathLike, *, grid_name: str | None = None, grid_index: int = 0) -> FieldGrid:
+    """Load one scalar grid from ``path``.
+
+    Args:
+        path: A ``.npy``, ``.nvdb`` or ``.vdb`` file (told apart by magic bytes).
+        grid_name: Picks the grids of this name in a VDB file; None: every grid.
+        grid_index: Which of those grids, 0 for the first in file order (UsdVol's ``fieldIndex``).
+    """
     path = Path(path)
     if not path.is_file():
         raise SceneError(f"field file {path} does not exist")
     kind = sniff_format(path)
     if kind == "npy":
+        if grid_index != 0:
+            raise SceneError(f"dense grid {path} holds one grid, so fieldIndex {grid_index} is out of range")
         return _load_npy(path)
-    if kind == "vdb":
-        return _load_nanovdb(convert_vdb(path), grid_name=grid_name, source=path)
-    return _load_nanovdb(path, grid_name=grid_name, source=path)
+    nvdb = convert_vdb(path) if kind == "vdb" else path
+    return _load_nanovdb(nvdb, grid_name=grid_name, grid_index=grid_index, source=path)
+
+
+def level_set_advice(source: str | os.PathLike, grid_name: str | None) -> str:
+    """How to turn a level-set grid into the fog volume warpsky renders (OpenVDB's ``vdb_tool``)."""
+    source = Path(source)
+    name = grid_name or "density"
+    vdb = source
+    convert = ""
+    if sniff_format(source) == "nvdb":
+        vdb = Path(f"{source.stem}.vdb")
+        convert = f"nanovdb_convert {shlex.quote(str(source))} {shlex.quote(str(vdb))}, then "
+    convert += (f"vdb_tool -read {shlex.quote(str(vdb))} grids={shlex.quote(name)} -ls2fog name={shlex.quote(name)} "
+                f"-write {shlex.quote(source.stem + '_fog.vdb')}")
+    return f"warpsky renders fog volumes (density), not level sets; convert it with {convert}"
 
 
 def _load_npy(path: Path) -> FieldGrid:
@@ -114,8 +153,8 @@ def convert_vdb(path: Path) -> Path:
     return target
 
 
-def nanovdb_grids(data: bytes, source: Path) -> list[tuple[str, bytes]]:
-    """Split a NanoVDB file into (grid name, uncompressed single-grid file) pairs, in file order."""
+def nanovdb_grids(data: bytes, source: Path) -> list[NanoGrid]:
+    """Split a NanoVDB file into its grids, in file order."""
     grids = []
     offset = 0
     while offset + _NVDB_HEADER.size <= len(data):
@@ -158,7 +197,8 @@ def nanovdb_grids(data: bytes, source: Path) -> list[tuple[str, bytes]]:
             struct.pack_into("<I", meta, 136, len(name) + 1)
             struct.pack_into("<H", meta, _NVDB_CODEC_OFFSET, 0)
             single = _NVDB_HEADER.pack(magic, version, 1, 0) + bytes(meta) + name + b"\0" + payload
-            grids.append((name.decode("utf-8", "replace"), single))
+            (grid_class,) = struct.unpack_from("<I", meta, _NVDB_TYPE_OFFSET + 4)
+            grids.append(NanoGrid(name.decode("utf-8", "replace"), single, grid_class))
     if not grids:
         raise SceneError(f"NanoVDB file {source} holds no grids")
     return grids
@@ -170,24 +210,40 @@ def _densify_kernel(volume: wp.uint64, origin: wp.vec3i, out: wp.array3d(dtype=f
     out[i, j, k] = wp.volume_lookup_f(volume, i + origin[0], j + origin[1], k + origin[2])
 
 
-def _load_nanovdb(path: Path, *, grid_name: str | None, source: Path) -> FieldGrid:
-    data = path.read_bytes()
-    grids = nanovdb_grids(data, source)
+def _pick_grid(grids: list[NanoGrid], grid_name: str | None, grid_index: int, source: Path) -> NanoGrid:
+    """The ``grid_index``-th grid named ``grid_name`` (of all grids when no name is given)."""
     if grid_name:
-        matches = [g for g in grids if g[0] == grid_name]
+        matches = [g for g in grids if g.name == grid_name]
         if not matches:
-            names = ", ".join(repr(n) for n, _ in grids)
+            names = ", ".join(repr(g.name) for g in grids)
             raise SceneError(f"field file {source} has no grid named {grid_name!r}; it holds {names}")
-        name, blob = matches[0]
+        what = f"grid(s) named {grid_name!r}"
     else:
-        name, blob = grids[0]
+        matches, what = grids, "grid(s)"
+    if not 0 <= grid_index < len(matches):
+        raise SceneError(
+            f"field file {source} holds {len(matches)} {what}, so fieldIndex {grid_index} is out of range "
+            f"(0 to {len(matches) - 1})"
+        )
+    grid = matches[grid_index]
+    if grid.grid_class == GRID_CLASS_LEVEL_SET:
+        raise SceneError(f"grid {grid.name!r} of {source} is a level set: {level_set_advice(source, grid.name)}")
+    return grid
+
+
+def _load_nanovdb(path: Path, *, grid_name: str | None, grid_index: int, source: Path) -> FieldGrid:
+    name, blob, _ = _pick_grid(nanovdb_grids(path.read_bytes(), source), grid_name, grid_index, source)
     try:
         volume = wp.Volume.load_from_nvdb(blob, device="cpu")
     except RuntimeError as exc:
         raise SceneError(f"cannot load grid {name!r} of {source}: {exc}") from exc
     info = volume.get_grid_info()
     if info.type_str != "float":
-        raise SceneError(f"grid {name!r} of {source} holds {info.type_str!r} values; expected a float (fog) grid")
+        kind = "a vector grid" if info.type_str.lower().startswith("vec") else "a grid"
+        raise SceneError(
+            f"grid {name!r} of {source} is {kind} of {info.type_str!r} values; warpsky renders scalar float (fog) "
+            "grids: point fieldName at the density grid"
+        )
     voxels = volume.get_voxels().numpy()
     if len(voxels) == 0:
         raise SceneError(f"grid {name!r} of {source} has no voxels")

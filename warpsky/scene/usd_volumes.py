@@ -1,6 +1,26 @@
 """Voxel media from ``UsdVolVolume`` prims: one :class:`~warpsky.scene.model.VoxelMedium` per rendered field
-(``field:density`` with an analytic phase, ``field:cloud|rain|ice|snow`` with species tables), the Volume's
-``warpsky:detail:*`` animated detail, and the field files (``.vdb``, ``.nvdb``, dense ``.npy``) behind them.
+(``field:density`` or ``field:extinction`` with an analytic phase, ``field:cloud|rain|ice|snow`` with species
+tables), the Volume's ``warpsky:detail:*`` animated detail, and the field files (``.vdb``, ``.nvdb``, dense ``.npy``)
+behind them.
+
+``field:extinction`` is the name UsdVol's own documentation gives the optical-density field; it is read exactly like
+``field:density``: extinction [1/m] = field value × ``warpsky:extinctionScale`` (default 1). A Volume with both is
+ambiguous and refused.
+
+The ``OpenVDBAsset`` attributes read besides ``filePath`` (time samples give per-frame files) and ``fieldName``:
+
+============== ======= ======= ========================================================================
+attribute      type    default meaning
+============== ======= ======= ========================================================================
+fieldIndex     int     0       which of the grids named ``fieldName`` in the file (all grids without
+                               a name), in file order; may be time-sampled
+fieldDataType  token   –       when authored: ``float``, ``half`` or ``double`` (scalar grids only)
+fieldClass     token   –       ``levelSet`` is refused with the ``vdb_tool -ls2fog`` command that
+                               converts it (``vdbGridClass`` is read the same way)
+============== ======= ======= ========================================================================
+
+The grid itself is checked as well: a level set or a vector grid in the file is refused (see
+:mod:`warpsky.media.fields`).
 
 pxr is imported inside the methods (a heavy import).
 """
@@ -13,17 +33,23 @@ import os
 import numpy as np
 
 from warpsky.errors import SceneError
-from warpsky.media.fields import load_field
+from warpsky.media.fields import level_set_advice, load_field
 from warpsky.optics.species import get_species
 from warpsky.scene.model import FIELD_SPECIES, DetailSpec, PhaseKind, PhaseModel, VoxelMedium
 from warpsky.scene.usd_prims import StagePrims
 
 PHASE_TOKENS = {"isotropic": PhaseKind.ISOTROPIC, "hg": PhaseKind.HG, "rayleigh": PhaseKind.RAYLEIGH}
 DENSITY_FIELD = "density"
-#: Field relationship names warpsky renders: the generic one (analytic phase) and one per species (tables).
+#: Generic extinction fields (analytic phase): ``density`` and UsdVol's documented ``extinction``, one per Volume.
+ANALYTIC_FIELDS = (DENSITY_FIELD, "extinction")
+#: Field relationship names warpsky renders: the generic ones (analytic phase) and one per species (tables).
 SPECIES_FIELDS = FIELD_SPECIES
-RENDERED_FIELDS = (DENSITY_FIELD, *SPECIES_FIELDS)
+RENDERED_FIELDS = (*ANALYTIC_FIELDS, *SPECIES_FIELDS)
 QUANTITIES = ("extinction", "concentration")
+#: ``fieldDataType`` tokens of scalar grids; UsdVol allows vectors, matrices, ints and more.
+SCALAR_DATA_TYPES = ("float", "half", "double")
+#: Attributes that say a grid's class: UsdVol's ``fieldClass`` and the ``vdbGridClass`` some tools author.
+GRID_CLASS_ATTRS = ("fieldClass", "vdbGridClass")
 
 
 class VolumeReading(StagePrims):
@@ -54,6 +80,10 @@ class VolumeReading(StagePrims):
             raise SceneError(
                 f"Volume {path} has fields {', '.join(sorted(fields))} but none that warpsky renders ({expected})"
             )
+        if all(name in fields for name in ANALYTIC_FIELDS):
+            raise SceneError(
+                f"Volume {path} has both field:density and field:extinction, which mean the same thing; keep one"
+            )
         volume_world = self._world(prim, tc)
         phase_token = self._token_attr(prim, "warpsky:phase", tc, "hg")
         if phase_token not in PHASE_TOKENS:
@@ -73,7 +103,7 @@ class VolumeReading(StagePrims):
                 local_from_index = self._extent_placement(prim, tc, grid.values.shape)
             else:
                 local_from_index = grid.local_from_index
-            species = None if name == DENSITY_FIELD else name
+            species = None if name in ANALYTIC_FIELDS else name
             scale = np.full(3, self._float_attr(field_prim, "warpsky:extinctionScale", tc, 1.0))
             quantity = self._token_attr(field_prim, "warpsky:quantity", tc, "extinction")
             if quantity not in QUANTITIES:
@@ -84,7 +114,7 @@ class VolumeReading(StagePrims):
                 if species is None:
                     raise SceneError(
                         f"{field_prim.GetPath()}: warpsky:quantity = concentration needs a species field "
-                        f"(field:{'|'.join(SPECIES_FIELDS)}), not field:{DENSITY_FIELD}"
+                        f"(field:{'|'.join(SPECIES_FIELDS)}), not field:{name}"
                     )
                 scale = scale * np.array(get_species(species).extinction_cross_section)
             albedo = self._float_attr(field_prim, "warpsky:albedo", tc, volume_albedo)
@@ -160,14 +190,40 @@ class VolumeReading(StagePrims):
             raise SceneError(f"field {field_path}: file {asset_path.path!r} not found (relative to {layer})")
         grid_name = asset.GetFieldNameAttr().Get(tc)
         grid_name = str(grid_name) if grid_name else None
+        grid_index = self._check_grid_attrs(field_prim, tc, resolved, grid_name)
         try:
             stat = os.stat(resolved)
         except OSError as exc:
             raise SceneError(f"field {field_path}: cannot read {resolved}: {exc.strerror}") from None
-        key = (resolved, grid_name, stat.st_mtime_ns, stat.st_size)
+        key = (resolved, grid_name, grid_index, stat.st_mtime_ns, stat.st_size)
         if key not in self._field_cache:
             try:
-                self._field_cache[key] = load_field(resolved, grid_name=grid_name)
+                self._field_cache[key] = load_field(resolved, grid_name=grid_name, grid_index=grid_index)
             except SceneError as exc:
                 raise SceneError(f"field {field_path}: {exc}") from None
         return self._field_cache[key]
+
+    @staticmethod
+    def _check_grid_attrs(field_prim, tc, resolved: str, grid_name: str | None) -> int:
+        """Check ``fieldDataType`` and the grid class attributes; return ``fieldIndex`` (0 when unauthored)."""
+        path = field_prim.GetPath()
+        data_type = field_prim.GetAttribute("fieldDataType")
+        if data_type and data_type.HasAuthoredValue():
+            value = str(data_type.Get(tc))
+            if value not in SCALAR_DATA_TYPES:
+                raise SceneError(
+                    f"{path}.fieldDataType is {value!r} (file {resolved}); warpsky renders scalar grids "
+                    f"({', '.join(SCALAR_DATA_TYPES)}): point fieldName at a scalar density grid"
+                )
+        for name in GRID_CLASS_ATTRS:
+            attr = field_prim.GetAttribute(name)
+            if attr and attr.HasAuthoredValue() and str(attr.Get(tc)) == "levelSet":
+                advice = level_set_advice(resolved, grid_name)
+                raise SceneError(f"{path}.{name} is 'levelSet' (file {resolved}): {advice}")
+        index = field_prim.GetAttribute("fieldIndex")
+        if not index or not index.HasAuthoredValue():
+            return 0
+        value = index.Get(tc)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise SceneError(f"{path}.fieldIndex must be an int >= 0 (0 = the first grid of its name), got {value!r}")
+        return int(value)
