@@ -38,7 +38,7 @@ OPENVDB_MAGIC = struct.pack("<i", 0x56444220)
 _NVDB_HEADER = struct.Struct("<QIHH")  # magic, version, grid count, codec
 _NVDB_META_SIZE = 176  # sizeof(nanovdb::io::FileMetaData), followed by the grid name
 _NVDB_CODEC_OFFSET = 168
-_NVDB_TYPE_OFFSET = 32  # nanovdb::GridType, then nanovdb::GridClass (uint32 each)
+_NVDB_CLASS_OFFSET = 36  # nanovdb::GridClass (uint32), after the grid type
 GRID_CLASS_LEVEL_SET = 1  # nanovdb::GridClass::LevelSet
 
 
@@ -108,9 +108,12 @@ def level_set_advice(source: str | os.PathLike, grid_name: str | None) -> str:
     """How to turn a level-set grid into the fog volume warpsky renders (OpenVDB's ``vdb_tool``)."""
     source = Path(source)
     name = grid_name or "density"
+    kind = sniff_format(source)
+    if kind == "npy":
+        return "warpsky renders fog volumes (density), not level sets; a dense .npy grid holds density"
     vdb = source
     convert = ""
-    if sniff_format(source) == "nvdb":
+    if kind == "nvdb":
         vdb = Path(f"{source.stem}.vdb")
         convert = f"nanovdb_convert {shlex.quote(str(source))} {shlex.quote(str(vdb))}, then "
     convert += (f"vdb_tool -read {shlex.quote(str(vdb))} grids={shlex.quote(name)} -ls2fog name={shlex.quote(name)} "
@@ -197,7 +200,7 @@ def nanovdb_grids(data: bytes, source: Path) -> list[NanoGrid]:
             struct.pack_into("<I", meta, 136, len(name) + 1)
             struct.pack_into("<H", meta, _NVDB_CODEC_OFFSET, 0)
             single = _NVDB_HEADER.pack(magic, version, 1, 0) + bytes(meta) + name + b"\0" + payload
-            (grid_class,) = struct.unpack_from("<I", meta, _NVDB_TYPE_OFFSET + 4)
+            (grid_class,) = struct.unpack_from("<I", meta, _NVDB_CLASS_OFFSET)
             grids.append(NanoGrid(name.decode("utf-8", "replace"), single, grid_class))
     if not grids:
         raise SceneError(f"NanoVDB file {source} holds no grids")
@@ -239,11 +242,12 @@ def _load_nanovdb(path: Path, *, grid_name: str | None, grid_index: int, source:
         raise SceneError(f"cannot load grid {name!r} of {source}: {exc}") from exc
     info = volume.get_grid_info()
     if info.type_str != "float":
-        kind = "a vector grid" if info.type_str.lower().startswith("vec") else "a grid"
-        raise SceneError(
-            f"grid {name!r} of {source} is {kind} of {info.type_str!r} values; warpsky renders scalar float (fog) "
-            "grids: point fieldName at the density grid"
-        )
+        if info.type_str.lower().startswith("vec"):
+            raise SceneError(
+                f"grid {name!r} of {source} is a vector grid of {info.type_str!r} values; warpsky renders scalar "
+                "float (fog) grids: point fieldName at the density grid"
+            )
+        raise SceneError(f"grid {name!r} of {source} holds {info.type_str!r} values; expected a float (fog) grid")
     voxels = volume.get_voxels().numpy()
     if len(voxels) == 0:
         raise SceneError(f"grid {name!r} of {source} has no voxels")
