@@ -146,6 +146,38 @@ def test_unknown_variant_set_or_selection_lists_the_choices(tmp_path):
     assert path.read_bytes() == before
 
 
+def test_variant_applies_to_every_instance_offering_it(tmp_path):
+    from pxr import Usd, UsdGeom
+
+    asset = Usd.Stage.CreateNew(str(tmp_path / "cloud_asset.usda"))
+    root = UsdGeom.Xform.Define(asset, "/Asset").GetPrim()
+    shape = root.GetVariantSets().AddVariantSet("shape")
+    for name, value in (("thin", 0.2), ("thick", 4.0)):
+        shape.AddVariant(name)
+        shape.SetVariantSelection(name)
+        with shape.GetVariantEditContext():
+            define_volume(asset, "/Asset/Cloud", grid(tmp_path, name, value))
+    shape.SetVariantSelection("thin")
+    asset.DefinePrim("/Asset/Inner").GetVariantSets().AddVariantSet("lod").AddVariant("high")
+    asset.SetDefaultPrim(root)
+    asset.Save()
+    path, stage = base_stage(tmp_path)
+    for prim_path in ("/World/A", "/World/B"):
+        prim = UsdGeom.Xform.Define(stage, prim_path).GetPrim()
+        prim.GetReferences().AddReference("./cloud_asset.usda")
+        prim.SetInstanceable(True)
+    stage.Save()
+
+    reader = StageReader(path, StageOptions(variants=(("shape", "thick"),)))
+    assert [float(m.density.max()) for m in reader.scene_at(None).media] == pytest.approx([4.0, 4.0])
+    summary = reader.composition_summary()
+    assert [line for line in summary if line.startswith("variants:")] == [
+        "variants: /World/A shape=thick (session layer)", "variants: /World/B shape=thick (session layer)"]
+    assert "instances: 2 instance(s) of 1 prototype(s)" in summary
+    with pytest.raises(SceneError, match=r"variant set 'lod' exists only inside instances \(e.g. /World/A/Inner\)"):
+        StageReader(path, StageOptions(variants=(("lod", "high"),)))
+
+
 # ------------------------------------------------------------------------------------------------------- purpose
 @pytest.mark.parametrize("purpose,on_parent", [("proxy", False), ("guide", True)])
 def test_proxy_and_guide_volumes_render_only_when_asked(tmp_path, purpose, on_parent):

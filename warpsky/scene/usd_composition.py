@@ -137,14 +137,14 @@ def composition_summary(stage, options: StageOptions, variant_lines: list[str]) 
     from pxr import Usd
 
     lines = []
-    loadable = stage.FindLoadable()
+    loadable = stage.FindLoadable()  # payloaded prims, inside instances too (GetLoadSet counts a prototype once)
     if loadable:
-        loaded = len(stage.GetLoadSet())
+        loaded = sum(1 for path in loadable if stage.GetPrimAtPath(path).IsLoaded())
         if loaded:
             lines.append(f"payloads: {loaded} loaded" + (f", {len(loadable) - loaded} not" if loaded < len(loadable)
                                                           else ""))
         else:
-            lines.append(f"payloads: {len(loadable)} not loaded (--load none)")
+            lines.append(f"payloads: {len(loadable)} not loaded (--load {options.load})")
     prims = list(stage.Traverse(Usd.TraverseInstanceProxies()))
     referencing = sum(1 for p in prims if p.HasAuthoredReferences())
     if referencing:
