@@ -196,20 +196,40 @@ def test_proxy_and_guide_volumes_render_only_when_asked(tmp_path, purpose, on_pa
     assert StageReader(path, options).composition_summary()[-1] == f"purposes rendered: default, render, {purpose}"
 
 
-def test_purpose_skips_ground_and_atmosphere_but_not_the_sun(tmp_path):
-    from conftest import add_atmosphere
-    from pxr import Usd, UsdGeom
+def add_surfaces(stage, tmp_path) -> dict[str, str]:
+    """A ground plane, an atmosphere prim and a stratiform layer (a small thickness map); returns their paths."""
+    from pxr import Gf, Sdf, UsdGeom
 
-    path = add_atmosphere(write_stage(tmp_path / "ground.usda", StageSpec(ground=(-5.0, 0.3))))
-    stage = Usd.Stage.Open(str(path))
-    for prim_path in ("/World/Ground", "/World/Atmosphere", "/World/Sun"):
+    UsdGeom.Plane.Define(stage, "/World/Ground").CreateAxisAttr(UsdGeom.Tokens.y)
+    stage.DefinePrim("/World/Atmosphere", "Scope").CreateAttribute(
+        "warpsky:atmosphere:scaleHeight", Sdf.ValueTypeNames.Float).Set(8000.0)
+    np.save(tmp_path / "thickness.npy", np.full((8, 8), 100.0, dtype=np.float32))
+    layer = UsdGeom.Xform.Define(stage, "/World/Stratus")
+    layer.AddTranslateOp().Set(Gf.Vec3d(0.0, 1000.0, 0.0))
+    layer.GetPrim().CreateAttribute("warpsky:kind", Sdf.ValueTypeNames.Token, custom=False).Set("stratiformLayer")
+    layer.GetPrim().CreateAttribute("warpsky:stratiform:thicknessMap", Sdf.ValueTypeNames.Asset).Set(
+        Sdf.AssetPath(str(tmp_path / "thickness.npy")))
+    return {"ground": "/World/Ground", "atmosphere": "/World/Atmosphere", "layer": "/World/Stratus"}
+
+
+def surfaces(scene) -> dict[str, str | None]:
+    """Names of the scene's ground, atmosphere and (first) stratiform layer; None where absent."""
+    return {"ground": scene.ground and scene.ground.name, "atmosphere": scene.atmosphere and scene.atmosphere.name,
+            "layer": scene.layers[0].name if scene.layers else None}
+
+
+def test_purpose_skips_ground_atmosphere_and_layers_but_not_the_sun(tmp_path):
+    from pxr import UsdGeom
+
+    path, stage = base_stage(tmp_path)
+    paths = add_surfaces(stage, tmp_path)
+    for prim_path in (*paths.values(), "/World/Sun"):
         UsdGeom.Imageable(stage.GetPrimAtPath(prim_path)).CreatePurposeAttr("proxy")
     stage.Save()
     default = StageReader(path).scene_at(None)
-    assert default.ground is None and default.atmosphere is None
+    assert surfaces(default) == dict.fromkeys(paths)
     assert default.sun is not None  # lights ignore purpose, as in Hydra
-    proxy = StageReader(path, StageOptions(purposes=("default", "proxy"))).scene_at(None)
-    assert proxy.ground.name == "/World/Ground" and proxy.atmosphere.name == "/World/Atmosphere"
+    assert surfaces(StageReader(path, StageOptions(purposes=("default", "proxy"))).scene_at(None)) == paths
 
 
 # -------------------------------------------------------------------------------------- visibility and activity
@@ -226,11 +246,19 @@ def test_time_sampled_invisibility_and_inactive_prims(tmp_path):
     define_volume(stage, "/World/OffGroup/Cloud", grid(tmp_path, "d", 1.0))
     stage.GetPrimAtPath("/World/OffGroup").SetActive(False)  # an inactive parent takes its subtree with it
     define_volume(stage, "/World/Steady", grid(tmp_path, "d", 1.0))
+    paths = add_surfaces(stage, tmp_path)
+    for prim_path in paths.values():
+        attr = UsdGeom.Imageable(stage.GetPrimAtPath(prim_path)).CreateVisibilityAttr()
+        attr.Set(UsdGeom.Tokens.inherited, 1.0)
+        attr.Set(UsdGeom.Tokens.invisible, 2.0)
+        attr.Set(UsdGeom.Tokens.inherited, 3.0)
     stage.Save()
     reader = StageReader(path)
     assert media_names(reader, 1.0) == ["/World/Blink", "/World/Steady"]
     assert media_names(reader, 2.0) == ["/World/Steady"]
     assert media_names(reader, 3.0) == ["/World/Blink", "/World/Steady"]
+    assert surfaces(reader.scene_at(1.0)) == surfaces(reader.scene_at(3.0)) == paths
+    assert surfaces(reader.scene_at(2.0)) == dict.fromkeys(paths)
 
 
 # ---------------------------------------------------------------------------------------------------- instancing
