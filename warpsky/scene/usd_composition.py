@@ -9,7 +9,8 @@ option             default                             meaning
 =================  ==================================  ==============================================================
 ``load``           ``"all"``                           ``"all"``: payloads are loaded (usdview, husk); ``"none"``:
                                                        none is (usdview ``--unloaded``): the prims under a payload
-                                                       are absent and a payload file need not exist.
+                                                       are absent and a missing payload file is no error (one that
+                                                       exists is still parsed, to report a broken file early).
 ``variants``       ``()``                              ``(set, selection)`` pairs applied in order on the stage's
                                                        session layer, so the files on disk never change; every prim
                                                        offering the set gets the selection (a later pair can select a
