@@ -4,7 +4,9 @@ Stage units are converted here: ``upAxis`` Y or Z and ``metersPerUnit`` become w
 Every problem is a :class:`SceneError` naming the prim, attribute or file. :class:`StageReader` reads the camera,
 sun, atmosphere and render settings itself; its parts read the rest: :mod:`warpsky.scene.usd_volumes` (voxel media),
 :mod:`warpsky.scene.usd_surfaces` (ground and stratiform layers) on :mod:`warpsky.scene.usd_prims` (transforms,
-visibility, typed attributes). pxr is imported inside the methods (a heavy import).
+visibility, typed attributes). :mod:`warpsky.scene.usd_composition` decides how the stage is composed (payloads
+loaded or not, variant selections, which purposes render: :class:`StageOptions`). pxr is imported inside the
+methods (a heavy import).
 
 What is read (the README's "USD attributes" section lists the same with units and defaults):
 
@@ -31,6 +33,7 @@ import numpy as np
 
 from warpsky.errors import SceneError
 from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
+from warpsky.scene.usd_composition import StageOptions, apply_variants, composition_summary
 from warpsky.scene.usd_layers import composition_problem, open_layers, tf_message
 from warpsky.scene.usd_surfaces import SurfaceReading
 from warpsky.scene.usd_volumes import VolumeReading
@@ -52,17 +55,23 @@ class StageReader(VolumeReading, SurfaceReading):
 
     Args:
         path: The stage file (.usd, .usda, .usdc, .usdz).
+        options: How to compose it: payloads loaded or not, variant selections (made on the session layer, never
+            in the files) and the purposes that render; None: :class:`StageOptions` defaults (all payloads, the
+            authored variants, default and render purposes).
     """
 
-    def __init__(self, path: str | os.PathLike):
+    def __init__(self, path: str | os.PathLike, options: StageOptions | None = None):
         from pxr import Tf, Usd, UsdGeom
 
         self.path = Path(path)
+        self.options = StageOptions() if options is None else options
         if not self.path.is_file():
             raise SceneError(f"stage file {self.path} does not exist")
         try:
-            self._layers = open_layers(self.path)  # held open: the stage reuses them instead of parsing again
-            stage = Usd.Stage.Open(self._layers[0])
+            # Held open: the stage reuses them instead of parsing again. Payload files are read even with
+            # --load none (a missing one is skipped here, and USD does not compose it unloaded).
+            self._layers = open_layers(self.path)
+            stage = Usd.Stage.Open(self._layers[0], self.options.initial_load_set())
         except SceneError as exc:  # the message names the file at fault, often the stage itself
             named = str(exc).startswith(str(self.path))
             raise SceneError(f"cannot open stage{':' if named else f' {self.path}:'} {exc}") from None
@@ -70,7 +79,11 @@ class StageReader(VolumeReading, SurfaceReading):
             raise SceneError(f"cannot open stage {self.path}: {tf_message(exc) or 'unreadable'}") from None
         if stage is None:
             raise SceneError(f"cannot open stage {self.path}")
-        problem = composition_problem(stage)
+        try:
+            self._variant_lines = apply_variants(stage, self.options.variants)
+        except SceneError as exc:
+            raise SceneError(f"stage {self.path}: {exc}") from None
+        problem = composition_problem(stage)  # after the variants: a selected variant may reference a missing file
         if problem is not None:
             raise SceneError(f"stage {self.path}: {problem}")
         self.stage = stage
@@ -97,6 +110,11 @@ class StageReader(VolumeReading, SurfaceReading):
             float(stage.GetFramesPerSecond()),
             bool(stage.HasAuthoredTimeCodeRange()),
         )
+
+    def composition_summary(self) -> list[str]:
+        """One line per thing composition did (payloads, references, variants, instances, purposes rendered), for
+        ``warpsky info``."""
+        return composition_summary(self.stage, self.options, self._variant_lines)
 
     # ---------------------------------------------------------------------------------------------- camera
     def camera_paths(self) -> list[str]:
@@ -220,11 +238,12 @@ class StageReader(VolumeReading, SurfaceReading):
 
     # ------------------------------------------------------------------------------------------ atmosphere
     def read_atmosphere(self, time=None):
-        """The first active prim with ``warpsky:atmosphere:*`` attributes (e.g. a Scope /World/Atmosphere)."""
+        """The first active prim with ``warpsky:atmosphere:*`` attributes (e.g. a Scope /World/Atmosphere) that is
+        visible at ``time`` and of a rendered purpose."""
         tc = self._time(time)
-        for prim in self.stage.Traverse():
+        for prim in self._traverse():
             names = [a.GetName() for a in prim.GetAttributes() if a.GetName().startswith("warpsky:atmosphere:")]
-            if not names:
+            if not names or not self._rendered(prim, tc):
                 continue
             known = {"warpsky:atmosphere:betaSeaLevel", "warpsky:atmosphere:scaleHeight",
                      "warpsky:atmosphere:altitude", "warpsky:atmosphere:enabled"}

@@ -1,5 +1,9 @@
-"""What every part of :class:`~warpsky.scene.usd.StageReader` shares: time codes, world transforms, visibility,
-prims by schema, and typed attribute reads whose :class:`SceneError` names the prim and the attribute.
+"""What every part of :class:`~warpsky.scene.usd.StageReader` shares: time codes, world transforms, visibility and
+purpose, prims by schema, and typed attribute reads whose :class:`SceneError` names the prim and the attribute.
+
+Every traversal goes through :meth:`StagePrims._traverse`: USD's default predicate (active, defined, loaded,
+non-abstract prims: ``active = false`` and unloaded payloads drop out with their subtrees) plus instance proxies,
+so each instance of an instanceable prim is read at its own path and transform.
 
 pxr is imported inside the methods (a heavy import), so importing this module stays cheap.
 """
@@ -19,8 +23,9 @@ def _matrix(gf_matrix) -> np.ndarray:
 
 
 class StagePrims:
-    """Base of the stage reader's parts. The reader sets ``stage``, ``path``, ``up_axis``, ``meters_per_unit``,
-    ``world_from_stage`` (warpsky's Y-up metres from stage space) and the ``_field_cache`` / ``_map_cache`` dicts."""
+    """Base of the stage reader's parts. The reader sets ``stage``, ``path``, ``options`` (a
+    :class:`~warpsky.scene.usd_composition.StageOptions`), ``up_axis``, ``meters_per_unit``, ``world_from_stage``
+    (warpsky's Y-up metres from stage space) and the ``_field_cache`` / ``_map_cache`` dicts."""
 
     # ------------------------------------------------------------------------------------- time and prims
     @staticmethod
@@ -40,10 +45,25 @@ class StagePrims:
         imageable = UsdGeom.Imageable(prim)
         return not imageable or imageable.ComputeVisibility(time) != UsdGeom.Tokens.invisible
 
-    def _prims_of(self, schema) -> list:
+    def _rendered(self, prim, time) -> bool:
+        """Visible at ``time`` and of a purpose the options render (for geometry; lights and cameras ignore purpose,
+        as in Hydra)."""
+        from pxr import UsdGeom
+
+        imageable = UsdGeom.Imageable(prim)
+        if imageable and str(imageable.ComputePurpose()) not in self.options.purposes:
+            return False
+        return self._visible(prim, time)
+
+    def _traverse(self):
+        """The stage's prims, depth first, without the pseudo-root: active, defined, loaded, non-abstract, and
+        instance proxies (the prims inside each instance of an instanceable prim, at their own paths)."""
         from pxr import Usd
 
-        return [p for p in Usd.PrimRange(self.stage.GetPseudoRoot()) if p.IsA(schema) and p.IsActive()]
+        return self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate))
+
+    def _prims_of(self, schema) -> list:
+        return [p for p in self._traverse() if p.IsA(schema)]
 
     # ------------------------------------------------------------------------------------------ attributes
     @staticmethod

@@ -34,7 +34,7 @@ class SurfaceReading(StagePrims):
 
         tc = self._time(time)
         for prim in self._prims_of(UsdGeom.Plane):
-            if not self._visible(prim, tc):
+            if not self._rendered(prim, tc):
                 continue
             plane = UsdGeom.Plane(prim)
             axis = {"X": 0, "Y": 1, "Z": 2}[str(plane.GetAxisAttr().Get(tc))]
@@ -55,14 +55,14 @@ class SurfaceReading(StagePrims):
 
     # ------------------------------------------------------------------------------------ stratiform layers
     def read_layers(self, time=None) -> tuple:
-        """Visible prims with ``uniform token warpsky:kind = "stratiformLayer"`` as
+        """Visible prims of a rendered purpose with ``uniform token warpsky:kind = "stratiformLayer"`` as
         :class:`~warpsky.scene.layers.StratiformLayer` at ``time`` (the attribute table is on that class)."""
         from pxr import UsdGeom
 
         tc = self._time(time)
         time_s = 0.0 if time is None else float(time) / float(self.stage.GetTimeCodesPerSecond())
         layers = []
-        for prim in self.stage.Traverse():  # not the pseudo-root, which has no attributes to ask for
+        for prim in self._traverse():
             names = {a.GetName() for a in prim.GetAttributes()}
             ours = {n for n in names if n.startswith(("warpsky:stratiform:", "warpsky:advection:"))}
             kind = prim.GetAttribute("warpsky:kind")
@@ -79,7 +79,7 @@ class SurfaceReading(StagePrims):
             if not prim.IsA(UsdGeom.Xformable):
                 raise SceneError(f"stratiform layer {prim.GetPath()}: must be an Xformable prim (e.g. Xform) whose "
                                  f"translation places the cloud base, got {prim.GetTypeName() or 'a typeless prim'}")
-            if self._visible(prim, tc):
+            if self._rendered(prim, tc):
                 layers.append(self._read_layer(prim, tc, time_s))
         return tuple(layers)
 

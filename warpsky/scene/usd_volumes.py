@@ -60,8 +60,10 @@ class VolumeReading(StagePrims):
 
         tc = self._time(time)
         media = []
+        # Inside an instance each Volume is an instance proxy at its own path (unique medium names), and USD maps
+        # its field relationships' targets into the same instance.
         for prim in self._prims_of(UsdVol.Volume):
-            if self._visible(prim, tc):
+            if self._rendered(prim, tc):
                 media.extend(self._read_volume(prim, tc))
         return tuple(media)
 
