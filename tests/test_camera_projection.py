@@ -166,3 +166,49 @@ def test_slicing_refuses_an_orthographic_camera(tmp_path, homogeneous_npy):
     scene = StageReader(orthographic_stage(tmp_path / "ortho.usda", homogeneous_npy)).scene_at(None)
     with pytest.raises(UsageError, match=r"camera /World/Camera is orthographic.*single_scatter"):
         make_plan(scene, technique="slicing", resolution=(SIZE, SIZE))
+
+
+def test_orthographic_sky_transmittance_follows_each_rows_altitude(device):
+    """Parallel rays climbing at 30 degrees from a view window 4 km wide and 8 km tall: each row's air to space is
+    the column above its own start, beta H exp(-h / H) / sin(30 deg), with h the row's altitude."""
+    from warpsky.scene.model import Atmosphere, Scene
+    from warpsky.techniques.sky.technique import SkyPass
+
+    elevation = math.radians(30.0)
+    forward = (0.0, math.sin(elevation), -math.cos(elevation))
+    camera = Camera("ortho", (0.0, 5000.0, 0.0), look_rotation(forward), 0.05, 4000.0, 8000.0,
+                    projection=Projection.ORTHOGRAPHIC)
+    atmosphere = Atmosphere()
+    front, _ = SkyPass(device=device).render(Scene(camera, None, atmosphere=atmosphere), 4, 8)
+    window_y = (0.5 - (np.arange(8) + 0.5) / 8) * 8000.0  # each row's centre up the view window
+    altitude = 5000.0 + window_y * math.cos(elevation)  # the window's up axis climbs at cos(30 deg)
+    depth = np.outer(np.exp(-altitude / atmosphere.scale_height), atmosphere.beta_sea_level)
+    expected = np.exp(-depth * atmosphere.scale_height / math.sin(elevation))
+    np.testing.assert_allclose(front.transmittance, np.broadcast_to(expected[:, None, :], (8, 4, 3)), rtol=1e-4)
+
+
+def test_orthographic_stratiform_layer_maps_texels_to_pixels_at_any_distance(device):
+    """Looking straight up through a 2.4 km window at 24 px, each pixel's vertical ray meets the centre of one
+    100 m texel of an overcast at 1.5 km: a clear 3 x 2 texel block opens exactly 6 pixels, and the image is the
+    same from the ground and from 1 km up (in perspective it would shrink with the distance)."""
+    from warpsky.scene.layers import StratiformLayer
+    from warpsky.scene.model import Atmosphere, Scene, Sun
+    from warpsky.techniques.stratiform.technique import Stratiform
+
+    thickness = np.full((24, 24), 300.0, np.float32)
+    thickness[12:15, 4:6] = 0.0
+    layer = StratiformLayer(thickness, 1500.0, (-1200.0, -1200.0), (2400.0, 2400.0))
+    images = []
+    for height in (0.0, 1000.0):
+        camera = Camera("ortho", (0.0, height, 0.0), look_rotation((0.0, 1.0, 0.0)), 0.05, 2400.0, 2400.0, far=1e5,
+                        projection=Projection.ORTHOGRAPHIC)
+        scene = Scene(camera, Sun((0.3, 0.8, 0.2), (1.0, 1.0, 1.0)), atmosphere=Atmosphere())
+        images.append(Stratiform(device=device).render(scene, 24, 24, layer=layer))
+    low, high = images
+    assert np.count_nonzero(low.transmittance[..., 1] > 0.5) == 6
+    np.testing.assert_allclose(high.transmittance, low.transmittance, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(high.radiance, low.radiance, rtol=1e-4, atol=1e-7)
+    hit = low.depth < 1e5  # the cloud base, 1500 m and then 500 m along the axis; the far plane elsewhere
+    np.testing.assert_allclose(low.depth[hit], 1500.0, rtol=1e-5)
+    np.testing.assert_allclose(high.depth[hit], 500.0, rtol=1e-5)
+    np.testing.assert_array_equal(high.depth[~hit], low.depth[~hit])
