@@ -170,15 +170,16 @@ class StageReader(VolumeReading, SurfaceReading):
         prim = self.stage.GetPrimAtPath(path)
         tc = self._time(time)
         usd_camera = UsdGeom.Camera(prim)
-        if usd_camera.GetProjectionAttr().Get(tc) != UsdGeom.Tokens.perspective:
-            raise SceneError(f"camera {path}: projection must be 'perspective'; orthographic is not supported")
+        token = usd_camera.GetProjectionAttr().Get(tc)
+        if token not in (UsdGeom.Tokens.perspective, UsdGeom.Tokens.orthographic):
+            raise SceneError(f"camera {path}: projection must be 'perspective' or 'orthographic', got {token!r}")
         gf = usd_camera.GetCamera(tc)
         world = self._world(prim, tc)
         u, _, vt = np.linalg.svd(world[:3, :3])
         rotation = u @ vt
         if np.linalg.det(rotation) < 0.0:
             raise SceneError(f"camera {path}: its transform mirrors space (negative determinant)")
-        # Focal length and apertures are in tenths of a scene unit.
+        # Focal length and apertures are in tenths of a scene unit; orthographic apertures are the view's extent.
         tenth = 0.1 * self.meters_per_unit
         clip = gf.clippingRange
         values = {
@@ -203,6 +204,7 @@ class StageReader(VolumeReading, SurfaceReading):
             gf.verticalApertureOffset * tenth,
             clip.min * self.meters_per_unit,
             clip.max * self.meters_per_unit,
+            str(token),
         )
 
     # ------------------------------------------------------------------------------------------------- sun

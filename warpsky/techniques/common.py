@@ -7,13 +7,16 @@ import math
 import numpy as np
 import warp as wp
 
-from warpsky.scene.model import Camera
+from warpsky.scene.model import Camera, Projection
 from warpsky.techniques.sunlight import Sunlight
 
 
 @wp.struct
 class PinholeCamera:
-    """A conformed pinhole camera; positions are relative to the eye, which sits at the origin."""
+    """A conformed camera, pinhole or orthographic; positions are relative to the eye, which sits at the origin.
+
+    An orthographic camera's apertures and offsets are its view window's size and shift [m] in the plane through
+    the eye across the view axis; its rays start there (:func:`camera_ray_origin`) and run along the axis."""
 
     rotation: wp.mat33  # world-from-camera; columns right, up, back
     focal_length: float
@@ -25,6 +28,7 @@ class PinholeCamera:
     far: float  # [m] along the view axis
     width: int
     height: int
+    orthographic: int  # 1: parallel rays from the view window, 0: rays from the eye
 
 
 def pinhole_camera(camera: Camera, width: int, height: int) -> PinholeCamera:
@@ -40,6 +44,7 @@ def pinhole_camera(camera: Camera, width: int, height: int) -> PinholeCamera:
     cam.far = float(camera.far)
     cam.width = int(width)
     cam.height = int(height)
+    cam.orthographic = int(camera.projection is Projection.ORTHOGRAPHIC)
     return cam
 
 
@@ -108,11 +113,33 @@ def camera_forward(cam: PinholeCamera) -> wp.vec3:
 
 
 @wp.func
-def camera_ray_at(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) -> wp.vec3:
-    """Unit world direction through the point (fx, fy) in [0, 1)^2 of pixel (row, col); fx right, fy down."""
+def camera_film_point(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) -> wp.vec2:
+    """Film-back (pinhole) or view-window (orthographic) position of the point (fx, fy) of pixel (row, col)."""
     sx = ((float(col) + fx) / float(cam.width) - 0.5) * cam.horizontal_aperture + cam.horizontal_offset
     sy = (0.5 - (float(row) + fy) / float(cam.height)) * cam.vertical_aperture + cam.vertical_offset
-    return wp.normalize(cam.rotation * wp.vec3(sx, sy, -cam.focal_length))
+    return wp.vec2(sx, sy)
+
+
+@wp.func
+def camera_ray_at(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) -> wp.vec3:
+    """Unit world direction through the point (fx, fy) in [0, 1)^2 of pixel (row, col); fx right, fy down. An
+    orthographic camera's rays all run along its view axis."""
+    if cam.orthographic != 0:
+        return camera_forward(cam)
+    s = camera_film_point(cam, row, col, fx, fy)
+    return wp.normalize(cam.rotation * wp.vec3(s[0], s[1], -cam.focal_length))
+
+
+@wp.func
+def camera_ray_origin(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) -> wp.vec3:
+    """Eye-relative start of the ray through the point (fx, fy) of pixel (row, col), in the plane through the eye
+    across the view axis: the eye (zero) for a pinhole, the pixel's point of the view window for an orthographic
+    camera. The ray is ``origin + t * camera_ray_at(...)``; it enters the clipping range at t = near / cos_axis
+    and its depth is t * cos_axis in both projections."""
+    if cam.orthographic == 0:
+        return wp.vec3(0.0)
+    s = camera_film_point(cam, row, col, fx, fy)
+    return cam.rotation * wp.vec3(s[0], s[1], 0.0)
 
 
 @wp.func

@@ -21,7 +21,15 @@ from warpsky.kernel_variants import kernel_variants
 from warpsky.media.air import Air
 from warpsky.media.voxel import VoxelMedia
 from warpsky.optics.phase_sampling import PhaseTables
-from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_forward, camera_ray, camera_ray_at
+from warpsky.techniques.common import (
+    Ground,
+    PinholeCamera,
+    Sun,
+    camera_forward,
+    camera_ray,
+    camera_ray_at,
+    camera_ray_origin,
+)
 from warpsky.techniques.path_tracer.events import (
     SURFACE_GROUND,
     SURFACE_NONE,
@@ -130,6 +138,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
         r, col = wp.tid()
         row = r + row_offset
         centre = camera_ray(cam, row, col)
+        centre_origin = camera_ray_origin(cam, row, col, 0.5, 0.5)
         axis = camera_forward(cam)
         sun_on = sun_reaches(sun, air)
         pixel = row * cam.width + col
@@ -138,13 +147,17 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
         for s in range(settings.sample_count):
             state = wp.rand_init(settings.seed + (settings.first_sample + s) * SAMPLE_STRIDE, pixel)
             view = centre
+            eye = centre_origin
             if settings.pixel_jitter != 0:
                 # a box-filtered pixel, as Mitsuba and pbrt sample it (used by the Mitsuba cross-check)
-                view = camera_ray_at(cam, row, col, wp.randf(state), wp.randf(state))
+                fx = wp.randf(state)
+                fy = wp.randf(state)
+                view = camera_ray_at(cam, row, col, fx, fy)
+                eye = camera_ray_origin(cam, row, col, fx, fy)
             cos_axis = wp.dot(view, axis)
             t_near = cam.near / cos_axis
             t_far = cam.far / cos_axis
-            origin = view * t_near
+            origin = eye + view * t_near
             first = primary_end(air, ground, origin, view, t_far - t_near)
             if first.surface == SURFACE_NONE and settings.multiple_only == 0:
                 tr = ratio_track(media, majorants, air, origin, view, first.t, state)

@@ -24,6 +24,7 @@ from warpsky.techniques.common import (
     Sun,
     camera_forward,
     camera_ray,
+    camera_ray_origin,
     exp3,
     exp_lerp_mean3,
     luminance,
@@ -41,18 +42,18 @@ class MarchSettings:
 
 @functools.cache
 def sun_depth_function(has_detail: bool):
-    """``sun_optical_depth(media, t, view_dir, sun_dir, shadow_step) -> vec4``: optical depth (RGB in xyz) from the
-    point ``t`` metres along the view ray to the sun, summed over all grids, and the number of grid lookups it took
-    (w); with ``has_detail`` the media's animated detail is included."""
+    """``sun_optical_depth(media, origin, t, view_dir, sun_dir, shadow_step) -> vec4``: optical depth (RGB in xyz)
+    from the point ``origin + t * view_dir`` of the view ray to the sun, summed over all grids, and the number of
+    grid lookups it took (w); with ``has_detail`` the media's animated detail is included."""
 
     @wp.func
-    def sun_optical_depth(media: VoxelMedia, t: float, view_dir: wp.vec3, sun_dir: wp.vec3,
+    def sun_optical_depth(media: VoxelMedia, origin: wp.vec3, t: float, view_dir: wp.vec3, sun_dir: wp.vec3,
                           shadow_step: float) -> wp.vec4:
         tau = wp.vec3(0.0)
         lookups = float(0.0)
         for m in range(media.count):
             grid = media.grids[m]
-            start = grid.eye_index + t * (grid.index_from_world * view_dir)
+            start = grid.eye_index + grid.index_from_world * origin + t * (grid.index_from_world * view_dir)
             toward_sun = grid.index_from_world * sun_dir  # index steps per metre towards the sun
             span = grid_interval(grid, start, toward_sun, 0.0, 1.0e30)
             if span[1] > span[0]:
@@ -66,7 +67,7 @@ def sun_depth_function(has_detail: bool):
                     s = span[0] + (float(i) + 0.5) * dt
                     value = grid_value(media.values, grid, start + s * toward_sun)
                     if wp.static(has_detail):
-                        value = detailed_value(value, media.details, m, t * view_dir + s * sun_dir)
+                        value = detailed_value(value, media.details, m, origin + t * view_dir + s * sun_dir)
                     total += value
                 tau += grid.extinction * (total * dt)
                 lookups += float(count)
@@ -76,13 +77,15 @@ def sun_depth_function(has_detail: bool):
 
 
 @wp.func
-def media_span(media: VoxelMedia, view: wp.vec3, t_near: float, t_end: float) -> wp.vec2:
-    """Union (t0, t1) of the media boxes along the eye ray ``t * view`` within [t_near, t_end] (empty: t1 <= t0)."""
+def media_span(media: VoxelMedia, origin: wp.vec3, view: wp.vec3, t_near: float, t_end: float) -> wp.vec2:
+    """Union (t0, t1) of the media boxes along the view ray ``origin + t * view`` within [t_near, t_end] (empty:
+    t1 <= t0)."""
     t0 = t_end
     t1 = t_near
     for m in range(media.count):
         grid = media.grids[m]
-        span = grid_interval(grid, grid.eye_index, grid.index_from_world * view, t_near, t_end)
+        start = grid.eye_index + grid.index_from_world * origin
+        span = grid_interval(grid, start, grid.index_from_world * view, t_near, t_end)
         if span[1] > span[0]:
             t0 = wp.min(t0, span[0])
             t1 = wp.max(t1, span[1])
@@ -118,6 +121,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
         r, col = wp.tid()
         row = r + row_offset
         view = camera_ray(cam, row, col)
+        origin = camera_ray_origin(cam, row, col, 0.5, 0.5)
         cos_axis = wp.dot(view, camera_forward(cam))
         t_near = cam.near / cos_axis
         t_end = cam.far / cos_axis
@@ -129,12 +133,12 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
         if wp.static(has_ground):
             # The plane is opaque: it ends the ray (the part of the sun below it is already out of sun.irradiance).
             if view[1] != 0.0:
-                t_ground = ground.offset / view[1]
+                t_ground = (ground.offset - origin[1]) / view[1]
                 if t_ground > t_near and t_ground < t_end:
                     t_end = t_ground
                     hit_ground = True
 
-        span = media_span(media, view, t_near, t_end)
+        span = media_span(media, origin, view, t_near, t_end)
         t0 = span[0]
         t1 = span[1]
         light = wp.vec3(0.0)
@@ -150,16 +154,16 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
             for i in range(count):
                 ta = t0 + float(i) * dt
                 tm = ta + 0.5 * dt
-                here = sample_media(media, tm * view)
+                here = sample_media(media, origin + tm * view)
                 scatter = scattered_phase(media, here, phase_tables, wp.vec3(0.0), theta)
                 lookups += wp.int64(media.count)
                 tau_eye_b = tau_eye + here.extinction * dt
                 if lit and wp.max(scatter) > 0.0:
                     if not sun_a_known:
-                        shadow = sun_optical_depth(media, ta, view, sun_dir, march.shadow_step)
+                        shadow = sun_optical_depth(media, origin, ta, view, sun_dir, march.shadow_step)
                         tau_sun_a = wp.vec3(shadow[0], shadow[1], shadow[2])
                         lookups += wp.int64(shadow[3])
-                    shadow = sun_optical_depth(media, ta + dt, view, sun_dir, march.shadow_step)
+                    shadow = sun_optical_depth(media, origin, ta + dt, view, sun_dir, march.shadow_step)
                     tau_sun_b = wp.vec3(shadow[0], shadow[1], shadow[2])
                     lookups += wp.int64(shadow[3])
                     mean = exp_lerp_mean3(tau_eye + tau_sun_a, tau_eye_b + tau_sun_b)
@@ -179,7 +183,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
         if wp.static(has_ground):
             if hit_ground:
                 if lit:
-                    shadow = sun_optical_depth(media, t_end, view, sun_dir, march.shadow_step)
+                    shadow = sun_optical_depth(media, origin, t_end, view, sun_dir, march.shadow_step)
                     lookups += wp.int64(shadow[3])
                     lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (wp.max(sun_dir[1], 0.0) / wp.pi)
                     light += wp.cw_mul(wp.cw_mul(lit_ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)

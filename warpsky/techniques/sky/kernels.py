@@ -5,7 +5,7 @@ from __future__ import annotations
 import warp as wp
 
 from warpsky.optics.phase import phase_rayleigh
-from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_forward, camera_ray, exp3
+from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_forward, camera_ray, camera_ray_origin, exp3
 from warpsky.techniques.sky.analytic import air_depth, air_inscatter
 
 INFINITE = wp.constant(1.0e30)
@@ -27,16 +27,18 @@ def sky_kernel(
 ):
     row, col = wp.tid()
     view = camera_ray(cam, row, col)
+    height = camera_ray_origin(cam, row, col, 0.5, 0.5)[1]  # of the ray's start above the eye (orthographic)
+    altitude = camera_altitude + height
     cos_axis = wp.dot(view, camera_forward(cam))
     sun_dir = sun.direction
     # where the air ends: the ground plane, else infinity
     t_end = INFINITE
     if view[1] < 0.0:
         # the air ends at sea level: below it lies a black surface unless a ground plane comes first
-        t_end = wp.max(camera_altitude, 0.0) / (-view[1])
+        t_end = wp.max(altitude, 0.0) / (-view[1])
     if has_ground != 0:
-        if view[1] < 0.0 and ground.offset < 0.0:
-            t_end = wp.min(t_end, ground.offset / view[1])
+        if view[1] < 0.0 and ground.offset < height:
+            t_end = wp.min(t_end, (ground.offset - height) / view[1])
     # the media's representative depth splits the air into a front and a back part (Riley §4, Fig. 7)
     split = t_end
     d = media_depth[row, col]
@@ -45,12 +47,12 @@ def sky_kernel(
     cos_theta = wp.dot(sun_dir, view)  # light travels along -sun, leaves towards the eye along -view
     phase = phase_rayleigh(cos_theta)
     sun_y = sun.air_sine  # the sun's optical depth at height h is the vertical column over air_sine
-    front = air_inscatter(beta_sl, gamma, camera_altitude, view[1], sun_y, split)
+    front = air_inscatter(beta_sl, gamma, altitude, view[1], sun_y, split)
     front_radiance[row, col] = wp.cw_mul(sun.irradiance, front) * phase
-    front_transmittance[row, col] = exp3(air_depth(beta_sl, gamma, camera_altitude, view[1], split))
+    front_transmittance[row, col] = exp3(air_depth(beta_sl, gamma, altitude, view[1], split))
     back = wp.vec3(0.0)
     if split < t_end:
-        h_split = camera_altitude + view[1] * split
+        h_split = altitude + view[1] * split
         rest = t_end
         if t_end < INFINITE:
             rest = t_end - split
@@ -60,6 +62,6 @@ def sky_kernel(
     if t_end >= INFINITE and wp.dot(sun.disk_direction, view) >= sun.cos_radius and sun.lit != 0:
         beyond = wp.vec3(1.0)  # no media: the front layer's transmittance already holds all the air
         if split < INFINITE:
-            beyond = exp3(air_depth(beta_sl, gamma, camera_altitude + view[1] * split, view[1], INFINITE))
+            beyond = exp3(air_depth(beta_sl, gamma, altitude + view[1] * split, view[1], INFINITE))
         back += wp.cw_mul(sun.disk_radiance, beyond)
     back_radiance[row, col] = back

@@ -333,7 +333,7 @@ def eye_span_kernel(media: VoxelMedia, cam: PinholeCamera, spans: wp.array2d(dty
     row, col = wp.tid()
     view = camera_ray(cam, row, col)
     cos_axis = wp.dot(view, camera_forward(cam))
-    spans[row, col] = media_span(media, view, cam.near / cos_axis, cam.far / cos_axis)
+    spans[row, col] = media_span(media, wp.vec3(0.0), view, cam.near / cos_axis, cam.far / cos_axis)  # pinhole only
 
 
 @kernel_variants(low_albedo=(False, True), equation=(0, 24, 25), has_detail=(False, True))
@@ -412,7 +412,7 @@ def ground_kernel(has_detail: bool = False):
         sun_dir = sun.direction
         lit = wp.vec3(0.0)
         if sun.lit != 0:
-            tau = sun_optical_depth(media, t, view, sun_dir, shadow_step)
+            tau = sun_optical_depth(media, wp.vec3(0.0), t, view, sun_dir, shadow_step)  # rays from the eye
             lit = wp.cw_mul(sun.irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (wp.max(sun_dir[1], 0.0) / wp.pi)
         before = transmittance[row, col]
         radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground.albedo, lit))

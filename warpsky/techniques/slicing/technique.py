@@ -18,7 +18,7 @@ from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integ
 from warpsky.optics.phase import phase_numpy
 from warpsky.optics.tables import ams_table
 from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
-from warpsky.scene.model import PhaseKind, Scene
+from warpsky.scene.model import PhaseKind, Projection, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.slicing.kernels import (
@@ -143,7 +143,11 @@ class Slicing:
 
     def resolved_settings(self, scene: Scene) -> SlicingSettings:
         """The settings with ``slice_count = auto`` replaced by one slice per voxel edge of the finest field across
-        the media's depth along the half-angle axis (32..512)."""
+        the media's depth along the half-angle axis (32..512). Refuses an orthographic camera: the slices and
+        the eye buffers are laid out for rays from the eye."""
+        if scene.camera.projection is Projection.ORTHOGRAPHIC:
+            raise UsageError(f"camera {scene.camera.name} is orthographic, which slicing does not render (it slices "
+                             "from the eye); use technique single_scatter, path_tracer or hybrid")
         if self.settings.slice_count is not None:
             return self.settings
         count = self.AUTO_SLICES[0]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_forward, camera_ray
+from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_forward, camera_ray, camera_ray_origin
 from warpsky.techniques.radiosity.kernels import bilinear
 from warpsky.techniques.stratiform.slab import INV_PI, MU_MIN, SlabOptics, order_energies, slab_radiance
 
@@ -88,6 +88,7 @@ def stratiform_kernel(
     r, col = wp.tid()
     row = r + row_offset
     d = camera_ray(cam, row, col)
+    o = camera_ray_origin(cam, row, col, 0.5, 0.5)  # the ray is o + t d
     cos_axis = wp.dot(d, camera_forward(cam))
     sun = sun_light.direction
     sun_irradiance = sun_light.irradiance
@@ -102,28 +103,28 @@ def stratiform_kernel(
     t_hit = float(-1.0)
     h = float(0.0)
     normal = wp.vec3(0.0, -1.0, 0.0)
-    below = geometry.base > 0.0
+    below = geometry.base > o[1]
     if below and d[1] > 0.0:
-        t_hit = geometry.base / d[1]
-        p = t_hit * d
+        t_hit = (geometry.base - o[1]) / d[1]
+        p = o + t_hit * d
         h = thickness_at(thickness, geometry, p[0], p[2])
     elif (not below) and d[1] < 0.0:
         # march from the top plane (or the camera) down to the base plane
-        t0 = wp.max((geometry.top - 0.0) / d[1], 0.0)
-        t1 = geometry.base / d[1]
-        if geometry.top > 0.0:
+        t0 = wp.max((geometry.top - o[1]) / d[1], 0.0)
+        t1 = (geometry.base - o[1]) / d[1]
+        if geometry.top > o[1]:
             t0 = 0.0
         dt = (t1 - t0) / float(MARCH_STEPS)
         prev = t0
         for step in range(MARCH_STEPS):
             t = t0 + float(step + 1) * dt
-            p = t * d
+            p = o + t * d
             if t_hit < 0.0 and p[1] <= geometry.base + thickness_at(thickness, geometry, p[0], p[2]) + 1.0e-3:
                 lo = prev
                 hi = t
                 for _ in range(6):
                     mid = 0.5 * (lo + hi)
-                    q = mid * d
+                    q = o + mid * d
                     if q[1] <= geometry.base + thickness_at(thickness, geometry, q[0], q[2]):
                         hi = mid
                     else:
@@ -131,7 +132,7 @@ def stratiform_kernel(
                 t_hit = hi
             prev = t
         if t_hit >= 0.0:
-            p = t_hit * d
+            p = o + t_hit * d
             h = thickness_at(thickness, geometry, p[0], p[2])
             eps = 0.5 * wp.min(geometry.sx / float(thickness.shape[0]), geometry.sz / float(thickness.shape[1]))
             gx = (thickness_at(thickness, geometry, p[0] + eps, p[2]) - thickness_at(thickness, geometry, p[0] - eps,
@@ -140,7 +141,7 @@ def stratiform_kernel(
                                                                                  p[2] - eps)) / (2.0 * eps)
             normal = wp.normalize(wp.vec3(-gx, 1.0, -gz))
     if t_hit >= 0.0 and h > 0.0:
-        p = t_hit * d
+        p = o + t_hit * d
         shade = slab_radiance(tables, params, optics, h, normal, sun, d)
         mu_v = wp.max(wp.abs(d[1]), MU_MIN)
         e = order_energies(params, h * optics.to_reference, mu_sun, kappa_ref_s)
@@ -161,10 +162,10 @@ def stratiform_kernel(
         tr = wp.vec3(unscattered)
         z_depth = t_hit * cos_axis
     # ---- the ground, seen through the cloud
-    if has_ground != 0 and d[1] < 0.0 and ground_y < 0.0:
-        t_g = ground_y / d[1]
+    if has_ground != 0 and d[1] < 0.0 and ground_y < o[1]:
+        t_g = (ground_y - o[1]) / d[1]
         if t_g * cos_axis < cam.far:
-            q = t_g * d
+            q = o + t_g * d
             rho = grid_lookup(albedo, q[0], q[2], albedo_box[0], albedo_box[1], albedo_box[2], albedo_box[3])
             direct = wp.vec3(0.0)
             if lit:
