@@ -33,7 +33,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,denoise,compare,farm,preview]"
+	$(PY) -m pip install --quiet -e ".[dev,denoise,compare,farm,preview,color]"
 	rm -f $(VENV)/.installed-*
 	touch $@
 

@@ -12,6 +12,7 @@ import textwrap
 from pathlib import Path
 
 import warpsky
+from warpsky.api import render_options, with_product, with_render_settings
 from warpsky.batch.frames import FramePattern, parse_frame_spec
 from warpsky.batch.run import (
     DaskExecutor,
@@ -23,17 +24,19 @@ from warpsky.batch.run import (
     plan_first_frame,
     run_batch,
 )
-from warpsky.device import init_warp, resolve_device
+from warpsky.device import init_warp
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.evaluation.cli import add_parser as add_bench
 from warpsky.evaluation.cli import run as run_bench
 from warpsky.interrupt import Interrupted, report_interrupt, sigint_stops_renders
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
+from warpsky.output.color import COLORSPACES
 from warpsky.output.preview import contact_sheet, stage_preview
-from warpsky.render import RenderOptions, plan_frame
+from warpsky.render import plan_frame
 from warpsky.resources import parse_size, resource_lines
 from warpsky.scene.usd import StageReader
+from warpsky.scene.usd_render import read_render_spec
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, settings_table, technique_class, technique_names
 from warpsky.techniques.stratiform.technique import StratiformSettings
 
@@ -174,6 +177,21 @@ def _add_render_options(parser: argparse.ArgumentParser) -> None:
                         "host and on a GPU each, e.g. 8G or 512M (default: what is free)")
     parser.add_argument("--no-work-limit", dest="work_limit", action="store_false", help="render frames whose "
                         "worst-case work exceeds 1e8 kernel iterations per pixel or 1e13 per frame")
+    usd = parser.add_argument_group("USD pipeline")
+    usd.add_argument("--settings", dest="settings_prim", metavar="PATH", help="UsdRenderSettings prim (default: "
+                     "the stage's renderSettingsPrimPath, else the first RenderSettings prim)")
+    usd.add_argument("--product", dest="products", action="append", metavar="PATH", help="render only this "
+                     "RenderProduct of the settings (repeatable; default: all of them)")
+    usd.add_argument("--load", choices=("all", "none"), default="all", help="load payloads (all, the default) or "
+                     "leave them unloaded (none), as usdview's --unloaded")
+    usd.add_argument("--variant", dest="variants", action="append", default=[], metavar="SET=SELECTION",
+                     help="variant selection applied on the session layer (repeatable)")
+    usd.add_argument("--purpose", dest="purposes", action="append", metavar="PURPOSE", help="render prims of "
+                     "this purpose (repeatable: render, proxy, guide; prims of purpose default always render; "
+                     "default: the settings' includedPurposes, else default and render)")
+    usd.add_argument("--colorspace", choices=tuple(COLORSPACES), default=None, help="primaries of the EXR's "
+                     "colours: lin_rec709 (default; sRGB primaries, D65) or ACEScg (AP1); written into the "
+                     "header's chromaticities (default: the settings' renderingColorSpace, else lin_rec709)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -193,7 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG_RENDER.format(settings=settings_help()), formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     render.add_argument("stage", type=Path, help="USD stage (.usda, .usdc, .usd, .usdz)")
-    render.add_argument("output", help="output EXR path, with a #### placeholder for several frames")
+    render.add_argument("output", nargs="?", help="output EXR path, with a #### placeholder for several frames "
+                        "(default: each RenderProduct's productName)")
     render.add_argument("--frames", metavar="SPEC", help="frames to render (usdrecord grammar, see below)")
     _add_render_options(render)
     render.add_argument("--png", action="store_true", help="also write a tone-mapped PNG preview per frame")
@@ -263,18 +282,61 @@ def _settings(args) -> dict[str, str]:
 
 
 def _render_options(args) -> object:
-    return RenderOptions(
+    """The render's options as the Python API builds them (:func:`warpsky.api.render_options`)."""
+    return render_options(
         technique=args.technique,
         settings=_settings(args),
         resolution=args.res,
-        device=resolve_device(args.device),
+        device=args.device,
         camera=args.camera,
+        colorspace=args.colorspace,
+        load=args.load,
+        variants=tuple(args.variants),
+        purposes=("default", *args.purposes) if args.purposes else None,
         half=not getattr(args, "full_float", False),
         png=getattr(args, "png", False),
         exposure=getattr(args, "exposure", 0.0),
         max_memory=args.max_memory,
         work_limit=args.work_limit,
     )
+
+
+def _explicit(args) -> set[str]:
+    """Options given on the command line, which win over the stage's render settings and products."""
+    given = {"camera": args.camera, "resolution": args.res, "purposes": args.purposes, "colorspace": args.colorspace}
+    return {name for name, value in given.items() if value}
+
+
+def shots(args, reader) -> tuple[object, list[tuple[str, object]]]:
+    """(the reader, [(output pattern, options)]): one shot per RenderProduct of the stage's render settings, or
+    the command line's OUT with the settings' camera and resolution when there are no products."""
+    options = _render_options(args)
+    spec = read_render_spec(reader.stage, args.settings_prim, reader.meters_per_unit)
+    options = with_render_settings(options, spec, explicit=_explicit(args))
+    if options.stage != reader.options:  # the settings' includedPurposes
+        reader = StageReader(args.stage, options.stage)
+    for note in spec.notes if spec else ():
+        print(f"warpsky: note: {note}", file=sys.stderr)
+    products = list(spec.products) if spec else []
+    if args.products:
+        known = {p.path: p for p in products}
+        missing = [p for p in args.products if p not in known]
+        if missing:
+            raise UsageError(f"--product {missing[0]}: not a product of "
+                             f"{spec.path if spec else 'the stage (it has no RenderSettings)'}; known: "
+                             f"{', '.join(known) or 'none'}")
+        products = [known[p] for p in args.products]
+    if not products:
+        if args.output is None:
+            raise UsageError(f"OUT is required: {'render settings ' + spec.path if spec else 'the stage'} has no "
+                             "RenderProduct to name the output")
+        return reader, [(args.output, options)]
+    if args.output is not None and len(products) > 1:
+        raise UsageError(f"OUT {args.output!r} names one file but {len(products)} products are rendered "
+                         f"({', '.join(p.path for p in products)}); leave OUT out to write each product's "
+                         "productName, or pick one with --product")
+    return reader, [(args.output or product.name, with_product(options, product, explicit=_explicit(args)))
+                    for product in products]
 
 
 def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
@@ -292,14 +354,8 @@ def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
     return [span.start + i for i in range(count)]
 
 
-def cmd_render(args) -> int:
-    pattern = FramePattern(args.output)
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers must be >= 1, got {args.workers}")
-    if args.retries < 0:
-        raise UsageError(f"--retries must be >= 0, got {args.retries}")
-    options = _render_options(args)
-    reader = StageReader(args.stage)
+def _shot_jobs(args, reader, pattern_text: str, options) -> tuple[FramePattern, list[FrameJob]]:
+    pattern = FramePattern(pattern_text)
     times = frame_list(reader, pattern, args.frames)
     span = reader.time_range()
     outside = [t for t in times if t is not None and span.authored and not span.start <= t <= span.end]
@@ -307,11 +363,23 @@ def cmd_render(args) -> int:
         print(f"warpsky: warning: frame(s) {', '.join(f'{t:g}' for t in outside[:8])}"
               f"{' ...' if len(outside) > 8 else ''} lie outside the stage's time range {span.start:g}..{span.end:g}; "
               "rendering them anyway (time samples hold their end values)", file=sys.stderr)
-    outputs = [pattern.path_for(t) if t is not None and pattern.has_placeholder else Path(args.output) for t in times]
-    jobs = [FrameJob(str(args.stage), t, str(out), options, args.overwrite) for t, out in zip(times, outputs,
-                                                                                            strict=True)]
-    plan_first_frame(jobs[0], keep_reader=not (args.scheduler or args.workers))  # input errors: nothing written
-    for directory in dict.fromkeys(p.parent for p in outputs):
+    outputs = [pattern.path_for(t) if t is not None and pattern.has_placeholder else Path(pattern_text)
+               for t in times]
+    return pattern, [FrameJob(str(args.stage), t, str(out), options, args.overwrite)
+                     for t, out in zip(times, outputs, strict=True)]
+
+
+def cmd_render(args) -> int:
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    if args.retries < 0:
+        raise UsageError(f"--retries must be >= 0, got {args.retries}")
+    reader, planned = shots(args, StageReader(args.stage, _render_options(args).stage))
+    batches = [_shot_jobs(args, reader, pattern, options) for pattern, options in planned]
+    far = bool(args.scheduler or args.workers)
+    for _, jobs in batches:  # input errors of any product: nothing written
+        plan_first_frame(jobs[0], keep_reader=not far)
+    for directory in dict.fromkeys(Path(job.out).parent for _, jobs in batches for job in jobs):
         check_writable(directory)
     if args.scheduler:
         executor = DaskExecutor(address=args.scheduler, timeout=args.scheduler_timeout)
@@ -319,15 +387,19 @@ def cmd_render(args) -> int:
         executor = DaskExecutor(workers=args.workers)
     else:
         executor = InProcessExecutor()
+    results = []
     try:
-        result = run_batch(str(args.stage), jobs, executor, retries=args.retries,
-                           log=args.log or log_path_for(pattern.pattern))
+        for pattern, jobs in batches:
+            log = args.log if args.log and len(batches) == 1 else log_path_for(pattern.pattern)
+            results.append(run_batch(str(args.stage), jobs, executor, retries=args.retries, log=log))
     finally:
         executor.close()
-    if len(times) > 1 or result.failed or executor.name != "in-process":
-        print(format_summary(result), file=sys.stderr)
-    if result.failed:  # each failure was already reported as it happened
-        return 1 if any(r.retryable for r in result.failed) else 2
+    for (_, jobs), result in zip(batches, results, strict=True):
+        if len(jobs) > 1 or len(batches) > 1 or result.failed or executor.name != "in-process":
+            print(format_summary(result), file=sys.stderr)
+    failed = [r for result in results for r in result.failed]
+    if failed:  # each failure was already reported as it happened
+        return 1 if any(r.retryable for r in failed) else 2
     return 0
 
 
@@ -352,12 +424,41 @@ def cmd_contact_sheet(args) -> int:
     return 0
 
 
+def _render_spec_lines(spec, products) -> list[str]:
+    """``warpsky info``'s lines on the render settings, their products and each product's vars."""
+    if spec is None:
+        return ["render      no RenderSettings prim: OUT, --camera and --res decide"]
+    res = "x".join(map(str, spec.resolution)) if spec.resolution else "not authored"
+    lines = [f"render      {spec.path}: camera {spec.camera or 'not set'}, resolution {res}, pixel aspect "
+             f"{spec.pixel_aspect:g}, dataWindowNDC {list(spec.data_window)}"
+             + (f", purposes {', '.join(spec.purposes)}" if spec.purposes is not None else "")
+             + (f", renderingColorSpace {spec.colorspace}" if spec.colorspace else "")]
+    lines += [f"            note: {note}" for note in spec.notes]
+    for product in products:
+        res = "x".join(map(str, product.resolution)) if product.resolution else "default"
+        lines.append(f"product     {product.path} -> {product.name}: camera {product.camera or 'default'}, "
+                     f"resolution {res}")
+        for var in product.outputs:
+            precision = "half" if var.half else "float"
+            lines.append(f"  var       {var.prim}: {var.source} -> {', '.join(var.channels)} ({precision})")
+    return lines
+
+
 def cmd_info(args) -> int:
     import numpy as np
 
-    reader = StageReader(args.stage)
-    span = reader.time_range()
     options = _render_options(args)
+    reader = StageReader(args.stage, options.stage)
+    spec = read_render_spec(reader.stage, args.settings_prim, reader.meters_per_unit)
+    options = with_render_settings(options, spec, explicit=_explicit(args))
+    if options.stage != reader.options:
+        reader = StageReader(args.stage, options.stage)
+    products = list(spec.products) if spec else []
+    if args.products:
+        products = [p for p in products if p.path in args.products]
+    if products:  # the plan of the first product
+        options = with_product(options, products[0], explicit=_explicit(args))
+    span = reader.time_range()
     scene, plan = plan_frame(reader, args.time, options, check=False)
     out = [
         f"stage       {reader.path}",
@@ -389,7 +490,9 @@ def cmd_info(args) -> int:
             out.append(f"            advected detail: amplitude {d.amplitude:g}, scale {d.scale:g} m, wind "
                        f"{np.round(np.asarray(d.wind), 3).tolist()} m/s, curl {d.curl_speed:g} m/s, "
                        f"period {d.period:g} s")
-    out.append("plan:")
+    out += _render_spec_lines(spec, products)
+    out += [f"composition {line}" for line in reader.composition_summary()]
+    out.append("plan:" + (f" (of product {products[0].path})" if products else ""))
     out += ["  " + line for line in plan.describe().splitlines()]
     out += ["  " + line for line in resource_lines(plan, options.max_memory)]
     print("\n".join(out))

@@ -93,7 +93,7 @@ def _fmt(value) -> str:
 def resolve_resolution(scene: Scene, resolution: tuple[int, int | None] | None) -> tuple[int, int]:
     """Image size: ``--res``, else the stage's render settings, else 512 wide at the camera's aspect ratio."""
     camera = scene.camera
-    aspect = camera.horizontal_aperture / camera.vertical_aperture
+    aspect = camera.horizontal_aperture / camera.vertical_aperture / camera.pixel_aspect  # in pixels
     if resolution is None:
         resolution = scene.resolution or (DEFAULT_WIDTH, None)
     width, height = resolution

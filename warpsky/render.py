@@ -1,4 +1,8 @@
-"""Render one frame end to end: stage -> scene -> plan -> passes -> composite -> EXR (+ PNG preview)."""
+"""Render one frame end to end: stage -> scene -> plan -> passes -> composite -> channels -> EXR (+ PNG preview).
+
+:func:`render_image` stops before the file: it returns the frame's pixels, channels and header in memory (the Python
+API's :func:`warpsky.render_stage`); :func:`write_frame` writes them (the command line and batches).
+"""
 
 from __future__ import annotations
 
@@ -6,19 +10,22 @@ import hashlib
 import json
 import os
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 import warpsky
-from warpsky.composite import composite, merge_by_depth
-from warpsky.output.exr import write_exr
+from warpsky.composite import Frame, composite, merge_by_depth
+from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_frame
+from warpsky.output.exr import write_channels
 from warpsky.output.png import write_png
+from warpsky.output.products import FULL_WINDOW, default_outputs, frame_channels, required_channels, window_pixels
 from warpsky.passes import StratiformPass, media_scene
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.resources import check_resources
-from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
+from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene, as_imath_rows
+from warpsky.scene.usd_render import OutputVar, check_outputs
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
 from warpsky.techniques.sky.technique import SkyPass
 
@@ -48,6 +55,11 @@ class RenderOptions:
         exposure: Preview exposure in stops, on top of the automatic sun-based normalisation.
         max_memory: Most bytes a frame may allocate on the host and on the device each (None: what is free).
         work_limit: Refuse frames whose worst-case work exceeds :mod:`warpsky.resources`' bounds.
+        outputs: The channels to write (a RenderProduct's vars), or None for warpsky's default channels.
+        pixel_aspect: Width / height of a pixel as displayed (RenderSettings ``pixelAspectRatio``).
+        data_window: The part of the image written, (xmin, ymin, xmax, ymax) in NDC (``dataWindowNDC``).
+        colorspace: The primaries the EXR's colours are written in (:mod:`warpsky.output.color`).
+        stage: How the stage is composed (:class:`~warpsky.scene.usd_composition.StageOptions`; None: defaults).
     """
 
     technique: str = DEFAULT_TECHNIQUE
@@ -60,6 +72,49 @@ class RenderOptions:
     exposure: float = 0.0
     max_memory: int | None = None
     work_limit: bool = True
+    outputs: tuple[OutputVar, ...] | None = None
+    pixel_aspect: float = 1.0
+    data_window: tuple[float, float, float, float] = FULL_WINDOW
+    colorspace: str = DEFAULT_COLORSPACE
+    stage: object = None
+
+    @property
+    def required_channels(self) -> tuple[str, ...]:
+        """Channels every frame written with these options holds (AOVs left out of the default set)."""
+        return required_channels(self.outputs or default_outputs())
+
+
+@dataclass
+class RenderedImage:
+    """One frame in memory, before (or instead of) its file.
+
+    Attributes:
+        frame: The composited frame in the output colour space: ``rgba``, ``transmittance``, ``depth``, ``aovs``.
+        channels: The output's channels by EXR name, cropped to the data window, in the precision written.
+        metadata: warpsky's header values (written as ``warpsky/<key>``).
+        attributes: OpenEXR's standard attributes (chromaticities, whiteLuminance, camera matrices, ...).
+        window: Pixel bounds (x0, y0, x1, y1) of the data window in the full image, or None for all of it.
+        preview: (H, W, 3) linear Rec.709 radiance of the whole frame, for the sRGB PNG preview.
+    """
+
+    frame: Frame
+    channels: dict
+    metadata: dict
+    attributes: dict
+    window: tuple[int, int, int, int] | None
+    preview: np.ndarray
+    scene: Scene
+    plan: RenderPlan
+    layer: Layer
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def width(self) -> int:
+        return self.plan.width
+
+    @property
+    def height(self) -> int:
+        return self.plan.height
 
 
 @dataclass
@@ -102,8 +157,11 @@ def preview_exposure(scene: Scene, stops: float = 0.0) -> float:
 def plan_frame(reader, time_code, options: RenderOptions, *, check: bool = True) -> tuple[Scene, RenderPlan]:
     """Read the stage at ``time_code`` once and plan the frame: technique built, settings resolved, passes chosen,
     settings hash computed (``plan.settings_hash``); with ``check``, a frame over the memory or work limits is
-    refused here (:class:`~warpsky.resources.ResourceError`), before anything is allocated."""
+    refused here (:class:`~warpsky.resources.ResourceError`), before anything is allocated, and so is an output the
+    technique does not write or a data window without pixels."""
     scene = reader.scene_at(time_code, camera_path=options.camera)
+    if options.pixel_aspect != 1.0:
+        scene = replace(scene, camera=replace(scene.camera, pixel_aspect=float(options.pixel_aspect)))
     plan = make_plan(
         scene,
         technique=options.technique,
@@ -112,6 +170,8 @@ def plan_frame(reader, time_code, options: RenderOptions, *, check: bool = True)
         device=options.device,
     )
     plan.settings_hash = settings_hash(plan, options, scene)
+    check_outputs(options.outputs or (), plan.technique)
+    window_pixels(options.data_window, plan.width, plan.height)
     if check:
         check_resources(plan, max_memory=options.max_memory, work_limit=options.work_limit)
     return scene, plan
@@ -131,7 +191,9 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
                 inputs.append([str(path), None, None])
     key = json.dumps(
         {"plan": json.loads(plan.settings_json()), "res": [plan.width, plan.height], "camera": options.camera,
-         "half": options.half, "inputs": inputs},
+         "half": options.half, "inputs": inputs, "outputs": [list(o.channels) for o in options.outputs or ()],
+         "pixelAspect": options.pixel_aspect, "window": list(options.data_window), "colorspace": options.colorspace,
+         "stage": repr(options.stage)},
         sort_keys=True,
     )
     return hashlib.sha256(key.encode()).hexdigest()[:16]
@@ -164,30 +226,58 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
     return write_frame(scene, plan, out_path, options, stage=reader.path, time_code=time_code, timings=timings)
 
 
-def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderOptions, *, stage, time_code,
-                timings: dict[str, float] | None = None) -> FrameResult:
-    """Render a planned frame (``plan_frame``'s scene and plan, of the stage at ``stage`` and ``time_code``) and
-    write ``out_path`` atomically, plus the PNG preview when asked."""
+def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stage, time_code,
+                 timings: dict[str, float] | None = None) -> RenderedImage:
+    """Render a planned frame (``plan_frame``'s scene and plan, of the stage at ``stage`` and ``time_code``) into
+    memory: composited, converted to the output colour space, its channels cropped to the data window."""
     timings = dict(timings or {})
     started = _time.perf_counter()
     layer, layers = render_layers(plan.renderer, scene, plan)
     timings["passes"] = _time.perf_counter() - started
-    frame = composite(layers, far=scene.camera.far)
+    linear = composite(layers, far=scene.camera.far)
+    frame = convert_frame(linear, options.colorspace)
+    outputs = options.outputs or default_outputs(sorted(frame.aovs), half=options.half)
+    full = tuple(options.data_window) == FULL_WINDOW
+    window = None if full else window_pixels(options.data_window, plan.width, plan.height)
+    channels = frame_channels(frame, outputs, window)
     timings["composite"] = _time.perf_counter() - started - timings["passes"]
-    exr = write_exr(
-        out_path, frame.rgba, transmittance=frame.transmittance, depth=frame.depth, aovs=frame.aovs,
-        metadata=_metadata(scene, plan, options, layer, stage=stage, time_code=time_code),
-        half=options.half,
-    )
+    metadata = _metadata(scene, plan, options, layer, stage=stage, time_code=time_code)
+    metadata["orderedChannels"] = ",".join(channels)
+    attributes = {**colour_attributes(options.colorspace), "pixelAspectRatio": float(options.pixel_aspect)}
+    attributes.update(camera_attributes(scene.camera, plan.width, plan.height))
+    return RenderedImage(frame, channels, metadata, attributes, window, linear.rgba[..., :3], scene, plan, layer,
+                         timings)
+
+
+def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderOptions, *, stage, time_code,
+                timings: dict[str, float] | None = None) -> FrameResult:
+    """Render a planned frame (``plan_frame``'s scene and plan, of the stage at ``stage`` and ``time_code``) and
+    write ``out_path`` atomically, plus the PNG preview when asked."""
+    image = render_image(scene, plan, options, stage=stage, time_code=time_code, timings=timings)
+    timings, layer = image.timings, image.layer
+    started = _time.perf_counter()
+    window = image.window
+    exr = write_channels(out_path, image.channels, metadata=image.metadata, standard=image.attributes,
+                         display=None if window is None else (plan.width, plan.height),
+                         origin=(0, 0) if window is None else (window[0], window[1]))
     png = None
     if options.png:
-        png = write_png(Path(out_path).with_suffix(".png"), frame.rgba[..., :3],
+        png = write_png(Path(out_path).with_suffix(".png"), image.preview,
                         exposure=preview_exposure(scene, options.exposure))
-    timings["write"] = _time.perf_counter() - started - timings["passes"] - timings["composite"]
+    timings["write"] = _time.perf_counter() - started
     quality = quality_stats(layer)
     warnings = [w for w in [capped_paths_warning(quality, plan)] if w]
-    return FrameResult(Path(exr), png, timings.get("plan", 0.0) + _time.perf_counter() - started,
-                       float(layer.stats.get("seconds", 0.0)), time_code, plan, timings, quality, warnings)
+    seconds = sum(timings.get(k, 0.0) for k in ("plan", "passes", "composite", "write"))
+    return FrameResult(Path(exr), png, seconds, float(layer.stats.get("seconds", 0.0)), time_code, plan, timings,
+                       quality, warnings)
+
+
+def camera_attributes(camera, width: int, height: int) -> dict:
+    """OpenEXR's ``worldToCamera`` (RenderMan's camera space: z > 0 in front) and ``worldToNDC`` (top left (0, 0),
+    bottom right (1, 1)) of the camera conformed to the image, as Imath (row-vector) float matrices; world space is
+    warpsky's Y-up metres."""
+    return {"worldToCamera": as_imath_rows(camera.world_to_camera(left_handed=True)).astype(np.float32),
+            "worldToNDC": as_imath_rows(camera.world_to_ndc(width, height)).astype(np.float32)}
 
 
 def quality_stats(layer: Layer) -> dict:
@@ -222,6 +312,7 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
         "version": warpsky.__version__,
         "renderSeconds": float(layer.stats.get("seconds", 0.0)),
         "lookups": int(layer.stats.get("lookups", 0)),
+        "colorspace": options.colorspace,
     }
     for key, value in quality_stats(layer).items():
         metadata[_camel(key)] = value

@@ -31,7 +31,7 @@ from warpsky.errors import UsageError, WarpskyError
 from warpsky.files import atomic_write
 from warpsky.interrupt import Interrupted, request_stop, sigint_ignored, stop_requested, stop_scope
 from warpsky.output.exr import validate_exr
-from warpsky.render import EXR_CHANNELS, plan_frame, write_frame
+from warpsky.render import plan_frame, write_frame
 from warpsky.scene.usd import StageReader
 
 FAIL_FRAMES_ENV = "WARPSKY_FAIL_FRAMES"
@@ -68,15 +68,16 @@ class FrameRecord:
     warnings: list = field(default_factory=list)  # one line each, printed by the client as the frame finishes
 
 
-_READERS: dict[tuple[str, float], object] = {}
+_READERS: dict[tuple, object] = {}
 
 
-def _reader(stage: str):
-    """The stage opened once per worker process (reopened when the file changes)."""
-    key = (str(Path(stage).resolve()), Path(stage).stat().st_mtime if Path(stage).exists() else 0.0)
+def _reader(stage: str, options=None):
+    """The stage opened once per worker process with its composition ``options`` (reopened when the file or the
+    options change)."""
+    key = (str(Path(stage).resolve()), Path(stage).stat().st_mtime if Path(stage).exists() else 0.0, options)
     if key not in _READERS:
         _READERS.clear()
-        _READERS[key] = StageReader(stage)
+        _READERS[key] = StageReader(stage) if options is None else StageReader(stage, options)
     return _READERS[key]
 
 
@@ -84,7 +85,7 @@ def plan_first_frame(job: FrameJob, *, keep_reader: bool = True) -> None:
     """Read the stage and plan ``job``'s frame here, before anything is written: an input error that every frame
     shares (no camera, a bad setting) is raised once, as a :class:`WarpskyError`, and leaves no output directory
     and no log behind. ``keep_reader``: keep the stage read for frames rendered in this process."""
-    plan_frame(_reader(job.stage), job.time_code, job.options)
+    plan_frame(_reader(job.stage, job.options.stage), job.time_code, job.options)
     if not keep_reader:
         _READERS.clear()
 
@@ -110,12 +111,12 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
     record = FrameRecord(job.time_code, job.out, "failed", device=job.options.device,
                          worker=f"{socket.gethostname()}:{os.getpid()}", attempt=attempt)
     try:
-        reader = _reader(job.stage)
+        reader = _reader(job.stage, job.options.stage)
         t0 = time.perf_counter()
         scene, plan = plan_frame(reader, job.time_code, job.options)
         record.timings["stage_load"] = time.perf_counter() - t0
         record.settings_hash = plan.settings_hash
-        if not job.overwrite and validate_exr(job.out, required_channels=EXR_CHANNELS,
+        if not job.overwrite and validate_exr(job.out, required_channels=job.options.required_channels,
                                               metadata_expect={"settingsHash": record.settings_hash}):
             record.status = "skipped"
             return record
@@ -287,7 +288,7 @@ def prepare_batch(jobs: list[FrameJob]) -> None:
 
     job = jobs[0]
     try:
-        scene, plan = plan_frame(_reader(job.stage), job.time_code, job.options)
+        scene, plan = plan_frame(_reader(job.stage, job.options.stage), job.time_code, job.options)
     except (WarpskyError, OSError):
         return
     prepare_tables(scene, plan)

@@ -1,21 +1,23 @@
 """EXR frames through the OpenEXR Python bindings: RGBA plus AOVs and metadata, written atomically.
 
-Channels: ``R, G, B, A`` (half by default, float32 with ``half=False``), ``transmittance.R/G/B`` and ``depth.Z``
-(always float32). Metadata goes into header attributes named ``warpsky/<key>`` (str, int or float). A frame is
-written to a temporary file in the target directory and renamed into place, so readers never see a partial file.
+:func:`write_exr` writes warpsky's default channels: ``R, G, B, A`` (half by default, float32 with ``half=False``),
+``transmittance.R/G/B`` and ``depth.Z`` (always float32); :func:`write_channels` writes any named channels (a
+RenderProduct's vars), a data window inside a larger display window and OpenEXR's standard attributes. Metadata goes
+into header attributes named ``warpsky/<key>`` (str, int or float). A frame is written to a temporary file in the
+target directory and renamed into place, so readers never see a partial file.
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from warpsky.files import OutputError, atomic_write
 
-__all__ = ["OutputError", "ExrImage", "read_exr", "validate_exr", "write_exr"]
+__all__ = ["OutputError", "ExrImage", "read_exr", "validate_exr", "write_channels", "write_exr"]
 
 METADATA_PREFIX = "warpsky/"
 COMPRESSIONS = ("none", "zip", "piz", "dwaa", "zstd")
@@ -45,8 +47,6 @@ def write_exr(
     compression: str = "zip",
 ) -> Path:
     """Write one frame. Nothing is written if any channel holds NaN/Inf or has the wrong shape."""
-    import OpenEXR
-
     rgba = np.asarray(rgba)
     if rgba.ndim != 3 or rgba.shape[2] != 4:
         raise OutputError(f"channel RGBA: expected shape (H, W, 4), got {rgba.shape}")
@@ -54,8 +54,6 @@ def write_exr(
     _check("RGBA", rgba, rgba.shape)
     transmittance = _check("transmittance", transmittance, (height, width, 3))
     depth = _check("depth.Z", depth, (height, width))
-    if compression not in COMPRESSIONS:
-        raise OutputError(f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}")
     channels = {"RGBA": np.ascontiguousarray(rgba, dtype=np.float16 if half else np.float32)}
     if transmittance is not None:
         for i, c in enumerate("RGB"):
@@ -66,10 +64,44 @@ def write_exr(
         values = _check(name, values, (height, width, 3))
         for i, c in enumerate("RGB"):
             channels[f"{name}.{c}"] = np.ascontiguousarray(values[..., i], dtype=np.float32)
+    return write_channels(path, channels, metadata=metadata, compression=compression)
+
+
+def write_channels(
+    path: str | os.PathLike,
+    channels: dict[str, np.ndarray],
+    *,
+    metadata: dict | None = None,
+    standard: dict | None = None,
+    compression: str = "zip",
+    display: tuple[int, int] | None = None,
+    origin: tuple[int, int] = (0, 0),
+) -> Path:
+    """Write named channels ((H, W) arrays, or the (H, W, 4) ``RGBA`` shorthand), in the given order, atomically.
+
+    ``metadata`` goes into ``warpsky/<key>`` attributes; ``standard`` holds OpenEXR's own attributes
+    (``chromaticities``, ``whiteLuminance``, ``worldToCamera``, ``pixelAspectRatio``, ...) as the bindings take
+    them. ``display`` (width, height) is the whole image when the channels cover only the data window starting
+    at pixel ``origin`` (x, y from the top left)."""
+    import OpenEXR
+
+    if compression not in COMPRESSIONS:
+        raise OutputError(f"compression must be one of {', '.join(COMPRESSIONS)}, got {compression!r}")
+    shapes = {name: np.shape(values)[:2] for name, values in channels.items()}
+    if len(set(shapes.values())) > 1:
+        raise OutputError(f"channels differ in size: {shapes}")
+    for name, values in channels.items():
+        _check(name, values, np.shape(values))
     header = {
         "compression": getattr(OpenEXR, f"{'NO' if compression == 'none' else compression.upper()}_COMPRESSION"),
         "type": OpenEXR.scanlineimage,
     }
+    if display is not None:
+        height, width = next(iter(shapes.values()))
+        x0, y0 = origin
+        header["dataWindow"] = (np.array([x0, y0], np.int32), np.array([x0 + width - 1, y0 + height - 1], np.int32))
+        header["displayWindow"] = (np.array([0, 0], np.int32), np.array([display[0] - 1, display[1] - 1], np.int32))
+    header.update(standard or {})
     for key, value in (metadata or {}).items():
         if isinstance(value, (bool, np.bool_)):
             value = int(value)
@@ -78,17 +110,20 @@ def write_exr(
         if not isinstance(value, (str, int, float)):
             raise OutputError(f"metadata {key!r}: expected str, int or float, got {type(value).__name__}")
         header[METADATA_PREFIX + key] = value
+    channels = {name: np.ascontiguousarray(values) for name, values in channels.items()}
     return atomic_write(path, lambda tmp: OpenEXR.File(header, channels).write(str(tmp)))
 
 
 @dataclass
 class ExrImage:
-    """A frame read back: channels by name (H, W arrays), and the ``warpsky/`` metadata without its prefix."""
+    """A frame read back: channels by name (H, W arrays), the ``warpsky/`` metadata without its prefix, and the
+    whole header (OpenEXR's standard attributes included)."""
 
     channels: dict[str, np.ndarray]
     metadata: dict
     width: int
     height: int
+    header: dict = field(default_factory=dict)
 
     def rgba(self) -> np.ndarray:
         return np.stack([self.channels[c].astype(np.float32) for c in "RGBA"], axis=-1)
@@ -114,7 +149,7 @@ def read_exr(path: str | os.PathLike) -> ExrImage:
         raise OutputError(f"EXR {path} has no channels")
     height, width = next(iter(channels.values())).shape
     metadata = {k[len(METADATA_PREFIX):]: v for k, v in header.items() if k.startswith(METADATA_PREFIX)}
-    return ExrImage(channels, metadata, width, height)
+    return ExrImage(channels, metadata, width, height, header)
 
 
 def validate_exr(path: str | os.PathLike, *, required_channels, metadata_expect: dict | None = None) -> bool:

@@ -100,6 +100,8 @@ class Camera:
         near: Near clipping distance along the view axis [m].
         far: Far clipping distance along the view axis [m].
         projection: :class:`Projection`, perspective by default (USD ``token projection``).
+        pixel_aspect: Width / height of an image pixel as displayed (RenderSettings ``pixelAspectRatio``): the
+            film back is conformed to ``width * pixel_aspect / height``.
     """
 
     name: str
@@ -113,6 +115,7 @@ class Camera:
     near: float = 0.1
     far: float = 1.0e6
     projection: Projection = Projection.PERSPECTIVE
+    pixel_aspect: float = 1.0
 
     def __post_init__(self):
         object.__setattr__(self, "position", _vec3(self.position, f"camera {self.name}: position"))
@@ -127,7 +130,7 @@ class Camera:
         if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
             raise SceneError(f"camera {self.name}: rotation must be orthonormal and right-handed")
         object.__setattr__(self, "rotation", rot)
-        for attr in ("focal_length", "horizontal_aperture", "vertical_aperture"):
+        for attr in ("focal_length", "horizontal_aperture", "vertical_aperture", "pixel_aspect"):
             value = getattr(self, attr)
             if not (math.isfinite(value) and value > 0.0):
                 raise SceneError(f"camera {self.name}: {attr} must be positive, got {value}")
@@ -147,9 +150,9 @@ class Camera:
         """Return this camera with its film back grown to the image aspect ratio (CameraUtil's "fit" policy).
 
         The authored window stays entirely in view; one aperture is enlarged so that
-        ``horizontal_aperture / vertical_aperture == width / height``.
+        ``horizontal_aperture / vertical_aperture == width * pixel_aspect / height``.
         """
-        aspect = width / height
+        aspect = width * self.pixel_aspect / height
         h_ap, v_ap = self.horizontal_aperture, self.vertical_aperture
         if h_ap / v_ap > aspect:
             v_ap = h_ap / aspect
@@ -158,6 +161,7 @@ class Camera:
         return Camera(
             self.name, self.position, self.rotation, self.focal_length, h_ap, v_ap,
             self.horizontal_aperture_offset, self.vertical_aperture_offset, self.near, self.far, self.projection,
+            self.pixel_aspect,
         )
 
     def pixel_direction(self, x: float, y: float, width: int, height: int) -> np.ndarray:

@@ -123,15 +123,14 @@ class StageReader(VolumeReading, SurfaceReading):
         return [str(p.GetPath()) for p in self._prims_of(UsdGeom.Camera)]
 
     def render_settings(self) -> tuple[tuple[int, int] | None, str | None]:
-        """Resolution and camera path authored on the stage's UsdRenderSettings prim, if any."""
+        """Resolution and camera path authored on the stage's default UsdRenderSettings prim (its
+        renderSettingsPrimPath, else the first one), if any; :mod:`warpsky.scene.usd_render` reads the rest."""
         from pxr import UsdRender
 
-        settings_path = self.stage.GetMetadata("renderSettingsPrimPath") or ""
-        prim = self.stage.GetPrimAtPath(settings_path) if settings_path else None
-        if not prim:
-            candidates = self._prims_of(UsdRender.Settings)
-            prim = candidates[0] if candidates else None
-        if not prim:
+        from warpsky.scene.usd_render import find_settings
+
+        prim = find_settings(self.stage, None)
+        if prim is None:
             return None, None
         settings = UsdRender.Settings(prim)
         resolution = None

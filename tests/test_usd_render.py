@@ -1,0 +1,206 @@
+"""UsdRender settings, products and vars; colour spaces and camera matrices in the header; the Python API.
+
+Real stages written with pxr, real EXRs read back through the OpenEXR bindings.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import StageSpec, look_rotation, write_stage
+
+import warpsky
+from warpsky.cli import main
+from warpsky.output.exr import read_exr
+
+#: lin_rec709 -> ACEScg (Bradford D65 -> ACES white), as published with the ACES CG configs.
+REC709_TO_ACESCG = np.array([[0.61309732, 0.33952285, 0.04737928],
+                             [0.07019422, 0.91635557, 0.01345020],
+                             [0.02061560, 0.10956983, 0.86981457]])
+FAST = ["--device", "cpu", "--technique", "single_scatter", "--set", "step_length=1"]
+
+
+def run(args, capsys):
+    code = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.fixture
+def stage(tmp_path, homogeneous_npy):
+    return write_stage(tmp_path / "shot.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
+
+
+def add_render(stage_path, products, *, settings_attrs=None, second_camera=True):
+    """Add /Render/Settings with ``products``: {name: (productName, camera or None, resolution or None,
+    [(var name, sourceName, dataType, sourceType)], extra attrs)}."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdRender
+
+    usd = Usd.Stage.Open(str(stage_path))
+    if second_camera:
+        cam = UsdGeom.Camera.Define(usd, "/World/Side")
+        cam.CreateFocalLengthAttr(50.0)
+        cam.CreateHorizontalApertureAttr(36.0)
+        cam.CreateVerticalApertureAttr(36.0)
+        m = np.eye(4)
+        m[:3, :3] = look_rotation((-1.0, 0.0, 0.0))
+        m[:3, 3] = (40.0, 0.0, 0.0)
+        UsdGeom.Xformable(cam.GetPrim()).AddTransformOp().Set(Gf.Matrix4d(m.T.tolist()))
+    settings = UsdRender.Settings.Define(usd, "/Render/Settings")
+    settings.CreateResolutionAttr(Gf.Vec2i(12, 8))
+    settings.CreateCameraRel().SetTargets(["/World/Camera"])
+    for name, value in (settings_attrs or {}).items():
+        getattr(settings, f"Create{name[0].upper()}{name[1:]}Attr")(value)
+    targets = []
+    for name, (product_name, camera, resolution, variables, extra) in products.items():
+        product = UsdRender.Product.Define(usd, f"/Render/{name}")
+        if product_name is not None:
+            product.CreateProductNameAttr(product_name)
+        if camera is not None:
+            product.CreateCameraRel().SetTargets([camera])
+        if resolution is not None:
+            product.CreateResolutionAttr(Gf.Vec2i(*resolution))
+        for attr, value in (extra or {}).items():
+            getattr(product, f"Create{attr[0].upper()}{attr[1:]}Attr")(value)
+        var_paths = []
+        for var_name, source, data_type, source_type in variables:
+            var = UsdRender.Var.Define(usd, f"/Render/{name}/{var_name}")
+            var.CreateSourceNameAttr(source)
+            var.CreateDataTypeAttr(data_type)
+            var.CreateSourceTypeAttr(source_type)
+            var_paths.append(var.GetPath())
+        product.CreateOrderedVarsRel().SetTargets(var_paths)
+        targets.append(product.GetPath())
+    settings.CreateProductsRel().SetTargets(targets)
+    usd.GetRootLayer().Save()
+    del Sdf
+    return stage_path
+
+
+def test_two_products_write_their_sequences_with_their_vars(tmp_path, stage, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    add_render(stage, {
+        "Beauty": ("out/beauty.$F4.exr", None, None,
+                   [("color", "color", "color4f", "raw"), ("depth", "depth", "float", "raw")], None),
+        "Side": ("out/side.####.exr", "/World/Side", (8, 6),
+                 [("beauty", "Ci", "color3h", "raw"), ("tau", "transmittance", "color3f", "raw")], None),
+    })
+    code, stdout, err = run(["render", stage, "--frames", "1:2", *FAST], capsys)
+    assert code == 0, err
+    for frame in (1, 2):
+        beauty = read_exr(tmp_path / f"out/beauty.{frame:04d}.exr")
+        assert set(beauty.channels) == {"R", "G", "B", "A", "depth.Z"}
+        assert (beauty.width, beauty.height) == (12, 8)
+        assert beauty.metadata["camera"] == "/World/Camera"
+        assert beauty.metadata["orderedChannels"] == "R,G,B,A,depth.Z"
+        side = read_exr(tmp_path / f"out/side.{frame:04d}.exr")
+        assert set(side.channels) == {"R", "G", "B", "tau.R", "tau.G", "tau.B"}
+        assert side.channels["R"].dtype == np.float16 and side.channels["tau.R"].dtype == np.float32
+        assert (side.width, side.height) == (8, 6) and side.metadata["camera"] == "/World/Side"
+    assert (tmp_path / "out/beauty.log.json").is_file() and (tmp_path / "out/side.log.json").is_file()
+
+
+def test_one_product_selected_and_out_overrides_its_name(tmp_path, stage, capsys):
+    add_render(stage, {
+        "A": ("a.####.exr", None, None, [("color", "color", "color4f", "raw")], None),
+        "B": ("b.####.exr", None, None, [("color", "color", "color4f", "raw")], None),
+    })
+    out = tmp_path / "picked.exr"
+    code, _, err = run(["render", stage, out, "--product", "/Render/B", *FAST], capsys)
+    assert code == 0, err
+    assert read_exr(out).channels.keys() == {"R", "G", "B", "A"}
+    code, _, err = run(["render", stage, out, *FAST], capsys)
+    assert code == 2 and "2 products" in err and "--product" in err
+
+
+def test_data_window_and_pixel_aspect(tmp_path, stage, capsys):
+    add_render(stage, {"P": (str(tmp_path / "w.exr"), None, (16, 8), [("color", "color", "color4f", "raw")],
+                             {"dataWindowNDC": (0.25, 0.5, 0.75, 1.0), "pixelAspectRatio": 2.0})})
+    code, _, err = run(["render", stage, *FAST], capsys)
+    assert code == 0, err
+    image = read_exr(tmp_path / "w.exr")
+    lo, hi = image.header["dataWindow"]
+    assert lo.tolist() == [4, 0] and hi.tolist() == [11, 3]  # the top half, middle half of the columns
+    assert image.header["displayWindow"][1].tolist() == [15, 7] and image.header["pixelAspectRatio"] == 2.0
+    api = warpsky.render_stage(stage, product="/Render/P", device="cpu", technique="single_scatter",
+                               settings={"step_length": 1})
+    assert np.array_equal(api.channels["R"], image.channels["R"])
+    assert api.frame.rgba.shape == (8, 16, 4)
+
+
+def test_colorspace_acescg_is_rec709_times_the_standard_matrix(tmp_path, stage, capsys):
+    rec, aces = tmp_path / "rec.exr", tmp_path / "aces.exr"
+    assert run(["render", stage, rec, "--res", "12x8", "--float", *FAST], capsys)[0] == 0
+    assert run(["render", stage, aces, "--res", "12x8", "--float", "--colorspace", "ACEScg", *FAST], capsys)[0] == 0
+    a, b = read_exr(rec), read_exr(aces)
+    rgb_a = np.stack([a.channels[c] for c in "RGB"], axis=-1)
+    rgb_b = np.stack([b.channels[c] for c in "RGB"], axis=-1)
+    assert rgb_a.max() > 0.0
+    np.testing.assert_allclose(rgb_b, rgb_a @ REC709_TO_ACESCG.T, rtol=1e-5, atol=1e-7)
+    np.testing.assert_array_equal(a.channels["A"], b.channels["A"])
+    np.testing.assert_array_equal(a.channels["transmittance.R"], b.channels["transmittance.R"])
+    assert np.allclose(a.header["chromaticities"], (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290))
+    assert np.allclose(b.header["chromaticities"], (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767))
+    assert a.header["whiteLuminance"] == 1.0 and b.metadata["colorspace"] == "ACEScg"
+
+
+def test_camera_matrices_in_the_header(tmp_path, stage, capsys):
+    out = tmp_path / "m.exr"
+    assert run(["render", stage, out, "--res", "12x8", *FAST], capsys)[0] == 0
+    header = read_exr(out).header
+    world_to_camera = np.asarray(header["worldToCamera"], dtype=np.float64).T  # Imath rows -> column vectors
+    world_to_ndc = np.asarray(header["worldToNDC"], dtype=np.float64).T
+    point = np.array([3.0, -2.0, 0.0, 1.0])  # the camera sits at (0, 0, 40) looking down -Z
+    np.testing.assert_allclose(world_to_camera @ point, [3.0, -2.0, 40.0, 1.0], atol=1e-4)  # z > 0 in front
+    ndc = world_to_ndc @ point
+    # The same point through the camera model: film x = f X / depth over the film (36 x 36 at focal length 50,
+    # conformed to 12x8 by growing the film to 54 x 36), NDC (0, 0) at the top left.
+    col = (50.0 * 3.0 / 40.0 / 54.0 + 0.5) * 12
+    row = (0.5 - 50.0 * -2.0 / 40.0 / 36.0) * 8
+    np.testing.assert_allclose((ndc[0] / ndc[3] * 12, ndc[1] / ndc[3] * 8), (col, row), atol=1e-4)
+
+
+def test_api_returns_the_pixels_the_cli_writes(tmp_path, stage, capsys):
+    out = tmp_path / "cli.exr"
+    assert run(["render", stage, out, "--res", "12x8", "--float", *FAST], capsys)[0] == 0
+    written = read_exr(out)
+    image = warpsky.render_stage(stage, resolution=(12, 8), device="cpu", technique="single_scatter",
+                                 settings={"step_length": 1}, half=False)
+    for name in ("R", "G", "B", "A", "depth.Z", "transmittance.G"):
+        np.testing.assert_array_equal(image.channels[name], written.channels[name])
+    np.testing.assert_array_equal(image.frame.rgba[..., 0], written.channels["R"])
+    path = warpsky.render_to_exr(stage, tmp_path / "api.exr", resolution=(12, 8), device="cpu",
+                                 technique="single_scatter", settings={"step_length": 1}, half=False)
+    np.testing.assert_array_equal(read_exr(path).channels["R"], written.channels["R"])
+
+
+def test_info_lists_settings_products_and_vars(stage, capsys):
+    add_render(stage, {"Beauty": ("b.$F4.exr", None, None, [("color", "color", "color4h", "raw"),
+                                                            ("z", "depth", "float", "raw")], None)})
+    code, stdout, err = run(["info", stage, "--device", "cpu"], capsys)
+    assert code == 0, err
+    for text in ("render      /Render/Settings", "product     /Render/Beauty -> b.####.exr",
+                 "/Render/Beauty/color: color -> R, G, B, A (half)", "/Render/Beauty/z: depth -> z.Z (float)"):
+        assert text in stdout
+
+
+@pytest.mark.parametrize("case, expected", [
+    ("settings_not_settings", "--settings /World/Camera: prim is a Camera, not a RenderSettings"),
+    ("no_name", "/Render/P.productName is not authored"),
+    ("unknown_source", "RenderVar /Render/P/v.sourceName 'normals' is not a warpsky output; known: color"),
+    ("bad_type", "RenderVar /Render/P/v.dataType 'float' does not fit source transmittance"),
+    ("technique_aov", "RenderVar /Render/P/v: source single_scatter is written by technique hybrid, not "
+                      "single_scatter"),
+    ("not_exr", "/Render/P.productName 'x.png' must end in .exr"),
+])
+def test_bad_render_prims_exit_2_and_write_nothing(tmp_path, stage, capsys, monkeypatch, case, expected):
+    monkeypatch.chdir(tmp_path)
+    var = {"unknown_source": ("v", "normals", "color3f", "raw"), "bad_type": ("v", "transmittance", "float", "raw"),
+           "technique_aov": ("v", "single_scatter", "color3f", "raw")}.get(case, ("v", "color", "color4f", "raw"))
+    name = {"no_name": None, "not_exr": "x.png"}.get(case, "out/p.exr")
+    add_render(stage, {"P": (name, None, None, [var], None)})
+    args = ["render", stage, *FAST] + (["--settings", "/World/Camera"] if case == "settings_not_settings" else [])
+    code, _, err = run(args, capsys)
+    assert code == 2
+    assert expected in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()

@@ -1,0 +1,139 @@
+"""warpsky from Python: render a stage into arrays, or into an EXR, without the command line.
+
+    import warpsky
+    image = warpsky.render_stage("usd_scenes/cumulus.usda", time=1, resolution=(256, 170))
+    rgba = image.frame.rgba                      # (H, W, 4) float32, linear
+    print(image.metadata["technique"], image.channels.keys())
+    warpsky.render_to_exr("usd_scenes/cumulus.usda", "out/cumulus.exr", time=1, png=True)
+
+Both read the stage the way ``warpsky render`` does (the same stage reader, plan, passes and composite; the command
+line builds its options with :func:`render_options`), so they return the pixels the command line writes. A
+``product`` (a UsdRenderProduct prim path) applies that product's camera, resolution, pixel aspect, data window and
+vars; ``settings_prim`` picks the UsdRenderSettings prim whose camera and resolution are the defaults.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+from pathlib import Path
+
+from warpsky.errors import SceneError, UsageError
+from warpsky.output.color import DEFAULT_COLORSPACE, check_colorspace
+from warpsky.output.products import FULL_WINDOW
+from warpsky.render import RenderedImage, RenderOptions, plan_frame, render_image, write_frame
+from warpsky.scene.usd_render import ProductSpec, RenderSpec, read_render_spec
+from warpsky.techniques.base import DEFAULT_TECHNIQUE
+
+#: renderingColorSpace tokens (USD's colour space names and OCIO's) and the output colour space they select.
+RENDERING_COLORSPACES = {"lin_rec709": "lin_rec709", "lin_rec709_scene": "lin_rec709",
+                         "linear rec.709 (srgb)": "lin_rec709", "acescg": "ACEScg", "lin_ap1": "ACEScg",
+                         "lin_ap1_scene": "ACEScg"}
+
+
+def render_options(*, technique: str = DEFAULT_TECHNIQUE, resolution=None, camera: str | None = None,
+                   device: str = "auto", settings: dict | None = None, colorspace: str | None = None,
+                   load: str = "all", variants=(), purposes=None, **more) -> RenderOptions:
+    """:class:`~warpsky.render.RenderOptions` from keyword arguments; ``resolution`` is (width, height), (width,
+    None) or a width; ``variants`` are (set, selection) pairs or ``"SET=SELECTION"`` strings; the rest
+    (``half``, ``png``, ``exposure``, ``max_memory``, ``work_limit``) pass through."""
+    from warpsky.device import resolve_device
+    from warpsky.scene.usd_composition import StageOptions, parse_variant
+
+    if isinstance(resolution, int):
+        resolution = (resolution, None)
+    variants = tuple(parse_variant(v) if isinstance(v, str) else tuple(v) for v in variants)
+    stage = StageOptions(load=load, variants=variants, **({} if purposes is None else {"purposes": tuple(purposes)}))
+    return RenderOptions(technique=technique, settings={k: str(v) for k, v in (settings or {}).items()},
+                         resolution=None if resolution is None else tuple(resolution), device=resolve_device(device),
+                         camera=camera, colorspace=check_colorspace(colorspace or DEFAULT_COLORSPACE), stage=stage,
+                         **more)
+
+
+def with_render_settings(options: RenderOptions, spec: RenderSpec | None, *, explicit: set[str] = frozenset()
+                         ) -> RenderOptions:
+    """``options`` with the UsdRenderSettings' camera, resolution, pixel aspect, data window, purposes and colour
+    space filled in where ``explicit`` (the option names given by the caller) does not set them."""
+    if spec is None:
+        return options
+    changes = {"pixel_aspect": spec.pixel_aspect, "data_window": spec.data_window}
+    if "camera" not in explicit and spec.camera is not None:
+        changes["camera"] = spec.camera
+    if "resolution" not in explicit and spec.resolution is not None:
+        changes["resolution"] = spec.resolution
+    if "purposes" not in explicit and spec.purposes is not None and options.stage is not None:
+        changes["stage"] = replace(options.stage, purposes=spec.purposes)
+    if "colorspace" not in explicit and spec.colorspace is not None:
+        token = RENDERING_COLORSPACES.get(spec.colorspace.strip().lower())
+        if token is None:
+            raise SceneError(f"{spec.path}.renderingColorSpace {spec.colorspace!r} is not supported; expected one "
+                             f"of {', '.join(sorted(set(RENDERING_COLORSPACES)))}")
+        changes["colorspace"] = token
+    return replace(options, **changes)
+
+
+def with_product(options: RenderOptions, product: ProductSpec, *, explicit: set[str] = frozenset()
+                 ) -> RenderOptions:
+    """``options`` with a RenderProduct's camera, resolution, pixel aspect, data window and vars (its own values
+    or those it inherits from its settings), except what ``explicit`` names."""
+    changes = {"pixel_aspect": product.pixel_aspect, "data_window": product.data_window, "outputs": product.outputs}
+    if "camera" not in explicit and product.camera is not None:
+        changes["camera"] = product.camera
+    if "resolution" not in explicit and product.resolution is not None:
+        changes["resolution"] = product.resolution
+    return replace(options, **changes)
+
+
+def _reader_and_options(stage, options: RenderOptions, product: str | None, settings_prim: str | None,
+                        explicit: set[str]):
+    from warpsky.scene.usd import StageReader
+
+    reader = StageReader(stage, options.stage)
+    spec = read_render_spec(reader.stage, settings_prim, reader.meters_per_unit)
+    options = with_render_settings(options, spec, explicit=explicit)
+    if options.stage != reader.options:  # the settings' includedPurposes
+        reader = StageReader(stage, options.stage)
+    if product is not None:
+        products = {p.path: p for p in (spec.products if spec else ())}
+        if product not in products:
+            known = ", ".join(products) or "none"
+            raise SceneError(f"product {product} is not among the render settings' products (known: {known})")
+        options = with_product(options, products[product], explicit=explicit)
+    return reader, options
+
+
+def render_stage(stage: str | os.PathLike, time: float | None = None, *, product: str | None = None,
+                 settings_prim: str | None = None, **kwargs) -> RenderedImage:
+    """Render ``stage`` at ``time`` (None: its earliest time sample) into memory; nothing is written.
+
+    Keyword arguments are :func:`render_options`' (``technique``, ``resolution``, ``camera``, ``device``,
+    ``settings``, ``colorspace``, ``load``, ``variants``, ``purposes``, ...). Returns a
+    :class:`~warpsky.render.RenderedImage`: ``frame.rgba`` / ``frame.transmittance`` / ``frame.depth`` /
+    ``frame.aovs``, the output's ``channels``, its ``metadata`` and OpenEXR ``attributes``.
+    """
+    from warpsky.device import init_warp
+
+    init_warp()
+    explicit = {k for k, v in kwargs.items() if v is not None}
+    reader, options = _reader_and_options(stage, render_options(**kwargs), product, settings_prim, explicit)
+    scene, plan = plan_frame(reader, time, options)
+    return render_image(scene, plan, options, stage=reader.path, time_code=time)
+
+
+def render_to_exr(stage: str | os.PathLike, out: str | os.PathLike, time: float | None = None, *,
+                  product: str | None = None, settings_prim: str | None = None, **kwargs) -> Path:
+    """Render ``stage`` at ``time`` and write ``out`` atomically (plus a PNG preview with ``png=True``); returns
+    the EXR's path. Arguments as :func:`render_stage`."""
+    from warpsky.device import init_warp
+
+    if not str(out).lower().endswith(".exr"):
+        raise UsageError(f"output {str(out)!r} must end in .exr")
+    init_warp()
+    explicit = {k for k, v in kwargs.items() if v is not None}
+    reader, options = _reader_and_options(stage, render_options(**kwargs), product, settings_prim, explicit)
+    scene, plan = plan_frame(reader, time, options)
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    return write_frame(scene, plan, Path(out), options, stage=reader.path, time_code=time).exr
+
+
+__all__ = ["FULL_WINDOW", "render_options", "render_stage", "render_to_exr", "with_product", "with_render_settings"]

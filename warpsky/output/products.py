@@ -1,0 +1,73 @@
+"""From a composited frame to the channels of one output image: which warpsky outputs, under which names, in
+which precision, over which data window.
+
+Without UsdRender prims a frame is written with warpsky's default channels (:func:`default_outputs`): the beauty
+as ``R, G, B, A``, ``transmittance.R/G/B``, ``depth.Z`` and every AOV the technique writes. A RenderProduct's
+``orderedVars`` choose and order the channels instead (:class:`~warpsky.scene.usd_render.OutputVar`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from warpsky.errors import SceneError
+from warpsky.scene.usd_render import OutputVar
+
+FULL_WINDOW = (0.0, 0.0, 1.0, 1.0)
+
+
+def default_outputs(aov_names=(), *, half: bool = True) -> tuple[OutputVar, ...]:
+    """warpsky's own channels: beauty RGBA (half unless ``half`` is False), transmittance, depth and the AOVs."""
+    outputs = [OutputVar("", "color", "RGBA", half), OutputVar("transmittance", "transmittance", "RGB"),
+               OutputVar("depth", "depth", "Z")]
+    outputs += [OutputVar(name, name, "RGB") for name in aov_names]
+    return tuple(outputs)
+
+
+def required_channels(outputs) -> tuple[str, ...]:
+    """Every channel name ``outputs`` write, in order."""
+    return tuple(channel for output in outputs for channel in output.channels)
+
+
+def window_pixels(window, width: int, height: int, *, where: str = "dataWindowNDC") -> tuple[int, int, int, int]:
+    """Pixel bounds (x0, y0, x1, y1), inclusive, top-left origin, of the pixels whose centres lie inside the NDC
+    window (xmin, ymin, xmax, ymax; NDC (0, 0) is the image's bottom left, (1, 1) its top right)."""
+    xmin, ymin, xmax, ymax = (float(v) for v in window)
+    x0, x1 = max(0, math.ceil(xmin * width - 0.5)), min(width - 1, math.floor(xmax * width - 0.5))
+    y0 = max(0, math.ceil((1.0 - ymax) * height - 0.5))
+    y1 = min(height - 1, math.floor((1.0 - ymin) * height - 0.5))
+    if x1 < x0 or y1 < y0:
+        raise SceneError(f"{where} {tuple(window)} holds no pixel centre of the {width}x{height} image")
+    return x0, y0, x1, y1
+
+
+def _source(frame, output: OutputVar) -> np.ndarray:
+    """The (H, W, C) array of ``output``'s source in ``frame``."""
+    if output.source == "color":
+        return frame.rgba if output.components == "RGBA" else frame.rgba[..., :3]
+    if output.source == "alpha":
+        return frame.rgba[..., 3:4]
+    if output.source == "transmittance":
+        return frame.transmittance
+    if output.source == "depth":
+        return frame.depth[..., None]
+    if output.source not in frame.aovs:
+        raise SceneError(f"RenderVar {output.prim or output.source}: this render has no {output.source} output "
+                         f"(it has {', '.join(sorted(frame.aovs)) or 'no AOVs'})")
+    return frame.aovs[output.source]
+
+
+def frame_channels(frame, outputs, window: tuple[int, int, int, int] | None = None) -> dict[str, np.ndarray]:
+    """Channel name -> (h, w) array for ``outputs`` of a composited frame, cropped to the pixel ``window``."""
+    channels = {}
+    for output in outputs:
+        values = _source(frame, output)
+        if window is not None:
+            x0, y0, x1, y1 = window
+            values = values[y0:y1 + 1, x0:x1 + 1]
+        dtype = np.float16 if output.half else np.float32
+        for i, name in enumerate(output.channels):
+            channels[name] = np.ascontiguousarray(values[..., i], dtype=dtype)
+    return channels

@@ -1,0 +1,263 @@
+"""UsdRender prims: what a stage asks to be rendered, the way ``husk`` reads it.
+
+A ``UsdRenderSettings`` prim (``--settings PATH``, else the stage's ``renderSettingsPrimPath`` metadata, else the
+first one) gives the camera, resolution, pixel aspect ratio, data window and purposes, and its ``products``
+relationship names ``UsdRenderProduct`` prims. Each product writes one image per frame to its ``productName``
+(``$F4``, ``$F`` and ``####`` mark the frame number), may override the settings' camera, resolution, pixel aspect
+ratio and data window, and lists its channels as ``orderedVars``: ``UsdRenderVar`` prims whose ``sourceName``
+names a warpsky output (:data:`SOURCES`) and whose ``dataType`` says how many components and what precision.
+
+Attributes read here and not acted on (``materialBindingPurposes``: warpsky binds no materials;
+``disableMotionBlur`` and friends: warpsky renders instants) are reported as notes, not errors.
+
+pxr is imported inside the functions (a heavy import).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from warpsky.errors import SceneError
+
+#: warpsky outputs a RenderVar's ``sourceName`` may name: components, and the techniques that produce it (None:
+#: every technique).
+SOURCES = {
+    "color": ("RGBA", None),
+    "alpha": ("A", None),
+    "transmittance": ("RGB", None),
+    "depth": ("Z", None),
+    "variance": ("RGB", ("hybrid", "path_tracer")),
+    "single_scatter": ("RGB", ("hybrid",)),
+    "multiple_scatter": ("RGB", ("hybrid",)),
+}
+#: Other spellings of the same sources: RenderMan's and Karma's beauty, light path expressions for the beauty.
+ALIASES = {"ci": "color", "c": "color", "rgba": "color", "beauty": "color", "c.*": "color", "z": "depth",
+           "a": "alpha"}
+#: ``dataType`` tokens by component count, and which of them are half floats.
+DATA_TYPES = {
+    1: ("float", "half", "double"),
+    3: ("color3f", "color3h", "color3d", "float3", "half3", "double3", "vector3f", "vector3h"),
+    4: ("color4f", "color4h", "color4d", "float4", "half4", "double4"),
+}
+HALF_TYPES = frozenset({"half", "color3h", "half3", "vector3h", "color4h", "half4"})
+SOURCE_TYPES = ("raw", "lpe")
+CONFORM_POLICY = "expandAperture"
+FRAME_TOKEN = re.compile(r"\$F(\d*)|\$\{F(\d*)\}")
+
+
+@dataclass(frozen=True)
+class OutputVar:
+    """One channel group of an output image.
+
+    Attributes:
+        layer: EXR layer name ("" for the beauty's unprefixed R, G, B, A, which Nuke reads as its rgba layer).
+        source: The warpsky output (a key of :data:`SOURCES`).
+        components: Channel suffixes written, e.g. ``RGBA``, ``RGB``, ``Z``.
+        half: Written as half floats (else 32-bit float).
+        prim: The RenderVar prim path, for messages ("" for the built-in default outputs).
+    """
+
+    layer: str
+    source: str
+    components: str
+    half: bool = False
+    prim: str = ""
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        return tuple(f"{self.layer}.{c}" if self.layer else c for c in self.components)
+
+
+@dataclass(frozen=True)
+class ProductSpec:
+    """One UsdRenderProduct with what it inherits from its settings already applied."""
+
+    path: str
+    name: str  # the output path, frame tokens rewritten as a #### placeholder
+    camera: str | None
+    resolution: tuple[int, int] | None
+    pixel_aspect: float
+    data_window: tuple[float, float, float, float]
+    outputs: tuple[OutputVar, ...]
+
+
+@dataclass(frozen=True)
+class RenderSpec:
+    """A UsdRenderSettings prim and its products."""
+
+    path: str
+    camera: str | None
+    resolution: tuple[int, int] | None
+    pixel_aspect: float
+    data_window: tuple[float, float, float, float]
+    purposes: tuple[str, ...] | None  # None: not authored
+    colorspace: str | None  # renderingColorSpace, when authored
+    products: tuple[ProductSpec, ...]
+    notes: tuple[str, ...] = ()
+
+
+def frame_placeholder(name: str) -> str:
+    """``productName`` with husk's frame tokens as warpsky's placeholder: ``$F4`` -> ``####``, ``$F`` -> ``#``."""
+    return FRAME_TOKEN.sub(lambda m: "#" * max(1, int(m.group(1) or m.group(2) or 1)), name)
+
+
+def find_settings(stage, settings_path: str | None):
+    """The UsdRenderSettings prim to use, or None when the stage has none (and none was asked for)."""
+    from pxr import Sdf, UsdRender
+
+    if settings_path is not None:
+        if not Sdf.Path.IsValidPathString(settings_path) or not Sdf.Path(settings_path).IsAbsolutePath():
+            raise SceneError(f"--settings {settings_path!r} is not an absolute prim path (e.g. /Render/Settings)")
+        prim = stage.GetPrimAtPath(settings_path)
+        if not prim:
+            raise SceneError(f"--settings {settings_path}: the stage has no prim there")
+        if not prim.IsA(UsdRender.Settings):
+            raise SceneError(f"--settings {settings_path}: prim is a {prim.GetTypeName() or 'typeless prim'}, "
+                             "not a RenderSettings")
+        return prim
+    metadata = stage.GetMetadata("renderSettingsPrimPath") or ""
+    if metadata:
+        prim = stage.GetPrimAtPath(metadata)
+        if not prim or not prim.IsA(UsdRender.Settings):
+            raise SceneError(f"the stage's renderSettingsPrimPath {metadata} is not a RenderSettings prim")
+        return prim
+    for prim in stage.Traverse():
+        if prim.IsA(UsdRender.Settings):
+            return prim
+    return None
+
+
+def read_render_spec(stage, settings_path: str | None, meters_per_unit: float = 1.0) -> RenderSpec | None:
+    """The render settings and products of ``stage`` (None when it has no RenderSettings prim)."""
+    from pxr import UsdRender
+
+    prim = find_settings(stage, settings_path)
+    if prim is None:
+        return None
+    settings = UsdRender.Settings(prim)
+    base = _base_values(settings, None)
+    notes = []
+    bindings = [str(p) for p in (settings.GetMaterialBindingPurposesAttr().Get() or []) if str(p)]
+    if settings.GetMaterialBindingPurposesAttr().HasAuthoredValue():
+        notes.append(f"{prim.GetPath()}.materialBindingPurposes {bindings} ignored: warpsky binds no materials")
+    purposes_attr = settings.GetIncludedPurposesAttr()
+    purposes = tuple(str(p) for p in purposes_attr.Get()) if purposes_attr.HasAuthoredValue() else None
+    colorspace_attr = prim.GetAttribute("renderingColorSpace")
+    colorspace = str(colorspace_attr.Get()) if colorspace_attr and colorspace_attr.HasAuthoredValue() else None
+    products = []
+    for target in settings.GetProductsRel().GetTargets():
+        product_prim = stage.GetPrimAtPath(target)
+        if not product_prim or not product_prim.IsA(UsdRender.Product):
+            raise SceneError(f"{prim.GetPath()}.products targets {target}, which is not a RenderProduct prim")
+        products.append(_product(stage, UsdRender.Product(product_prim), base))
+    return RenderSpec(str(prim.GetPath()), *base, purposes, colorspace, tuple(products), tuple(notes))
+
+
+def _base_values(schema, inherited) -> tuple:
+    """(camera, resolution, pixel aspect, data window) of a RenderSettingsBase prim; unauthored values come from
+    ``inherited`` (a product inherits its settings')."""
+    prim = schema.GetPrim()
+    path = prim.GetPath()
+    camera, resolution, aspect, window = inherited if inherited is not None else (None, None, 1.0, (0.0, 0.0, 1.0, 1.0))
+    targets = schema.GetCameraRel().GetTargets()
+    if targets:
+        camera = str(targets[0])
+    attr = schema.GetResolutionAttr()
+    if attr.HasAuthoredValue():
+        res = attr.Get()
+        if res[0] <= 0 or res[1] <= 0:
+            raise SceneError(f"{path}.resolution must be two positive integers, got {tuple(res)}")
+        resolution = (int(res[0]), int(res[1]))
+    attr = schema.GetPixelAspectRatioAttr()
+    if attr.HasAuthoredValue():
+        aspect = float(attr.Get())
+        if not 0.0 < aspect < float("inf"):
+            raise SceneError(f"{path}.pixelAspectRatio must be positive, got {aspect}")
+    attr = schema.GetDataWindowNDCAttr()
+    if attr.HasAuthoredValue():
+        window = tuple(float(v) for v in attr.Get())
+        if not (window[0] < window[2] and window[1] < window[3]):
+            raise SceneError(f"{path}.dataWindowNDC must be (xmin, ymin, xmax, ymax) with min < max, got {window}")
+    policy = schema.GetAspectRatioConformPolicyAttr()
+    if policy.HasAuthoredValue() and str(policy.Get()) != CONFORM_POLICY:
+        raise SceneError(f"{path}.aspectRatioConformPolicy {str(policy.Get())!r} is not supported; warpsky "
+                         f"conforms cameras by {CONFORM_POLICY!r} (the film back grows to the image's aspect)")
+    return camera, resolution, aspect, window
+
+
+def _product(stage, product, base) -> ProductSpec:
+    from pxr import UsdRender
+
+    prim = product.GetPrim()
+    path = str(prim.GetPath())
+    kind = str(product.GetProductTypeAttr().Get() or "raster")
+    if kind != "raster":
+        raise SceneError(f"{path}.productType {kind!r} is not supported; warpsky writes 'raster' products (EXR)")
+    name = str(product.GetProductNameAttr().Get() or "")
+    if not name:
+        raise SceneError(f"{path}.productName is not authored; expected the output file, e.g. out/shot.$F4.exr")
+    name = frame_placeholder(name)
+    if not name.lower().endswith(".exr"):
+        raise SceneError(f"{path}.productName {name!r} must end in .exr (warpsky writes OpenEXR products)")
+    values = _base_values(product, base)
+    targets = product.GetOrderedVarsRel().GetTargets()
+    if not targets:
+        raise SceneError(f"{path}.orderedVars names no RenderVar; expected at least one (e.g. sourceName color)")
+    outputs = []
+    for target in targets:
+        var_prim = stage.GetPrimAtPath(target)
+        if not var_prim or not var_prim.IsA(UsdRender.Var):
+            raise SceneError(f"{path}.orderedVars targets {target}, which is not a RenderVar prim")
+        outputs.append(read_var(UsdRender.Var(var_prim)))
+    seen: dict[str, str] = {}
+    for output in outputs:
+        for channel in output.channels:
+            if channel in seen:
+                raise SceneError(f"{path}: RenderVars {seen[channel]} and {output.prim} both write channel "
+                                 f"{channel!r}; give one of them another name")
+            seen[channel] = output.prim
+    return ProductSpec(path, name, *values, tuple(outputs))
+
+
+def read_var(var) -> OutputVar:
+    """A RenderVar as an :class:`OutputVar`: its source, layer name and channel types checked."""
+    prim = var.GetPrim()
+    path = str(prim.GetPath())
+    known = ", ".join(SOURCES)
+    source_type = str(var.GetSourceTypeAttr().Get() or "raw")
+    raw_name = str(var.GetSourceNameAttr().Get() or "")
+    if source_type not in SOURCE_TYPES:
+        raise SceneError(f"RenderVar {path}.sourceType {source_type!r} is not supported; warpsky outputs raw "
+                         f"sources ({known}) and the beauty as lpe 'C.*'")
+    name = raw_name.strip().lower()
+    name = ALIASES.get(name, name)
+    if source_type == "lpe" and name != "color":
+        raise SceneError(f"RenderVar {path}: light path expression {raw_name!r} is not supported; warpsky writes "
+                         "the beauty for 'C.*' and these raw sources: " + known)
+    if name not in SOURCES:
+        raise SceneError(f"RenderVar {path}.sourceName {raw_name!r} is not a warpsky output; known: {known}")
+    components, _ = SOURCES[name]
+    data_type = str(var.GetDataTypeAttr().Get() or "")
+    count = next((n for n, types in DATA_TYPES.items() if data_type in types), None)
+    allowed = (3, 4) if name == "color" else (len(components),)
+    if count not in allowed:
+        expected = " or ".join(DATA_TYPES[n][0] for n in allowed)
+        raise SceneError(f"RenderVar {path}.dataType {data_type!r} does not fit source {name} ({components}); "
+                         f"expected {expected} (or their half/double forms)")
+    if name == "color" and count == 3:
+        components = "RGB"
+    layer_attr = prim.GetAttribute("driver:parameters:aov:name")
+    layer = str(layer_attr.Get()) if layer_attr and layer_attr.HasAuthoredValue() else prim.GetName()
+    if name == "color":
+        layer = ""  # the beauty: unprefixed R, G, B, A
+    return OutputVar(layer, name, components, data_type in HALF_TYPES, path)
+
+
+def check_outputs(outputs, technique: str) -> None:
+    """Each output is produced by ``technique``; else a SceneError naming the RenderVar and who produces it."""
+    for output in outputs:
+        producers = SOURCES[output.source][1]
+        if producers is not None and technique not in producers:
+            raise SceneError(f"RenderVar {output.prim or output.source}: source {output.source} is written by "
+                             f"technique {' or '.join(producers)}, not {technique}")
