@@ -204,3 +204,75 @@ def test_bad_render_prims_exit_2_and_write_nothing(tmp_path, stage, capsys, monk
     assert code == 2
     assert expected in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists()
+
+
+def _composed_stage(tmp_path, homogeneous_npy):
+    """A stage whose cloud sits in a payload, a proxy-purpose second cloud and a variant set choosing the cloud's
+    extinction; the camera looks at both."""
+    from pxr import Sdf, Usd, UsdGeom, UsdVol
+
+    payload = write_stage(tmp_path / "cloud.usda", StageSpec(volume_file=homogeneous_npy, sun_direction=None))
+    path = write_stage(tmp_path / "shot.usda", StageSpec(camera_position=(0, 0, 60)))
+    stage = Usd.Stage.Open(str(path))
+    holder = stage.DefinePrim("/World/Payloaded")  # typeless: the payload makes it a Volume
+    holder.GetPayloads().AddPayload(str(payload), "/World/Cloud")
+    proxy = UsdVol.Volume.Define(stage, "/World/Proxy")
+    proxy.CreateExtentAttr([(-3, -3, -3), (3, 3, 3)])
+    UsdGeom.Imageable(proxy.GetPrim()).CreatePurposeAttr("proxy")
+    asset = UsdVol.OpenVDBAsset.Define(stage, "/World/Proxy/density")
+    asset.CreateFilePathAttr(Sdf.AssetPath(str(homogeneous_npy)))
+    proxy.CreateFieldRelationship("density", asset.GetPath())
+    variants = holder.GetVariantSets().AddVariantSet("weather")
+    for name, scale in (("fair", 0.01), ("storm", 0.2)):
+        variants.AddVariant(name)
+        variants.SetVariantSelection(name)
+        with variants.GetVariantEditContext():
+            holder.CreateAttribute("warpsky:unused", Sdf.ValueTypeNames.Float)
+            over = stage.OverridePrim("/World/Payloaded/density")
+            over.CreateAttribute("warpsky:extinctionScale", Sdf.ValueTypeNames.Float).Set(scale)
+    variants.SetVariantSelection("fair")
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_composition_flags_reach_the_render(tmp_path, homogeneous_npy, capsys):
+    stage = _composed_stage(tmp_path, homogeneous_npy)
+    alpha = {}
+    for name, flags in (("loaded", []), ("unloaded", ["--load", "none"]), ("storm", ["--variant", "weather=storm"]),
+                        ("proxy", ["--purpose", "proxy", "--load", "none"])):
+        out = tmp_path / f"{name}.exr"
+        code, _, err = run(["render", stage, out, "--res", "8", *FAST, *flags], capsys)
+        assert code == 0, err
+        alpha[name] = read_exr(out).channels["A"].astype(np.float64).mean()
+    assert alpha["unloaded"] == 0.0  # the payload is the only rendered cloud; the proxy is skipped
+    assert 0.0 < alpha["loaded"] < alpha["storm"]  # the variant raises the extinction
+    assert alpha["proxy"] > 0.0  # the proxy cloud alone
+    code, stdout, _ = run(["info", stage, "--device", "cpu", "--load", "none", "--variant", "weather=storm"],
+                          capsys)
+    assert code == 0 and "composition payloads: 1 not loaded (--load none)" in stdout
+    assert "weather=storm (session layer)" in stdout
+    code, _, err = run(["render", stage, tmp_path / "x.exr", *FAST, "--variant", "weather=hail"], capsys)
+    assert code == 2 and "hail" in err and "storm" in err and not (tmp_path / "x.exr").exists()
+
+
+def test_settings_choose_purposes_and_colour_space(tmp_path, homogeneous_npy, capsys):
+    from pxr import Usd, UsdRender
+
+    stage = _composed_stage(tmp_path, homogeneous_npy)
+    usd = Usd.Stage.Open(str(stage))
+    settings = UsdRender.Settings.Define(usd, "/Render/Settings")
+    settings.CreateIncludedPurposesAttr(["default", "render", "proxy"])
+    settings.CreateMaterialBindingPurposesAttr(["full"])
+    settings.GetPrim().GetAttribute("renderingColorSpace").Set("lin_ap1_scene")
+    usd.GetRootLayer().Save()
+    out = tmp_path / "p.exr"
+    code, _, err = run(["render", stage, out, "--res", "8", "--load", "none", *FAST], capsys)
+    assert code == 0, err
+    assert "materialBindingPurposes ['full'] ignored" in err
+    image = read_exr(out)
+    assert image.channels["A"].astype(np.float64).mean() > 0.0 and image.metadata["colorspace"] == "ACEScg"
+    code, _, err = run(["render", stage, out, "--res", "8", "--load", "none", "--colorspace", "lin_rec709",
+                        "--purpose", "render", "--overwrite", *FAST], capsys)
+    image = read_exr(out)
+    assert code == 0 and image.metadata["colorspace"] == "lin_rec709"
+    assert image.channels["A"].astype(np.float64).max() == 0.0  # --purpose wins over includedPurposes

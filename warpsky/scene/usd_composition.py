@@ -95,7 +95,7 @@ def apply_variants(stage, variants) -> list[str]:
 
     lines = []
     for name, selection in variants:
-        owners = [prim for prim in stage.Traverse() if prim.GetVariantSets().HasVariantSet(name)]
+        owners = [prim for prim in _with_unloaded(stage) if prim.GetVariantSets().HasVariantSet(name)]
         if not owners:
             raise SceneError(_no_such_set(stage, name))
         offering = [p for p in owners if selection in p.GetVariantSets().GetVariantSet(name).GetVariantNames()]
@@ -114,6 +114,14 @@ def apply_variants(stage, variants) -> list[str]:
     return lines
 
 
+def _with_unloaded(stage):
+    """Every active, defined, concrete prim, unloaded payload holders included: their variant sets are authored
+    outside the payload and select whatever it loads."""
+    from pxr import Usd
+
+    return stage.Traverse(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)
+
+
 def _no_such_set(stage, name: str) -> str:
     """Why ``--variant name=...`` selects nothing: the variant sets the stage has, or where the set hides."""
     from pxr import Usd
@@ -125,7 +133,7 @@ def _no_such_set(stage, name: str) -> str:
                 f"{inside[0].GetPath()}), whose prims cannot be edited; select it in the instanced asset or make "
                 "the prim non-instanceable")
     sets: dict[str, set[str]] = {}
-    for prim in stage.Traverse():
+    for prim in _with_unloaded(stage):
         for set_name in prim.GetVariantSets().GetNames():
             sets.setdefault(set_name, set()).update(prim.GetVariantSets().GetVariantSet(set_name).GetVariantNames())
     listed = "; ".join(f"{s} ({', '.join(sorted(v))})" for s, v in sorted(sets.items()))
