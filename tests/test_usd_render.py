@@ -276,3 +276,23 @@ def test_settings_choose_purposes_and_colour_space(tmp_path, homogeneous_npy, ca
     image = read_exr(out)
     assert code == 0 and image.metadata["colorspace"] == "lin_rec709"
     assert image.channels["A"].astype(np.float64).max() == 0.0  # --purpose wins over includedPurposes
+
+
+def test_products_sharing_a_camera_come_from_one_render(tmp_path, stage, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    add_render(stage, {
+        "Beauty": ("beauty.exr", None, None, [("color", "color", "color4f", "raw")], None),
+        "Aovs": ("aovs.exr", None, None, [("single", "single_scatter", "color3f", "raw"),
+                                          ("multiple", "multiple_scatter", "color3f", "raw")], None),
+    })
+    code, stdout, err = run(["render", stage, "--device", "cpu", "--spp", "4", "--set", "denoise=0",
+                             "--time-budget", "30"], capsys)
+    assert code == 0, err
+    beauty, aovs = read_exr(tmp_path / "beauty.exr"), read_exr(tmp_path / "aovs.exr")
+    assert "aovs.exr" in stdout and not (tmp_path / "aovs.log.json").exists()  # one render, one log
+    rgb = np.stack([beauty.channels[c] for c in "RGB"], axis=-1)
+    parts = sum(np.stack([aovs.channels[f"{name}.{c}"] for c in "RGB"], axis=-1) for name in ("single", "multiple"))
+    np.testing.assert_allclose(rgb, parts, rtol=1e-5, atol=1e-6)  # no sky: the beauty is exactly the two parts
+    code, stdout, err = run(["render", stage, "--device", "cpu", "--spp", "4", "--set", "denoise=0",
+                             "--time-budget", "30"], capsys)
+    assert code == 0 and "up to date, skipped" in stdout

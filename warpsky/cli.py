@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 
 import warpsky
@@ -33,6 +34,7 @@ from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
 from warpsky.output.color import COLORSPACES
 from warpsky.output.preview import contact_sheet, stage_preview
+from warpsky.output.products import FULL_WINDOW
 from warpsky.render import plan_frame
 from warpsky.resources import parse_size, resource_lines
 from warpsky.scene.usd import StageReader
@@ -47,6 +49,14 @@ frames:
   else one frame at the earliest time sample.
   OUT placeholders follow usdrecord: a run of # is the zero-padded frame number (####  -> 0012),
   ###.## adds decimals for subframes (-> 012.50).
+
+USD render settings and products:
+  A UsdRenderSettings prim (--settings PATH, else the stage's renderSettingsPrimPath, else the first one) gives
+  the camera, resolution, pixelAspectRatio, dataWindowNDC, includedPurposes and renderingColorSpace; each of its
+  UsdRenderProducts (all, or those named by --product) is written to its productName ($F4, $F or #### for the
+  frame) with the channels its orderedVars name (sourceName color, alpha, transmittance, depth, variance,
+  single_scatter, multiple_scatter). OUT replaces the name of a single product; --camera, --res, --purpose and
+  --colorspace win over the stage. Without RenderProducts, OUT is required and gets warpsky's default channels.
 
 batches, resume and farms:
   A frame whose EXR exists, opens, has every channel and carries the same settings hash is skipped (--overwrite
@@ -71,6 +81,8 @@ examples:
   warpsky render usd_scenes/cumulus.usda out/fine.####.exr --frames 1 --target-error 0.02 --time-budget 60
   warpsky render usd_scenes/cumulus.usda out/fast.####.exr --frames 1 --technique slicing
   warpsky render usd_scenes/cumulus.usda out/ref.####.exr --frames 1 --technique path_tracer --spp 256 --seed 7
+  warpsky render shot.usda --frames 1:48 --variant weather=storm --load all
+  warpsky render shot.usda out/beauty.####.exr --product /Render/Beauty --colorspace ACEScg
   warpsky render usd_scenes/storm.usda out/storm.####.exr --res 256 --workers 2
   warpsky render usd_scenes/storm.usda /shared/storm.####.exr --scheduler tcp://farm:8786
 """
@@ -205,8 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     render = sub.add_parser(
-        "render", help="render a stage to EXR frames", description="Render STAGE to OUT, one EXR per frame "
-        "(RGBA radiance + transmittance.RGB + depth.Z, metadata in the header). Files are written to a temporary "
+        "render", help="render a stage to EXR frames", description="Render STAGE to OUT (or to its "
+        "RenderProducts), one EXR per frame (RGBA radiance + transmittance.RGB + depth.Z, or the products' vars; "
+        "metadata in the header). Files are written to a temporary "
         "name and renamed, so no partial EXR is ever left behind.",
         epilog=EPILOG_RENDER.format(settings=settings_help()), formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -354,6 +367,21 @@ def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
     return [span.start + i for i in range(count)]
 
 
+def _same_render(planned: list) -> list[list]:
+    """``planned`` (pattern, options) shots grouped by what their pixels depend on: shots that differ only in
+    their channels (outputs) and data window are written from one render."""
+    groups: list[tuple[object, list]] = []
+    for shot in planned:
+        key = replace(shot[1], outputs=None, data_window=FULL_WINDOW)
+        for group_key, members in groups:
+            if group_key == key:
+                members.append(shot)
+                break
+        else:
+            groups.append((key, [shot]))
+    return [members for _, members in groups]
+
+
 def _shot_jobs(args, reader, pattern_text: str, options) -> tuple[FramePattern, list[FrameJob]]:
     pattern = FramePattern(pattern_text)
     times = frame_list(reader, pattern, args.frames)
@@ -375,7 +403,13 @@ def cmd_render(args) -> int:
     if args.retries < 0:
         raise UsageError(f"--retries must be >= 0, got {args.retries}")
     reader, planned = shots(args, StageReader(args.stage, _render_options(args).stage))
-    batches = [_shot_jobs(args, reader, pattern, options) for pattern, options in planned]
+    batches = []
+    for group in _same_render(planned):  # products that differ only in their vars and window: one render
+        pattern, jobs = _shot_jobs(args, reader, *group[0])
+        siblings = [_shot_jobs(args, reader, *shot)[1] for shot in group[1:]]
+        jobs = [replace(job, siblings=tuple((other.out, other.options) for other in others))
+                for job, *others in zip(jobs, *siblings, strict=True)]
+        batches.append((pattern, jobs))
     far = bool(args.scheduler or args.workers)
     for _, jobs in batches:  # input errors of any product: nothing written
         plan_first_frame(jobs[0], keep_reader=not far)

@@ -236,30 +236,46 @@ def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stag
     timings["passes"] = _time.perf_counter() - started
     linear = composite(layers, far=scene.camera.far)
     frame = convert_frame(linear, options.colorspace)
-    outputs = options.outputs or default_outputs(sorted(frame.aovs), half=options.half)
+    timings["composite"] = _time.perf_counter() - started - timings["passes"]
+    image = RenderedImage(frame, {}, {}, {}, None, linear.rgba[..., :3], scene, plan, layer, timings)
+    return output_image(image, options, stage=stage, time_code=time_code)
+
+
+def output_image(image: RenderedImage, options: RenderOptions, *, stage, time_code) -> RenderedImage:
+    """``image`` (rendered once) with the channels, header and data window of the output ``options`` describe:
+    several RenderProducts that share a camera and resolution are written from one render."""
+    scene, plan = image.scene, image.plan
+    outputs = options.outputs or default_outputs(sorted(image.frame.aovs), half=options.half)
     full = tuple(options.data_window) == FULL_WINDOW
     window = None if full else window_pixels(options.data_window, plan.width, plan.height)
-    channels = frame_channels(frame, outputs, window)
-    timings["composite"] = _time.perf_counter() - started - timings["passes"]
-    metadata = _metadata(scene, plan, options, layer, stage=stage, time_code=time_code)
+    channels = frame_channels(image.frame, outputs, window)
+    metadata = _metadata(scene, plan, options, image.layer, stage=stage, time_code=time_code)
     metadata["orderedChannels"] = ",".join(channels)
     attributes = {**colour_attributes(options.colorspace), "pixelAspectRatio": float(options.pixel_aspect)}
     attributes.update(camera_attributes(scene.camera, plan.width, plan.height))
-    return RenderedImage(frame, channels, metadata, attributes, window, linear.rgba[..., :3], scene, plan, layer,
-                         timings)
+    return replace(image, channels=channels, metadata=metadata, attributes=attributes, window=window)
+
+
+def _write_image(image: RenderedImage, path: Path) -> Path:
+    window = image.window
+    return write_channels(path, image.channels, metadata=image.metadata, standard=image.attributes,
+                          display=None if window is None else (image.width, image.height),
+                          origin=(0, 0) if window is None else (window[0], window[1]))
 
 
 def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderOptions, *, stage, time_code,
-                timings: dict[str, float] | None = None) -> FrameResult:
+                timings: dict[str, float] | None = None, siblings=()) -> FrameResult:
     """Render a planned frame (``plan_frame``'s scene and plan, of the stage at ``stage`` and ``time_code``) and
-    write ``out_path`` atomically, plus the PNG preview when asked."""
+    write ``out_path`` atomically, plus the PNG preview when asked; ``siblings`` ((path, options) pairs of
+    products with the same camera and resolution) are written from the same render."""
     image = render_image(scene, plan, options, stage=stage, time_code=time_code, timings=timings)
     timings, layer = image.timings, image.layer
     started = _time.perf_counter()
-    window = image.window
-    exr = write_channels(out_path, image.channels, metadata=image.metadata, standard=image.attributes,
-                         display=None if window is None else (plan.width, plan.height),
-                         origin=(0, 0) if window is None else (window[0], window[1]))
+    exr = _write_image(image, out_path)
+    for path, sibling_options in siblings:
+        sibling = output_image(image, sibling_options, stage=stage, time_code=time_code)
+        sibling.metadata["settingsHash"] = settings_hash(plan, sibling_options, scene)
+        _write_image(sibling, Path(path))
     png = None
     if options.png:
         png = write_png(Path(out_path).with_suffix(".png"), image.preview,

@@ -31,8 +31,10 @@ from warpsky.errors import UsageError, WarpskyError
 from warpsky.files import atomic_write
 from warpsky.interrupt import Interrupted, request_stop, sigint_ignored, stop_requested, stop_scope
 from warpsky.output.exr import validate_exr
-from warpsky.render import plan_frame, write_frame
+from warpsky.output.products import window_pixels
+from warpsky.render import plan_frame, settings_hash, write_frame
 from warpsky.scene.usd import StageReader
+from warpsky.scene.usd_render import check_outputs
 
 FAIL_FRAMES_ENV = "WARPSKY_FAIL_FRAMES"
 
@@ -46,6 +48,7 @@ class FrameJob:
     out: str
     options: object  # warpsky.render.RenderOptions
     overwrite: bool = False
+    siblings: tuple = ()  # (out, RenderOptions) of products with the same camera and resolution: one render
 
 
 @dataclass
@@ -62,6 +65,7 @@ class FrameRecord:
     attempt: int = 1
     error: str | None = None
     png: str | None = None  # the preview written beside the EXR, if asked for
+    also: list = field(default_factory=list)  # sibling products written from the same render
     retryable: bool = False  # errors in the input (a missing file, a bad attribute) fail the same way again
     timings: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)  # Monte Carlo figures: spp, passes, error estimate, capped paths
@@ -85,7 +89,10 @@ def plan_first_frame(job: FrameJob, *, keep_reader: bool = True) -> None:
     """Read the stage and plan ``job``'s frame here, before anything is written: an input error that every frame
     shares (no camera, a bad setting) is raised once, as a :class:`WarpskyError`, and leaves no output directory
     and no log behind. ``keep_reader``: keep the stage read for frames rendered in this process."""
-    plan_frame(_reader(job.stage, job.options.stage), job.time_code, job.options)
+    _, plan = plan_frame(_reader(job.stage, job.options.stage), job.time_code, job.options)
+    for _, options in job.siblings:
+        check_outputs(options.outputs or (), plan.technique)
+        window_pixels(options.data_window, plan.width, plan.height)
     if not keep_reader:
         _READERS.clear()
 
@@ -116,13 +123,14 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
         scene, plan = plan_frame(reader, job.time_code, job.options)
         record.timings["stage_load"] = time.perf_counter() - t0
         record.settings_hash = plan.settings_hash
-        if not job.overwrite and validate_exr(job.out, required_channels=job.options.required_channels,
-                                              metadata_expect={"settingsHash": record.settings_hash}):
+        record.also = [out for out, _ in job.siblings]
+        if not job.overwrite and _up_to_date(job, scene, plan):
             record.status = "skipped"
             return record
         if _hook_fails(job.time_code, attempt):
             raise RuntimeError(f"{FAIL_FRAMES_ENV} asks frame {job.time_code:g} to fail (test hook)")
-        result = write_frame(scene, plan, Path(job.out), job.options, stage=reader.path, time_code=job.time_code)
+        result = write_frame(scene, plan, Path(job.out), job.options, stage=reader.path, time_code=job.time_code,
+                             siblings=[(Path(out), options) for out, options in job.siblings])
         record.timings.update(result.timings)
         record.timings["technique"] = result.render_seconds
         record.quality = result.quality
@@ -139,6 +147,14 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
     finally:
         record.seconds = time.perf_counter() - started
     return record
+
+
+def _up_to_date(job: FrameJob, scene, plan) -> bool:
+    """Whether the job's EXR and its siblings' exist, open, hold their channels and carry their settings hash."""
+    outputs = [(job.out, job.options, plan.settings_hash)]
+    outputs += [(out, options, settings_hash(plan, options, scene)) for out, options in job.siblings]
+    return all(validate_exr(out, required_channels=options.required_channels,
+                            metadata_expect={"settingsHash": digest}) for out, options, digest in outputs)
 
 
 def run_frame_in_scope(job: FrameJob, attempt: int, stop_token: str) -> FrameRecord:
@@ -331,6 +347,8 @@ def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, l
                 bar.write(f"{record.path} (up to date, skipped)")
             else:
                 bar.write(record.path)
+                for path in record.also:
+                    bar.write(path)
                 if record.png:
                     bar.write(record.png)
             final[i] = record
