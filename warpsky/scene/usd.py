@@ -2,14 +2,16 @@
 
 Stage units are converted here: ``upAxis`` Y or Z and ``metersPerUnit`` become warpsky's right-handed Y-up metres.
 Every problem is a :class:`SceneError` naming the prim, attribute or file. :class:`StageReader` reads the camera,
-sun, atmosphere and render settings itself; its parts read the rest: :mod:`warpsky.scene.usd_volumes` (voxel media),
+atmosphere and render settings itself; its parts read the rest: :mod:`warpsky.scene.usd_lights` (suns and dome),
+:mod:`warpsky.scene.usd_volumes` (voxel media),
 :mod:`warpsky.scene.usd_surfaces` (ground and stratiform layers) on :mod:`warpsky.scene.usd_prims` (transforms,
 visibility, typed attributes). pxr is imported inside the methods (a heavy import).
 
 What is read (the README's "USD attributes" section lists the same with units and defaults):
 
 - ``UsdGeomCamera``: chosen by ``--camera``, else the render settings' camera, else the first camera.
-- ``UsdLuxDistantLight``: the sun (the first visible one).
+- ``UsdLuxDistantLight``: the sun (the first visible one); further visible ones are ``extra_suns``.
+- ``UsdLuxDomeLight``: the environment (the first visible one), uniform or a lat-long EXR texture.
 - ``UsdVolVolume`` with ``field:density`` (analytic phase) and/or ``field:cloud|rain|ice|snow`` (tabulated
   species optics) -> ``OpenVDBAsset`` (``.vdb``, ``.nvdb`` or dense ``.npy``).
 - ``warpsky:detail:*`` on a Volume: animated density detail (:class:`~warpsky.scene.model.DetailSpec`).
@@ -30,8 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.errors import SceneError
-from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
+from warpsky.scene.model import Atmosphere, Camera, Scene
 from warpsky.scene.usd_layers import composition_problem, open_layers, tf_message
+from warpsky.scene.usd_lights import LightReading
 from warpsky.scene.usd_surfaces import SurfaceReading
 from warpsky.scene.usd_volumes import VolumeReading
 
@@ -47,7 +50,7 @@ class TimeRange:
     authored: bool
 
 
-class StageReader(VolumeReading, SurfaceReading):
+class StageReader(LightReading, VolumeReading, SurfaceReading):
     """An open stage plus the caches that make reading many frames cheap.
 
     Args:
@@ -187,37 +190,6 @@ class StageReader(VolumeReading, SurfaceReading):
             clip.max * self.meters_per_unit,
         )
 
-    # ------------------------------------------------------------------------------------------------- sun
-    def read_sun(self, time=None) -> Sun | None:
-        from pxr import UsdLux
-
-        tc = self._time(time)
-        for prim in self._prims_of(UsdLux.DistantLight):
-            if not self._visible(prim, tc):
-                continue
-            light = UsdLux.DistantLight(prim)
-            world = self._world(prim, tc)
-            # Light travels along the light's local -Z, so the sun lies along +Z.
-            direction = world[:3, :3] @ np.array([0.0, 0.0, 1.0])
-            if np.linalg.norm(direction) == 0.0:
-                raise SceneError(f"light {prim.GetPath()}: its transform collapses the light direction")
-            intensity = float(light.GetIntensityAttr().Get(tc))
-            exposure = float(light.GetExposureAttr().Get(tc))
-            color = np.array(light.GetColorAttr().Get(tc), dtype=np.float64)
-            if light.GetEnableColorTemperatureAttr().Get(tc):
-                color = color * np.array(UsdLux.BlackbodyTemperatureAsRgb(light.GetColorTemperatureAttr().Get(tc)))
-            angle = float(light.GetAngleAttr().Get(tc))
-            if not (0.0 <= angle < 180.0):
-                raise SceneError(f"light {prim.GetPath()}: inputs:angle must lie in [0, 180) degrees, got {angle}")
-            irradiance = intensity * 2.0**exposure * color
-            if not np.all(np.isfinite(irradiance)) or np.any(irradiance < 0.0):
-                raise SceneError(
-                    f"light {prim.GetPath()}: intensity x 2^exposure x color must be finite and >= 0, "
-                    f"got {irradiance.tolist()}"
-                )
-            return Sun(direction, irradiance, math.radians(angle), str(prim.GetPath()))
-        return None
-
     # ------------------------------------------------------------------------------------------ atmosphere
     def read_atmosphere(self, time=None):
         """The first active prim with ``warpsky:atmosphere:*`` attributes (e.g. a Scope /World/Atmosphere)."""
@@ -255,9 +227,12 @@ class StageReader(VolumeReading, SurfaceReading):
     def scene_at(self, time=None, *, camera_path: str | None = None) -> Scene:
         """Everything warpsky renders, at ``time`` (None: the earliest time sample, like usdrecord)."""
         resolution, _ = self.render_settings()
+        suns = self.read_suns(time)
         return Scene(
             camera=self.read_camera(camera_path, time),
-            sun=self.read_sun(time),
+            sun=suns[0] if suns else None,
+            extra_suns=suns[1:],
+            dome=self.read_dome(time),
             media=self.read_media(time),
             ground=self.read_ground(time),
             atmosphere=self.read_atmosphere(time),
