@@ -241,3 +241,33 @@ def test_two_distant_lights_render_the_sum_of_their_images(box, device, techniqu
     np.testing.assert_allclose(frames[0].rgba[..., :3], frames[1].rgba[..., :3] + frames[2].rgba[..., :3],
                                rtol=1e-6, atol=1e-9)
     assert np.array_equal(frames[0].transmittance, frames[1].transmittance)
+
+
+def test_stratiform_stage_with_air_sums_its_lights_and_takes_the_dome(tmp_path, device):
+    """The stratocumulus stage (sky pass, stratiform layer over a textured ground, a voxel cloud): a second
+    DistantLight adds its own image, and a dome brightens the layer and shows through the air above the horizon."""
+    from pxr import Usd
+    from test_stratiform_scene import write_layer_stage
+
+    npy = tmp_path / "cloud.npy"
+    np.save(npy, np.ones((6, 6, 6), np.float32))
+    stages = {}
+    for name in ("both", "sun", "moon", "dome"):
+        folder = tmp_path / name
+        folder.mkdir()
+        stages[name] = write_layer_stage(folder / "layer.usda", volume=npy)
+    moon = (-0.2, 0.5, 0.6)
+    add_distant_light(stages["both"], "Moon", moon, 0.2)
+    add_distant_light(stages["moon"], "Moon", moon, 0.2)
+    usd = Usd.Stage.Open(str(stages["moon"]))
+    usd.GetPrimAtPath("/World/Sun").SetActive(False)
+    usd.Save()
+    add_dome(stages["dome"], intensity=0.05)
+    (both_layer, both), (sun_layer, sun), (_, moon_frame), (dome_layer, dome) = (
+        render_frame(stages[name], device, 12, "single_scatter") for name in ("both", "sun", "moon", "dome"))
+    np.testing.assert_allclose(both.rgba[..., :3], sun.rgba[..., :3] + moon_frame.rgba[..., :3], rtol=1e-5,
+                               atol=1e-7)
+    covered = (sun_layer.transmittance < 0.9).all(axis=-1)
+    assert covered.any()
+    assert np.all((dome_layer.radiance - sun_layer.radiance)[covered] > 0.0)
+    assert np.all(dome.rgba[..., :3] >= sun.rgba[..., :3] - 1e-6)
