@@ -3,11 +3,13 @@
 The path tracer looks the dome up where a path escapes (:func:`dome_radiance`: a constant, or a bilinear lookup of
 the lat-long texture in the convention of :class:`~warpsky.scene.model.Dome`), so it integrates the dome exactly.
 The marching techniques (single_scatter, slicing, the stratiform layers) cannot afford that integral per sample:
-they light every point with the dome's mean radiance L_mean (over the sphere, solid-angle weighted) as an ambient
+they light every point with the mean radiance L_mean arriving there (:func:`ambient_radiance`: the dome's mean over
+the sphere, solid-angle weighted; with a ground plane its lower half is the ground lit by the dome) as an ambient
 light. The phase function integrates to 1, so the in-scattered radiance is sigma_s L_mean, times an occlusion
 factor (the technique's docstring says which: the transmittance towards the zenith, or none); a Lambertian ground
-of albedo a under it reflects a L_mean. This is exact for a uniform dome seen through optically thin media and
-leaves out the dome light scattered more than once and the directional structure of a textured dome.
+of albedo a reflects a E / pi, E the irradiance from the dome's upper hemisphere, under the same occlusion. This
+is exact for a uniform dome seen through optically thin media and leaves out the dome light scattered more than
+once and the directional structure of a textured dome.
 """
 
 from __future__ import annotations
@@ -61,14 +63,41 @@ def dome_radiance(dome: DomeLight, d: wp.vec3) -> wp.vec3:
     return wp.cw_mul(dome.color, top * (1.0 - fy) + bottom * fy)
 
 
+def upper_hemisphere(dome, samples: int = 128) -> tuple[np.ndarray, np.ndarray]:
+    """(mean radiance, cosine-weighted mean radiance) [RGB] of the dome's upper hemisphere, on an equal-area grid
+    of ``samples`` x ``2 samples`` cells. The second is E / pi, the uniform radiance that gives a horizontal surface
+    the irradiance E the hemisphere gives it."""
+    if dome.texture is None:
+        return dome.color.copy(), dome.color.copy()
+    cos_theta = (np.arange(samples) + 0.5) / samples
+    phi = (np.arange(2 * samples) + 0.5) * (np.pi / samples)
+    cos_grid, phi_grid = np.meshgrid(cos_theta, phi, indexing="ij")
+    sin_grid = np.sqrt(1.0 - cos_grid**2)
+    radiance = dome.radiance(np.stack([sin_grid * np.cos(phi_grid), cos_grid, sin_grid * np.sin(phi_grid)], -1))
+    return radiance.reshape(-1, 3).mean(axis=0), 2.0 * (radiance * cos_grid[..., None]).reshape(-1, 3).mean(axis=0)
+
+
 def ambient_radiance(scene) -> np.ndarray:
-    """The dome's mean radiance L_mean [RGB] (zeros without a dome): the fast techniques' ambient light."""
-    return np.zeros(3) if scene.dome is None else np.asarray(scene.dome.mean_radiance(), dtype=np.float64)
+    """The mean radiance [RGB] arriving at a point of the media from all directions: the dome's mean L_mean, or
+    with a ground plane the upper half of the sphere from the dome and the lower half from the ground it lights
+    (albedo E / pi); zeros without a dome. The fast techniques' ambient light."""
+    if scene.dome is None:
+        return np.zeros(3)
+    if scene.ground is None:
+        return np.asarray(scene.dome.mean_radiance(), dtype=np.float64)
+    mean, cosine_mean = upper_hemisphere(scene.dome)
+    return 0.5 * (mean + scene.ground.albedo * cosine_mean)
 
 
 def ambient_vec(scene) -> wp.vec3:
     """:func:`ambient_radiance` as a kernel argument."""
     return wp.vec3(*ambient_radiance(scene).tolist())
+
+
+def ground_ambient_vec(scene) -> wp.vec3:
+    """The radiance a Lambertian ground of albedo 1 reflects under the dome's upper hemisphere (its E / pi; zeros
+    without a dome), as a kernel argument: kernels multiply it by the ground's albedo and occlusion."""
+    return wp.vec3(*(np.zeros(3) if scene.dome is None else upper_hemisphere(scene.dome)[1]).tolist())
 
 
 @wp.func
@@ -80,7 +109,7 @@ def ambient_scattered(scattering: wp.vec3, ambient: wp.vec3, tau_up: wp.vec3) ->
 
 
 @wp.func
-def ambient_ground(albedo: wp.vec3, ambient: wp.vec3, tau_up: wp.vec3) -> wp.vec3:
-    """Radiance of a Lambertian ground of ``albedo`` under the ambient dome light (a L_mean: the cosine-weighted
-    irradiance pi L_mean over pi), occluded by exp(-tau_up) towards the zenith."""
-    return ambient_scattered(albedo, ambient, tau_up)
+def ambient_ground(albedo: wp.vec3, sky: wp.vec3, tau_up: wp.vec3) -> wp.vec3:
+    """Radiance of a Lambertian ground of ``albedo`` under the dome: albedo E / pi with ``sky`` = E / pi of the
+    dome's upper hemisphere (:func:`upper_hemisphere`), occluded by exp(-tau_up) towards the zenith."""
+    return ambient_scattered(albedo, sky, tau_up)

@@ -8,7 +8,8 @@ and any optical depth per step from 1e-9 to 1e5 finite and non-negative.
 
 A dome lights the media as an ambient light (:mod:`warpsky.techniques.dome`): sigma_s L_mean per metre, occluded by
 the transmittance towards the zenith, which a second shadow march per step takes at the step's midpoint (it
-doubles the cost of the march); the ground receives albedo L_mean under the same occlusion. Dome light scattered
+doubles the cost of the march); the ground reflects albedo E / pi of the dome's upper hemisphere under the same
+occlusion. Dome light scattered
 more than once, and the direction-dependence of a textured dome, are left out.
 """
 
@@ -43,8 +44,9 @@ class MarchSettings:
     step: float  # eye-ray step [m]
     shadow_step: float  # shadow-ray step towards the sun [m]
     min_transmittance: float  # stop once the luminance transmittance falls below this
-    ambient: wp.vec3  # the dome's mean radiance L_mean, RGB
-    ambient_on: int  # 1: light the media and the ground with ``ambient`` (a scene with a dome)
+    ambient: wp.vec3  # mean radiance L_mean arriving at the media from the dome (and the ground it lights), RGB
+    ground_ambient: wp.vec3  # E / pi of the dome's upper hemisphere: what a white ground reflects, RGB
+    ambient_on: int  # 1: light the media and the ground with them (a scene with a dome)
 
 
 @functools.cache
@@ -199,8 +201,8 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                 if march.ambient_on != 0:
                     up = sun_optical_depth(media, t_end, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
                     lookups += wp.int64(up[3])
-                    light += wp.cw_mul(ambient_ground(ground.albedo, march.ambient, wp.vec3(up[0], up[1], up[2])),
-                                       trans)
+                    shown = ambient_ground(ground.albedo, march.ground_ambient, wp.vec3(up[0], up[1], up[2]))
+                    light += wp.cw_mul(shown, trans)
                 depth_sum += luminance(trans) * t_end * cos_axis
                 weight_sum += luminance(trans)
                 trans = wp.vec3(0.0)

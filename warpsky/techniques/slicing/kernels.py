@@ -17,7 +17,8 @@ A dome lights the media as an unoccluded ambient light (:mod:`warpsky.techniques
 L_mean times its scattering integrated over the sample, (1 - e^-tau) albedo, as if its phase were isotropic and no
 cloud shadowed it. For an albedo-1 medium under a uniform dome this is exactly the white furnace's answer (the
 pixel shows L_mean whatever the optical depth); for darker media and textured domes it overestimates the light
-deep inside thick clouds. The ground under the media gets albedo L_mean occluded towards the zenith.
+deep inside thick clouds. The ground reflects albedo E / pi of the dome's upper hemisphere, occluded towards
+the zenith.
 """
 
 from __future__ import annotations
@@ -409,7 +410,7 @@ def ground_kernel(has_detail: bool = False, has_dome: bool = False):
         sun: Sun,
         ground: Ground,
         shadow_step: float,
-        ambient: wp.vec3,
+        ground_ambient: wp.vec3,
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
         depth: wp.array2d(dtype=float),
@@ -432,7 +433,7 @@ def ground_kernel(has_detail: bool = False, has_dome: bool = False):
         radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground.albedo, lit))
         if wp.static(has_dome):
             up = sun_optical_depth(media, t, view, wp.vec3(0.0, 1.0, 0.0), shadow_step)
-            shown = ambient_ground(ground.albedo, ambient, wp.vec3(up[0], up[1], up[2]))
+            shown = ambient_ground(ground.albedo, ground_ambient, wp.vec3(up[0], up[1], up[2]))
             radiance[row, col] = radiance[row, col] + wp.cw_mul(before, shown)
         if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
             depth[row, col] = z

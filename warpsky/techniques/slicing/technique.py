@@ -21,7 +21,7 @@ from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import PhaseKind, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
-from warpsky.techniques.dome import ambient_vec
+from warpsky.techniques.dome import ambient_vec, ground_ambient_vec
 from warpsky.techniques.slicing.kernels import (
     AmsTables,
     SliceFrame,
@@ -311,6 +311,6 @@ class Slicing:
             depth = wp.array(layer.depth, dtype=float)
             wp.launch(ground_kernel(media.has_detail, scene.dome is not None), dim=(height, width), inputs=[
                 media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
-                ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ambient_vec(scene),
+                ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_ambient_vec(scene),
                 radiance, transmittance, depth])
             layer.radiance, layer.transmittance, layer.depth = radiance.numpy(), transmittance.numpy(), depth.numpy()
