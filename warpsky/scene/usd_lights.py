@@ -40,6 +40,13 @@ def read_latlong_exr(path: Path, where: str) -> np.ndarray:
     return np.stack([channels[c] for c in "RGB"], axis=-1)
 
 
+def _mtime(path: Path) -> int | None:
+    try:
+        return path.stat().st_mtime_ns
+    except OSError:
+        return None
+
+
 class LightReading(StagePrims):
     """The stage reader's lights."""
 
@@ -111,7 +118,10 @@ class LightReading(StagePrims):
                                      f"{' or '.join(repr(f) for f in LATLONG_FORMATS)} (a lat-long EXR)")
                 resolved = asset.resolvedPath or str(Path(prim.GetStage().GetRootLayer().realPath).parent / asset.path)
                 source = str(resolved)
-                texture = read_latlong_exr(Path(resolved), f"{where}.inputs:texture:file")
+                key = ("dome", source, _mtime(Path(source)))
+                if key not in self._map_cache:  # read once for all the frames that show it
+                    self._map_cache[key] = read_latlong_exr(Path(source), f"{where}.inputs:texture:file")
+                texture = self._map_cache[key]
             dome = Dome(color, texture, rotation, str(prim.GetPath()), source)
             return dome if dome.active else None
         return None
