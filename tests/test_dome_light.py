@@ -271,3 +271,28 @@ def test_stratiform_stage_with_air_sums_its_lights_and_takes_the_dome(tmp_path, 
     assert covered.any()
     assert np.all((dome_layer.radiance - sun_layer.radiance)[covered] > 0.0)
     assert np.all(dome.rgba[..., :3] >= sun.rgba[..., :3] - 1e-6)
+
+
+def test_dome_lies_beyond_the_air(tmp_path, device):
+    """With an atmosphere (sky pass), the dome replaces black space: seen through the air's transmittance above the
+    horizon, hidden below it (sea level)."""
+    from conftest import add_atmosphere
+
+    from warpsky.composite import pixel_directions
+
+    spec = StageSpec(sun_direction=(0.3, 0.5, 0.2), camera_rotation=look_rotation((0.0, 0.05, -1.0)),
+                     camera_position=(0.0, 10.0, 0.0))
+    plain = add_atmosphere(write_stage(tmp_path / "air.usda", spec))
+    domed = add_dome(add_atmosphere(write_stage(tmp_path / "air_dome.usda", spec)), intensity=3.0)
+    _, without = render_frame(plain, device, 8, "single_scatter")
+    _, with_dome = render_frame(domed, device, 8, "single_scatter")
+    scene = StageReader(domed).scene_at(None)
+    directions = pixel_directions(scene.camera, 8, 8)
+    atmosphere = scene.atmosphere
+    column = atmosphere.beta_sea_level * np.exp(-atmosphere.gamma * 10.0) / atmosphere.gamma
+    up = directions[..., 1] > 0.1
+    assert up.any() and (~up).any()
+    expected = 3.0 * np.exp(-column / directions[..., 1:2])
+    added = with_dome.rgba[..., :3] - without.rgba[..., :3]
+    np.testing.assert_allclose(added[up], np.broadcast_to(expected, added.shape)[up], rtol=1e-4)
+    assert np.all(added[directions[..., 1] < 0.0] == 0.0)

@@ -129,13 +129,17 @@ def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.
     return radiance.astype(np.float32)
 
 
-def with_background(layers: list[Layer], background: np.ndarray, far: float, *, into_last: bool) -> list[Layer]:
-    """``layers`` with ``background`` radiance behind them: with ``into_last`` added to the last layer (the sky
-    pass's opaque back layer, ``background`` already seen through the air), else as an opaque layer at ``far``."""
+def with_background(layers: list[Layer], background: np.ndarray, far: float, *,
+                    front_air: np.ndarray | None = None) -> list[Layer]:
+    """``layers`` with ``background`` radiance behind them, as an opaque layer at ``far``; or, with ``front_air``,
+    added to the last layer: the sky pass's opaque back layer, ``background`` having been seen through all the air
+    (:func:`dome_background` with ``through_air``) of which ``front_air`` (the sky pass's front transmittance) is
+    the part the composite applies again in front of the media, so it is divided out here."""
     last = layers[-1]
-    if into_last:
-        return [*layers[:-1], Layer(last.radiance + background, last.transmittance, last.depth, last.stats,
-                                    last.aovs)]
+    if front_air is not None:
+        beyond = np.divide(background, front_air, out=np.zeros_like(background), where=front_air > 0.0)
+        return [*layers[:-1], Layer(last.radiance + beyond.astype(np.float32), last.transmittance, last.depth,
+                                    last.stats, last.aovs)]
     height, width = background.shape[:2]
     return [*layers, Layer(background, np.zeros_like(background), np.full((height, width), far, np.float32))]
 

@@ -175,7 +175,8 @@ def render_layers(technique: Technique, scene: Scene, plan: RenderPlan) -> tuple
     if scene.dome is not None:
         sky = "sky" in plan.passes
         background = dome_background(scene, width, height, through_air=sky)
-        layers = with_background(layers, background, scene.camera.far, into_last=sky)
+        layers = with_background(layers, background, scene.camera.far,
+                                 front_air=layers[0].transmittance if sky else None)
     return main, layers
 
 
