@@ -17,7 +17,7 @@ from warpsky.plan import make_plan
 from warpsky.render import render_layers
 from warpsky.scene.model import Dome
 from warpsky.scene.usd import StageReader
-from warpsky.techniques.dome import DomeLight, dome_radiance, dome_struct
+from warpsky.techniques.dome import DomeLight, dome_radiance, dome_struct, mean_radiance, upper_hemisphere
 
 
 @wp.kernel
@@ -113,7 +113,7 @@ def test_uniform_dome_reads_color_intensity_exposure(box):
     dome = StageReader(stage).scene_at(None).dome
     np.testing.assert_allclose(dome.color, [4.0, 2.0, 1.0], rtol=1e-6)
     np.testing.assert_allclose(dome.radiance([[0.0, 1.0, 0.0], [0.6, -0.8, 0.0]]), [[4.0, 2.0, 1.0]] * 2)
-    np.testing.assert_allclose(dome.mean_radiance(), [4.0, 2.0, 1.0])
+    np.testing.assert_allclose(mean_radiance(dome), [4.0, 2.0, 1.0])
 
 
 @pytest.mark.parametrize("up", ["Y", "Z"])
@@ -137,6 +137,23 @@ def test_latlong_texel_maps_to_its_direction(box, tmp_path, up):
     # The image centre (latitude 0, longitude 0) is the dome's +Z.
     np.testing.assert_allclose(latlong_direction((height - 1) // 2, (width - 1) // 2, height, width), [0, 0, 1],
                                atol=1e-12)
+
+
+def test_textured_means_weigh_texels_by_solid_angle():
+    """A texture bright only in its top row (the pole): its bilinear radiance falls linearly to 0 over the first
+    row spacing a = pi/8, so the mean over the sphere is (1 - sin(a)/a) / 2 = 0.0127, not the texel mean 1/9; a
+    texture bright above the equator and dark below (0.5 on it) has mean 1/2."""
+    pole = np.zeros((9, 16, 3), np.float32)
+    pole[0] = 1.0
+    a = math.pi / 8.0
+    exact = 0.5 * (1.0 - math.sin(a) / a)
+    np.testing.assert_allclose(mean_radiance(Dome(1.0, pole)), exact, rtol=5e-3)  # the 256 x 512 grid: 0.24 %
+    np.testing.assert_allclose(mean_radiance(Dome(1.0, pole), 4096), exact, rtol=1e-4)
+    halves = np.zeros((9, 16, 3), np.float32)
+    halves[:4], halves[4] = 1.0, 0.5
+    np.testing.assert_allclose(mean_radiance(Dome(2.0, halves)), 1.0, rtol=1e-6)
+    upper, cosine_weighted = upper_hemisphere(Dome(2.0, halves))
+    assert 1.8 < upper[0] < 2.0 and 1.9 < cosine_weighted[0] < 2.0  # the dim band lies near the horizon
 
 
 def test_kernel_lookup_matches_the_host_lookup(tmp_path):

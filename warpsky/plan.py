@@ -192,11 +192,13 @@ def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) 
 
 def _dome_feature(scene: Scene, technique: str) -> str:
     """How the dome lights this technique, and what it is."""
+    from warpsky.techniques.dome import mean_radiance
+
     dome = scene.dome
     kind = f"lat-long texture {dome.source}" if dome.texture is not None else "uniform"
     how = ("path traced exactly" if technique in ("path_tracer", "hybrid")
            else "ambient: its mean radiance, occluded towards the zenith")
-    return (f"{dome.name}: {kind}, mean radiance {np.round(dome.mean_radiance(), 4).tolist()}; {how}; "
+    return (f"{dome.name}: {kind}, mean radiance {np.round(mean_radiance(dome), 4).tolist()}; {how}; "
             "shown behind everything")
 
 

@@ -251,18 +251,6 @@ class Dome:
         bottom = tex[y1, x0] * (1.0 - fx) + tex[y1, x1] * fx
         return self.color * (top * (1.0 - fy) + bottom * fy)
 
-    def mean_radiance(self, samples: int = 256) -> np.ndarray:
-        """Mean radiance over the sphere (solid-angle weighted) [RGB]: the texture's bilinear radiance averaged on
-        an equal-area grid of ``samples`` x ``2 samples`` cells (exactly ``color`` for a uniform dome)."""
-        if self.texture is None:
-            return self.color.copy()
-        cos_theta = 1.0 - (np.arange(samples) + 0.5) * (2.0 / samples)
-        phi = (np.arange(2 * samples) + 0.5) * (math.pi / samples)
-        cos_grid, phi_grid = np.meshgrid(cos_theta, phi, indexing="ij")
-        sin_grid = np.sqrt(1.0 - cos_grid**2)
-        local = np.stack([sin_grid * np.sin(phi_grid), cos_grid, sin_grid * np.cos(phi_grid)], axis=-1)
-        return self.radiance(local @ self.rotation.T).reshape(-1, 3).mean(axis=0)
-
 
 @dataclass(frozen=True)
 class DetailSpec:

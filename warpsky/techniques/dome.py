@@ -63,18 +63,34 @@ def dome_radiance(dome: DomeLight, d: wp.vec3) -> wp.vec3:
     return wp.cw_mul(dome.color, top * (1.0 - fy) + bottom * fy)
 
 
-def upper_hemisphere(dome, samples: int = 128) -> tuple[np.ndarray, np.ndarray]:
-    """(mean radiance, cosine-weighted mean radiance) [RGB] of the dome's upper hemisphere, on an equal-area grid
-    of ``samples`` x ``2 samples`` cells. The second is E / pi, the uniform radiance that gives a horizontal surface
-    the irradiance E the hemisphere gives it."""
-    if dome.texture is None:
-        return dome.color.copy(), dome.color.copy()
-    cos_theta = (np.arange(samples) + 0.5) / samples
+def hemisphere_directions(samples: int, *, upper: bool) -> np.ndarray:
+    """World directions [samples, 2 samples, 3] at the centres of an equal-area grid of a hemisphere (uniform in
+    the cosine of the zenith angle and in azimuth)."""
+    cos_theta = (np.arange(samples) + 0.5) / samples * (1.0 if upper else -1.0)
     phi = (np.arange(2 * samples) + 0.5) * (np.pi / samples)
     cos_grid, phi_grid = np.meshgrid(cos_theta, phi, indexing="ij")
     sin_grid = np.sqrt(1.0 - cos_grid**2)
-    radiance = dome.radiance(np.stack([sin_grid * np.cos(phi_grid), cos_grid, sin_grid * np.sin(phi_grid)], -1))
-    return radiance.reshape(-1, 3).mean(axis=0), 2.0 * (radiance * cos_grid[..., None]).reshape(-1, 3).mean(axis=0)
+    return np.stack([sin_grid * np.cos(phi_grid), cos_grid, sin_grid * np.sin(phi_grid)], axis=-1)
+
+
+def upper_hemisphere(dome, samples: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """(mean radiance, cosine-weighted mean radiance) [RGB] of the dome's upper hemisphere (bilinear texture on an
+    equal-area grid of ``samples`` x ``2 samples`` cells). The second is E / pi, the uniform radiance that gives a
+    horizontal surface the irradiance E the hemisphere gives it."""
+    if dome.texture is None:
+        return dome.color.copy(), dome.color.copy()
+    directions = hemisphere_directions(samples, upper=True)
+    radiance = dome.radiance(directions)
+    cosine = directions[..., 1:2]
+    return radiance.reshape(-1, 3).mean(axis=0), 2.0 * (radiance * cosine).reshape(-1, 3).mean(axis=0)
+
+
+def mean_radiance(dome, samples: int = 256) -> np.ndarray:
+    """The dome's mean radiance over the sphere, solid-angle weighted [RGB] (exactly ``color`` when uniform)."""
+    if dome.texture is None:
+        return dome.color.copy()
+    lower = dome.radiance(hemisphere_directions(samples, upper=False)).reshape(-1, 3).mean(axis=0)
+    return 0.5 * (upper_hemisphere(dome, samples)[0] + lower)
 
 
 def ambient_radiance(scene) -> np.ndarray:
@@ -84,7 +100,7 @@ def ambient_radiance(scene) -> np.ndarray:
     if scene.dome is None:
         return np.zeros(3)
     if scene.ground is None:
-        return np.asarray(scene.dome.mean_radiance(), dtype=np.float64)
+        return mean_radiance(scene.dome)
     mean, cosine_mean = upper_hemisphere(scene.dome)
     return 0.5 * (mean + scene.ground.albedo * cosine_mean)
 
