@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from warpsky.scene.model import LUMINANCE_WEIGHTS
+from warpsky.scene.model import LUMINANCE_WEIGHTS, Projection
 from warpsky.techniques.base import Layer
 
 
@@ -92,3 +92,69 @@ def merge_by_depth(layers: list[Layer], far: float) -> Layer:
         "parts": [layer.stats for layer in layers],
     }
     return Layer(out_radiance, out_trans, out_depth, stats, out_aovs)
+
+
+def pixel_directions(camera, width: int, height: int) -> np.ndarray:
+    """(H, W, 3) world unit directions through the pixel centres of ``camera`` conformed to (width, height), as the
+    kernels' ``camera_ray`` gives them (an orthographic camera's all run along its view axis)."""
+    camera = camera.conformed(width, height)
+    if camera.projection is Projection.ORTHOGRAPHIC:
+        return np.broadcast_to(camera.forward, (height, width, 3)).copy()
+    sx = ((np.arange(width) + 0.5) / width - 0.5) * camera.horizontal_aperture + camera.horizontal_aperture_offset
+    sy = (0.5 - (np.arange(height) + 0.5) / height) * camera.vertical_aperture + camera.vertical_aperture_offset
+    local = np.stack(np.broadcast_arrays(sx[None, :], sy[:, None], -camera.focal_length), axis=-1)
+    d = local @ np.asarray(camera.rotation, dtype=np.float64).T
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.ndarray:
+    """(H, W, 3) float32 radiance of the scene's dome behind everything (zeros without one).
+
+    The dome lights from beyond the air: it replaces the black space an atmosphere would otherwise show. With
+    ``through_air`` (a sky pass drew the air, whose back layer is opaque) it is seen through the air's
+    transmittance to space along each pixel's ray, the flat-earth column over the finite-air-mass sine
+    (:func:`~warpsky.techniques.sunlight.air_sine`), and not at all below the horizon (ground or sea level);
+    otherwise the layers' own transmittance (zero on the ground, with the air where a technique traced it)
+    is all that hides it."""
+    if scene.dome is None:
+        return np.zeros((height, width, 3), np.float32)
+    directions = pixel_directions(scene.camera, width, height)
+    radiance = scene.dome.radiance(directions)
+    atmosphere = scene.atmosphere
+    if through_air and atmosphere is not None:
+        from warpsky.techniques.sunlight import air_sine
+
+        altitude = float(scene.camera.position[1]) + atmosphere.altitude
+        column = atmosphere.beta_sea_level * np.exp(-atmosphere.gamma * altitude) / atmosphere.gamma
+        sine = air_sine(directions[..., 1], atmosphere.gamma)[..., None]
+        radiance = np.where(directions[..., 1:2] > 0.0, radiance * np.exp(-column / sine), 0.0)
+    return radiance.astype(np.float32)
+
+
+def with_background(layers: list[Layer], background: np.ndarray, far: float, *,
+                    front_air: np.ndarray | None = None) -> list[Layer]:
+    """``layers`` with ``background`` radiance behind them, as an opaque layer at ``far``; or, with ``front_air``,
+    added to the last layer: the sky pass's opaque back layer, ``background`` having been seen through all the air
+    (:func:`dome_background` with ``through_air``) of which ``front_air`` (the sky pass's front transmittance) is
+    the part the composite applies again in front of the media, so it is divided out here."""
+    last = layers[-1]
+    if front_air is not None:
+        beyond = np.divide(background, front_air, out=np.zeros_like(background), where=front_air > 0.0)
+        return [*layers[:-1], Layer(last.radiance + beyond.astype(np.float32), last.transmittance, last.depth,
+                                    last.stats, last.aovs)]
+    height, width = background.shape[:2]
+    return [*layers, Layer(background, np.zeros_like(background), np.full((height, width), far, np.float32))]
+
+
+def add_light(layers: list[Layer], more: list[Layer]) -> list[Layer]:
+    """Per layer, the radiance (and any variance AOV) of ``layers`` plus that of ``more``: the same passes lit by
+    another light (transmittance and depth do not depend on the light and are kept)."""
+    out = []
+    for layer, extra in zip(layers, more, strict=True):
+        aovs = {name: values + extra.aovs[name] if name in extra.aovs else values
+                for name, values in layer.aovs.items()}
+        stats = dict(layer.stats)
+        if "seconds" in extra.stats:
+            stats["seconds"] = float(stats.get("seconds", 0.0)) + float(extra.stats["seconds"])
+        out.append(Layer(layer.radiance + extra.radiance, layer.transmittance, layer.depth, stats, aovs))
+    return out

@@ -150,6 +150,12 @@ def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) 
             f"{sun.name}: elevation {np.degrees(sun.elevation):.2f} deg, "
             f"irradiance {np.round(sun.irradiance, 4).tolist()}"
         )
+    if scene.extra_suns:
+        features["extra suns"] = (", ".join(f"{s.name} (elevation {np.degrees(s.elevation):.2f} deg)"
+                                            for s in scene.extra_suns)
+                                  + f": every pass runs {1 + len(scene.extra_suns)} times, once per light")
+    if scene.dome is not None:
+        features["dome"] = _dome_feature(scene, technique)
     if scene.media:
         voxels = sum(int(np.prod(m.shape)) for m in scene.media)
         features["media"] = f"{len(scene.media)} voxel grid(s), {voxels:,} voxels, {voxels * 4 / 2**20:.1f} MiB"
@@ -182,6 +188,18 @@ def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) 
     if scene.ground is not None and scene.layers:
         features["ground"] += "; drawn by the stratiform pass (layer shadows, radiosity), voxel media cast no shadow"
     return features
+
+
+def _dome_feature(scene: Scene, technique: str) -> str:
+    """How the dome lights this technique, and what it is."""
+    from warpsky.techniques.dome import mean_radiance
+
+    dome = scene.dome
+    kind = f"lat-long texture {dome.source}" if dome.texture is not None else "uniform"
+    how = ("path traced exactly" if technique in ("path_tracer", "hybrid")
+           else "ambient: its mean radiance, occluded towards the zenith")
+    return (f"{dome.name}: {kind}, mean radiance {np.round(mean_radiance(dome), 4).tolist()}; {how}; "
+            "shown behind everything")
 
 
 def _sky_feature(scene: Scene) -> str:

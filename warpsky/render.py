@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 import warpsky
-from warpsky.composite import Frame, composite, merge_by_depth
+from warpsky.composite import Frame, add_light, composite, dome_background, merge_by_depth, with_background
 from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_frame
 from warpsky.output.exr import write_channels
 from warpsky.output.png import write_png
@@ -202,20 +202,43 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
 def render_layers(technique: Technique, scene: Scene, plan: RenderPlan) -> tuple[Layer, list[Layer]]:
     """Run the plan's passes: (the media's layer, merged by depth with the stratiform layers when the scene has
     any; all layers front to back for :func:`~warpsky.composite.composite`). ``technique`` is the plan's
-    ``renderer`` or another technique with the same capabilities."""
+    ``renderer`` or another technique with the same capabilities.
+
+    Light transport is linear in the lights: each of the scene's ``extra_suns`` runs every pass again with that
+    light as the sun (one more run of every pass per light) and the radiance adds up; transmittance and depth are
+    the first run's. The dome lights the first run only, and shows behind everything
+    (:func:`~warpsky.composite.dome_background`)."""
     width, height = plan.width, plan.height
-    parts = []
-    if "media" in plan.passes:
-        parts.append(technique.render(media_scene(scene, plan.passes), width, height))
-    if "stratiform" in plan.passes:
-        parts += StratiformPass(plan.layer_settings, device=plan.device).render(scene, width, height)
-        main = merge_by_depth(parts, far=scene.camera.far)
-    else:
-        main = parts[0]
-    if "sky" not in plan.passes:
-        return main, [main]
-    front, back = SkyPass(device=plan.device).render(scene, width, height, media_depth=main.depth)
-    return main, [front, main, back]
+
+    def lit_by(lit: Scene, run: Technique) -> tuple[Layer, list[Layer]]:
+        parts = []
+        if "media" in plan.passes:
+            parts.append(run.render(media_scene(lit, plan.passes), width, height))
+        if "stratiform" in plan.passes:
+            parts += StratiformPass(plan.layer_settings, device=plan.device).render(lit, width, height)
+            main = merge_by_depth(parts, far=lit.camera.far)
+        else:
+            main = parts[0]
+        if "sky" not in plan.passes:
+            return main, [main]
+        front, back = SkyPass(device=plan.device).render(lit, width, height, media_depth=main.depth)
+        return main, [front, main, back]
+
+    main, layers = lit_by(scene, technique)
+    if scene.extra_suns:
+        settings = getattr(technique, "settings", None)
+        if getattr(settings, "environment", 0.0):  # the uniform environment lights the first run only
+            technique = type(technique)(replace(settings, environment=0.0), device=plan.device)
+        for sun in scene.extra_suns:
+            extra_main, extra_layers = lit_by(replace(scene, sun=sun, extra_suns=(), dome=None), technique)
+            main = add_light([main], [extra_main])[0]
+            layers = add_light(layers, extra_layers)
+    if scene.dome is not None:
+        sky = "sky" in plan.passes
+        background = dome_background(scene, width, height, through_air=sky)
+        layers = with_background(layers, background, scene.camera.far,
+                                 front_air=layers[0].transmittance if sky else None)
+    return main, layers
 
 
 def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> FrameResult:

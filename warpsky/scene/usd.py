@@ -2,7 +2,8 @@
 
 Stage units are converted here: ``upAxis`` Y or Z and ``metersPerUnit`` become warpsky's right-handed Y-up metres.
 Every problem is a :class:`SceneError` naming the prim, attribute or file. :class:`StageReader` reads the camera,
-sun, atmosphere and render settings itself; its parts read the rest: :mod:`warpsky.scene.usd_volumes` (voxel media),
+atmosphere and render settings itself; its parts read the rest: :mod:`warpsky.scene.usd_lights` (suns and dome),
+:mod:`warpsky.scene.usd_volumes` (voxel media),
 :mod:`warpsky.scene.usd_surfaces` (ground and stratiform layers) on :mod:`warpsky.scene.usd_prims` (transforms,
 visibility, typed attributes). :mod:`warpsky.scene.usd_composition` decides how the stage is composed (payloads
 loaded or not, variant selections, which purposes render: :class:`StageOptions`). pxr is imported inside the
@@ -11,7 +12,8 @@ methods (a heavy import).
 What is read (the README's "USD attributes" section lists the same with units and defaults):
 
 - ``UsdGeomCamera``: chosen by ``--camera``, else the render settings' camera, else the first camera.
-- ``UsdLuxDistantLight``: the sun (the first visible one).
+- ``UsdLuxDistantLight``: the sun (the first visible one); further visible ones are ``extra_suns``.
+- ``UsdLuxDomeLight``: the environment (the first visible one), uniform or a lat-long EXR texture.
 - ``UsdVolVolume`` with ``field:density`` (analytic phase) and/or ``field:cloud|rain|ice|snow`` (tabulated
   species optics) -> ``OpenVDBAsset`` (``.vdb``, ``.nvdb`` or dense ``.npy``).
 - ``warpsky:detail:*`` on a Volume: animated density detail (:class:`~warpsky.scene.model.DetailSpec`).
@@ -32,9 +34,10 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.errors import SceneError
-from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
+from warpsky.scene.model import Atmosphere, Camera, Scene
 from warpsky.scene.usd_composition import StageOptions, apply_variants, composition_summary
 from warpsky.scene.usd_layers import composition_problem, open_layers, tf_message
+from warpsky.scene.usd_lights import LightReading
 from warpsky.scene.usd_surfaces import SurfaceReading
 from warpsky.scene.usd_volumes import VolumeReading
 
@@ -50,7 +53,7 @@ class TimeRange:
     authored: bool
 
 
-class StageReader(VolumeReading, SurfaceReading):
+class StageReader(LightReading, VolumeReading, SurfaceReading):
     """An open stage plus the caches that make reading many frames cheap.
 
     Args:
@@ -206,37 +209,6 @@ class StageReader(VolumeReading, SurfaceReading):
             str(token),
         )
 
-    # ------------------------------------------------------------------------------------------------- sun
-    def read_sun(self, time=None) -> Sun | None:
-        from pxr import UsdLux
-
-        tc = self._time(time)
-        for prim in self._prims_of(UsdLux.DistantLight):
-            if not self._visible(prim, tc):
-                continue
-            light = UsdLux.DistantLight(prim)
-            world = self._world(prim, tc)
-            # Light travels along the light's local -Z, so the sun lies along +Z.
-            direction = world[:3, :3] @ np.array([0.0, 0.0, 1.0])
-            if np.linalg.norm(direction) == 0.0:
-                raise SceneError(f"light {prim.GetPath()}: its transform collapses the light direction")
-            intensity = float(light.GetIntensityAttr().Get(tc))
-            exposure = float(light.GetExposureAttr().Get(tc))
-            color = np.array(light.GetColorAttr().Get(tc), dtype=np.float64)
-            if light.GetEnableColorTemperatureAttr().Get(tc):
-                color = color * np.array(UsdLux.BlackbodyTemperatureAsRgb(light.GetColorTemperatureAttr().Get(tc)))
-            angle = float(light.GetAngleAttr().Get(tc))
-            if not (0.0 <= angle < 180.0):
-                raise SceneError(f"light {prim.GetPath()}: inputs:angle must lie in [0, 180) degrees, got {angle}")
-            irradiance = intensity * 2.0**exposure * color
-            if not np.all(np.isfinite(irradiance)) or np.any(irradiance < 0.0):
-                raise SceneError(
-                    f"light {prim.GetPath()}: intensity x 2^exposure x color must be finite and >= 0, "
-                    f"got {irradiance.tolist()}"
-                )
-            return Sun(direction, irradiance, math.radians(angle), str(prim.GetPath()))
-        return None
-
     # ------------------------------------------------------------------------------------------ atmosphere
     def read_atmosphere(self, time=None):
         """The first active prim with ``warpsky:atmosphere:*`` attributes (e.g. a Scope /World/Atmosphere) that is
@@ -275,9 +247,12 @@ class StageReader(VolumeReading, SurfaceReading):
     def scene_at(self, time=None, *, camera_path: str | None = None) -> Scene:
         """Everything warpsky renders, at ``time`` (None: the earliest time sample, like usdrecord)."""
         resolution, _ = self.render_settings()
+        suns = self.read_suns(time)
         return Scene(
             camera=self.read_camera(camera_path, time),
-            sun=self.read_sun(time),
+            sun=suns[0] if suns else None,
+            extra_suns=suns[1:],
+            dome=self.read_dome(time),
             media=self.read_media(time),
             ground=self.read_ground(time),
             atmosphere=self.read_atmosphere(time),

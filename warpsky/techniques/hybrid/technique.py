@@ -4,8 +4,10 @@ Light reaching the eye after one scattering event is marched exactly and without
 :mod:`~warpsky.techniques.single_scatter` kernel: sun -> shadow march -> scattering -> eye). Light scattered at
 least twice is path traced (the :mod:`~warpsky.techniques.path_tracer` kernel with the sunlight at the first
 event left out, so the two parts never count the same light twice), then denoised with Intel Open Image Denoise
-(:mod:`~warpsky.techniques.hybrid.denoise`). Passes of paths are added until the frame's estimated relative error
-falls below ``target_error``, or ``time_budget`` or ``spp`` is reached.
+(:mod:`~warpsky.techniques.hybrid.denoise`). A dome's light is path traced whole, its first scattering included
+(the march cannot integrate a dome exactly and takes the sun alone), so the sum stays unbiased; with
+``multiple_scattering = 0`` the dome lights nothing but the background. Passes of paths are added until the
+frame's estimated relative error falls below ``target_error``, or ``time_budget`` or ``spp`` is reached.
 
 The error estimate splits the paths into two independent halves A and B (alternate passes). Denoised separately,
 their difference has about twice the variance of the denoised whole, so RMS(D(A) - D(B)) / 2 over the covered
@@ -178,11 +180,14 @@ class Hybrid:
         if settings.multiple_scattering and settings.denoise:
             require_denoiser()
         started = time.perf_counter()
-        single = SingleScatter(settings.single_scatter(), device=self.device).render(scene, width, height)
+        # The dome's light, its first scattering included, is all path traced: the march takes the sun alone.
+        single = SingleScatter(settings.single_scatter(), device=self.device).render(
+            dataclasses.replace(scene, dome=None), width, height)
         stats = {"single_scatter_seconds": single.stats["seconds"], "lookups": single.stats["lookups"]}
         multiple = np.zeros_like(single.radiance)
         variance = np.zeros_like(single.radiance)
-        if settings.multiple_scattering and scene.sun is not None and scene.media:
+        lit = (scene.sun is not None and scene.media) or (scene.dome is not None and (scene.media or scene.ground))
+        if settings.multiple_scattering and lit:
             multiple, variance, ms_stats = MultipleScattering(scene, width, height, settings, self.device).run(
                 single, started)
             stats.update(ms_stats)

@@ -3,8 +3,8 @@
 At a scattering point the path takes next-event estimation toward the sunlight (the light of the disk's visible
 part, :mod:`warpsky.techniques.sunlight`; ratio-tracked transmittance times the media's mixed phase) and samples a
 new direction from that mixture. On the Lambertian ground it takes the sun through the media, then a
-cosine-weighted bounce. A path that leaves every medium gains the uniform environment (after a bounce) or, with
-air, the sun's disk seen directly; with air a downward path ends at a black sea level.
+cosine-weighted bounce. A path that leaves every medium gains the uniform environment and the dome (after a
+bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black sea level.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import scattering_angle
 from warpsky.optics.phase_sampling import PhaseTables, mixture_functions
 from warpsky.techniques.common import Ground, Sun
+from warpsky.techniques.dome import DomeLight, dome_radiance
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.tracking import Transmittance, tracking_functions
 
@@ -97,6 +98,17 @@ def escaped_radiance(air: Air, sun: Sun, environment: wp.vec3, d: wp.vec3, throu
         out = wp.cw_mul(throughput, environment)
     elif air.enabled != 0 and sun_on and wp.dot(d, sun.disk_direction) >= sun.cos_radius:
         out = wp.cw_mul(throughput, sun.disk_radiance)  # the horizon clips the disk: d[1] >= 0 here
+    return out
+
+
+@wp.func
+def escaped_dome(air: Air, dome: DomeLight, d: wp.vec3, throughput: wp.vec3, bounce: int) -> wp.vec3:
+    """The dome's light on a path of ``throughput`` that escapes along ``d`` after a bounce (with air: upward, out
+    of the air). A camera ray that escapes (bounce 0) gains nothing here: the frame's composite draws the dome
+    behind the layer's transmittance, as it draws it behind every technique's."""
+    out = wp.vec3(0.0)
+    if bounce > 0 and not (air.enabled != 0 and d[1] < 0.0):
+        out = wp.cw_mul(throughput, dome_radiance(dome, d))
     return out
 
 

@@ -30,11 +30,13 @@ from warpsky.techniques.common import (
     camera_ray_at,
     camera_ray_origin,
 )
+from warpsky.techniques.dome import DomeLight
 from warpsky.techniques.path_tracer.events import (
     SURFACE_GROUND,
     SURFACE_NONE,
     PathState,
     RayEnd,
+    escaped_dome,
     escaped_radiance,
     event_functions,
     roulette,
@@ -72,22 +74,27 @@ class PixelSums:
     counters: wp.array2d(dtype=wp.vec2i)  # (tracking steps, capped paths)
 
 
-@kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True))
+@kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True),
+                 has_dome=(False, True))
 @functools.cache
-def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False) -> wp.Kernel:
-    """The per-pixel progressive path tracer, specialised on ground, tabulated species and animated detail."""
+def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False,
+                      has_dome: bool = False) -> wp.Kernel:
+    """The per-pixel progressive path tracer, specialised on ground, tabulated species, animated detail and a
+    dome (a scene without one runs exactly the code it ran before domes existed)."""
     _media_at, delta_track, ratio_track = tracking_functions(has_detail)
     primary_end, flight_end, sun_reaches = surface_functions(has_ground)
     scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
 
     @wp.func
     def trace_path(media: VoxelMedia, majorants: Majorants, phase_tables: PhaseTables, air: Air, sun: Sun,
-                   ground: Ground, settings: PathSettings, sun_on: bool, start: PathState, first: RayEnd) -> PathState:
+                   ground: Ground, dome: DomeLight, settings: PathSettings, sun_on: bool, start: PathState,
+                   first: RayEnd) -> PathState:
         """One path from the camera ray ``start`` (which ends at ``first``): per bounce a free flight, then a
         scattering event, a ground bounce, or the end (environment, sun disk, sea level), then roulette. With
         ``settings.multiple_only`` the first event takes no sunlight and a camera ray does not see the sun's disk:
         the path carries light scattered at least twice (media, air or ground), the part that an exact
-        single-scattering march and the analytic sky leave out."""
+        single-scattering march and the analytic sky leave out, and all the dome's light but what the camera sees
+        of it directly (the composite's background)."""
         path = start
         bounce = int(0)
         while path.alive != 0:
@@ -106,6 +113,8 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
             if flight.scattered == 0 and end.surface != SURFACE_GROUND:
                 path.radiance = path.radiance + escaped_radiance(air, sun, settings.environment, path.direction,
                                                                  path.throughput, bounce, lit)
+                if wp.static(has_dome):
+                    path.radiance = path.radiance + escaped_dome(air, dome, path.direction, path.throughput, bounce)
                 break
             p = path.origin + flight.t * path.direction
             if bounce == 0:
@@ -128,6 +137,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
         sun: Sun,
         cam: PinholeCamera,
         ground: Ground,
+        dome: DomeLight,
         settings: PathSettings,
         sums: PixelSums,
         row_offset: int,
@@ -164,7 +174,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
                 state = tr.state
                 sums.transmittance_sum[row, col] = sums.transmittance_sum[row, col] + tr.value
                 steps += tr.steps
-            path = trace_path(media, majorants, phase_tables, air, sun, ground, settings, sun_on,
+            path = trace_path(media, majorants, phase_tables, air, sun, ground, dome, settings, sun_on,
                               start_path(origin, view, state, steps), first)
             steps = path.steps
             capped += path.capped

@@ -21,6 +21,7 @@ from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.dome import dome_struct
 from warpsky.techniques.path_tracer.kernels import PathSettings, PixelSums, path_trace_kernel
 from warpsky.techniques.path_tracer.majorants import upload_majorants
 from warpsky.techniques.sunlight import sunlight
@@ -63,7 +64,8 @@ class PathTracer:
     """Unbiased volumetric path tracing of voxel media: delta tracking with local majorants, ratio-tracked
     next-event estimation toward the sun, phase sampling from the optics tables, all media combined (Riley Eq. 6),
     the scene's atmosphere as a Rayleigh medium of exponential density (then it also draws the sun's disk),
-    Russian roulette, a Lambertian ground and an optional uniform environment. Progressive: samples accumulate
+    Russian roulette, a Lambertian ground, an optional uniform environment and the scene's dome (light of paths
+    that escape after a bounce; the composite draws it behind the camera rays). Progressive: samples accumulate
     per pixel with their running variance (``Layer.aovs["variance"]``, the variance of the pixel mean)."""
 
     name = "path_tracer"
@@ -151,11 +153,13 @@ class PathTracing:
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
             majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device)
-        self.kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail)
-        self._keep = (tables, media)  # the structs below point into these buffers
+        self.kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail,
+                                        scene.dome is not None)
+        dome = dome_struct(scene.dome, device)
+        self._keep = (tables, media, dome)  # the structs below point into these buffers
         self.fixed = [media.media, majorants, phase_tables_struct(tables),
                       air_struct(scene.atmosphere if air else None, camera.position), sun_struct(sunlight(scene)),
-                      pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position)]
+                      pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position), dome]
 
     def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:
         """Add paths ``first_sample .. first_sample + count - 1`` of every pixel to ``sums`` (asynchronous on

@@ -5,6 +5,12 @@ extinction is taken at the step's midpoint, and the total optical depth seen by 
 sample plus sample to eye) is taken as linear between the step's ends, where shadow rays are marched. The
 step's contribution is then integrated exactly (:func:`exp_lerp_mean`), which keeps a homogeneous medium exact
 and any optical depth per step from 1e-9 to 1e5 finite and non-negative.
+
+A dome lights the media as an ambient light (:mod:`warpsky.techniques.dome`): sigma_s L_mean per metre, occluded by
+the transmittance towards the zenith, which a second shadow march per step takes at the step's midpoint (it
+doubles the cost of the march); the ground reflects albedo E / pi of the dome's upper hemisphere under the same
+occlusion. Dome light scattered
+more than once, and the direction-dependence of a textured dome, are left out.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from warpsky.techniques.common import (
     exp_lerp_mean3,
     luminance,
 )
+from warpsky.techniques.dome import ambient_ground, ambient_scattered
 
 
 @wp.struct
@@ -38,6 +45,9 @@ class MarchSettings:
     step: float  # eye-ray step [m]
     shadow_step: float  # shadow-ray step towards the sun [m]
     min_transmittance: float  # stop once the luminance transmittance falls below this
+    ambient: wp.vec3  # mean radiance L_mean arriving at the media from the dome (and the ground it lights), RGB
+    ground_ambient: wp.vec3  # E / pi of the dome's upper hemisphere: what a white ground reflects, RGB
+    ambient_on: int  # 1: light the media and the ground with them (a scene with a dome)
 
 
 @functools.cache
@@ -172,6 +182,11 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                     sun_a_known = True
                 else:
                     sun_a_known = False
+                if march.ambient_on != 0 and wp.max(here.scattering) > 0.0:
+                    up = sun_optical_depth(media, tm, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
+                    lookups += wp.int64(up[3])
+                    ambient = ambient_scattered(here.scattering, march.ambient, wp.vec3(up[0], up[1], up[2]))
+                    light += wp.cw_mul(ambient, exp_lerp_mean3(tau_eye, tau_eye_b)) * dt
                 opacity = luminance(exp3(tau_eye)) - luminance(exp3(tau_eye_b))
                 depth_sum += opacity * tm * cos_axis
                 weight_sum += opacity
@@ -187,6 +202,11 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                     lookups += wp.int64(shadow[3])
                     lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (wp.max(sun_dir[1], 0.0) / wp.pi)
                     light += wp.cw_mul(wp.cw_mul(lit_ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
+                if march.ambient_on != 0:
+                    up = sun_optical_depth(media, t_end, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
+                    lookups += wp.int64(up[3])
+                    shown = ambient_ground(ground.albedo, march.ground_ambient, wp.vec3(up[0], up[1], up[2]))
+                    light += wp.cw_mul(shown, trans)
                 depth_sum += luminance(trans) * t_end * cos_axis
                 weight_sum += luminance(trans)
                 trans = wp.vec3(0.0)

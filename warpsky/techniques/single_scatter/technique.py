@@ -18,6 +18,7 @@ from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes, march_work
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.dome import ambient_vec, ground_ambient_vec
 from warpsky.techniques.single_scatter.kernels import MarchSettings, single_scatter_kernel
 from warpsky.techniques.sunlight import sunlight
 
@@ -115,6 +116,9 @@ class SingleScatter:
             march.step = float(settings.step_length)
             march.shadow_step = float(settings.shadow_step_length)
             march.min_transmittance = float(settings.min_transmittance)
+            march.ambient = ambient_vec(scene)
+            march.ground_ambient = ground_ambient_vec(scene)
+            march.ambient_on = int(scene.dome is not None)
             kernel = single_scatter_kernel(scene.ground is not None, bool(species), media.has_detail)
             inputs = [media.media, tables.values, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
                       ground_struct(scene.ground, camera.position), march, radiance, transmittance, depth, lookups]

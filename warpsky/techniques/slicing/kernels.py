@@ -12,6 +12,13 @@ is a square grid in the plane perpendicular to the light, so a texel follows its
 Every medium has a table of multiple-scattering distributions Ams_n (n = 0..N) and forward fractions F_n: species
 from :mod:`warpsky.optics.tables`, analytic phases in closed form (HG(g)^{*n} = HG(g^n)). Several media at a
 point mix their Ams and F by scattering weight (Riley Eq. 6 applied per order).
+
+A dome lights the media as an unoccluded ambient light (:mod:`warpsky.techniques.dome`): each eye sample adds
+L_mean times its scattering integrated over the sample, (1 - e^-tau) albedo, as if its phase were isotropic and no
+cloud shadowed it. For an albedo-1 medium under a uniform dome this is exactly the white furnace's answer (the
+pixel shows L_mean whatever the optical depth); for darker media and textured domes it overestimates the light
+deep inside thick clouds. The ground reflects albedo E / pi of the dome's upper hemisphere, occluded towards
+the zenith.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from warpsky.techniques.common import (
     exp3,
     one_minus_exp,
 )
+from warpsky.techniques.dome import ambient_ground
 from warpsky.techniques.single_scatter.kernels import media_span, sun_depth_function
 
 
@@ -222,25 +230,27 @@ def light_update(low_albedo: bool, equation: int):
     return {0: light_continuous, 24: light_riley24, 25: light_riley25}[equation]
 
 
-def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = False):
+def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = False, has_dome: bool = False):
     """(eye_kernel, light_kernel), specialised on Riley's low-albedo comparison mode (Fig. 13: Ams_1 only, light
     attenuated by extinction, no multiple scattering), on the light-buffer update: 0, the continuous limit of
     Riley's model solved per step (second order in the slice spacing); Riley's Eq. 24 (per-event forward
     fractions, first order) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta), which does not converge); and on
-    whether any medium has animated detail (without it the samplers never touch ``details``)."""
-    return slice_eye_kernel(low_albedo, has_detail), slice_light_kernel(low_albedo, equation, has_detail)
+    whether any medium has animated detail (without it the samplers never touch ``details``); the eye kernel also
+    on a dome (its ambient light)."""
+    return slice_eye_kernel(low_albedo, has_detail, has_dome), slice_light_kernel(low_albedo, equation, has_detail)
 
 
-@kernel_variants(low_albedo=(False, True), has_detail=(False, True))
+@kernel_variants(low_albedo=(False, True), has_detail=(False, True), has_dome=(False, True))
 @functools.cache
-def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
+def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool = False):
     """The eye gather of one slice (see :func:`slicing_kernels`)."""
 
     sample_media = media_functions(has_detail)
 
     @wp.func
     def gather_sample(media: VoxelMedia, tables: AmsTables, frame: SliceFrame, light_i: wp.array2d(dtype=wp.vec3),
-                      light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3, theta: float, length: float):
+                      light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3, theta: float, length: float,
+                      ambient: wp.vec3):
         """(light scattered towards the eye, optical depth), RGB, of the piece of the eye ray of ``length`` [m]
         centred on ``p``."""
         point = sample_media(media, p)
@@ -262,6 +272,8 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
                 p_c = phase[c] / scattering[c]  # xi included, per medium
                 # scattering integrated exactly over the piece: (1 - e^-tau) albedo instead of beta_s * length
                 out[c] = light[c] * p_c * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
+                if wp.static(has_dome):
+                    out[c] = out[c] + ambient[c] * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
         return out, tau
 
     @wp.kernel(module="unique")
@@ -276,6 +288,7 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
         sun: Sun,
         spans: wp.array2d(dtype=wp.vec2),
         sample_length: float,
+        ambient: wp.vec3,
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
         depth_sum: wp.array2d(dtype=wp.vec2),
@@ -306,7 +319,7 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False):
         keep = wp.vec3(1.0)
         for k in range(count):  # front to back inside the slab
             p = view * (t + (lo + (float(k) + 0.5) * length))
-            scattered, tau = gather_sample(media, tables, frame, light_i, light_n, p, theta, length)
+            scattered, tau = gather_sample(media, tables, frame, light_i, light_n, p, theta, length, ambient)
             contribution += wp.cw_mul(keep, scattered)
             keep = wp.cw_mul(keep, exp3(tau))
         if keep[0] >= 1.0 and keep[1] >= 1.0 and keep[2] >= 1.0:
@@ -382,10 +395,11 @@ def slice_light_kernel(low_albedo: bool, equation: int = 0, has_detail: bool = F
     return light_kernel
 
 
-@kernel_variants(has_detail=(False, True))
+@kernel_variants(has_detail=(False, True), has_dome=(False, True))
 @functools.cache
-def ground_kernel(has_detail: bool = False):
-    """The ground pass, specialised on animated detail (the shadow rays see the same detailed media)."""
+def ground_kernel(has_detail: bool = False, has_dome: bool = False):
+    """The ground pass, specialised on animated detail (the shadow rays see the same detailed media) and on a dome
+    (its ambient light, occluded by the media towards the zenith)."""
 
     sun_optical_depth = sun_depth_function(has_detail)
 
@@ -396,6 +410,7 @@ def ground_kernel(has_detail: bool = False):
         sun: Sun,
         ground: Ground,
         shadow_step: float,
+        ground_ambient: wp.vec3,
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
         depth: wp.array2d(dtype=float),
@@ -416,6 +431,10 @@ def ground_kernel(has_detail: bool = False):
             lit = wp.cw_mul(sun.irradiance, exp3(wp.vec3(tau[0], tau[1], tau[2]))) * (wp.max(sun_dir[1], 0.0) / wp.pi)
         before = transmittance[row, col]
         radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground.albedo, lit))
+        if wp.static(has_dome):
+            up = sun_optical_depth(media, t, view, wp.vec3(0.0, 1.0, 0.0), shadow_step)
+            shown = ambient_ground(ground.albedo, ground_ambient, wp.vec3(up[0], up[1], up[2]))
+            radiance[row, col] = radiance[row, col] + wp.cw_mul(before, shown)
         if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
             depth[row, col] = z
         transmittance[row, col] = wp.vec3(0.0)

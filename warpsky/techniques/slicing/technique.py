@@ -21,6 +21,7 @@ from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import PhaseKind, Projection, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.dome import ambient_vec, ground_ambient_vec
 from warpsky.techniques.slicing.kernels import (
     AmsTables,
     SliceFrame,
@@ -247,7 +248,7 @@ class Slicing:
                 light_i = wp.full((res, res), wp.vec3(*np.asarray(start, dtype=np.float64).tolist()), dtype=wp.vec3)
                 light_n = wp.zeros((res, res), dtype=wp.vec3)
                 eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
-                                                           media.has_detail)
+                                                           media.has_detail, scene.dome is not None)
                 cam = pinhole_camera(camera, width, height)
                 sun_view = sun_struct(sun)
                 spacing = float(frame.spacing)
@@ -261,7 +262,7 @@ class Slicing:
                 for plane in planes:
                     launch_rows(eye_kernel, height, width, [
                         media.media, ams, cam, frame, float(plane), light_i, light_n, sun_view, spans,
-                        sample_length, radiance, transmittance, depth_sum], device)
+                        sample_length, ambient_vec(scene), radiance, transmittance, depth_sum], device)
                     wp.launch(light_kernel, dim=(res, res), inputs=[
                         media.media, ams, frame, float(plane), spacing, light_i, light_n])
                     slices += 1
@@ -312,8 +313,8 @@ class Slicing:
             radiance = wp.array(layer.radiance, dtype=wp.vec3)
             transmittance = wp.array(layer.transmittance, dtype=wp.vec3)
             depth = wp.array(layer.depth, dtype=float)
-            wp.launch(ground_kernel(media.has_detail), dim=(height, width), inputs=[
+            wp.launch(ground_kernel(media.has_detail, scene.dome is not None), dim=(height, width), inputs=[
                 media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
-                ground_struct(scene.ground, camera.position), float(media.min_voxel_size), radiance, transmittance,
-                depth])
+                ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_ambient_vec(scene),
+                radiance, transmittance, depth])
             layer.radiance, layer.transmittance, layer.depth = radiance.numpy(), transmittance.numpy(), depth.numpy()

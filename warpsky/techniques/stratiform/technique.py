@@ -1,5 +1,11 @@
 """Host side of the stratiform technique: a :class:`~warpsky.media.stratiform.StratiformLayer` over a (textured)
-ground, with the ground <-> cloud-base radiosity of Bouthors 2006 §5 (see :mod:`.kernels`)."""
+ground, with the ground <-> cloud-base radiosity of Bouthors 2006 §5 (see :mod:`.kernels`).
+
+A dome's upper hemisphere, as the uniform radiance giving the same irradiance on a horizontal surface
+(:func:`~warpsky.techniques.dome.upper_hemisphere`), is added to the uniform-equivalent sky C_sky that lights the
+layer from above (T_ms C_sky below it, R_ms C_sky above it, and the radiosity's source): the slab's multiple
+scattering model then stands for the occlusion. Its light from below the horizon and a texture's directional
+structure are left out."""
 
 from __future__ import annotations
 
@@ -15,6 +21,7 @@ from warpsky.media.stratiform import GroundTexture, StratiformLayer, at_time, sa
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.techniques.dome import upper_hemisphere
 from warpsky.techniques.radiosity.solver import Radiosity, ground_direct, pyramid_shape
 from warpsky.techniques.sky.analytic import inscatter, rayleigh
 from warpsky.techniques.stratiform.kernels import LayerGeometry, stratiform_kernel
@@ -168,6 +175,8 @@ class Stratiform:
         eye = camera.position
         optics = stratiform_optics(layer.number_density, layer.effective_radius)
         sky = sky_radiance(scene, layer.base_altitude + float(layer.thickness.max()))
+        if scene.dome is not None:
+            sky = sky + upper_hemisphere(scene.dome)[1]  # the dome joins the uniform-equivalent sky above it
         stats = {"radiosity": bool(self.settings.radiosity_for(layer))}
         with wp.ScopedDevice(self.device):
             slab_optics, tables, params = optics.device_inputs(self.device)
