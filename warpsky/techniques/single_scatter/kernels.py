@@ -183,7 +183,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                 else:
                     sun_a_known = False
                 if march.ambient_on != 0 and wp.max(here.scattering) > 0.0:
-                    up = sun_optical_depth(media, tm, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
+                    up = sun_optical_depth(media, origin, tm, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
                     lookups += wp.int64(up[3])
                     ambient = ambient_scattered(here.scattering, march.ambient, wp.vec3(up[0], up[1], up[2]))
                     light += wp.cw_mul(ambient, exp_lerp_mean3(tau_eye, tau_eye_b)) * dt
@@ -203,7 +203,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                     lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (wp.max(sun_dir[1], 0.0) / wp.pi)
                     light += wp.cw_mul(wp.cw_mul(lit_ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
                 if march.ambient_on != 0:
-                    up = sun_optical_depth(media, t_end, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
+                    up = sun_optical_depth(media, origin, t_end, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
                     lookups += wp.int64(up[3])
                     shown = ambient_ground(ground.albedo, march.ground_ambient, wp.vec3(up[0], up[1], up[2]))
                     light += wp.cw_mul(shown, trans)
