@@ -160,6 +160,18 @@ def test_orthographic_box_has_one_transmittance_path_tracer(tmp_path, homogeneou
     assert np.all(np.isfinite(layer.radiance)) and layer.radiance[INSIDE, INSIDE].mean() > 0.0
 
 
+def test_orthographic_box_has_one_transmittance_hybrid(tmp_path, homogeneous_npy, device):
+    from warpsky.plan import make_plan
+    from warpsky.techniques.hybrid.technique import Hybrid
+
+    scene = StageReader(orthographic_stage(tmp_path / "ortho.usda", homogeneous_npy)).scene_at(None)
+    settings = {"spp": "4", "seed": "3", "target_error": "0", "denoise": "0"}
+    plan = make_plan(scene, technique="hybrid", settings=settings, resolution=(SIZE, SIZE), device=device)
+    layer = Hybrid(plan.settings, device=device).render(scene, SIZE, SIZE)
+    np.testing.assert_allclose(layer.transmittance[INSIDE, INSIDE], math.exp(-SIGMA * 2.0 * HALF), rtol=1e-4)
+    assert np.all(np.isfinite(layer.radiance)) and layer.radiance[INSIDE, INSIDE].min() > 0.0
+
+
 def test_slicing_refuses_an_orthographic_camera(tmp_path, homogeneous_npy):
     from warpsky.plan import make_plan
 
