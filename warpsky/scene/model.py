@@ -1,5 +1,8 @@
 """What is in the world at one time code: plain dataclasses in SI units, world Y-up metres, no pxr types.
 
+The camera lives in :mod:`warpsky.scene.camera`, the sun and the dome in :mod:`warpsky.scene.lights`; both are
+imported here, so ``warpsky.scene.model`` names every part of a :class:`Scene`.
+
 Everything here can be built by hand (tests, notebooks) or read from USD by :mod:`warpsky.scene.usd`.
 Constructors validate their inputs and say what is wrong.
 """
@@ -13,7 +16,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from warpsky.errors import SceneError
+from warpsky.scene.camera import Camera, Projection, as_imath_rows  # noqa: F401 - part of the model's names
+from warpsky.scene.checks import _vec3
 from warpsky.scene.layers import GroundTexture, StratiformLayer
+from warpsky.scene.lights import Dome, Sun
 
 #: The particle species warpsky has optics for (:mod:`warpsky.optics.species`).
 SPECIES_NAMES = ("air", "cloud", "rain", "ice", "snow", "stratus")
@@ -22,20 +28,6 @@ FIELD_SPECIES = ("cloud", "rain", "ice", "snow")
 
 #: Rec. 709 luminance weights used for alpha and for one-number summaries of RGB quantities.
 LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
-
-
-def _vec3(value, name: str, *, unit: bool = False) -> np.ndarray:
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
-    if arr.size == 1:
-        arr = np.repeat(arr, 3)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise SceneError(f"{name} must be 3 finite numbers, got {value!r}")
-    if unit:
-        norm = float(np.linalg.norm(arr))
-        if norm == 0.0:
-            raise SceneError(f"{name} must be a non-zero direction, got {value!r}")
-        arr = arr / norm
-    return arr
 
 
 class PhaseKind(enum.IntEnum):
@@ -70,270 +62,6 @@ class PhaseModel:
         if self.kind == PhaseKind.HG:
             return f"PhaseModel(hg, g={self.g:g})"
         return f"PhaseModel({self.kind.name.lower()})"
-
-
-class Projection(enum.Enum):
-    """How a camera maps the world onto its image; values are USD's ``projection`` tokens."""
-
-    PERSPECTIVE = "perspective"
-    ORTHOGRAPHIC = "orthographic"
-
-
-@dataclass(frozen=True)
-class Camera:
-    """A camera looking down its local -Z with +Y up; image row 0 is the top.
-
-    A perspective camera is a pinhole at ``position``. An orthographic camera sends every ray along its view axis,
-    from the pixel's point of a view window centred on ``position`` across that axis; its apertures and offsets are
-    the window's size and shift in metres (USD's apertures, in tenths of a scene unit, are the view's extent).
-
-    Attributes:
-        name: Prim path or label, used in messages and metadata.
-        position: Eye position in world metres, float64 (kept exact for scenes far from the origin).
-        rotation: 3x3 world-from-camera rotation; columns are the camera's right, up and back axes.
-        focal_length: Focal length [m of film-back units; only ratios to the apertures matter; unused when
-            orthographic].
-        horizontal_aperture: Film-back width, same units as ``focal_length`` (orthographic: view width [m]).
-        vertical_aperture: Film-back height, same units as ``focal_length`` (orthographic: view height [m]).
-        horizontal_aperture_offset: Film-back shift to the right, same units.
-        vertical_aperture_offset: Film-back shift up, same units.
-        near: Near clipping distance along the view axis [m].
-        far: Far clipping distance along the view axis [m].
-        projection: :class:`Projection`, perspective by default (USD ``token projection``).
-        pixel_aspect: Width / height of an image pixel as displayed (RenderSettings ``pixelAspectRatio``): the
-            film back is conformed to ``width * pixel_aspect / height``.
-    """
-
-    name: str
-    position: np.ndarray
-    rotation: np.ndarray
-    focal_length: float
-    horizontal_aperture: float
-    vertical_aperture: float
-    horizontal_aperture_offset: float = 0.0
-    vertical_aperture_offset: float = 0.0
-    near: float = 0.1
-    far: float = 1.0e6
-    projection: Projection = Projection.PERSPECTIVE
-    pixel_aspect: float = 1.0
-
-    def __post_init__(self):
-        object.__setattr__(self, "position", _vec3(self.position, f"camera {self.name}: position"))
-        try:
-            object.__setattr__(self, "projection", Projection(self.projection))
-        except ValueError:
-            raise SceneError(f"camera {self.name}: projection must be 'perspective' or 'orthographic', "
-                             f"got {self.projection!r}") from None
-        rot = np.asarray(self.rotation, dtype=np.float64)
-        if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
-            raise SceneError(f"camera {self.name}: rotation must be a finite 3x3 matrix")
-        if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-            raise SceneError(f"camera {self.name}: rotation must be orthonormal and right-handed")
-        object.__setattr__(self, "rotation", rot)
-        for attr in ("focal_length", "horizontal_aperture", "vertical_aperture", "pixel_aspect"):
-            value = getattr(self, attr)
-            if not (math.isfinite(value) and value > 0.0):
-                raise SceneError(f"camera {self.name}: {attr} must be positive, got {value}")
-        if not (math.isfinite(self.near) and self.near > 0.0):
-            raise SceneError(f"camera {self.name}: near clipping distance must be positive, got {self.near}")
-        if not (self.far > self.near):
-            raise SceneError(
-                f"camera {self.name}: clipping range must have near < far, got near={self.near}, far={self.far}"
-            )
-
-    @property
-    def forward(self) -> np.ndarray:
-        """Unit view direction (the camera's -Z) in world space."""
-        return -self.rotation[:, 2]
-
-    def conformed(self, width: int, height: int) -> Camera:
-        """Return this camera with its film back grown to the image aspect ratio (CameraUtil's "fit" policy).
-
-        The authored window stays entirely in view; one aperture is enlarged so that
-        ``horizontal_aperture / vertical_aperture == width * pixel_aspect / height``.
-        """
-        aspect = width * self.pixel_aspect / height
-        h_ap, v_ap = self.horizontal_aperture, self.vertical_aperture
-        if h_ap / v_ap > aspect:
-            v_ap = h_ap / aspect
-        else:
-            h_ap = v_ap * aspect
-        return Camera(
-            self.name, self.position, self.rotation, self.focal_length, h_ap, v_ap,
-            self.horizontal_aperture_offset, self.vertical_aperture_offset, self.near, self.far, self.projection,
-            self.pixel_aspect,
-        )
-
-    def pixel_direction(self, x: float, y: float, width: int, height: int) -> np.ndarray:
-        """World-space unit ray direction through image position (x, y) in pixels (row 0 at the top).
-
-        Pixel centres sit at half-integers. The camera should already be conformed to (width, height). An
-        orthographic camera's rays all run along :attr:`forward`.
-        """
-        if self.projection is Projection.ORTHOGRAPHIC:
-            return self.forward
-        sx = (x / width - 0.5) * self.horizontal_aperture + self.horizontal_aperture_offset
-        sy = (0.5 - y / height) * self.vertical_aperture + self.vertical_aperture_offset
-        d = self.rotation @ np.array([sx, sy, -self.focal_length])
-        return d / np.linalg.norm(d)
-
-    def world_to_camera(self, *, left_handed: bool = False) -> np.ndarray:
-        """4x4 float64 matrix from warpsky world space (Y up, metres: the stage's up axis and units already
-        converted) to camera space, for column vectors: ``p_cam = M @ (x, y, z, 1)``.
-
-        Camera space has the eye at the origin, +X right and +Y up in the image and, right-handed, the view along
-        -Z (USD's, Arnold's and Cycles' camera space). ``left_handed=True`` gives the space of OpenEXR's
-        ``worldToCamera`` standard attribute instead, RenderMan's: the same with z negated, so that points in front
-        of the camera have z > 0. Headers store Imath's row-vector transpose (:func:`as_imath_rows`) in float32,
-        which keeps a translation 100 km long to about 1 cm.
-        """
-        m = np.eye(4)
-        m[:3, :3] = self.rotation.T
-        m[:3, 3] = -(self.rotation.T @ self.position)
-        if left_handed:
-            m[2] = -m[2]
-        return m
-
-    def world_to_ndc(self, width: int, height: int) -> np.ndarray:
-        """4x4 float64 projective matrix from warpsky world space (as :meth:`world_to_camera`) to the normalised
-        device coordinates of a ``width`` x ``height`` image, for column vectors, before the homogeneous divide.
-
-        NDC is OpenEXR's ``worldToNDC`` standard attribute's (RenderMan's): after dividing by w, x runs right and y
-        down, with (0, 0) the top-left and (1, 1) the bottom-right corner of the image (the display window; this
-        camera conformed to it), so pixel (row, col)'s centre is ((col + 0.5) / width, (row + 0.5) / height).
-        OpenEXR discards z; here z / w is 0 on the near and 1 on the far clipping plane. w is the distance along
-        the view axis (perspective) or 1 (orthographic).
-        """
-        cam = self.conformed(width, height)
-        h_ap, v_ap = cam.horizontal_aperture, cam.vertical_aperture
-        h_shift, v_shift = cam.horizontal_aperture_offset / h_ap, cam.vertical_aperture_offset / v_ap
-        near, far = cam.near, cam.far
-        if cam.projection is Projection.ORTHOGRAPHIC:
-            projection = np.array([
-                [1.0 / h_ap, 0.0, 0.0, 0.5 - h_shift],
-                [0.0, -1.0 / v_ap, 0.0, 0.5 + v_shift],
-                [0.0, 0.0, -1.0 / (far - near), -near / (far - near)],
-                [0.0, 0.0, 0.0, 1.0],
-            ])
-        else:
-            focal = cam.focal_length
-            projection = np.array([
-                [focal / h_ap, 0.0, h_shift - 0.5, 0.0],
-                [0.0, -focal / v_ap, -0.5 - v_shift, 0.0],
-                [0.0, 0.0, -far / (far - near), -far * near / (far - near)],
-                [0.0, 0.0, -1.0, 0.0],
-            ])
-        return projection @ self.world_to_camera()
-
-
-def as_imath_rows(matrix: np.ndarray) -> np.ndarray:
-    """The 4x4 transpose of a column-vector matrix (:meth:`Camera.world_to_camera`, :meth:`Camera.world_to_ndc`):
-    Imath's M44f multiplies row vectors (``p' = p M``), so this is what an EXR header's M44f attribute holds, row
-    by row (flattened, the 16 values in Imath's ``x[i][j]`` order)."""
-    m = np.asarray(matrix, dtype=np.float64)
-    if m.shape != (4, 4):
-        raise ValueError(f"expected a 4x4 matrix, got shape {m.shape}")
-    return m.T.copy()
-
-
-@dataclass(frozen=True)
-class Sun:
-    """A distant light source.
-
-    Attributes:
-        direction: Unit vector in world space pointing **towards** the sun.
-        irradiance: RGB irradiance at normal incidence [W/m^2 per channel, or the stage's light units].
-        angular_diameter: Angular diameter of the disk [rad] (USD ``inputs:angle`` is in degrees).
-        name: Prim path or label.
-    """
-
-    direction: np.ndarray
-    irradiance: np.ndarray
-    angular_diameter: float = math.radians(0.53)
-    name: str = "sun"
-
-    def __post_init__(self):
-        object.__setattr__(self, "direction", _vec3(self.direction, f"sun {self.name}: direction", unit=True))
-        irr = _vec3(self.irradiance, f"sun {self.name}: irradiance")
-        if np.any(irr < 0.0):
-            raise SceneError(f"sun {self.name}: irradiance must be non-negative, got {irr.tolist()}")
-        object.__setattr__(self, "irradiance", irr)
-        if not (math.isfinite(self.angular_diameter) and 0.0 <= self.angular_diameter < math.pi):
-            raise SceneError(f"sun {self.name}: angular diameter must lie in [0, pi) rad, got {self.angular_diameter}")
-
-    @property
-    def elevation(self) -> float:
-        """Angle of the sun above the horizon [rad]; negative below it."""
-        return math.asin(max(-1.0, min(1.0, float(self.direction[1]))))
-
-
-@dataclass(frozen=True)
-class Dome:
-    """Light from a distant environment all around the scene (``UsdLuxDomeLight``): radiance per direction.
-
-    The radiance towards world direction ``d`` is ``color`` times, with a texture, the texture's bilinear value
-    there. The texture is a latitude-longitude map in OpenEXR's convention (which UsdLux adopts for DomeLight): in
-    the dome's own frame +Y is the upper pole, the image's top row latitude +pi/2 and bottom row -pi/2, its left
-    column longitude +pi and right column -pi, longitude 0 (the image centre) along +Z and +pi/2 along +X. Pixel
-    centres sit exactly at those extremes (x = (W-1)/2 - lon (W-1)/(2 pi), y = (H-1)/2 - lat (H-1)/pi).
-
-    Attributes:
-        color: RGB radiance scale [the sun's irradiance units per sr]: ``inputs:color`` x ``inputs:intensity`` x
-            2^``inputs:exposure`` (x the blackbody colour with ``inputs:enableColorTemperature``).
-        texture: (H, W, 3) float32 lat-long image (``inputs:texture:file``), or None for a uniform dome.
-        rotation: 3x3 world-from-dome rotation (the prim's transform and the stage's up axis, scale removed).
-        name: Prim path or label.
-        source: The texture file, for messages.
-    """
-
-    color: np.ndarray
-    texture: np.ndarray | None = None
-    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
-    name: str = "dome"
-    source: str = ""
-
-    def __post_init__(self):
-        color = _vec3(self.color, f"dome {self.name}: color")
-        if np.any(color < 0.0):
-            raise SceneError(f"dome {self.name}: color x intensity x 2^exposure must be >= 0, got {color.tolist()}")
-        object.__setattr__(self, "color", color)
-        rot = np.asarray(self.rotation, dtype=np.float64)
-        if rot.shape != (3, 3) or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-            raise SceneError(f"dome {self.name}: rotation must be an orthonormal right-handed 3x3 matrix")
-        object.__setattr__(self, "rotation", rot)
-        if self.texture is not None:
-            tex = np.ascontiguousarray(self.texture, dtype=np.float32)
-            if tex.ndim != 3 or tex.shape[2] != 3 or min(tex.shape[:2]) < 1:
-                raise SceneError(f"dome {self.name}: texture {self.source} must be an (H, W, RGB) image, "
-                                 f"got shape {tex.shape}")
-            if not np.all(np.isfinite(tex)) or np.any(tex < 0.0):
-                raise SceneError(f"dome {self.name}: texture {self.source} must hold finite values >= 0")
-            object.__setattr__(self, "texture", tex)
-
-    @property
-    def active(self) -> bool:
-        """Whether the dome gives any light (a black dome is treated as no dome)."""
-        lit = float(np.max(self.color)) > 0.0
-        return lit and (self.texture is None or float(np.max(self.texture)) > 0.0)
-
-    def radiance(self, direction) -> np.ndarray:
-        """Radiance [.., 3] arriving from world ``direction`` [.., 3] (unit vectors; any leading shape)."""
-        d = np.asarray(direction, dtype=np.float64)
-        if self.texture is None:
-            return np.broadcast_to(self.color, d.shape).copy()
-        local = d @ self.rotation  # dome-from-world applied to row vectors
-        height, width = self.texture.shape[:2]
-        lat = np.arcsin(np.clip(local[..., 1], -1.0, 1.0))
-        lon = np.arctan2(local[..., 0], local[..., 2])
-        x = np.clip(0.5 * (width - 1) - lon * (width - 1) / (2.0 * math.pi), 0.0, width - 1)
-        y = np.clip(0.5 * (height - 1) - lat * (height - 1) / math.pi, 0.0, height - 1)
-        x0, y0 = np.minimum(np.floor(x).astype(int), width - 1), np.minimum(np.floor(y).astype(int), height - 1)
-        x1, y1 = np.minimum(x0 + 1, width - 1), np.minimum(y0 + 1, height - 1)
-        fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-        tex = self.texture.astype(np.float64)
-        top = tex[y0, x0] * (1.0 - fx) + tex[y0, x1] * fx
-        bottom = tex[y1, x0] * (1.0 - fx) + tex[y1, x1] * fx
-        return self.color * (top * (1.0 - fy) + bottom * fy)
 
 
 @dataclass(frozen=True)
