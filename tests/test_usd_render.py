@@ -296,3 +296,22 @@ def test_products_sharing_a_camera_come_from_one_render(tmp_path, stage, capsys,
     code, stdout, err = run(["render", stage, "--device", "cpu", "--spp", "4", "--set", "denoise=0",
                              "--time-budget", "30"], capsys)
     assert code == 0 and "up to date, skipped" in stdout
+
+
+def test_info_lists_every_light_with_its_irradiance(stage, capsys):
+    from pxr import Gf, Usd, UsdGeom, UsdLux
+
+    usd = Usd.Stage.Open(str(stage))
+    moon = UsdLux.DistantLight.Define(usd, "/World/Moon")
+    moon.CreateIntensityAttr(0.25)
+    UsdGeom.Xformable(moon.GetPrim()).AddRotateXOp().Set(-60.0)  # local +Z tilted up: 60 deg elevation
+    dome = UsdLux.DomeLight.Define(usd, "/World/Dome")
+    dome.CreateIntensityAttr(0.5)
+    dome.CreateColorAttr(Gf.Vec3f(1.0, 1.0, 1.0))
+    usd.GetRootLayer().Save()
+    code, stdout, err = run(["info", stage, "--device", "cpu"], capsys)
+    assert code == 0, err
+    assert "light       /World/Sun: distant" in stdout
+    assert "light       /World/Moon: distant, elevation 60.00 deg, irradiance 0.25 at normal incidence" in stdout
+    assert "0.216506 on a horizontal surface" in stdout  # 0.25 sin 60 deg
+    assert "light       /World/Dome: dome, uniform, mean radiance 0.5, 1.5708 on a horizontal surface" in stdout

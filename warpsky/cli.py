@@ -458,6 +458,31 @@ def cmd_contact_sheet(args) -> int:
     return 0
 
 
+def _light_lines(scene) -> list[str]:
+    """``warpsky info``'s lines on the lights: each DistantLight's irradiance (intensity x 2^exposure x colour) and
+    what reaches a horizontal surface above the horizon (the visible part of the disk, at its elevation); the
+    dome's mean radiance and its irradiance on a horizontal surface."""
+    import numpy as np
+
+    from warpsky.techniques.dome import mean_radiance, upper_hemisphere
+    from warpsky.techniques.sunlight import has_horizon, sun_sunlight
+
+    lines = []
+    for sun in [s for s in [scene.sun, *scene.extra_suns] if s is not None]:
+        light = sun_sunlight(sun, horizon=has_horizon(scene))
+        flat = light.irradiance * max(float(light.direction[1]), 0.0)
+        lines.append(f"light       {sun.name}: distant, elevation {np.degrees(sun.elevation):.2f} deg, irradiance "
+                     f"{_fmt3(sun.irradiance)} at normal incidence; visible disk {light.visible:.0%}, "
+                     f"{_fmt3(flat)} on a horizontal surface (before the air)")
+    if scene.dome is not None:
+        dome = scene.dome
+        kind = f"lat-long {dome.source}" if dome.texture is not None else "uniform"
+        _, cosine_mean = upper_hemisphere(dome)
+        lines.append(f"light       {dome.name}: dome, {kind}, mean radiance {_fmt3(mean_radiance(dome))}, "
+                     f"{_fmt3(np.pi * cosine_mean)} on a horizontal surface")
+    return lines or ["light       none: no visible DistantLight or DomeLight"]
+
+
 def _render_spec_lines(spec, products) -> list[str]:
     """``warpsky info``'s lines on the render settings, their products and each product's vars."""
     if spec is None:
@@ -503,7 +528,7 @@ def cmd_info(args) -> int:
     ]
     cam = scene.camera
     out.append(
-        f"camera      {cam.name} at {np.round(cam.position, 3).tolist()} m looking "
+        f"camera      {cam.name} ({cam.projection.value}) at {np.round(cam.position, 3).tolist()} m looking "
         f"{np.round(cam.forward, 4).tolist()}, clip {cam.near:g}..{cam.far:g} m"
     )
     for medium in scene.media:
@@ -524,6 +549,7 @@ def cmd_info(args) -> int:
             out.append(f"            advected detail: amplitude {d.amplitude:g}, scale {d.scale:g} m, wind "
                        f"{np.round(np.asarray(d.wind), 3).tolist()} m/s, curl {d.curl_speed:g} m/s, "
                        f"period {d.period:g} s")
+    out += _light_lines(scene)
     out += _render_spec_lines(spec, products)
     out += [f"composition {line}" for line in reader.composition_summary()]
     out.append("plan:" + (f" (of product {products[0].path})" if products else ""))
