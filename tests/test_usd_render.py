@@ -192,6 +192,7 @@ def test_info_lists_settings_products_and_vars(stage, capsys):
     ("technique_aov", "RenderVar /Render/P/v: source single_scatter is written by technique hybrid, not "
                       "single_scatter"),
     ("not_exr", "/Render/P.productName 'x.png' must end in .exr"),
+    ("dome_texture_missing", "/World/Dome.inputs:texture:file"),
 ])
 def test_bad_render_prims_exit_2_and_write_nothing(tmp_path, stage, capsys, monkeypatch, case, expected):
     monkeypatch.chdir(tmp_path)
@@ -199,10 +200,18 @@ def test_bad_render_prims_exit_2_and_write_nothing(tmp_path, stage, capsys, monk
            "technique_aov": ("v", "single_scatter", "color3f", "raw")}.get(case, ("v", "color", "color4f", "raw"))
     name = {"no_name": None, "not_exr": "x.png"}.get(case, "out/p.exr")
     add_render(stage, {"P": (name, None, None, [var], None)})
+    if case == "dome_texture_missing":
+        from pxr import Sdf, Usd, UsdLux
+
+        usd = Usd.Stage.Open(str(stage))
+        UsdLux.DomeLight.Define(usd, "/World/Dome").CreateTextureFileAttr(Sdf.AssetPath("sky/nowhere.exr"))
+        usd.GetRootLayer().Save()
+        expected += ": texture file "  # and then the file
     args = ["render", stage, *FAST] + (["--settings", "/World/Camera"] if case == "settings_not_settings" else [])
     code, _, err = run(args, capsys)
     assert code == 2
     assert expected in err and len(err.strip().splitlines()) == 1, err
+    assert case != "dome_texture_missing" or "nowhere.exr" in err
     assert not (tmp_path / "out").exists()
 
 
