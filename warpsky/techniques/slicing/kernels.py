@@ -432,7 +432,7 @@ def ground_kernel(has_detail: bool = False, has_dome: bool = False):
         before = transmittance[row, col]
         radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground.albedo, lit))
         if wp.static(has_dome):
-            up = sun_optical_depth(media, t, view, wp.vec3(0.0, 1.0, 0.0), shadow_step)
+            up = sun_optical_depth(media, wp.vec3(0.0), t, view, wp.vec3(0.0, 1.0, 0.0), shadow_step)
             shown = ambient_ground(ground.albedo, ground_ambient, wp.vec3(up[0], up[1], up[2]))
             radiance[row, col] = radiance[row, col] + wp.cw_mul(before, shown)
         if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
