@@ -40,6 +40,9 @@ from warpsky.media.voxel import VoxelMedia
 from warpsky.techniques.common import PinholeCamera, Sun
 from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, eye_span_kernel
 
+#: Capture and replay graphs on CUDA; False: plain launches everywhere (benchmarks compare the two).
+USE_GRAPHS = True
+
 #: Also capture on the CPU (Warp replays CPU graphs itself). Off in production: a CPU frame's eye gathers run in row
 #: bands over every core, which one captured launch per slice would not. Tests turn it on to run the graph path.
 CAPTURE_ON_CPU = False
@@ -110,8 +113,9 @@ class SliceSweep:
         return (self.eye_kernel, self.light_kernel, structs, arrays, tuple(float(v) for v in self.ambient),
                 float(self.sample_length), np.asarray(self.planes, dtype=np.float64).tobytes(), tuple(self.start))
 
-    def issue(self, *, bands: bool) -> None:
-        """Clear the buffers and launch the sweep; ``bands``: the eye gathers in CPU row bands."""
+    def issue(self, *, capturing: bool) -> None:
+        """Clear the buffers and launch the sweep: plain, the eye gathers through :func:`launch_rows` (row bands on
+        the CPU, a stop request honoured between slices); ``capturing``, one launch each."""
         b, device = self.buffers, self.device
         height, width = b.radiance.shape
         res = b.light_i.shape[0]
@@ -130,10 +134,10 @@ class SliceSweep:
         for plane in self.planes:
             eye_inputs = [self.media, self.tables, self.cam, self.frame, float(plane), b.light_i, b.light_n, self.sun,
                           b.spans, self.sample_length, self.ambient, b.radiance, b.transmittance, b.depth_sum]
-            if bands:
-                launch_rows(self.eye_kernel, height, width, eye_inputs, device)
-            else:
+            if capturing:
                 wp.launch(self.eye_kernel, dim=(height, width), inputs=[*eye_inputs, 0], device=device)
+            else:
+                launch_rows(self.eye_kernel, height, width, eye_inputs, device)
             wp.launch(self.light_kernel, dim=(res, res), inputs=[
                 self.media, self.tables, self.frame, float(plane), spacing, b.light_i, b.light_n], device=device)
 
@@ -143,15 +147,15 @@ def run_sweep(sweep: SliceSweep) -> str:
     launches. Returns how it ran (``captured``, ``replayed``, ``plain``; see :data:`COUNTS`)."""
     device = wp.get_device(sweep.device)
     name = str(device)
-    if not (device.is_cuda or CAPTURE_ON_CPU) or name in _CAPTURE_FAILED:
-        return _plain(sweep, device)
+    if not USE_GRAPHS or not (device.is_cuda or CAPTURE_ON_CPU) or name in _CAPTURE_FAILED:
+        return _plain(sweep)
     check_stop()
     key = sweep.key()
     kept = _GRAPHS.get(name)
     if kept is not None and kept[0] == key:
         wp.capture_launch(kept[1])
         return _counted("replayed")
-    _GRAPHS.pop(name, None)  # its addresses may be freed once the new sweep's uploads replaced them
+    _GRAPHS.pop(name, None)  # no frame will replay it: let go of it and of the arrays it held
     try:
         graph = _capture(sweep)
     except Exception as error:  # noqa: BLE001 - any capture failure falls back to the launches it would replay
@@ -160,7 +164,7 @@ def run_sweep(sweep: SliceSweep) -> str:
             _WARNED[0] = True
             print(f"warpsky: warning: CUDA graph capture of the slicing sweep failed on {name} "
                   f"({type(error).__name__}: {error}); running plain launches", file=sys.stderr)
-        return _plain(sweep, device)
+        return _plain(sweep)
     _GRAPHS[name] = (key, graph, sweep)
     wp.capture_launch(graph)
     return _counted("captured")
@@ -171,12 +175,12 @@ def _capture(sweep: SliceSweep):
     for kernel in (eye_span_kernel, sweep.eye_kernel, sweep.light_kernel):
         wp.load_module(kernel.module, device=sweep.device)
     with wp.ScopedCapture(device=sweep.device, force_module_load=False) as capture:
-        sweep.issue(bands=False)
+        sweep.issue(capturing=True)
     return capture.graph
 
 
-def _plain(sweep: SliceSweep, device) -> str:
-    sweep.issue(bands=device.is_cpu)
+def _plain(sweep: SliceSweep) -> str:
+    sweep.issue(capturing=False)
     return _counted("plain")
 
 
