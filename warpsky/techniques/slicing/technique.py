@@ -232,23 +232,36 @@ class Slicing:
                 sweep = self._sweep(scene, settings, camera, width, height, media)
                 with sweep_lock(device):
                     how = run_sweep(sweep)
-                    b = sweep.buffers  # one download per output, after the whole sweep
-                    radiance = device_buffers.download("slicing:radiance", b.radiance)
-                    transmittance = device_buffers.download("slicing:transmittance", b.transmittance)
-                    depth = device_buffers.download("slicing:depth_sum", b.depth_sum)
+                    radiance, transmittance, depth = self._finish(scene, camera, width, height, media, sweep.buffers)
                 slices = len(sweep.planes)
             else:
                 how, slices = "none", 0
-                radiance = np.zeros((height, width, 3), dtype=np.float32)
-                transmittance = np.ones((height, width, 3), dtype=np.float32)
-                depth = np.zeros((height, width, 2), dtype=np.float32)
-            depth_mean = np.where(depth[..., 1] > 1e-6, depth[..., 0] / np.maximum(depth[..., 1], 1e-30), far)
-            layer = Layer(radiance, transmittance, depth_mean.astype(np.float32), stats={
+                shape = (height, width)
+                images = [wp.zeros(shape, dtype=wp.vec3), wp.full(shape, wp.vec3(1.0, 1.0, 1.0), dtype=wp.vec3),
+                          wp.full(shape, far, dtype=float)]
+                if scene.ground is not None:
+                    self._ground(scene, camera, width, height, media, *images)
+                radiance, transmittance, depth = (image.numpy() for image in images)
+            layer = Layer(radiance, transmittance, depth, stats={
                 "seconds": time.perf_counter() - started, "settings": dataclasses.asdict(settings),
                 "slices": slices, "sweep": how})
-        if scene.ground is not None:
-            self._ground(scene, camera, width, height, layer, media)
         return layer
+
+    def _finish(self, scene: Scene, camera, width: int, height: int, media: VoxelMediaBuffers,
+                buffers: SweepBuffers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(radiance, transmittance, depth [m]) of the frame after its sweep: the mean depth divided out on the
+        host, the ground drawn on the sweep's images still on the device, then one download per image."""
+        far = np.float32(camera.far)
+        depth_sum = device_buffers.download("slicing:depth_sum", buffers.depth_sum)
+        depth = np.where(depth_sum[..., 1] > 1e-6, depth_sum[..., 0] / np.maximum(depth_sum[..., 1], 1e-30), far)
+        depth = depth.astype(np.float32)
+        if scene.ground is not None:
+            depth_image = device_buffers.reusable("slicing:depth", (height, width), float, self.device)
+            depth_image.assign(depth)
+            self._ground(scene, camera, width, height, media, buffers.radiance, buffers.transmittance, depth_image)
+            depth = device_buffers.download("slicing:depth", depth_image)
+        return (device_buffers.download("slicing:radiance", buffers.radiance),
+                device_buffers.download("slicing:transmittance", buffers.transmittance), depth)
 
     def _sweep(self, scene: Scene, settings: SlicingSettings, camera, width: int, height: int,
                media: VoxelMediaBuffers) -> SliceSweep:
@@ -299,15 +312,12 @@ class Slicing:
         frame.front_to_back = int(front_to_back)
         return frame, planes
 
-    def _ground(self, scene: Scene, camera, width: int, height: int, layer: Layer, media) -> None:
-        """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel);
-        ``media`` is the sweep's upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`)."""
-        with wp.ScopedDevice(self.device):
-            radiance = wp.array(layer.radiance, dtype=wp.vec3)
-            transmittance = wp.array(layer.transmittance, dtype=wp.vec3)
-            depth = wp.array(layer.depth, dtype=float)
-            wp.launch(ground_kernel(media.has_detail, scene.dome is not None), dim=(height, width), inputs=[
-                media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
-                ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_ambient_vec(scene),
-                radiance, transmittance, depth])
-            layer.radiance, layer.transmittance, layer.depth = radiance.numpy(), transmittance.numpy(), depth.numpy()
+    def _ground(self, scene: Scene, camera, width: int, height: int, media: VoxelMediaBuffers, radiance: wp.array,
+                transmittance: wp.array, depth: wp.array) -> None:
+        """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel), drawn
+        into the device images ``radiance``, ``transmittance`` (RGB) and ``depth`` [m]; ``media`` is the sweep's
+        upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`)."""
+        wp.launch(ground_kernel(media.has_detail, scene.dome is not None), dim=(height, width), inputs=[
+            media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
+            ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_ambient_vec(scene),
+            radiance, transmittance, depth], device=self.device)
