@@ -24,10 +24,11 @@ SETTINGS = {"slice_count": "8", "light_resolution": "16"}
 
 @pytest.fixture
 def puff_scene(tmp_path):
-    """A soft puff lit from the side, as a Scene (each frame renders it with a new technique, as a batch does)."""
+    """A soft puff lit from the side above a ground, as a Scene (each frame renders it with a new technique, as a
+    batch does)."""
     spec = StageSpec(volume_file=smooth_blob(tmp_path / "blob.npy", 8), extinction_scale=0.3,
                      camera_position=(3.0, 4.0, 42.0), camera_rotation=look_rotation((-0.05, -0.06, -1.0)),
-                     sun_direction=(0.4, 0.8, 0.3), phase="hg", g=0.8)
+                     sun_direction=(0.4, 0.8, 0.3), phase="hg", g=0.8, ground=(-12.0, 0.3))
     return StageReader(write_stage(tmp_path / "puff.usda", spec)).scene_at(None)
 
 
@@ -130,4 +131,4 @@ def test_buffers_kept_and_grids_uploaded_only_when_they_change(puff_scene, devic
     again = device_buffers.upload("slicing:values", changed.media[0].density.reshape(-1).astype(np.float32), float,
                                   device)
     assert again is not values and np.array_equal(again.numpy(), changed.media[0].density.reshape(-1))
-    assert np.all(np.isfinite(layer.radiance))
+    assert np.all(np.isfinite(layer.radiance)) and np.any(np.all(layer.transmittance == 0.0, axis=-1))  # ground
