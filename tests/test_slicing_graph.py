@@ -132,3 +132,26 @@ def test_buffers_kept_and_grids_uploaded_only_when_they_change(puff_scene, devic
                                   device)
     assert again is not values and np.array_equal(again.numpy(), changed.media[0].density.reshape(-1))
     assert np.all(np.isfinite(layer.radiance)) and np.any(np.all(layer.transmittance == 0.0, axis=-1))  # ground
+
+
+def test_the_captured_sweep_allocates_reads_back_and_synchronises_nothing(puff_scene, device, graphs, monkeypatch):
+    """CUDA's capture rules, checked on every device: inside the capture no array is created, copied to the host or
+    waited for (any of these would fail or bake a stale host pointer into a CUDA graph)."""
+    issue = sweep.SliceSweep.issue
+
+    def guarded(self, *, capturing):
+        if not capturing:
+            return issue(self, capturing=capturing)
+
+        def refuse(*args, **kwargs):
+            raise AssertionError("not allowed inside a graph capture")
+
+        with monkeypatch.context() as m:
+            for owner, name in ((wp.array, "__init__"), (wp.array, "numpy"), (wp, "synchronize"),
+                                (wp, "synchronize_device"), (wp, "synchronize_stream"), (wp, "copy")):
+                m.setattr(owner, name, refuse)
+            issue(self, capturing=capturing)
+
+    monkeypatch.setattr(sweep.SliceSweep, "issue", guarded)
+    layer = frame(puff_scene, device)
+    assert layer.stats["sweep"] == "captured" and same_pixels(layer, graphs(puff_scene))
