@@ -52,14 +52,19 @@ def reusable(name: str, shape, dtype, device) -> wp.array:
     """The device array kept under ``name`` for this ``shape``, ``dtype`` and ``device`` (allocated on first use or
     when the shape changes; contents not cleared)."""
     shape = (int(shape),) if np.isscalar(shape) else tuple(int(n) for n in shape)
-    key, spec = (name, _device_name(device)), (shape, dtype)
+    return _kept(_ARRAYS, (name, _device_name(device)), (shape, dtype),
+                 lambda: wp.empty(shape, dtype=dtype, device=device))
+
+
+def _kept(store: dict, key: tuple, spec: tuple, make):
+    """``store``'s array under ``key`` when it was made for ``spec``, else a new one from ``make()`` kept there."""
     with _LOCK:
-        kept = _ARRAYS.get(key)
+        kept = store.get(key)
         if kept is not None and kept[0] == spec:
             return kept[1]
-        array = wp.empty(shape, dtype=dtype, device=device)
+        array = make()
         _COUNT[0] += 1
-        _ARRAYS[key] = (spec, array)
+        store[key] = (spec, array)
         return array
 
 
@@ -71,16 +76,8 @@ def upload(name: str, values: np.ndarray, dtype, device) -> wp.array:
     """A device array holding ``values`` (converted to ``dtype``), uploaded only when ``name`` does not already hold
     the same contents on ``device``. Callers must not write into the returned array."""
     values = np.ascontiguousarray(values)
-    key = (name, _device_name(device))
     spec = (_digest(values), values.shape, str(values.dtype), dtype)
-    with _LOCK:
-        kept = _UPLOADS.get(key)
-        if kept is not None and kept[0] == spec:
-            return kept[1]
-        array = wp.array(values, dtype=dtype, device=device)
-        _COUNT[0] += 1
-        _UPLOADS[key] = (spec, array)
-        return array
+    return _kept(_UPLOADS, (name, _device_name(device)), spec, lambda: wp.array(values, dtype=dtype, device=device))
 
 
 def download(name: str, array: wp.array) -> np.ndarray:

@@ -130,21 +130,13 @@ class StageReader(LightReading, VolumeReading, SurfaceReading):
         renderSettingsPrimPath, else the first one), if any; :mod:`warpsky.scene.usd_render` reads the rest."""
         from pxr import UsdRender
 
-        from warpsky.scene.usd_render import find_settings
+        from warpsky.scene.usd_render import base_values, find_settings
 
         prim = find_settings(self.stage, None)
         if prim is None:
             return None, None
-        settings = UsdRender.Settings(prim)
-        resolution = None
-        res_attr = settings.GetResolutionAttr()
-        if res_attr.HasAuthoredValue():
-            res = res_attr.Get()
-            if res[0] <= 0 or res[1] <= 0:
-                raise SceneError(f"{prim.GetPath()}.resolution must be positive, got {tuple(res)}")
-            resolution = (int(res[0]), int(res[1]))
-        targets = settings.GetCameraRel().GetTargets()
-        return resolution, (str(targets[0]) if targets else None)
+        camera, resolution, _, _ = base_values(UsdRender.Settings(prim), None)
+        return resolution, camera
 
     def resolve_camera_path(self, camera_path: str | None) -> str:
         from pxr import Sdf, UsdGeom
