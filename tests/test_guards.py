@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import StageSpec, write_stage
+from conftest import run_cli as run
 
 from warpsky.cli import main
 from warpsky.device import RowBands
@@ -26,12 +27,6 @@ REPO = Path(__file__).resolve().parents[1]
 def box_stage(tmp_path, homogeneous_npy):
     """A 20 m box of constant density 40 m in front of the camera (4^3 voxels of 5 m)."""
     return write_stage(tmp_path / "box.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
-
-
-def run(args, capsys):
-    code = main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def files_in(directory: Path) -> list[str]:

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import StageSpec, look_rotation, write_stage
+from conftest import run_cli as run
 
 import warpsky
-from warpsky.cli import main
 from warpsky.output.exr import read_exr
 
 #: lin_rec709 -> ACEScg (Bradford D65 -> ACES white), as published with the ACES CG configs.
@@ -18,12 +18,6 @@ REC709_TO_ACESCG = np.array([[0.61309732, 0.33952285, 0.04737928],
                              [0.07019422, 0.91635557, 0.01345020],
                              [0.02061560, 0.10956983, 0.86981457]])
 FAST = ["--device", "cpu", "--technique", "single_scatter", "--set", "step_length=1"]
-
-
-def run(args, capsys):
-    code = main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 @pytest.fixture
