@@ -296,6 +296,12 @@ class Scene:
         extra_suns: Further DistantLights after the first (e.g. a moon); every pass runs once per light and the
             radiance adds up (light transport is linear in the lights).
         dome: The environment (``UsdLuxDomeLight``), or None (also for a black dome).
+        meshes: Opaque Lambertian surfaces (``UsdGeomMesh``, e.g. terrain), ray cast through Warp's BVH
+            (:class:`~warpsky.scene.terrain.TerrainMesh`).
+        heightfield_clouds: Constant-density clouds between two height fields about a mean plane, with the haze
+            below them (Max 1986; :class:`~warpsky.scene.heightfield_clouds.HeightFieldClouds`).
+        fogs: Fog whose extinction is a sum of functions with closed-form line integrals (Biri et al. 2002;
+            :class:`~warpsky.scene.analytic_fog.AnalyticFog`).
     """
 
     camera: Camera
@@ -310,9 +316,14 @@ class Scene:
     layers: tuple[StratiformLayer, ...] = ()
     extra_suns: tuple[Sun, ...] = ()
     dome: Dome | None = None
+    meshes: tuple = ()
+    heightfield_clouds: tuple = ()
+    fogs: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "media", tuple(self.media))
+        for name in ("meshes", "heightfield_clouds", "fogs"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "extra_suns", tuple(self.extra_suns))
         if self.dome is not None and not self.dome.active:
             object.__setattr__(self, "dome", None)  # a black dome renders exactly as none
