@@ -5,13 +5,21 @@ Layers are composited front to back (:mod:`warpsky.composite`):
 
 - ``media``: the voxel technique (:class:`~warpsky.techniques.base.Technique`), on :func:`media_scene`;
 - ``stratiform``: :class:`StratiformPass`, one Layer per stratiform layer, merged with the media by depth;
+- ``surfaces``: :class:`~warpsky.techniques.surfaces.technique.SurfacesPass`, the meshes (terrain) and, in a scene
+  without voxel media and stratiform layers, the ground plane; its depth stops the two passes below;
+- ``heightfield``: :class:`~warpsky.techniques.heightfield.technique.HeightFieldPass`, Max's clouds and haze;
+- ``fog``: :class:`~warpsky.techniques.fog.technique.FogPass`, Biri's analytic fog;
 - ``sky``: :class:`~warpsky.techniques.sky.technique.SkyPass`, the air in front of the merged layer and behind
   it (with the sun's disk).
+
+All but the sky are merged by depth (:func:`~warpsky.composite.merge_by_depth`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+
+import numpy as np
 
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer
@@ -19,6 +27,9 @@ from warpsky.techniques.sky.analytic import sun_transmittance
 from warpsky.techniques.sky.technique import attenuated_sun
 from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
 from warpsky.techniques.sunlight import light_elevation_sine, visible_sun
+
+#: The passes :func:`scenery_layers` runs.
+SCENERY_PASSES = frozenset({"surfaces", "heightfield", "fog"})
 
 
 def media_scene(scene: Scene, passes: tuple[str, ...]) -> Scene:
@@ -65,3 +76,57 @@ class StratiformPass:
             part.stats["layer"] = layer.name
             parts.append(part)
         return parts
+
+
+def scenery_sun_transmittance(scene: Scene, device: str):
+    """``points (N, 3) world -> (N, 3)``: the sunlight's transmittance through the scene's height-field clouds and
+    fog (the voxel media's shadows the surfaces pass traces itself); None when the scene has neither."""
+    parts = []
+    if scene.heightfield_clouds:
+        from warpsky.techniques.heightfield.technique import heightfield_sun_transmittance
+
+        parts.append(heightfield_sun_transmittance)
+    if scene.fogs:
+        from warpsky.techniques.fog.technique import fog_sun_transmittance
+
+        parts.append(fog_sun_transmittance)
+    if not parts:
+        return None
+
+    def transmittance(points):
+        out = 1.0
+        for part in parts:
+            out = out * part(scene, points, device)
+        return out
+
+    return transmittance
+
+
+def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: int, *, device: str,
+                   before: list[Layer] | None = None) -> tuple[list[Layer], np.ndarray | None]:
+    """The surfaces, height-field and fog passes' Layers for ``scene`` (already lit as the media see it), with the
+    ``before`` layers (the media's, the stratiform layers') between the surfaces and the rest; and the surfaces'
+    depth (the camera's far distance where no surface is hit; None without a surfaces pass). That depth
+    stops the height-field clouds, the haze and the fog (Max: "bounded by the distance to the nearest opaque
+    surface"; Biri: the fog integral runs to the depth buffer)."""
+    from warpsky.plan import surfaces_draw_ground
+
+    parts, limit = [], None
+    if "surfaces" in passes:
+        from warpsky.techniques.surfaces.technique import SurfacesPass
+
+        surfaces = SurfacesPass(device=device).render(
+            scene, width, height, draw_ground=surfaces_draw_ground(scene),
+            sun_transmittance=scenery_sun_transmittance(scene, device))
+        parts.append(surfaces)
+        limit = surfaces.depth
+    parts += before or []
+    if "heightfield" in passes:
+        from warpsky.techniques.heightfield.technique import HeightFieldPass
+
+        parts.append(HeightFieldPass(device=device).render(scene, width, height, limit=limit))
+    if "fog" in passes:
+        from warpsky.techniques.fog.technique import FogPass
+
+        parts.append(FogPass(device=device).render(scene, width, height, limit=limit))
+    return parts, limit

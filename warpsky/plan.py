@@ -128,15 +128,39 @@ def make_plan(
             raise UsageError(f"technique {technique} does not render stratiform layers "
                              f"({', '.join(layer.name for layer in scene.layers)}); use slicing or single_scatter")
         layer_settings = parse_settings(StratiformSettings, layer_values)
+    scenery = scene_has_scenery(scene)
+    if scenery and cls.traces_air:
+        raise UsageError(f"technique {technique} does not render terrain meshes, height-field clouds or analytic "
+                         "fog; use hybrid, slicing or single_scatter")
     passes = tuple(name for name, runs in (
-        ("media", bool(scene.media) or not scene.layers),
+        ("surfaces", surfaces_pass_runs(scene)),
+        ("media", bool(scene.media) or not (scene.layers or scenery)),
         ("stratiform", bool(scene.layers)),
+        ("heightfield", bool(scene.heightfield_clouds)),
+        ("fog", bool(scene.fogs)),
         ("sky", scene.atmosphere is not None and not cls.traces_air),
     ) if runs)
     plan = RenderPlan(technique, renderer.settings, device, width, height, renderer, passes,
                       _features(scene, technique, layer_settings, layer_values), layer_settings)
     plan.memory, plan.work = frame_memory(scene, plan), frame_work(scene, plan)
     return plan
+
+
+def scene_has_scenery(scene: Scene) -> bool:
+    """Whether ``scene`` holds meshes, height-field clouds or analytic fog (each drawn by its own pass)."""
+    return bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
+
+
+def surfaces_pass_runs(scene: Scene) -> bool:
+    """The surfaces pass draws the meshes, and the ground plane when no other pass would (no voxel media, no
+    stratiform layers) in a scene of terrain, height-field clouds or fog."""
+    return bool(scene.meshes) or (scene.ground is not None and scene_has_scenery(scene)
+                                  and not scene.media and not scene.layers)
+
+
+def surfaces_draw_ground(scene: Scene) -> bool:
+    """Whether the surfaces pass, rather than the voxel technique or the stratiform pass, draws the ground plane."""
+    return scene.ground is not None and not scene.media and not scene.layers
 
 
 def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) -> dict[str, str]:
@@ -169,6 +193,7 @@ def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) 
         unused = f" (unused: {', '.join(LAYER_SETTING_PREFIX + k for k in layer_values)})" if layer_values else ""
         features["layers"] = ('no layers (no prim with warpsky:kind = "stratiformLayer"): stratiform pass and '
                               "radiosity not built" + unused)
+    features.update(_scenery_features(scene))
     species = scene.species
     if species:
         states = [f"{name} ({'cached' if is_cached(name) else 'to build'})" for name in species]
@@ -187,6 +212,35 @@ def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) 
                                f"{tex.size[0]:g} x {tex.size[1]:g} m (stratiform pass only)")
     if scene.ground is not None and scene.layers:
         features["ground"] += "; drawn by the stratiform pass (layer shadows, radiosity), voxel media cast no shadow"
+    elif scene.ground is not None and surfaces_pass_runs(scene) and surfaces_draw_ground(scene):
+        features["ground"] += "; drawn by the surfaces pass (shadows of fog and height-field clouds)"
+    return features
+
+
+def _scenery_features(scene: Scene) -> dict[str, str]:
+    """One line each for the meshes, the height-field clouds and the analytic fog: what is built for them, or that
+    nothing is."""
+    features = {}
+    if scene.meshes:
+        triangles = sum(len(m.triangles) for m in scene.meshes)
+        features["meshes"] = (f"{len(scene.meshes)} mesh(es) ({', '.join(m.name for m in scene.meshes)}), "
+                              f"{triangles:,} triangles: one Warp BVH, surfaces pass")
+    else:
+        features["meshes"] = "none (no Mesh prim): no BVH built"
+    if scene.heightfield_clouds:
+        lines = []
+        for clouds in scene.heightfield_clouds:
+            haze = "with haze" if clouds.haze is not None else "no haze"
+            lines.append(f"{clouds.name}: mean plane {clouds.mean_altitude:g} m, {len(clouds.amplitudes)} waves, "
+                         f"density {clouds.density:g} 1/m, {haze}")
+        features["heightfield"] = "; ".join(lines) + " (Max 1986, exact single scattering)"
+    else:
+        features["heightfield"] = 'none (no prim with warpsky:kind = "heightFieldClouds")'
+    if scene.fogs:
+        features["fog"] = "; ".join(f"{fog.name}: {fog.describe()}" for fog in scene.fogs) + \
+            " (Biri 2002, closed-form optical depths)"
+    else:
+        features["fog"] = 'none (no prim with warpsky:kind = "analyticFog")'
     return features
 
 

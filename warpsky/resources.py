@@ -216,6 +216,13 @@ def frame_memory(scene, plan) -> MemoryEstimate:
         estimate.add("stratiform layers", host=pixels * (LAYER_BYTES * (0 if cpu else layers) + 40 * (layers + 1)),
                      device=pixels * LAYER_BYTES * layers)
         estimate.add("radiosity", device=radiosity_bytes(scene, plan.layer_settings))
+    if "surfaces" in plan.passes:
+        triangles = sum(len(m.triangles) for m in scene.meshes)
+        # points (12 B) and indices (12 B per triangle) plus Warp's BVH (about 64 B per triangle), per-pixel hits
+        estimate.add("meshes", host=40 * triangles, device=88 * triangles + pixels * LAYER_BYTES)
+    for name in ("heightfield", "fog"):
+        if name in plan.passes:
+            estimate.add(name, host=pixels * (0 if cpu else LAYER_BYTES), device=pixels * LAYER_BYTES)
     if "sky" in plan.passes:
         estimate.add("sky", host=pixels * (20 + (0 if cpu else 36)), device=pixels * 40)
     estimate.add("composite and EXR", host=pixels * COMPOSITE_BYTES)
