@@ -22,11 +22,12 @@ import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its k
 import warpsky.techniques.sky.kernels as sky
 import warpsky.techniques.slicing.kernels as slicing  # (also registers its kernel factories)
 import warpsky.techniques.stratiform.kernels as stratiform_kernels
+import warpsky.techniques.surfaces.kernels as surfaces_kernels
 from warpsky.kernel_variants import variant_modules
 
 #: Modules holding plain (not factory-made) kernels.
 PLAIN_MODULES = (fields, optics, ice_kernels, sky, evaluation_slab, stratiform_reference, radiosity, stratiform_kernels,
-                 advection_kernels, slicing)
+                 advection_kernels, slicing, surfaces_kernels)
 
 def kernel_modules() -> list:
     """Warp ``Module`` objects for every kernel warpsky can launch."""
