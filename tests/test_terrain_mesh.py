@@ -359,3 +359,60 @@ def test_time_sampled_points_move_the_hit_and_refit_the_bvh(tmp_path, device):
         refitted.append(layer.stats["bvh_refitted"])
     np.testing.assert_allclose(depths, [100.0, 95.0, 90.0], rtol=1e-6)
     assert refitted == [False, True, True]
+
+
+# ------------------------------------------------------------------------------------------ shading normals
+def test_vertex_normals_shade_a_flat_quad_as_a_tilted_plane(device):
+    """A horizontal quad whose vertex normals all lean 30 deg about z shades as the 30-deg plane of the Lambert
+    test (its shading normal), while the rays hit the flat triangles (depth of the flat quad)."""
+    tilt = math.radians(30.0)
+    normal = np.array([math.sin(tilt), math.cos(tilt), 0.0])
+    flat = floor(0.0, 500.0, (0.5, 0.25, 0.125))
+    mesh = dataclasses.replace(flat, normals=np.tile(normal, (4, 1)))
+    sun = Sun(unit((0.5, 0.7, 0.3)), np.array([2.0, 2.0, 2.0]))
+    camera = ortho_camera((3.0, 100.0, -7.0), DOWN, 200.0)
+    layer = SurfacesPass(device=device).render(Scene(camera=camera, sun=sun, dome=DOME, meshes=(mesh,)), 8, 8)
+    expected = mesh.albedo / math.pi * sun.irradiance * float(normal @ sun.direction) \
+        + mesh.albedo * DOME.color * (1 + normal[1]) / 2
+    np.testing.assert_allclose(layer.radiance, np.broadcast_to(expected, layer.radiance.shape), rtol=1e-5)
+    np.testing.assert_allclose(layer.depth, 100.0, rtol=1e-6)
+
+
+def test_vertex_normals_interpolate_across_a_triangle(device):
+    """Normals (0, 1, 0) at one edge of a floor and leaning 60 deg at the other: under an overhead sun, the
+    radiance follows cos of the normalised barycentric blend, which is not linear in x."""
+    lean = np.array([math.sin(math.radians(60.0)), math.cos(math.radians(60.0)), 0.0])
+    flat = floor(0.0, 100.0, (1.0, 1.0, 1.0))  # corners (-x,-z), (-x,+z), (+x,+z), (+x,-z)
+    normals = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0], lean, lean])
+    mesh = dataclasses.replace(flat, normals=normals)
+    sun = Sun(np.array([0.0, 1.0, 0.0]), np.array([math.pi, math.pi, math.pi]))
+    camera = ortho_camera((0.0, 50.0, 0.0), DOWN, 200.0)
+    layer = SurfacesPass(device=device).render(Scene(camera=camera, sun=sun, meshes=(mesh,)), 16, 16)
+    x = pixel_points(camera, 16)[..., 0]
+    f = (x + 100.0) / 200.0
+    blend = (1 - f)[..., None] * np.array([0.0, 1.0, 0.0]) + f[..., None] * lean
+    expected = blend[..., 1] / np.linalg.norm(blend, axis=-1)
+    np.testing.assert_allclose(layer.radiance[..., 0], expected, rtol=1e-4)
+
+
+def test_usd_vertex_normals_are_read_through_the_inverse_transpose(tmp_path):
+    """``normals`` with vertex interpolation under a non-uniform scale come back as the inverse transpose maps
+    them (unit length); faceVarying normals are ignored; a count that does not match the points is refused."""
+    from pxr import Gf, UsdGeom
+
+    stage = _stage(tmp_path)
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Lean")
+    mesh.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 0, 1)])
+    mesh.CreateFaceVertexCountsAttr([3])
+    mesh.CreateFaceVertexIndicesAttr([0, 2, 1])
+    mesh.CreateNormalsAttr([(1, 1, 0)] * 3)
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    mesh.AddScaleOp().Set(Gf.Vec3f(2.0, 1.0, 1.0))
+    got = read_mesh(_reader(stage), mesh.GetPrim(), None)
+    np.testing.assert_allclose(got.normals, np.tile(unit((0.5, 1.0, 0.0)), (3, 1)), atol=1e-6)
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.faceVarying)
+    assert read_mesh(_reader(stage), mesh.GetPrim(), None).normals is None
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    mesh.CreateNormalsAttr([(0, 1, 0)] * 2)
+    with pytest.raises(SceneError, match=r"/World/Lean\.normals: vertex normals need one per point \(3\), got 2"):
+        read_mesh(_reader(stage), mesh.GetPrim(), None)

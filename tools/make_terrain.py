@@ -104,8 +104,21 @@ def grid_triangles(n: int) -> np.ndarray:
     return np.stack([a, c, d, a, d, b], axis=-1).reshape(-1, 3).astype(np.int32)
 
 
-def write_mesh(stage, path: str, points: np.ndarray, triangles: np.ndarray, albedo=TERRAIN_ALBEDO):
-    """Define a ``UsdGeomMesh`` at ``path`` of ``stage`` with these points (stage units) and triangles."""
+def vertex_normals(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(N, 3) unit area-weighted vertex normals (the sum of the cross products of the faces around each vertex)."""
+    p0, p1, p2 = (points[triangles[:, k]] for k in range(3))
+    face = np.cross(p1 - p0, p2 - p0)  # length: twice the area
+    normals = np.zeros_like(points, dtype=np.float64)
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], face)
+    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    return normals / np.where(length > 0.0, length, 1.0)
+
+
+def write_mesh(stage, path: str, points: np.ndarray, triangles: np.ndarray, albedo=TERRAIN_ALBEDO, *,
+               smooth: bool = True):
+    """Define a ``UsdGeomMesh`` at ``path`` of ``stage`` with these points (stage units) and triangles, and with
+    ``smooth`` its area-weighted vertex normals (shading interpolates them across the triangles)."""
     from pxr import Gf, Sdf, UsdGeom, Vt
 
     mesh = UsdGeom.Mesh.Define(stage, path)
@@ -113,6 +126,10 @@ def write_mesh(stage, path: str, points: np.ndarray, triangles: np.ndarray, albe
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(triangles), 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(triangles, np.int32).reshape(-1)))
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    if smooth:
+        normals = vertex_normals(np.asarray(points, np.float64), np.asarray(triangles))
+        mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(normals, dtype=np.float32)))
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     lo, hi = points.min(axis=0), points.max(axis=0)
     mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*lo.tolist()), Gf.Vec3f(*hi.tolist())]))
     mesh.CreateDisplayColorAttr(Vt.Vec3fArray([Gf.Vec3f(*albedo)]))

@@ -21,6 +21,10 @@ USD (on the ``Mesh`` prim)                  unit       default      meaning
                                                                     (per vertex, per face, ...): a mesh has one
                                                                     albedo, or a map
 (neither)                                   --         0.3 grey     --
+``normal3f[] normals``                      --         (none)       per-vertex shading normals (``vertex`` or
+                                                                    ``varying`` interpolation; ``primvars:normals``
+                                                                    wins), interpolated across each triangle;
+                                                                    other interpolations are ignored (flat faces)
 ``asset warpsky:albedoMap``                 --         (none)       albedo texture keyed on world (x, z), as the
                                                                     ground plane's (``.npy`` (nx, nz, 3), ``.exr``
                                                                     or ``.png``), values clipped to [0, 1]
@@ -29,8 +33,9 @@ USD (on the ``Mesh`` prim)                  unit       default      meaning
 =========================================== ========== ============ ===============================================
 
 The prim's world transform (time-sampled or not, with the stage's upAxis and metersPerUnit) is applied in float64,
-so points 100 km from the origin keep millimetres. Normals are the faces' geometric normals; ``normals`` and
-subdivision are ignored (the mesh is drawn as its control cage).
+so points 100 km from the origin keep millimetres. Shading uses the authored vertex normals where there are any
+(turned to the side of the face the ray sees), else the faces' geometric normals; rays hit the flat triangles and
+subdivision is ignored (the mesh is drawn as its control cage).
 """
 
 from __future__ import annotations
@@ -57,6 +62,7 @@ class TerrainMesh:
         albedo: Diffuse reflectance, RGB in [0, 1] (used where there is no map).
         albedo_map: Optional albedo texture over world (x, z) (:class:`~warpsky.scene.layers.GroundTexture`).
         source: Stage file or tool the mesh came from.
+        normals: (N, 3) unit world shading normals per vertex, or None (flat faces).
     """
 
     name: str
@@ -65,6 +71,7 @@ class TerrainMesh:
     albedo: np.ndarray = field(default_factory=lambda: np.full(3, DEFAULT_ALBEDO))
     albedo_map: GroundTexture | None = None
     source: str = ""
+    normals: np.ndarray | None = None
 
     def __post_init__(self):
         points = np.asarray(self.points, dtype=np.float64)
@@ -88,6 +95,13 @@ class TerrainMesh:
         object.__setattr__(self, "albedo", albedo)
         if self.albedo_map is not None and not isinstance(self.albedo_map, GroundTexture):
             raise SceneError(f"mesh {self.name}: albedo_map must be a GroundTexture or None")
+        if self.normals is not None:
+            normals = np.asarray(self.normals, dtype=np.float64)
+            length = np.linalg.norm(normals, axis=-1, keepdims=True) if normals.ndim == 2 else None
+            if normals.shape != points.shape or not np.all(np.isfinite(normals)) or np.any(length < 1e-12):
+                raise SceneError(f"mesh {self.name}: normals must be finite non-zero (N, 3) vectors, one per point "
+                                 f"({len(points)}), got shape {normals.shape}")
+            object.__setattr__(self, "normals", np.ascontiguousarray(normals / length))
 
     @property
     def triangle_count(self) -> int:
@@ -189,7 +203,35 @@ def read_mesh(reader, prim, time_code) -> TerrainMesh:
         raise SceneError(f"{where}: albedo (warpsky:albedo or primvars:displayColor) must lie in [0, 1], got "
                          f"{np.round(albedo, 4).tolist()}")
     albedo_map = reader._albedo_map(prim, tc, world)
-    return TerrainMesh(where, points, triangles, albedo, albedo_map, str(reader.path))
+    normals = _vertex_normals(prim, tc, world, len(local), where)
+    return TerrainMesh(where, points, triangles, albedo, albedo_map, str(reader.path), normals)
+
+
+def _vertex_normals(prim, tc, world: np.ndarray, point_count: int, where: str) -> np.ndarray | None:
+    """World shading normals per vertex from ``primvars:normals`` or ``normals`` (vertex or varying
+    interpolation, one per point), transformed by the inverse transpose of the prim's transform; None otherwise."""
+    from pxr import UsdGeom
+
+    mesh = UsdGeom.Mesh(prim)
+    primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("normals")
+    if primvar and primvar.HasAuthoredValue():
+        values, interpolation, name = primvar.ComputeFlattened(tc), primvar.GetInterpolation(), "primvars:normals"
+    else:
+        attr = mesh.GetNormalsAttr()
+        if not attr.HasAuthoredValue():
+            return None
+        values, interpolation, name = attr.Get(tc), mesh.GetNormalsInterpolation(), "normals"
+    if values is None or str(interpolation) not in ("vertex", "varying"):
+        return None
+    normals = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+    if len(normals) != point_count:
+        raise SceneError(f"{where}.{name}: {interpolation} normals need one per point ({point_count}), got "
+                         f"{len(normals)}")
+    normals = normals @ np.linalg.inv(world[:3, :3])  # rows n^T M^-1: the inverse transpose applied to each
+    length = np.linalg.norm(normals, axis=-1)
+    if not np.all(np.isfinite(normals)) or np.any(length < 1e-12):
+        raise SceneError(f"{where}.{name}: normals must be finite and non-zero")
+    return normals
 
 
 def read_meshes(reader, time=None) -> tuple[TerrainMesh, ...]:

@@ -43,6 +43,8 @@ class SurfaceMeshes:
     triangle_material: wp.array(dtype=wp.int32)  # material index per triangle
     materials: wp.array(dtype=SurfaceMaterial)
     texels: wp.array(dtype=wp.vec3)  # every map's texels, (nx, nz) row-major each
+    normals: wp.array(dtype=wp.vec3)  # shading normal per vertex (zero for a mesh without authored normals)
+    smooth: int  # 1: some mesh has vertex normals
     triangle_count: int  # 0: no mesh, skip every query
 
 
@@ -52,6 +54,7 @@ class SurfaceHit:
 
     t: float  # distance along the (unit) ray [m]
     normal: wp.vec3  # unit geometric normal turned towards the ray's origin (surfaces are two-sided)
+    shading: wp.vec3  # unit shading normal: the interpolated vertex normal on the normal's side, else the normal
     albedo: wp.vec3  # RGB reflectance at the hit
     hit: int  # 1: something was hit
     back: int  # 1: the ray met the back of the face (the side its winding turns away from)
@@ -64,6 +67,7 @@ def no_hit(t_max: float) -> SurfaceHit:
     out = SurfaceHit()
     out.t = t_max
     out.normal = wp.vec3(0.0, 1.0, 0.0)
+    out.shading = wp.vec3(0.0, 1.0, 0.0)
     out.albedo = wp.vec3(0.0)
     out.hit = 0
     out.back = 0
@@ -114,7 +118,25 @@ def mesh_hit(surfaces: SurfaceMeshes, origin: wp.vec3, direction: wp.vec3, t_max
     for k in range(3):
         corner = wp.mesh_get_point(surfaces.mesh, wp.mesh_get_index(surfaces.mesh, q.face * 3 + k))
         out.scale = wp.max(out.scale, wp.length(corner))
+    out.shading = shading_normal(surfaces, q.face, q.u, q.v, out.normal)
     return out
+
+
+@wp.func
+def shading_normal(surfaces: SurfaceMeshes, face: int, u: float, v: float, geometric: wp.vec3) -> wp.vec3:
+    """The vertex normals of ``face`` interpolated at the barycentric (u, v) (Warp's: p = u p0 + v p1 +
+    (1 - u - v) p2), turned to the side of ``geometric``; ``geometric`` itself where the mesh has none."""
+    if surfaces.smooth == 0:
+        return geometric
+    n = wp.vec3(0.0)
+    weights = wp.vec3(u, v, 1.0 - u - v)
+    for k in range(3):
+        n += surfaces.normals[wp.mesh_get_index(surfaces.mesh, face * 3 + k)] * weights[k]
+    length = wp.length(n)
+    if length < 1.0e-6:  # a mesh without normals (zeros), or opposite normals cancelling
+        return geometric
+    n = n / length
+    return wp.where(wp.dot(n, geometric) < 0.0, -n, n)
 
 
 @wp.func
@@ -156,6 +178,7 @@ class MeshBuffers:
     triangle_material: wp.array
     materials: wp.array
     texels: wp.array
+    normals: wp.array
     triangle_count: int
     extra_material_base: int
     build_seconds: float  # wall time of the last BVH build or refit [s]
@@ -166,7 +189,7 @@ class MeshBuffers:
     def build(cls, meshes, camera_position, device, *, extra_materials=()) -> MeshBuffers:
         """Upload ``meshes`` (:class:`~warpsky.scene.terrain.TerrainMesh`) relative to ``camera_position`` [m]
         and build the BVH."""
-        out = cls(str(device), None, None, None, None, None, 0, len(meshes), 0.0, False)
+        out = cls(str(device), None, None, None, None, None, None, 0, len(meshes), 0.0, False)
         out._upload_materials(meshes, camera_position, extra_materials)
         triangles = [m.triangles + offset for m, offset in zip(meshes, _offsets(meshes), strict=True)]
         count = int(sum(len(t) for t in triangles))
@@ -178,6 +201,7 @@ class MeshBuffers:
             out.points = wp.array(_relative_points(meshes, camera_position), dtype=wp.vec3, device=device)
             indices = wp.array(np.concatenate(triangles).reshape(-1), dtype=wp.int32, device=device)
             out.mesh = wp.Mesh(out.points, indices)
+            out._upload_normals(meshes)
             wp.synchronize_device(device)
             out.build_seconds = time.perf_counter() - started
         out._topology = tuple(m.triangles for m in meshes)
@@ -195,10 +219,20 @@ class MeshBuffers:
             started = time.perf_counter()
             self.points.assign(_relative_points(meshes, camera_position))
             self.mesh.refit()
+            self._upload_normals(meshes)
             wp.synchronize_device(self.device)
             self.build_seconds = time.perf_counter() - started
         self.refitted = True
         return self
+
+    def _upload_normals(self, meshes) -> None:
+        """Vertex shading normals of every mesh (zeros for a mesh without them), or one zero when none has any."""
+        if not any(m.normals is not None for m in meshes):
+            self.normals = None
+            return
+        rows = [m.normals if m.normals is not None else np.zeros_like(m.points) for m in meshes]
+        self.normals = wp.array(np.ascontiguousarray(np.concatenate(rows), dtype=np.float32), dtype=wp.vec3,
+                                device=self.device)
 
     def _upload_materials(self, meshes, camera_position, extra_materials) -> None:
         eye = np.asarray(camera_position, dtype=np.float64)
@@ -222,6 +256,8 @@ class MeshBuffers:
         out.triangle_material = self.triangle_material
         out.materials = self.materials
         out.texels = self.texels
+        out.smooth = int(self.normals is not None)
+        out.normals = self.normals if self.normals is not None else wp.zeros(1, dtype=wp.vec3, device=self.device)
         out.triangle_count = self.triangle_count
         return out
 

@@ -43,7 +43,7 @@ class SurfaceImage:
     """Per pixel, the nearest surface the eye ray meets (``hit`` 0: none within the clipping range)."""
 
     point: wp.array2d(dtype=wp.vec3)  # camera-relative hit point [m]
-    normal: wp.array2d(dtype=wp.vec3)  # unit normal facing the eye
+    normal: wp.array2d(dtype=wp.vec3)  # unit shading normal facing the eye
     albedo: wp.array2d(dtype=wp.vec3)  # RGB reflectance
     depth: wp.array2d(dtype=float)  # camera-space depth along the view axis [m]; far where nothing is hit
     hit: wp.array2d(dtype=wp.int32)
@@ -101,7 +101,7 @@ def surface_hits(surfaces: SurfaceMeshes, plane: SurfacePlane, cam: PinholeCamer
     h = nearest_surface(surfaces, plane, origin, view, cam.near / cos_axis, cam.far / cos_axis)
     image.hit[row, col] = h.hit
     image.point[row, col] = origin + h.t * view
-    image.normal[row, col] = h.normal
+    image.normal[row, col] = h.shading
     image.albedo[row, col] = h.albedo
     image.scale[row, col] = h.scale
     image.depth[row, col] = wp.where(h.hit != 0, h.t * cos_axis, cam.far)
