@@ -35,6 +35,7 @@ class TerrainField:
 
     seed: int = 0
     size: float = 4000.0
+    valley_angle: float | None = None  # [deg] direction of the valley's axis from +x towards +z; None: seeded
 
     def _parts(self):
         rng = np.random.default_rng(self.seed)
@@ -50,6 +51,8 @@ class TerrainField:
         hills = [(rng.uniform(150.0, 300.0) * self.size / 4000.0, *rng.uniform(-self.size / 3, self.size / 3, 2),
                   rng.uniform(0.08, 0.15) * self.size) for _ in range(3)]  # (height, cx, cz, sigma)
         angle = rng.uniform(0.0, math.pi)
+        if self.valley_angle is not None:
+            angle = math.radians(self.valley_angle)
         valley = (120.0 * self.size / 4000.0, -math.sin(angle), math.cos(angle), 0.08 * self.size)  # (V, nx, nz, w)
         return waves, hills, valley
 
@@ -76,13 +79,13 @@ class TerrainField:
         return float(bound + valley[0] / valley[3] ** 2)
 
 
-def terrain_heights(x, z, seed: int = 0, size: float = 4000.0) -> np.ndarray:
-    """Height [m] of the seed's terrain at world (x, z) [m]."""
-    return TerrainField(seed, size).heights(x, z)
+def terrain_heights(x, z, seed: int = 0, size: float = 4000.0, valley_angle: float | None = None) -> np.ndarray:
+    """Height [m] of the seed's terrain at world (x, z) [m] (``valley_angle`` [deg]: see :class:`TerrainField`)."""
+    return TerrainField(seed, size, valley_angle).heights(x, z)
 
 
 def terrain_mesh(size: float = 4000.0, resolution: int = 129, seed: int = 0,
-                 offset=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+                 offset=(0.0, 0.0, 0.0), valley_angle: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(points (n^2, 3) float64 [m], triangles (2 (n-1)^2, 3) int32) of the height field sampled on an n x n
     vertex grid over [-size/2, size/2]^2, shifted by ``offset`` [m]; every triangle counter-clockwise seen from
     above (normals up). Vertex (i, j) sits at x_i, z_j; cell (i, j) splits along its (i, j)-(i+1, j+1) diagonal."""
@@ -91,7 +94,7 @@ def terrain_mesh(size: float = 4000.0, resolution: int = 129, seed: int = 0,
         raise ValueError(f"resolution must be >= 2 vertices per side, got {resolution}")
     axis = np.linspace(-0.5 * size, 0.5 * size, n)
     x, z = np.meshgrid(axis, axis, indexing="ij")
-    y = terrain_heights(x, z, seed, size)
+    y = terrain_heights(x, z, seed, size, valley_angle)
     points = np.stack([x, y, z], axis=-1).reshape(-1, 3) + np.asarray(offset, dtype=np.float64)
     return points, grid_triangles(n)
 
@@ -137,7 +140,8 @@ def write_mesh(stage, path: str, points: np.ndarray, triangles: np.ndarray, albe
     return mesh
 
 
-def make_terrain_stage(path, *, size: float = 4000.0, resolution: int = 129, seed: int = 0) -> Path:
+def make_terrain_stage(path, *, size: float = 4000.0, resolution: int = 129, seed: int = 0,
+                       valley_angle: float | None = None) -> Path:
     """Write the seed's terrain (with a camera at its south end looking north along it, and a sun) to ``path``."""
     from pxr import Gf, Usd, UsdGeom, UsdLux
 
@@ -146,10 +150,10 @@ def make_terrain_stage(path, *, size: float = 4000.0, resolution: int = 129, see
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/World").GetPrim())
-    points, triangles = terrain_mesh(size, resolution, seed)
+    points, triangles = terrain_mesh(size, resolution, seed, valley_angle=valley_angle)
     write_mesh(stage, "/World/Terrain", points, triangles)
     eye = np.array([0.0, 0.0, 0.45 * size])
-    eye[1] = float(terrain_heights(eye[0], eye[2], seed, size)) + 0.06 * size
+    eye[1] = float(terrain_heights(eye[0], eye[2], seed, size, valley_angle)) + 0.06 * size
     camera = UsdGeom.Camera.Define(stage, "/World/Camera")
     camera.CreateFocalLengthAttr(24.0)
     camera.CreateHorizontalApertureAttr(36.0)
@@ -171,6 +175,8 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=float, default=4000.0, help="side of the square terrain [m]")
     parser.add_argument("--resolution", type=int, default=129, help="vertices per side (2 (n-1)^2 triangles)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the fBm, hills and valley")
+    parser.add_argument("--valley-angle", type=float, default=None,
+                        help="direction of the valley's axis [deg from +x towards +z] (default: from the seed)")
     parser.add_argument("--out", type=Path, required=True, help="stage to write (.usda, .usdc, .usd)")
     args = parser.parse_args(argv)
     if not (args.size > 0.0 and math.isfinite(args.size)):
@@ -178,7 +184,8 @@ def main(argv=None) -> int:
     if args.resolution < 2:
         parser.error(f"--resolution must be >= 2, got {args.resolution}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    make_terrain_stage(args.out, size=args.size, resolution=args.resolution, seed=args.seed)
+    make_terrain_stage(args.out, size=args.size, resolution=args.resolution, seed=args.seed,
+                       valley_angle=args.valley_angle)
     print(f"wrote {args.out}: {2 * (args.resolution - 1) ** 2} triangles over {args.size:g} m, seed {args.seed}")
     return 0
 

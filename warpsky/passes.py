@@ -78,6 +78,19 @@ class StratiformPass:
         return parts
 
 
+_SURFACE_PASSES: dict = {}
+
+
+def _surfaces_pass(device: str):
+    """One surfaces pass per device for the process: it keeps its BVH, which the next frame refits when only the
+    points or the camera moved (an animated batch, a turntable)."""
+    from warpsky.techniques.surfaces.technique import SurfacesPass
+
+    if device not in _SURFACE_PASSES:
+        _SURFACE_PASSES[device] = SurfacesPass(device=device)
+    return _SURFACE_PASSES[device]
+
+
 def scenery_sun_transmittance(scene: Scene, device: str):
     """``points (N, 3) world -> (N, 3)``: the sunlight's transmittance through the scene's height-field clouds and
     fog (the voxel media's shadows the surfaces pass traces itself); None when the scene has neither."""
@@ -113,9 +126,7 @@ def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: in
 
     parts, limit = [], None
     if "surfaces" in passes:
-        from warpsky.techniques.surfaces.technique import SurfacesPass
-
-        surfaces = SurfacesPass(device=device).render(
+        surfaces = _surfaces_pass(device).render(
             scene, width, height, draw_ground=surfaces_draw_ground(scene),
             sun_transmittance=scenery_sun_transmittance(scene, device))
         parts.append(surfaces)

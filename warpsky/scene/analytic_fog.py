@@ -294,6 +294,13 @@ class AnalyticFog:
         inside = (x[..., 1] >= self.floor) & (x[..., 1] <= self.top)
         return np.where(inside, total, 0.0)
 
+    def describe(self) -> str:
+        """One line for ``warpsky info``: the terms by family, the slab and the wind."""
+        counts = {t.__name__.removesuffix("Term").lower(): len(self.of_type(t)) for t in TERM_TYPES}
+        terms = ", ".join(f"{c} {n}" for n, c in counts.items() if c) or "no terms"
+        return (f"{terms}; slab {self.floor:g} .. {self.top:g} m, wind {np.round(self.wind, 3).tolist()} m/s, "
+                f"albedo {np.round(self.albedo, 3).tolist()}, g {self.g:g}")
+
     def __repr__(self) -> str:
         counts = {t.__name__: len(self.of_type(t)) for t in TERM_TYPES}
         terms = ", ".join(f"{n}={c}" for n, c in counts.items() if c)
