@@ -7,7 +7,7 @@ PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind family
+	cumulus-wind family terrain valley-fog sunbeams
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
@@ -25,6 +25,11 @@ help:
 	@echo "make storm-data         - the storm's per-frame NanoVDB fields in data/storm/"
 	@echo "make storm              - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact"
 	@echo "                          sheets, preview (about 3 min once the optics tables are cached)"
+	@echo "make terrain            - the seeded 4 km fractal terrain mesh data/terrain.usda (hills, a north-south valley)"
+	@echo "make valley-fog         - 48 frames of morning fog drifting in the terrain's valley (Biri 2002) to"
+	@echo "                          out/valley_fog/ with a contact sheet (about 1 min on 2 CPU cores)"
+	@echo "make sunbeams           - sunbeams through holes in a Max 1986 cloud deck over the terrain, lighting the"
+	@echo "                          haze, to out/sunbeams/ (EXR + PNG, the exact and the sexp mode)"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 
@@ -103,6 +108,16 @@ storm: $(STAMP) data/storm/.complete
 	$(VENV)/bin/warpsky contact-sheet out/storm/rainbow.####.exr -o out/storm/rainbow_sheet.png
 	$(VENV)/bin/warpsky contact-sheet out/storm/anvil.####.exr -o out/storm/anvil_sheet.png
 	$(VENV)/bin/warpsky preview usd_scenes/storm.usda -o out/storm/preview.png --frame 40
+
+# Terrain, valley fog (Biri 2002) and sunbeams (Max 1986): one terrain mesh, two stages that reference it.
+data/terrain.usda: tools/make_terrain.py $(STAMP)
+	$(PY) tools/make_terrain.py --seed 1 --valley-angle 90 --resolution 257 --out $@
+
+terrain: data/terrain.usda
+
+valley-fog: $(STAMP) data/terrain.usda
+	$(VENV)/bin/warpsky render usd_scenes/valley_fog.usda out/valley_fog/valley_fog.####.exr --png
+	$(VENV)/bin/warpsky contact-sheet out/valley_fog/valley_fog.####.exr -o out/valley_fog/sheet.png
 
 clean:
 	rm -rf out data .pytest_cache

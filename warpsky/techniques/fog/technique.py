@@ -7,16 +7,16 @@ Greenstein phase) and the scene's ambient sky radiance (:func:`~warpsky.techniqu
 sky light is taken as isotropic and unshadowed by the fog, so its in-scattering is a L_ambient (1 - T) exactly
 (Biri's constant L_fog with L_fog = a L_ambient); light scattered more than once is left out.
 
-Accuracy (``tests/test_analytic_fog.py``): the closed-form optical depths match numerical quadrature of the
-density to relative 3e-13 (rays of 0 to 1e6 m, every family); the float32 image rounds T to 6e-8 and its float32
-ray direction moves an optical depth by about 1e-7 of itself. The single-scattered sunlight is a Gauss-Legendre
-sum; on the test fog (cosine, polynomial, point and line blobs; camera inside) it matches a nested quadrature to
-relative 4e-12 with 8 nodes and 16..256 pieces over 80 m and over 2000 m of fog. Its error is set by the pieces per feature
-(cosine wavelength, blob radius, polynomial interval): on that 2000 m ray 64 pieces give 5e-5 and 16 give 0.16;
-4 nodes per piece give 1e-7, 2 give 4e-4. A span holding more features than ``max_pieces`` is undersampled: its
-mean brightness stays right to first order, its pattern does not. The defaults (4 nodes, 4..64 pieces) are the
-speed end of that: on the valley-fog stage (cosines of 300 and 600 m, a 100 m polynomial, terrain-cut rays of up
-to 4 km) they differ from 8 nodes and 16..256 pieces by at most 5e-6 of the brightest pixel, at 5.6 times the speed.
+Accuracy (``tests/test_analytic_fog.py``): the closed-form optical depths match numerical quadrature of the density to
+relative 3e-13 (rays of 0 to 1e6 m, every family); the float32 image rounds T to 6e-8 and its float32 ray direction
+moves an optical depth by about 1e-7 of itself. The single-scattered sunlight is a Gauss-Legendre sum; on the test fog
+(cosine, polynomial, point and line blobs; camera inside) it matches a nested quadrature to relative 4e-12 with 8
+nodes and 16..256 pieces over 80 m and over 2000 m of fog. Its error is set by the pieces per feature (cosine
+wavelength, blob radius, polynomial interval): on that 2000 m ray 64 pieces give 5e-5 and 16 give 0.16; 4 nodes per
+piece give 1e-7, 2 give 4e-4. A span holding more features than ``max_pieces`` is undersampled: its mean brightness
+stays right to first order, its pattern does not. The defaults (4 nodes, 4..64 pieces) are the speed end of that: on
+the valley-fog stage (cosines of 300 and 600 m, a 100 m polynomial, terrain-cut rays of up to 4 km) they differ from 8
+nodes and 16..256 pieces by at most 5e-6 of the brightest pixel, at 5.6 times the speed.
 """
 
 from __future__ import annotations

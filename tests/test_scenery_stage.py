@@ -1,0 +1,138 @@
+"""Terrain meshes and analytic fog on real USD stages through ``warpsky render`` and ``warpsky info``: the plan
+leaves out what a stage lacks, the fog is composited in front of the terrain it is cut by, and bad input names the
+prim and attribute."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import run_cli
+
+from warpsky.output.exr import read_exr
+from warpsky.passes import scenery_layers
+from warpsky.plan import make_plan
+from warpsky.scene.usd import StageReader
+
+SUN_AND_CAMERA = """
+    def Camera "Camera"
+    {
+        float focalLength = 24
+        float horizontalAperture = 36
+        float verticalAperture = 24
+        float2 clippingRange = (1, 20000)
+        double3 xformOp:translate = (0, 30, 400)
+        float xformOp:rotateX = -8
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateX"]
+    }
+    def DistantLight "Sun"
+    {
+        float inputs:intensity = 1
+        float3 xformOp:rotateXYZ = (-30, 20, 0)
+        uniform token[] xformOpOrder = ["xformOp:rotateXYZ"]
+    }
+"""
+
+TERRAIN = """
+    def Mesh "Ground"
+    {
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(-3000, 0, -3000), (-3000, 0, 3000), (3000, 0, 3000), (3000, 0, -3000)]
+        color3f warpsky:albedo = (0.2, 0.3, 0.1)
+    }
+"""
+
+FOG = """
+    def Xform "Fog"
+    {
+        uniform token warpsky:kind = "analyticFog"
+        float warpsky:fog:constant = 0.002
+        float[] warpsky:fog:cosine:amplitudes = [0.001]
+        float3[] warpsky:fog:cosine:waveVectors = [(0.01, 0, 0.02)]
+        float warpsky:fog:floor = -10
+        float warpsky:fog:top = 60
+        vector3f warpsky:fog:wind = (2, 0, 0)
+    }
+"""
+
+
+def write_stage(tmp_path, *parts, name="scene.usda") -> str:
+    path = tmp_path / name
+    path.write_text('#usda 1.0\n(\n    defaultPrim = "World"\n    upAxis = "Y"\n    metersPerUnit = 1\n)\n'
+                    'def Xform "World"\n{\n' + SUN_AND_CAMERA + "".join(parts) + "}\n")
+    return str(path)
+
+
+def test_info_plans_only_the_passes_a_stage_needs(tmp_path, capsys):
+    code, out, _ = run_cli(["info", write_stage(tmp_path, TERRAIN, FOG)], capsys)
+    assert code == 0
+    assert "passes      surfaces -> fog -> composite" in out
+    assert "meshes      1 mesh(es) (/World/Ground), 2 triangles: one Warp BVH" in out
+    assert "fog         /World/Fog: 1 constant, 1 cosine; slab -10 .. 60 m, wind [2.0, 0.0, 0.0] m/s" in out
+    code, out, _ = run_cli(["info", write_stage(tmp_path, FOG, name="fog_only.usda")], capsys)
+    assert code == 0
+    assert "passes      fog -> composite" in out and "no BVH built" in out
+    code, out, _ = run_cli(["info", write_stage(tmp_path, TERRAIN, name="terrain_only.usda")], capsys)
+    assert "passes      surfaces -> composite" in out and 'none (no prim with warpsky:kind = "analyticFog")' in out
+
+
+def test_fog_is_composited_in_front_of_the_terrain_that_cuts_it(tmp_path, capsys):
+    """The frame is the fog's radiance plus its transmittance times the terrain's (rendered by the passes alone),
+    and the fog layer ends at the terrain: nearer rays (lower in the image) see less fog."""
+    path = write_stage(tmp_path, TERRAIN, FOG)
+    out = tmp_path / "frame.exr"
+    code, _, err = run_cli(["render", path, out, "--res", "32", "--float"], capsys)
+    assert code == 0, err
+    image = read_exr(out)
+    rgb = np.stack([image.channels[c] for c in "RGB"], axis=-1)
+    reader = StageReader(path)
+    scene = reader.scene_at(None)
+    plan = make_plan(scene, resolution=(32, None))
+    (surfaces, fog), _ = scenery_layers(scene, plan.passes, plan.width, plan.height, device="cpu")
+    expected = fog.radiance + fog.transmittance * surfaces.radiance
+    np.testing.assert_allclose(rgb, expected, rtol=1e-4, atol=1e-7)
+    assert np.all(surfaces.transmittance[-1] == 0.0)  # the bottom row sees the ground
+    column = fog.transmittance[:, 16, 1]
+    assert column[-1] > column[len(column) // 2]  # shorter fog path to the ground nearby
+    assert np.all(np.isfinite(rgb)) and rgb.min() >= 0.0
+
+
+def test_path_tracer_refuses_scenery_with_a_clear_error(tmp_path, capsys):
+    code, _, err = run_cli(["render", write_stage(tmp_path, FOG), tmp_path / "x.exr", "--technique",
+                            "path_tracer"], capsys)
+    assert code == 2
+    assert "technique path_tracer does not render terrain meshes, height-field clouds or analytic fog" in err
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_fog_attribute_on_a_prim_of_another_kind_is_named(tmp_path, capsys):
+    stray = """
+    def Xform "NotFog"
+    {
+        float warpsky:fog:constant = 0.01
+    }
+"""
+    code, _, err = run_cli(["info", write_stage(tmp_path, stray)], capsys)
+    assert code == 2
+    assert "/World/NotFog: has warpsky:fog:constant but warpsky:kind is None" in err
+    assert 'warpsky:kind = "analyticFog"' in err
+
+
+@pytest.mark.parametrize("time", [0.0, 24.0])
+def test_wind_moves_the_rendered_fog_as_a_camera_moved_against_it(tmp_path, time):
+    """A frame at time t (24 time codes = 1 s; wind 2 m/s along x) equals the frame at 0 seen from a camera moved
+    by -wind t, fog only (the terrain does not move with the wind)."""
+    import dataclasses
+
+    from warpsky.techniques.fog.technique import FogPass
+
+    reader = StageReader(write_stage(tmp_path, FOG))
+    later = reader.scene_at(time)
+    still = reader.scene_at(0.0)
+    shift = np.array([2.0, 0.0, 0.0]) * later.time_s
+    moved = dataclasses.replace(still, camera=dataclasses.replace(still.camera,
+                                                                  position=still.camera.position - shift))
+    a = FogPass().render(later, 16, 12)
+    b = FogPass().render(moved, 16, 12)
+    np.testing.assert_allclose(a.radiance, b.radiance, rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(a.transmittance, b.transmittance, rtol=1e-5)
