@@ -13,8 +13,9 @@ a (1 - T) exactly for one albedo a; the bracket, a quadrature ratio, only weighs
 
 The quadrature runs from where the ray enters the first slab to where it leaves the last, or to where the optical
 depth of its clearest channel reaches ``cut_depth`` (found by bisection on the closed form; what lies beyond is
-dimmed by exp(-cut_depth)). That span is split into pieces about ``feature`` metres long (between
-``min_pieces`` and ``max_pieces`` of them) and also at every discontinuity of the density: slab faces,
+dimmed by exp(-cut_depth)). That span is split into pieces as long as the shortest feature of the density along
+that ray (:func:`ray_feature`: a cosine's wavelength projected on the ray, ...; between ``min_pieces`` and
+``max_pieces`` of them) and also at every discontinuity of the density: slab faces,
 the ends of bounded polynomials and the cells of repeated ones. Each piece gets ``nodes`` Gauss-Legendre nodes.
 """
 
@@ -38,7 +39,6 @@ class FogMarch:
 
     nodes: wp.array(dtype=wp.float64)  # Gauss-Legendre abscissae on [0, 1]
     weights: wp.array(dtype=wp.float64)  # their weights on [0, 1]
-    feature: wp.float64  # preferred piece length [m]
     min_pieces: int
     max_pieces: int
     cut_depth: wp.float64  # optical depth after which the ray's contribution is dropped
@@ -116,6 +116,28 @@ def next_break(fogs: FogSet, o: wp.vec3d, w: wp.vec3d, t: wp.float64, best: wp.f
                 if dv < wp.float64(0.0):
                     cell = wp.ceil(q) - wp.float64(1.0)
                 best = line_crossing(v0, dv, cell * period - band.half, t, best)
+    return best
+
+
+@wp.func
+def ray_feature(fogs: FogSet, w: wp.vec3d, longest: wp.float64) -> wp.float64:
+    """The shortest length over which the density changes along direction ``w`` [m] (``longest`` when nothing
+    varies): a cosine's wavelength along the ray 2 pi / |k . w|, a polynomial band's interval along the ray
+    2 half / |axis . w|, a blob's radius (its profile along any line through it)."""
+    best = longest
+    for f in range(fogs.body_count):
+        body = fogs.bodies[f]
+        for i in range(body.cosine_first, body.cosine_first + body.cosine_count):
+            rate = wp.abs(wp.dot(fogs.cosines[i].wave, w))
+            if rate * best > wp.float64(2.0 * math.pi):
+                best = wp.float64(2.0 * math.pi) / rate
+        for i in range(body.polynomial_first, body.polynomial_first + body.polynomial_count):
+            band = fogs.polynomials[i]
+            rate = wp.abs(wp.dot(band.axis, w))
+            if rate * best > wp.float64(2.0) * band.half:
+                best = wp.float64(2.0) * band.half / rate
+        for i in range(body.blob_first, body.blob_first + body.blob_count):
+            best = wp.min(best, wp.sqrt(fogs.blobs[i].radius2))
     return best
 
 
@@ -213,9 +235,7 @@ def fog_ray(fogs: FogSet, march: FogMarch, o: wp.vec3d, w: wp.vec3d, t0: wp.floa
     total = fogs_optical_depth(fogs, o + span[0] * w, o + span[1] * w)
     out.transmittance = exp3d(total)
     end = cut_distance(fogs, march, o, w, span[0], span[1], total)
-    pieces = wp.float64(march.min_pieces)
-    if march.feature > wp.float64(0.0):
-        pieces = wp.ceil((end - span[0]) / march.feature)
+    pieces = wp.ceil((end - span[0]) / ray_feature(fogs, w, end - span[0] + wp.float64(1.0)))
     pieces = wp.clamp(pieces, wp.float64(march.min_pieces), wp.float64(march.max_pieces))
     step = (end - span[0]) / pieces
     cos_theta = wp.dot(w, march.sun_direction)
