@@ -136,3 +136,19 @@ def test_wind_moves_the_rendered_fog_as_a_camera_moved_against_it(tmp_path, time
     b = FogPass().render(moved, 16, 12)
     np.testing.assert_allclose(a.radiance, b.radiance, rtol=1e-4, atol=1e-9)
     np.testing.assert_allclose(a.transmittance, b.transmittance, rtol=1e-5)
+
+
+def test_stratiform_layer_shadows_points_below_it_along_the_slant_path():
+    """A flat 100 m layer at 1000 m, sun at 30 deg: a point below is dimmed by exp(-kappa 100 / sin 30 deg); a point
+    whose ray towards the sun passes beside the map, or above the base, is not."""
+    import math
+
+    from warpsky.media.stratiform import layer_sun_transmittance
+    from warpsky.scene.layers import StratiformLayer
+
+    layer = StratiformLayer(np.full((8, 8), 100.0, np.float32), 1000.0, (-500.0, -500.0), (1000.0, 1000.0))
+    sun = np.array([math.cos(math.radians(30.0)), 0.5, 0.0])
+    points = np.array([[-500.0, 500.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1200.0, 0.0], [-1000.0, 990.0, 0.0]])
+    got = layer_sun_transmittance(layer, points, sun)
+    dimmed = math.exp(-layer.extinction * 100.0 / 0.5)
+    np.testing.assert_allclose(got[:, 0], [dimmed, 1.0, 1.0, 1.0], rtol=1e-6)

@@ -92,8 +92,9 @@ def _surfaces_pass(device: str):
 
 
 def scenery_sun_transmittance(scene: Scene, device: str):
-    """``points (N, 3) world -> (N, 3)``: the sunlight's transmittance through the scene's height-field clouds and
-    fog (the voxel media's shadows the surfaces pass traces itself); None when the scene has neither."""
+    """``points (N, 3) world -> (N, 3)``: the sunlight's transmittance through the scene's height-field clouds,
+    fog and stratiform layers (the voxel media's shadows the surfaces pass traces itself); None when the scene has
+    none of them."""
     parts = []
     if scene.heightfield_clouds:
         from warpsky.techniques.heightfield.technique import heightfield_sun_transmittance
@@ -103,6 +104,11 @@ def scenery_sun_transmittance(scene: Scene, device: str):
         from warpsky.techniques.fog.technique import fog_sun_transmittance
 
         parts.append(fog_sun_transmittance)
+    if scene.layers and scene.sun is not None:
+        from warpsky.media.stratiform import layer_sun_transmittance
+
+        for layer in scene.layers:
+            parts.append(lambda s, points, d, layer=layer: layer_sun_transmittance(layer, points, s.sun.direction, d))
     if not parts:
         return None
 
