@@ -14,9 +14,11 @@ import warpsky.evaluation.stratiform_reference as stratiform_reference
 import warpsky.evaluation.stratiform_slab as evaluation_slab
 import warpsky.media.advection_kernels as advection_kernels
 import warpsky.media.fields as fields
+import warpsky.media.heightfield as heightfield_media
 import warpsky.optics.ice_kernels as ice_kernels
 import warpsky.optics.kernels as optics
 import warpsky.techniques.fog.kernels as fog_kernels
+import warpsky.techniques.heightfield.kernels as heightfield_kernels
 import warpsky.techniques.path_tracer.kernels  # noqa: F401  (registers its kernel factory)
 import warpsky.techniques.radiosity.kernels as radiosity
 import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its kernel factories)
@@ -28,7 +30,7 @@ from warpsky.kernel_variants import variant_modules
 
 #: Modules holding plain (not factory-made) kernels.
 PLAIN_MODULES = (fields, optics, ice_kernels, sky, evaluation_slab, stratiform_reference, radiosity, stratiform_kernels,
-                 advection_kernels, slicing, surfaces_kernels, fog_kernels)
+                 advection_kernels, slicing, surfaces_kernels, fog_kernels, heightfield_media, heightfield_kernels)
 
 def kernel_modules() -> list:
     """Warp ``Module`` objects for every kernel warpsky can launch."""
