@@ -60,9 +60,12 @@ class SceneryReading(StagePrims):
         prims = self._kind_prims(HEIGHTFIELD_KIND, tc)
         if not prims:
             return ()
+        if len(prims) > 1:
+            raise SceneError(f"stage {self.path}: {len(prims)} prims with warpsky:kind = \"{HEIGHTFIELD_KIND}\" "
+                             f"({', '.join(str(p.GetPath()) for p in prims)}); one cloud deck per stage is rendered")
         from warpsky.scene.heightfield_clouds import read_heightfield_clouds
 
-        return tuple(read_heightfield_clouds(self, prim, tc, self._time_s(time)) for prim in prims)
+        return tuple(read_heightfield_clouds(self, prim, tc) for prim in prims)
 
     def read_fogs(self, time=None) -> tuple:
         """Prims with ``warpsky:kind = "analyticFog"`` as :class:`~warpsky.scene.analytic_fog.AnalyticFog` at

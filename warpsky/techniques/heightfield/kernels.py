@@ -1,12 +1,13 @@
 """Kernels of the height-field cloud pass (Max 1986): one thread per pixel marches its ray front to back.
 
-The ray is cut where it enters and leaves the haze slab; within each part the pieces of cloud come from the
-deck's interval search (:func:`~warpsky.media.heightfield.hf_next_interval`), so the ray runs through a sequence
-of pieces of constant extinction: clear haze, cloud, or cloud inside haze. Each piece is integrated in equal
-steps. Along the view ray the optical depth is then exactly linear; the optical depth towards the sun is found at
-the step's ends (cloud: the exact length of the sun ray inside the deck; haze: its closed-form path to the slab's
-top) and taken as linear between them, and the step's exp(-(tau_view + tau_sun)) is integrated in closed form
-(:func:`~warpsky.techniques.common.exp_lerp_mean3`), which keeps any optical depth per step finite.
+The ray is cut where it enters and leaves the haze slab; within each part the pieces of cloud come from the deck's
+interval search (:func:`~warpsky.media.heightfield.hf_next_interval`), so the ray runs through a sequence of pieces of
+constant extinction: clear haze, cloud, or cloud inside haze. Each piece is integrated in equal steps. Along the view
+ray the optical depth is then exactly linear; the optical depth towards the sun is found at the step's ends (cloud:
+the exact length of the sun ray inside the deck, or in ``max`` mode Max's thickness rule :func:`deck_shadow_length`;
+haze: its closed-form path to the slab's top) and taken as linear between them, and the step's exp(-(tau_view +
+tau_sun)) is integrated in closed form (:func:`~warpsky.techniques.common.exp_lerp_mean3`), which keeps any optical
+depth per step finite.
 
 Sources per metre: sigma_s p(theta) E_sun exp(-tau_sun) from the sun (cloud and haze, each with its own
 Henyey-Greenstein phase) and sigma_s L_mean exp(-tau_zenith) from the sky's ambient light L_mean
@@ -57,7 +58,10 @@ class HeightFieldMarch:
     """Step lengths, mode and ambient light of the march."""
 
     cloud_step: float  # step inside cloud pieces [m]
-    haze_step: float  # step in clear haze [m]
+    haze_step: float  # shortest step in clear haze [m]
+    haze_feature: float  # shortest horizontal feature of the deck's shadow pattern [m]
+    haze_step_max: float  # longest step in clear haze, 0.25 / sigma_haze [m]
+    shadow: int  # 0: exact optical depth along the sun ray; 1: Max's thickness rule (:func:`deck_shadow_length`)
     max_steps: int  # most steps per piece (a longer piece takes longer steps)
     min_transmittance: float  # stop once the luminance transmittance falls below this
     ambient: wp.vec3  # L_mean, RGB [radiance]
@@ -87,10 +91,45 @@ def sexp3(x: wp.vec3) -> wp.vec3:
 
 
 @wp.func
-def sun_depth(hf: HeightField, haze: HazeSlab, p: wp.vec3, sun_dir: wp.vec3) -> wp.vec3:
-    """Optical depth (RGB) from ``p`` to the sun: the deck's exact one plus the haze slab's closed form."""
-    tau = hf_optical_depth(hf, p, sun_dir, 0.0, hf.max_length)
-    return tau + haze.extinction * haze_path(haze, p, sun_dir)
+def deck_shadow_length(hf: HeightField, p: wp.vec3, sun_dir: wp.vec3) -> float:
+    """Cloud length [m] the sunlight crosses to reach ``p`` by Max's thickness rule (§6), on a slant: the cloud
+    above the height of ``p`` in the column Q where the ray towards the sun pierces the mean plane (Q = p above the
+    plane: his vertical-sun model, §3), g(Q) - max(y - H, h(Q)), over the sine of the sun's elevation (a locally
+    flat slab crossed at that elevation). One evaluation of the pattern; exact for an overhead sun."""
+    yr = p[1] - hf.mean
+    q = p
+    if yr < 0.0:
+        q = p + sun_dir * (-yr / sun_dir[1])
+    f = hf_f(hf, q)
+    if f <= 0.0:
+        return 0.0
+    return wp.max(hf_top(hf, f) - wp.max(yr, hf_bottom(hf, f)), 0.0) / sun_dir[1]
+
+
+@wp.func
+def sun_depth(hf: HeightField, haze: HazeSlab, p: wp.vec3, sun_dir: wp.vec3, shadow: int) -> wp.vec3:
+    """Optical depth (RGB) from ``p`` to the sun: the deck's (exact along the sun ray, or by Max's thickness rule
+    with ``shadow`` 1 while the sun is above the horizon) plus the haze slab's closed form."""
+    tau = haze.extinction * haze_path(haze, p, sun_dir)
+    if shadow != 0 and sun_dir[1] > 1.0e-6:
+        return tau + hf.extinction * deck_shadow_length(hf, p, sun_dir)
+    return tau + hf_optical_depth(hf, p, sun_dir, 0.0, hf.max_length)
+
+
+@wp.func
+def haze_step_along(march: HeightFieldMarch, view: wp.vec3, sun_dir: wp.vec3) -> float:
+    """Step [m] of clear haze along ``view``: the shadow pattern seen along the ray changes as fast as the point
+    where the ray towards the sun meets a horizontal plane moves, |view_xz - (view_y / sun_y) sun_xz| per metre, so
+    a feature of ``haze_feature`` metres gets 8 steps; never below ``haze_step``, nor above ``haze_step_max`` (a
+    quarter of the haze's mean free path: the sky light's occlusion is taken at the step's middle)."""
+    rate = wp.sqrt(view[0] * view[0] + view[2] * view[2])
+    if sun_dir[1] > 1.0e-6:
+        k = view[1] / sun_dir[1]
+        dx = view[0] - k * sun_dir[0]
+        dz = view[2] - k * sun_dir[2]
+        rate = wp.sqrt(dx * dx + dz * dz)
+    step = wp.max(march.haze_step, march.haze_feature / (8.0 * wp.max(rate, 1.0e-6)))
+    return wp.min(step, wp.max(march.haze_step_max, march.haze_step))
 
 
 @wp.func
@@ -119,7 +158,7 @@ def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldMar
     """Integrate the piece [a, b] of the view ray, of constant extinction (cloud if ``cloud_on``, haze if
     ``haze_on``), front to back from ``state``."""
     out = state
-    step = march.haze_step
+    step = haze_step_along(march, view, sun.direction)
     if cloud_on > 0.0:
         step = march.cloud_step
     count = wp.min(wp.max(int(wp.ceil((b - a) / step)), 1), march.max_steps)
@@ -134,13 +173,13 @@ def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldMar
     tau_start = state.tau
     tau_sun_a = wp.vec3(0.0)
     if sunlit and not use_sexp:
-        tau_sun_a = sun_depth(hf, haze, o + a * view, sun.direction)
+        tau_sun_a = sun_depth(hf, haze, o + a * view, sun.direction, march.shadow)
     for i in range(count):
         ta = a + float(i) * dt
         tm = ta + 0.5 * dt
         tau_b = out.tau + sigma_t * dt
         if sunlit and not use_sexp:
-            tau_sun_b = sun_depth(hf, haze, o + (ta + dt) * view, sun.direction)
+            tau_sun_b = sun_depth(hf, haze, o + (ta + dt) * view, sun.direction, march.shadow)
             mean = exp_lerp_mean3(out.tau + tau_sun_a, tau_b + tau_sun_b)
             out.light += wp.cw_mul(wp.cw_mul(sigma_cloud + sigma_haze, sun.irradiance), mean) * dt
             tau_sun_a = tau_sun_b
@@ -237,20 +276,8 @@ def sun_transmittance_kernel(
     exact: int,
     out: wp.array(dtype=wp.vec3),
 ):
-    """Transmittance (RGB) of the sunlight reaching camera-relative ``points``: Max §6 (the deck's vertical
-    thickness g - h where the sun ray pierces the mean plane; a point above the plane: the cloud above it in its
-    column), or the exact sun-ray optical depth with ``exact``; times the haze's along the sun ray."""
+    """Transmittance (RGB) of the sunlight reaching camera-relative ``points``: Max's thickness rule
+    (:func:`deck_shadow_length`), or the exact sun-ray optical depth with ``exact``; times the haze's along the sun
+    ray."""
     i = wp.tid()
-    p = points[i]
-    tau = haze.extinction * haze_path(haze, p, sun_dir)
-    yr = p[1] - hf.mean
-    if exact != 0 or sun_dir[1] <= 1.0e-6:
-        tau += hf_optical_depth(hf, p, sun_dir, 0.0, hf.max_length)
-    elif yr < 0.0:
-        q = p + sun_dir * (-yr / sun_dir[1])
-        f = hf_f(hf, q)
-        if f > 0.0:
-            tau += hf.extinction * (hf_top(hf, f) - hf_bottom(hf, f))
-    else:
-        tau += hf.extinction * hf_column_above(hf, p)
-    out[i] = exp3(tau)
+    out[i] = exp3(sun_depth(hf, haze, points[i], sun_dir, 1 - exact))

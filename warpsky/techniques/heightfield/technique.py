@@ -3,19 +3,31 @@
 =================== ===== ============================= ========= =================================================
 setting             unit  default                       range     meaning
 =================== ===== ============================= ========= =================================================
-``mode``            --    ``exact``                     enum      ``exact``: exp everywhere, converged quadrature;
+``mode``            --    ``exact``                     enum      ``exact``: exp everywhere, the sunlight dimmed by
+                                                                  the exact optical depth along the sun ray;
+                                                                  ``max``: by Max's thickness rule (one pattern
+                                                                  lookup per sample; see below where it fails);
                                                                   ``sexp``: Max's quadratic sexp in the cloud
                                                                   integral (vertical-sun model), to measure it
 ``step_length``     m     min(0.25 / sigma_max,         > 0       step inside the cloud
                           feature / 16)
-``haze_step_length`` m    min(0.25 / sigma_haze,        > 0       step in clear haze (resolves the shafts)
-                          feature / 8)
+``haze_step_length`` m    min(0.25 / sigma_haze,        > 0       step in clear haze (resolves the shafts);
+                          shadow feature / 8), longer             authored: that step everywhere
+                          along rays close to the sun
 ``max_steps``       --    4096                          >= 1      most steps per piece of constant extinction
 ``min_transmittance`` --  1e-4                          [0, 1)    stop once the view is this opaque
 =================== ===== ============================= ========= =================================================
 
 ``feature`` is :func:`~warpsky.media.heightfield.feature_length` (the shortest wavelength, the equator's rounding
 and the polynomial's curvature length). The measured quadrature error against a 4x finer march is in the tests.
+
+Where ``max`` is not trustworthy: Max's thickness rule (:func:`~warpsky.techniques.heightfield.kernels.
+deck_shadow_length`) reads the deck in one column, where the ray towards the sun pierces the mean plane; a slanted
+sun ray through a deck thicker than its features crosses several of them. On the sunbeams stage (a deck about
+300 m thick with features of 200 m to 3 km; 48 x 32 pixels) its radiance against ``exact``: sun overhead, NRMSE
+3e-6 (the same integral); 17 deg from the zenith, 13% (bias +6%); 38 deg, 184% (bias +53%); at the stage's own sun
+(52 deg from the zenith, 96 x 64 pixels) 276% (bias +128%), and ``sexp`` 76% (bias +49%). It is exact for an
+overhead sun and fit for thin decks; it runs about 80 times faster than ``exact`` there.
 """
 
 from __future__ import annotations
@@ -37,7 +49,7 @@ from warpsky.techniques.dome import ambient_vec
 from warpsky.techniques.heightfield.kernels import HeightFieldMarch, heightfield_kernel, sun_transmittance_kernel
 from warpsky.techniques.sunlight import sunlight
 
-MODES = ("exact", "sexp")
+MODES = ("max", "exact", "sexp")
 
 
 def _positive(name: str, value: float | None) -> None:
@@ -45,13 +57,22 @@ def _positive(name: str, value: float | None) -> None:
         raise UsageError(f"height-field setting {name} must be a positive length in metres, got {value}")
 
 
+def shadow_feature(clouds: HeightFieldClouds) -> float:
+    """The shortest horizontal feature [m] of the deck's shadow pattern: the shortest wavelength, or the
+    polynomial's curvature length (the equator's rounding shapes the thickness near the edges, not the holes)."""
+    k = np.linalg.norm(clouds.wave_vectors, axis=1) if len(clouds.wave_vectors) else np.zeros(0)
+    lengths = [2.0 * math.pi / v for v in k if v > 0.0]
+    return float(min(lengths)) if lengths else feature_length(clouds)
+
+
 def automatic_steps(clouds: HeightFieldClouds) -> tuple[float, float]:
-    """(cloud step, haze step) [m] from the deck's extinction and smallest feature (module docstring)."""
+    """(cloud step, shortest haze step) [m] from the deck's extinction and smallest features (module docstring)."""
     feature = feature_length(clouds)
     sigma = float(np.max(clouds.extinction))
     cloud = min(0.25 / sigma, feature / 16.0) if sigma > 0.0 else feature / 16.0
     haze_sigma = float(np.max(clouds.haze.density)) if clouds.haze is not None else 0.0
-    haze = min(0.25 / haze_sigma, feature / 8.0) if haze_sigma > 0.0 else feature / 8.0
+    shadow = shadow_feature(clouds)
+    haze = min(0.25 / haze_sigma, shadow / 8.0) if haze_sigma > 0.0 else shadow / 8.0
     return cloud, haze
 
 
@@ -95,6 +116,10 @@ class HeightFieldPass:
         march = HeightFieldMarch()
         march.cloud_step = float(self.step_length or cloud_auto)
         march.haze_step = float(self.haze_step_length or haze_auto)
+        march.haze_feature = 0.0 if self.haze_step_length else shadow_feature(clouds)
+        march.shadow = int(self.mode != "exact")
+        haze_sigma = float(np.max(clouds.haze.density)) if clouds.haze is not None else 0.0
+        march.haze_step_max = 0.25 / haze_sigma if haze_sigma > 0.0 else 1.0e30
         march.max_steps = self.max_steps
         march.min_transmittance = self.min_transmittance
         march.ambient = ambient_vec(scene)
