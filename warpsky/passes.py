@@ -99,7 +99,8 @@ def scenery_sun_transmittance(scene: Scene, device: str):
     if scene.heightfield_clouds:
         from warpsky.techniques.heightfield.technique import heightfield_sun_transmittance
 
-        parts.append(heightfield_sun_transmittance)
+        # the exact sun-ray optical depth: Max's thickness rule fails for decks thicker than their features
+        parts.append(lambda s, points, d: heightfield_sun_transmittance(s, points, d, exact=True))
     if scene.fogs:
         from warpsky.techniques.fog.technique import fog_sun_transmittance
 
