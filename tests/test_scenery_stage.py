@@ -152,3 +152,23 @@ def test_stratiform_layer_shadows_points_below_it_along_the_slant_path():
     got = layer_sun_transmittance(layer, points, sun)
     dimmed = math.exp(-layer.extinction * 100.0 / 0.5)
     np.testing.assert_allclose(got[:, 0], [dimmed, 1.0, 1.0, 1.0], rtol=1e-6)
+
+
+def test_scenery_pass_settings_come_from_set_and_bad_ones_are_named(tmp_path, capsys):
+    path = write_stage(tmp_path, TERRAIN, FOG)
+    code, out, _ = run_cli(["info", path, "--set", "fog.nodes=2", "--set", "fog.cut_depth=20"], capsys)
+    assert code == 0 and "fog.nodes=2, fog.cut_depth=20" in out
+    code, _, err = run_cli(["info", path, "--set", "fog.node=2"], capsys)
+    assert code == 2 and "unknown setting fog.node; fog settings: fog.nodes, fog.min_pieces" in err
+    code, _, err = run_cli(["info", path, "--set", "fog.nodes=two"], capsys)
+    assert code == 2 and "setting fog.nodes must be a whole number, got 'two'" in err
+    code, _, err = run_cli(["info", path, "--set", "heightfield.mode=fast"], capsys)
+    assert code == 2 and "mode" in err and "fast" in err
+    reader = StageReader(path)
+    scene = reader.scene_at(None)
+    coarse = make_plan(scene, resolution=(16, None), settings={"fog.nodes": "1", "fog.max_pieces": "4"})
+    fine = make_plan(scene, resolution=(16, None))
+    assert coarse.settings_json() != fine.settings_json()
+    (_, a), _ = scenery_layers(scene, coarse.passes, 16, 11, device="cpu", settings=coarse.scenery_settings)
+    (_, b), _ = scenery_layers(scene, fine.passes, 16, 11, device="cpu", settings=fine.scenery_settings)
+    assert a.stats["nodes"] == 1 and b.stats["nodes"] == 4

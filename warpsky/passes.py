@@ -30,6 +30,42 @@ from warpsky.techniques.sunlight import light_elevation_sine, visible_sun
 
 #: The passes :func:`scenery_layers` runs.
 SCENERY_PASSES = frozenset({"surfaces", "heightfield", "fog"})
+#: ``--set PASS.NAME=VALUE`` settings of the height-field and fog passes: their keyword arguments and types
+#: (documented on :class:`~warpsky.techniques.heightfield.technique.HeightFieldPass` and
+#: :class:`~warpsky.techniques.fog.technique.FogPass`).
+SCENERY_SETTINGS = {
+    "heightfield": {"mode": str, "step_length": float, "haze_step_length": float, "max_steps": int,
+                    "min_transmittance": float},
+    "fog": {"nodes": int, "min_pieces": int, "max_pieces": int, "cut_depth": float},
+}
+
+
+def parse_scenery_settings(values: dict[str, str]) -> dict[str, dict]:
+    """``{"heightfield.mode": "max", ...}`` as ``{"heightfield": {"mode": "max"}, ...}``, typed and checked by
+    building the passes (a bad name or value is a one-line UsageError naming the setting)."""
+    from warpsky.errors import UsageError
+
+    out: dict[str, dict] = {}
+    for key, text in values.items():
+        prefix, _, name = key.partition(".")
+        kinds = SCENERY_SETTINGS[prefix]
+        if name not in kinds:
+            raise UsageError(f"unknown setting {key}; {prefix} settings: "
+                             f"{', '.join(prefix + '.' + n for n in kinds)}")
+        try:
+            out.setdefault(prefix, {})[name] = kinds[name](text)
+        except ValueError:
+            raise UsageError(f"setting {key} must be {'a whole number' if kinds[name] is int else 'a number'}, "
+                             f"got {text!r}") from None
+    if "heightfield" in out:
+        from warpsky.techniques.heightfield.technique import HeightFieldPass
+
+        HeightFieldPass(**out["heightfield"])
+    if "fog" in out:
+        from warpsky.techniques.fog.technique import FogPass
+
+        FogPass(**out["fog"])
+    return out
 
 
 def media_scene(scene: Scene, passes: tuple[str, ...]) -> Scene:
@@ -123,12 +159,13 @@ def scenery_sun_transmittance(scene: Scene, device: str):
 
 
 def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: int, *, device: str,
-                   before: list[Layer] | None = None) -> tuple[list[Layer], np.ndarray | None]:
+                   before: list[Layer] | None = None, settings: dict | None = None
+                   ) -> tuple[list[Layer], np.ndarray | None]:
     """The surfaces, height-field and fog passes' Layers for ``scene`` (already lit as the media see it), with the
     ``before`` layers (the media's, the stratiform layers') between the surfaces and the rest; and the surfaces'
     depth (the camera's far distance where no surface is hit; None without a surfaces pass). That depth
     stops the height-field clouds, the haze and the fog (Max: "bounded by the distance to the nearest opaque
-    surface"; Biri: the fog integral runs to the depth buffer)."""
+    surface"; Biri: the fog integral runs to the depth buffer). ``settings``: :func:`parse_scenery_settings`'s."""
     from warpsky.plan import surfaces_draw_ground
 
     parts, limit = [], None
@@ -142,9 +179,11 @@ def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: in
     if "heightfield" in passes:
         from warpsky.techniques.heightfield.technique import HeightFieldPass
 
-        parts.append(HeightFieldPass(device=device).render(scene, width, height, limit=limit))
+        options = (settings or {}).get("heightfield", {})
+        parts.append(HeightFieldPass(device=device, **options).render(scene, width, height, limit=limit))
     if "fog" in passes:
         from warpsky.techniques.fog.technique import FogPass
 
-        parts.append(FogPass(device=device).render(scene, width, height, limit=limit))
+        options = (settings or {}).get("fog", {})
+        parts.append(FogPass(device=device, **options).render(scene, width, height, limit=limit))
     return parts, limit

@@ -14,6 +14,7 @@ import numpy as np
 
 from warpsky.errors import UsageError
 from warpsky.optics.tables import is_cached
+from warpsky.passes import SCENERY_SETTINGS, parse_scenery_settings
 from warpsky.resources import MemoryEstimate, WorkEstimate, frame_memory, frame_work
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique, parse_settings, technique_class
@@ -45,6 +46,8 @@ class RenderPlan:
             batch's resume check and the EXR metadata share it); empty until then.
         memory: Bytes the frame will allocate, by part (:func:`warpsky.resources.frame_memory`).
         work: Worst-case kernel iterations of the frame (:func:`warpsky.resources.frame_work`).
+        scenery_settings: ``--set heightfield.*`` / ``fog.*`` values by pass
+            (:func:`warpsky.passes.parse_scenery_settings`).
     """
 
     technique: str
@@ -59,12 +62,14 @@ class RenderPlan:
     settings_hash: str = ""
     memory: MemoryEstimate = field(default_factory=MemoryEstimate)
     work: WorkEstimate = field(default_factory=WorkEstimate)
+    scenery_settings: dict = field(default_factory=dict)
 
     def settings_dict(self) -> dict:
         return dataclasses.asdict(self.settings)
 
     def settings_json(self) -> str:
         extra = {} if self.layer_settings is None else {"stratiform": dataclasses.asdict(self.layer_settings)}
+        extra.update(self.scenery_settings)
         return json.dumps({"technique": self.technique, **self.settings_dict(), **extra}, sort_keys=True)
 
     def describe(self) -> str:
@@ -77,6 +82,8 @@ class RenderPlan:
         if self.layer_settings is not None:
             lines.append("            " + ", ".join(f"stratiform.{k}={'auto' if v is None else _fmt(v)}"
                                                   for k, v in dataclasses.asdict(self.layer_settings).items()))
+        for name, values in self.scenery_settings.items():
+            lines.append("            " + ", ".join(f"{name}.{k}={_fmt(v)}" for k, v in values.items()))
         lines.append(f"passes      {' -> '.join(self.passes)} -> composite")
         lines += [f"{name:<11} {state}" for name, state in self.features.items()]
         return "\n".join(lines)
@@ -119,6 +126,8 @@ def make_plan(
     settings = dict(settings or {})
     layer_values = {k[len(LAYER_SETTING_PREFIX):]: settings.pop(k) for k in list(settings)
                     if k.startswith(LAYER_SETTING_PREFIX)}
+    scenery_settings = parse_scenery_settings({k: settings.pop(k) for k in list(settings)
+                                               if k.split(".")[0] in SCENERY_SETTINGS})
     renderer = cls(parse_settings(cls.Settings, settings), device=device)
     renderer.settings = renderer.resolved_settings(scene)
     width, height = resolve_resolution(scene, resolution)
@@ -141,7 +150,8 @@ def make_plan(
         ("sky", scene.atmosphere is not None and not cls.traces_air),
     ) if runs)
     plan = RenderPlan(technique, renderer.settings, device, width, height, renderer, passes,
-                      _features(scene, technique, layer_settings, layer_values), layer_settings)
+                      _features(scene, technique, layer_settings, layer_values), layer_settings,
+                      scenery_settings=scenery_settings)
     plan.memory, plan.work = frame_memory(scene, plan), frame_work(scene, plan)
     return plan
 
@@ -233,7 +243,7 @@ def _scenery_features(scene: Scene) -> dict[str, str]:
             haze = "with haze" if clouds.haze is not None else "no haze"
             lines.append(f"{clouds.name}: mean plane {clouds.mean_altitude:g} m, {len(clouds.amplitudes)} waves, "
                          f"density {clouds.density:g} 1/m, {haze}")
-        features["heightfield"] = "; ".join(lines) + " (Max 1986, exact single scattering)"
+        features["heightfield"] = "; ".join(lines) + " (Max 1986; single scattering, mode heightfield.mode)"
     else:
         features["heightfield"] = 'none (no prim with warpsky:kind = "heightFieldClouds")'
     if scene.fogs:

@@ -220,7 +220,8 @@ def render_layers(technique: Technique, scene: Scene, plan: RenderPlan) -> tuple
         opaque = None
         if SCENERY_PASSES & set(plan.passes):
             seen = attenuated_sun(lit) if "sky" in plan.passes else lit
-            parts, opaque = scenery_layers(seen, plan.passes, width, height, device=plan.device, before=parts)
+            parts, opaque = scenery_layers(seen, plan.passes, width, height, device=plan.device, before=parts,
+                                           settings=plan.scenery_settings)
         main = merge_by_depth(parts, far=lit.camera.far) if len(parts) > 1 else parts[0]
         if "sky" not in plan.passes:
             return main, [main]
