@@ -28,8 +28,9 @@ help:
 	@echo "make terrain            - the seeded 4 km fractal terrain mesh data/terrain.usda (hills, a north-south valley)"
 	@echo "make valley-fog         - 48 frames of morning fog drifting in the terrain's valley (Biri 2002) to"
 	@echo "                          out/valley_fog/ with a contact sheet (about 1 min on 2 CPU cores)"
-	@echo "make sunbeams           - sunbeams through holes in a Max 1986 cloud deck over the terrain, lighting the"
-	@echo "                          haze, to out/sunbeams/ (EXR + PNG, the exact and the sexp mode)"
+	@echo "make sunbeams           - sunbeams through gaps in a Max 1986 cloud deck over the terrain, lighting the"
+	@echo "                          haze, to out/sunbeams/: frame 1 (exact), 4 drifting frames and a contact sheet,"
+	@echo "                          frame 1 with Max's thickness rule (about 6 min on 2 CPU cores)"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 
@@ -118,6 +119,13 @@ terrain: data/terrain.usda
 valley-fog: $(STAMP) data/terrain.usda
 	$(VENV)/bin/warpsky render usd_scenes/valley_fog.usda out/valley_fog/valley_fog.####.exr --png
 	$(VENV)/bin/warpsky contact-sheet out/valley_fog/valley_fog.####.exr -o out/valley_fog/sheet.png
+
+sunbeams: $(STAMP) data/terrain.usda
+	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/sunbeams.####.exr --frames 1 --png
+	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/drift.####.exr --frames 1,17,33,48 --res 192 --png
+	$(VENV)/bin/warpsky contact-sheet out/sunbeams/drift.####.exr -o out/sunbeams/drift_sheet.png
+	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/max-rule.####.exr --frames 1 --png \
+		--set heightfield.mode=max
 
 clean:
 	rm -rf out data .pytest_cache
