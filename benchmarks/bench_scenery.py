@@ -3,7 +3,7 @@ stages that use them, on cpu and cuda when present.
 
 - ``valley_fog``: terrain mesh (131 k triangles) + Biri fog + sky: the surfaces pass, the fog pass, the frame.
 - ``sunbeams``: terrain + Max height-field clouds with haze + sky: the surfaces pass, the height-field pass in its
-  exact and ``sexp`` modes, the frame.
+  ``exact``, ``max`` and ``sexp`` modes, the frame.
 
     python benchmarks/bench_scenery.py [--device cpu|cuda|all] [--width 1024 --height 768] [--json]
 
@@ -62,7 +62,7 @@ def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -
     if scene.heightfield_clouds:
         from warpsky.techniques.heightfield.technique import HeightFieldPass
 
-        for mode in ("exact", "sexp"):
+        for mode in ("exact", "max", "sexp"):
             clouds = HeightFieldPass(device=device, mode=mode)
             row(f"height-field pass ({mode})",
                 _best(lambda c=clouds: c.render(scene, width, height, limit=limit), repeats)[0])

@@ -18,6 +18,7 @@ from warpsky.passes import SCENERY_SETTINGS, parse_scenery_settings
 from warpsky.resources import MemoryEstimate, WorkEstimate, frame_memory, frame_work
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique, parse_settings, technique_class
+from warpsky.techniques.path_tracer.layer_media import layer_voxel_features, traces_layers
 from warpsky.techniques.stratiform.technique import StratiformSettings, radiosity_grid
 
 DEFAULT_WIDTH = 512
@@ -90,6 +91,8 @@ class RenderPlan:
 
 
 def _fmt(value) -> str:
+    if value is None:
+        return "auto"
     if isinstance(value, bool):
         return str(int(value))
     if isinstance(value, enum.Enum):
@@ -132,7 +135,8 @@ def make_plan(
     renderer.settings = renderer.resolved_settings(scene)
     width, height = resolve_resolution(scene, resolution)
     layer_settings = None
-    if scene.layers:
+    traced_layers = bool(scene.layers) and traces_layers(cls)  # voxelised by the technique: no stratiform pass
+    if scene.layers and not traced_layers:
         if not cls.renders_layers:
             raise UsageError(f"technique {technique} does not render stratiform layers "
                              f"({', '.join(layer.name for layer in scene.layers)}); use slicing or single_scatter")
@@ -143,8 +147,8 @@ def make_plan(
                          "fog; use hybrid, slicing or single_scatter")
     passes = tuple(name for name, runs in (
         ("surfaces", surfaces_pass_runs(scene)),
-        ("media", bool(scene.media) or not (scene.layers or scenery)),
-        ("stratiform", bool(scene.layers)),
+        ("media", bool(scene.media) or traced_layers or not (scene.layers or scenery)),
+        ("stratiform", bool(scene.layers) and not traced_layers),
         ("heightfield", bool(scene.heightfield_clouds)),
         ("fog", bool(scene.fogs)),
         ("sky", scene.atmosphere is not None and not cls.traces_air),
@@ -152,6 +156,8 @@ def make_plan(
     plan = RenderPlan(technique, renderer.settings, device, width, height, renderer, passes,
                       _features(scene, technique, layer_settings, layer_values), layer_settings,
                       scenery_settings=scenery_settings)
+    if traced_layers:
+        plan.features = layer_voxel_features(scene, renderer.settings, plan.features)
     plan.memory, plan.work = frame_memory(scene, plan), frame_work(scene, plan)
     return plan
 

@@ -368,5 +368,5 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
     if scene.layers:
         keys = ("layer", "radiosity", "radiosity_iterations", "radiosity_residual", "radiosity_converged", "seconds")
         metadata["stratiform"] = json.dumps([{k: part[k] for k in keys if k in part}
-                                             for part in layer.stats["parts"] if "layer" in part])
+                                             for part in layer.stats.get("parts", [layer.stats]) if "layer" in part])
     return metadata

@@ -23,6 +23,7 @@ from warpsky.techniques.base import Layer, TechniqueSettings, documented, settin
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.dome import dome_struct
 from warpsky.techniques.path_tracer.kernels import PathSettings, PixelSums, path_trace_kernel
+from warpsky.techniques.path_tracer.layer_media import layer_voxel_memory, with_layers_as_media
 from warpsky.techniques.path_tracer.majorants import upload_majorants
 from warpsky.techniques.sunlight import sunlight
 
@@ -45,6 +46,13 @@ class PathTracerSettings(TechniqueSettings):
                                            auto="8 on the CPU, 64 on GPUs (at most spp)")
     pixel_jitter: bool = setting(False, help="0: every path through the pixel centre, like the other techniques "
                                  "(the reference compares pixel for pixel); 1: box-filtered pixels")
+    layer_voxel: float | None = setting(None, unit="m", range="> 0", help="vertical edge of the voxels a stratiform "
+                                        "layer is traced as (partial volume: each column's optical depth is exact)",
+                                        auto="the layer's largest thickness / 32, grown with layer_voxel_width until "
+                                        "the grid fits 2^27 voxels")
+    layer_voxel_width: float | None = setting(None, unit="m", range="> 0", help="horizontal edge of those voxels",
+                                              auto="half a texel of the layer's thickness map, grown with layer_voxel "
+                                              "until the grid fits 2^27 voxels")
 
     def __post_init__(self):
         self.normalise()
@@ -58,6 +66,10 @@ class PathTracerSettings(TechniqueSettings):
             raise UsageError(f"setting environment must be a finite radiance >= 0, got {self.environment}")
         if self.samples_per_pass is not None and not self.samples_per_pass >= 1:
             raise UsageError(f"setting samples_per_pass must be >= 1, got {self.samples_per_pass}")
+        for name in ("layer_voxel", "layer_voxel_width"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0.0):
+                raise UsageError(f"setting {name} must be a positive length [m] or auto, got {value}")
 
 
 class PathTracer:
@@ -65,15 +77,18 @@ class PathTracer:
     next-event estimation toward the sun, phase sampling from the optics tables, all media combined (Riley Eq. 6),
     the scene's atmosphere as a Rayleigh medium of exponential density (then it also draws the sun's disk),
     Russian roulette, a Lambertian ground, an optional uniform environment and the scene's dome (light of paths
-    that escape after a bounce; the composite draws it behind the camera rays). Progressive: samples accumulate
-    per pixel with their running variance (``Layer.aovs["variance"]``, the variance of the pixel mean)."""
+    that escape after a bounce; the composite draws it behind the camera rays). Stratiform layers are voxelised
+    (:mod:`.layer_media`) and traced as media. Progressive: samples accumulate per pixel with their running
+    variance (``Layer.aovs["variance"]``, the variance of the pixel mean)."""
 
     name = "path_tracer"
     Settings = PathTracerSettings
     #: The atmosphere is traced as a medium: no separate sky pass.
     traces_air = True
-    #: Stratiform layers are not traced.
+    #: It does not run next to the stratiform pass ...
     renders_layers = False
+    #: ... it traces the layers itself, voxelised (``layer_voxel``, ``layer_voxel_width``).
+    traces_layers = True
 
     def __init__(self, settings: PathTracerSettings | None = None, *, device: str = "cpu"):
         self.settings = settings or PathTracerSettings()
@@ -95,7 +110,8 @@ class PathTracer:
         lanes = gpu_lanes(self.device, pixels, int(settings.spp) // int(settings.samples_per_pass))
         return (path_tracing_memory(scene, pixels * lanes, int(settings.majorant_block), self.device)
                 .add("images", host=pixels * SUMS_LAYER_BYTES)
-                .add("AOVs", host=pixels * AOV_BYTES))
+                .add("AOVs", host=pixels * AOV_BYTES)
+                .merge(layer_voxel_memory(scene, settings)))
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Worst-case path events: every path runs to the bounce cap."""
@@ -105,6 +121,7 @@ class PathTracer:
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> Layer:
         settings = self.resolved_settings(scene)
         started = time.perf_counter()
+        scene = with_layers_as_media(scene, settings, self.device)
         tracing = PathTracing(scene, width, height, settings, self.device)
         lanes = gpu_lanes(self.device, width * height, int(settings.spp) // int(settings.samples_per_pass))
         sums = [pixel_sums((height, width), self.device) for _ in range(lanes)]
