@@ -113,6 +113,16 @@ def settings_help() -> str:
         if name == DEFAULT_TECHNIQUE:
             sections.append("  stratiform layers (prefix stratiform., also with slicing and single_scatter):\n"
                             + settings_table(StratiformSettings, indent=4))
+    sections.append("  terrain scenery passes (any technique but path_tracer):\n"
+                    "    heightfield.mode            exact | max | sexp (default exact): the sunlight reaching a point "
+                    "of the deck or the haze\n"
+                    "                                by the exact sun-ray optical depth, Max's thickness rule, or "
+                    "Max's sexp\n"
+                    "    heightfield.step_length, heightfield.haze_step_length [m], heightfield.max_steps, "
+                    "heightfield.min_transmittance\n"
+                    "    fog.nodes (4), fog.min_pieces (4), fog.max_pieces (64): Gauss-Legendre nodes and pieces of "
+                    "the fog's sunlight integral\n"
+                    "    fog.cut_depth (40): optical depth after which the rest of a ray is dropped")
     return ("technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default; whole numbers for\n"
             "counts, 0/1 or true/false for switches):\n" + "\n".join(sections) + "\n")
 
