@@ -23,6 +23,8 @@ def main() -> int:
     parser.add_argument("--spp", type=int, default=2048, help="reference samples per pixel")
     parser.add_argument("--res", type=int, nargs=2, default=(96, 64))
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--single-spp", type=int, default=512, help="samples of the single-scattering check "
+                        "(0: none)")
     parser.add_argument("--budget", type=float, default=120.0, help="seconds for the ladders")
     args = parser.parse_args()
     init_warp()
@@ -33,7 +35,28 @@ def main() -> int:
                         device=args.device, budget=args.budget, reference_spp=args.spp)
     print(format_table(report))
     write_outputs(report, out, stem="deck_error_vs_time")
+    if args.single_spp:
+        single_scattering_check(scene, args.res, args.device, args.single_spp)
     return 0
+
+
+def single_scattering_check(scene, res, device: str, spp: int) -> None:
+    """Print the exact mode's mean radiance against the path tracer limited to single scattering (max_bounces = 1:
+    the deck, the haze and the sunlit ground, no light scattered twice): what the rows' bias is not."""
+    import math
+
+    from warpsky.evaluation.error_vs_time import frame_plan, render_frame_radiance
+    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+
+    width, height = res
+    exact = render_frame_radiance(frame_plan(scene, "single_scatter", {"heightfield.mode": "exact"}, width, height,
+                                             device), scene)[0][..., 1]
+    single = PathTracer(PathTracerSettings(spp=spp, seed=7, max_bounces=1), device=device).render(scene, width,
+                                                                                                  height)
+    noise = math.sqrt(float(single.aovs["variance"][..., 1].sum())) / exact.size
+    mean = float(single.radiance[..., 1].mean())
+    print(f"exact mode vs path tracer with max_bounces=1 ({spp} spp): {float(exact.mean()) / mean - 1.0:+.4f} "
+          f"+- {noise / mean:.4f} (relative, mean radiance)")
 
 
 if __name__ == "__main__":
