@@ -18,6 +18,7 @@ from warpsky.passes import SCENERY_SETTINGS, parse_scenery_settings
 from warpsky.resources import MemoryEstimate, WorkEstimate, frame_memory, frame_work
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique, parse_settings, technique_class
+from warpsky.techniques.path_tracer.deck_media import deck_voxel_features, traces_decks
 from warpsky.techniques.path_tracer.layer_media import layer_voxel_features, traces_layers
 from warpsky.techniques.stratiform.technique import StratiformSettings, radiosity_grid
 
@@ -142,14 +143,15 @@ def make_plan(
                              f"({', '.join(layer.name for layer in scene.layers)}); use slicing or single_scatter")
         layer_settings = parse_settings(StratiformSettings, layer_values)
     scenery = scene_has_scenery(scene)
-    if scenery and cls.traces_air:
+    traced_deck = bool(scene.heightfield_clouds) and traces_decks(cls)  # voxelised by it: no height-field pass
+    if (scene.meshes or scene.fogs or (scene.heightfield_clouds and not traced_deck)) and cls.traces_air:
         raise UsageError(f"technique {technique} does not render terrain meshes, height-field clouds or analytic "
                          "fog; use hybrid, slicing or single_scatter")
     passes = tuple(name for name, runs in (
-        ("surfaces", surfaces_pass_runs(scene)),
-        ("media", bool(scene.media) or traced_layers or not (scene.layers or scenery)),
+        ("surfaces", surfaces_pass_runs(scene) and not traced_deck),
+        ("media", bool(scene.media) or traced_layers or traced_deck or not (scene.layers or scenery)),
         ("stratiform", bool(scene.layers) and not traced_layers),
-        ("heightfield", bool(scene.heightfield_clouds)),
+        ("heightfield", bool(scene.heightfield_clouds) and not traced_deck),
         ("fog", bool(scene.fogs)),
         ("sky", scene.atmosphere is not None and not cls.traces_air),
     ) if runs)
@@ -158,6 +160,8 @@ def make_plan(
                       scenery_settings=scenery_settings)
     if traced_layers:
         plan.features = layer_voxel_features(scene, renderer.settings, plan.features)
+    if traced_deck:
+        plan.features = deck_voxel_features(scene, renderer.settings, width, height, plan.features)
     plan.memory, plan.work = frame_memory(scene, plan), frame_work(scene, plan)
     return plan
 

@@ -27,6 +27,12 @@ Their rows read ``<technique> + stratiform pass`` when the stage also holds voxe
 alone every voxel technique's frame is the stratiform pass's, so one row family, ``stratiform pass (Bouthors
 2006)``, walks the radiosity buffers' resolution (``stratiform.radiosity_detail``). Both sides see the ground at its
 uniform albedo: the ground's albedo map, which the path tracer does not trace, is left out of the measured scene.
+
+Height-field cloud decks (Max 1986) likewise: the reference path-traces the deck and its haze voxelised
+(:mod:`warpsky.techniques.path_tracer.deck_media`); on a deck stage without voxel media every voxel technique's
+frame is the height-field pass's, measured once per mode (``height-field pass (Max 1986, exact)``, ``max``,
+``sexp``) along ``heightfield.step_length``. That pass is single scattering only, so its bias against the
+path-traced multiple scattering is expected to be negative.
 """
 
 from __future__ import annotations
@@ -50,6 +56,7 @@ from warpsky.files import atomic_write, cache_dir
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.render import render_layers
 from warpsky.techniques.base import technique_class
+from warpsky.techniques.path_tracer.deck_media import traces_decks
 
 #: Techniques the report knows how to walk, with their quality ladders.
 LADDERS = {
@@ -63,6 +70,11 @@ VOXEL_SETTINGS = ("step_length", "shadow_step_length")
 #: Row name of the stratiform pass measured on a stage of layers without voxel media, and its ladder.
 STRATIFORM_ROW = "stratiform pass (Bouthors 2006)"
 STRATIFORM_LADDER = [{"stratiform.radiosity_detail": d} for d in (0, 1, 2)]
+#: Row names of the height-field pass (Max 1986) measured on a deck stage without voxel media, one per mode, and
+#: its ladder: ``heightfield.step_length`` as these multiples of the pass's automatic cloud step.
+HEIGHTFIELD_ROW = "height-field pass (Max 1986, {mode})"
+HEIGHTFIELD_MODES = ("exact", "max", "sexp")
+HEIGHTFIELD_STEPS = (2.0, 1.0, 0.5)
 
 
 @dataclass
@@ -93,7 +105,8 @@ def _reference_key(scene, width, height, device, spp, seed) -> str:
 def frame_plan(scene, technique: str, values: dict, width: int, height: int, device: str) -> RenderPlan:
     """The plan of one measured frame: ``technique`` with the settings ``values`` (numbers), resolved for
     ``scene``."""
-    return make_plan(scene, technique=technique, settings={k: repr(v) for k, v in values.items()},
+    return make_plan(scene, technique=technique,
+                     settings={k: v if isinstance(v, str) else repr(v) for k, v in values.items()},
                      resolution=(width, height), device=device)
 
 
@@ -150,7 +163,8 @@ def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray,
 
 
 def setting_label(values: dict) -> str:
-    return ", ".join(f"{k.removeprefix('stratiform.')}={v:g}" for k, v in values.items() if k != "shadow_step_length")
+    return ", ".join(f"{k.split('.')[-1]}={v if isinstance(v, str) else format(v, '.4g')}"
+                     for k, v in values.items() if k not in ("shadow_step_length", "heightfield.mode"))
 
 
 def comparable_scene(scene, log=print):
@@ -170,13 +184,32 @@ def measured_rows(scene, techniques: list[str]) -> list[tuple[str, str, list[dic
     measured once along :data:`STRATIFORM_LADDER`."""
     out = []
     for name in techniques:
-        if not scene.layers or not technique_class(name).renders_layers:
+        if scene.heightfield_clouds and not traces_decks(technique_class(name)):
+            out += heightfield_rows(scene, name, out)
+        elif not scene.layers or not technique_class(name).renders_layers:
             out.append((name, name, LADDERS[name]))
         elif scene.media:
             out.append((f"{name} + stratiform pass", name, LADDERS[name]))
         elif STRATIFORM_ROW not in (row for row, _, _ in out):
             out.append((STRATIFORM_ROW, name, STRATIFORM_LADDER))
     return out
+
+
+def heightfield_rows(scene, name: str, so_far: list) -> list[tuple[str, str, list[dict]]]:
+    """The rows of a voxel technique ``name`` on a stage with a height-field deck: with voxel media, its own
+    ladder next to the height-field pass; without, the height-field pass's frame alone, once per mode along
+    :data:`HEIGHTFIELD_STEPS` (none when ``so_far`` already holds them)."""
+    if scene.media:
+        return [(f"{name} + height-field pass", name, LADDERS[name])]
+    first = HEIGHTFIELD_ROW.format(mode=HEIGHTFIELD_MODES[0])
+    if first in (row for row, _, _ in so_far):
+        return []
+    from warpsky.techniques.heightfield.technique import automatic_steps, the_deck
+
+    step = automatic_steps(the_deck(scene))[0]
+    return [(HEIGHTFIELD_ROW.format(mode=mode), name,
+             [{"heightfield.mode": mode, "heightfield.step_length": factor * step} for factor in HEIGHTFIELD_STEPS])
+            for mode in HEIGHTFIELD_MODES]
 
 
 def run_report(
@@ -198,8 +231,9 @@ def run_report(
     if unknown:
         raise UsageError(f"error-vs-time cannot measure {', '.join(unknown)} (yet); available: "
                          f"{', '.join(LADDERS)}")
-    if not scene.media and not scene.layers:
-        raise UsageError("the stage holds no media and no stratiform layers: nothing to measure")
+    if not scene.media and not scene.layers and not scene.heightfield_clouds:
+        raise UsageError("the stage holds no media, no stratiform layers and no height-field clouds: nothing to "
+                         "measure")
     scene = comparable_scene(scene, log)
     radiance_ref, trans_ref, var_ref, ref_seconds, cached = reference_image(
         scene, width, height, device, spp=reference_spp, seed=reference_seed, use_cache=use_cache)

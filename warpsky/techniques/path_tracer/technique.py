@@ -22,6 +22,7 @@ from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.dome import dome_struct
+from warpsky.techniques.path_tracer.deck_media import deck_voxel_memory, with_deck_as_media
 from warpsky.techniques.path_tracer.kernels import PathSettings, PixelSums, path_trace_kernel
 from warpsky.techniques.path_tracer.layer_media import layer_voxel_memory, with_layers_as_media
 from warpsky.techniques.path_tracer.majorants import upload_majorants
@@ -53,6 +54,17 @@ class PathTracerSettings(TechniqueSettings):
     layer_voxel_width: float | None = setting(None, unit="m", range="> 0", help="horizontal edge of those voxels",
                                               auto="half a texel of the layer's thickness map, grown with layer_voxel "
                                               "until the grid fits 2^27 voxels")
+    deck_extent: float | None = setting(None, unit="m", range="> 0", help="half-size of the square around the "
+                                        "camera over which a height-field cloud deck and its haze are voxelised",
+                                        auto="where the frame's rays enter the deck's band or haze, plus the "
+                                        "distance that dims them below 1%, at most 50 km")
+    deck_voxel_width: float | None = setting(None, unit="m", range="> 0", help="horizontal edge of the deck's "
+                                             "voxels (partial volume: 4x4 sub-columns when cheap)",
+                                             auto="the deck's smallest feature / 8, grown with deck_voxel until "
+                                             "the grid fits 2^27 voxels")
+    deck_voxel: float | None = setting(None, unit="m", range="> 0", help="vertical edge of the deck's voxels "
+                                       "(each column's optical depth is exact)", auto="the deck's band height / 32, "
+                                       "grown with deck_voxel_width until the grid fits 2^27 voxels")
 
     def __post_init__(self):
         self.normalise()
@@ -66,7 +78,7 @@ class PathTracerSettings(TechniqueSettings):
             raise UsageError(f"setting environment must be a finite radiance >= 0, got {self.environment}")
         if self.samples_per_pass is not None and not self.samples_per_pass >= 1:
             raise UsageError(f"setting samples_per_pass must be >= 1, got {self.samples_per_pass}")
-        for name in ("layer_voxel", "layer_voxel_width"):
+        for name in ("layer_voxel", "layer_voxel_width", "deck_extent", "deck_voxel_width", "deck_voxel"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0.0):
                 raise UsageError(f"setting {name} must be a positive length [m] or auto, got {value}")
@@ -78,7 +90,8 @@ class PathTracer:
     the scene's atmosphere as a Rayleigh medium of exponential density (then it also draws the sun's disk),
     Russian roulette, a Lambertian ground, an optional uniform environment and the scene's dome (light of paths
     that escape after a bounce; the composite draws it behind the camera rays). Stratiform layers are voxelised
-    (:mod:`.layer_media`) and traced as media. Progressive: samples accumulate per pixel with their running
+    (:mod:`.layer_media`) and traced as media, and so is a height-field cloud deck with its haze
+    (:mod:`.deck_media`). Progressive: samples accumulate per pixel with their running
     variance (``Layer.aovs["variance"]``, the variance of the pixel mean)."""
 
     name = "path_tracer"
@@ -89,6 +102,8 @@ class PathTracer:
     renders_layers = False
     #: ... it traces the layers itself, voxelised (``layer_voxel``, ``layer_voxel_width``).
     traces_layers = True
+    #: It traces a height-field cloud deck itself too, voxelised (``deck_extent``, ``deck_voxel*``).
+    traces_decks = True
 
     def __init__(self, settings: PathTracerSettings | None = None, *, device: str = "cpu"):
         self.settings = settings or PathTracerSettings()
@@ -111,7 +126,8 @@ class PathTracer:
         return (path_tracing_memory(scene, pixels * lanes, int(settings.majorant_block), self.device)
                 .add("images", host=pixels * SUMS_LAYER_BYTES)
                 .add("AOVs", host=pixels * AOV_BYTES)
-                .merge(layer_voxel_memory(scene, settings)))
+                .merge(layer_voxel_memory(scene, settings))
+                .merge(deck_voxel_memory(scene, settings, width, height)))
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Worst-case path events: every path runs to the bounce cap."""
@@ -121,7 +137,7 @@ class PathTracer:
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> Layer:
         settings = self.resolved_settings(scene)
         started = time.perf_counter()
-        scene = with_layers_as_media(scene, settings, self.device)
+        scene = with_deck_as_media(with_layers_as_media(scene, settings, self.device), settings, width, height)
         tracing = PathTracing(scene, width, height, settings, self.device)
         lanes = gpu_lanes(self.device, width * height, int(settings.spp) // int(settings.samples_per_pass))
         sums = [pixel_sums((height, width), self.device) for _ in range(lanes)]
