@@ -101,7 +101,8 @@ def test_path_tracer_refuses_scenery_with_a_clear_error(tmp_path, capsys):
     code, _, err = run_cli(["render", write_stage(tmp_path, FOG), tmp_path / "x.exr", "--technique",
                             "path_tracer"], capsys)
     assert code == 2
-    assert "technique path_tracer does not render terrain meshes, height-field clouds or analytic fog" in err
+    assert ("technique path_tracer does not render analytic fog (/World/Fog); use hybrid, slicing or "
+            "single_scatter") in err
     assert not (tmp_path / "x.exr").exists()
 
 

@@ -144,9 +144,12 @@ def make_plan(
         layer_settings = parse_settings(StratiformSettings, layer_values)
     scenery = scene_has_scenery(scene)
     traced_deck = bool(scene.heightfield_clouds) and traces_decks(cls)  # voxelised by it: no height-field pass
-    if (scene.meshes or scene.fogs or (scene.heightfield_clouds and not traced_deck)) and cls.traces_air:
-        raise UsageError(f"technique {technique} does not render terrain meshes, height-field clouds or analytic "
-                         "fog; use hybrid, slicing or single_scatter")
+    refused = [(what, objects) for what, objects in (
+        ("meshes", scene.meshes), ("analytic fog", scene.fogs),
+        ("height-field clouds", () if traced_deck else scene.heightfield_clouds)) if objects]
+    if refused and cls.traces_air:
+        named = "; ".join(f"{what} ({', '.join(o.name for o in objects)})" for what, objects in refused)
+        raise UsageError(f"technique {technique} does not render {named}; use hybrid, slicing or single_scatter")
     passes = tuple(name for name, runs in (
         ("surfaces", surfaces_pass_runs(scene) and not traced_deck),
         ("media", bool(scene.media) or traced_layers or traced_deck or not (scene.layers or scenery)),
