@@ -172,14 +172,19 @@ def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldMar
     use_sexp = march.sexp != 0 and cloud_on > 0.0
     tau_start = state.tau
     tau_sun_a = wp.vec3(0.0)
-    if sunlit and not use_sexp:
-        tau_sun_a = sun_depth(hf, haze, o + a * view, sun.direction, march.shadow)
-    for i in range(count):
-        ta = a + float(i) * dt
+    # node j = 0 .. count at a + j dt: the sun's optical depth at each node (one call site: it inlines the whole
+    # interval search), step j - 1 integrated once both its ends are known
+    for j in range(count + 1):
+        tau_sun_b = wp.vec3(0.0)
+        if sunlit and not use_sexp:
+            tau_sun_b = sun_depth(hf, haze, o + (a + float(j) * dt) * view, sun.direction, march.shadow)
+        if j == 0:
+            tau_sun_a = tau_sun_b
+            continue
+        ta = a + float(j - 1) * dt
         tm = ta + 0.5 * dt
         tau_b = out.tau + sigma_t * dt
         if sunlit and not use_sexp:
-            tau_sun_b = sun_depth(hf, haze, o + (ta + dt) * view, sun.direction, march.shadow)
             mean = exp_lerp_mean3(out.tau + tau_sun_a, tau_b + tau_sun_b)
             out.light += wp.cw_mul(wp.cw_mul(sigma_cloud + sigma_haze, sun.irradiance), mean) * dt
             tau_sun_a = tau_sun_b
@@ -210,11 +215,19 @@ def march_segment(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldM
     t = a
     while t < b and out.done == 0:
         piece = hf_next_interval(hf, o, view, slope, t, b)
-        if in_haze > 0.0 and piece[0] > t:
-            out = march_piece(hf, haze, sun, march, out, o, view, t, piece[0], 0.0, 1.0, cos_axis)
-        if piece[0] >= b or out.done != 0:
+        for k in range(2):  # the clear gap before the piece (haze only), then the piece; one call site
+            lo = t
+            hi = piece[0]
+            cloud = 0.0
+            if k == 1:
+                lo = piece[0]
+                hi = piece[1]
+                cloud = 1.0
+            run = (k == 0 and in_haze > 0.0 and hi > lo) or (k == 1 and piece[0] < b)
+            if run and out.done == 0:
+                out = march_piece(hf, haze, sun, march, out, o, view, lo, hi, cloud, in_haze, cos_axis)
+        if piece[0] >= b:
             break
-        out = march_piece(hf, haze, sun, march, out, o, view, piece[0], piece[1], 1.0, in_haze, cos_axis)
         t = wp.max(piece[1], piece[0] + hf.tolerance)
     return out
 
@@ -252,13 +265,13 @@ def heightfield_kernel(
         if haze.present != 0:
             span = slab_interval(o[1], view[1], haze.floor, haze.top, t_near, t_end)
         if span[0] >= span[1]:
-            state = march_segment(hf, haze, sun, march, state, o, view, t_near, t_end, 0.0, cos_axis)
-        else:
-            state = march_segment(hf, haze, sun, march, state, o, view, t_near, span[0], 0.0, cos_axis)
-            if state.done == 0:
-                state = march_segment(hf, haze, sun, march, state, o, view, span[0], span[1], 1.0, cos_axis)
-            if state.done == 0:
-                state = march_segment(hf, haze, sun, march, state, o, view, span[1], t_end, 0.0, cos_axis)
+            span = wp.vec2(t_end, t_end)
+        # before, inside and after the haze slab, through one call site (each inlines the whole march)
+        cuts = wp.vec4(t_near, span[0], span[1], t_end)
+        for k in range(3):
+            if state.done == 0 and cuts[k + 1] > cuts[k]:
+                in_haze = wp.where(k == 1, 1.0, 0.0)
+                state = march_segment(hf, haze, sun, march, state, o, view, cuts[k], cuts[k + 1], in_haze, cos_axis)
     radiance[row, col] = state.light
     transmittance[row, col] = exp3(state.tau)
     if state.weight_sum > 1.0e-6:
