@@ -202,3 +202,34 @@ def test_shipped_stages_plan_and_render(tmp_path, capsys, stage):
     image = read_exr(tmp_path / "f.0001.exr")
     rgb = np.stack([image.channels[c] for c in "RGB"], axis=-1)
     assert np.all(np.isfinite(rgb)) and rgb.min() >= 0.0 and rgb.mean() > 1e-3
+
+
+def test_the_analytic_sky_lights_surfaces_in_shadow_and_the_fog():
+    """Under an atmosphere, a floor in a wall's shadow receives only the analytic sky: its radiance is albedo x E/pi
+    of the sky's upper hemisphere (the Riley sky integrated over it); the fog's sky light is albedo L (1 - T) with
+    L the isotropic mean; without an atmosphere both are zero, as before."""
+    import math
+
+    from conftest import look_rotation
+
+    from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
+    from warpsky.scene.terrain import TerrainMesh
+    from warpsky.techniques.sky.light import isotropic_ambient, sky_hemisphere, sky_light
+
+    floor = TerrainMesh("floor", np.array([[-500.0, 0, -500], [-500, 0, 500], [500, 0, 500], [500, 0, -500]]),
+                        np.array([[0, 1, 2], [0, 2, 3]]), np.full(3, 0.5))
+    wall = TerrainMesh("wall", np.array([[0.0, 0, -500], [0, 400, -500], [0, 400, 500], [0, 0, 500]]),
+                       np.array([[0, 1, 2], [0, 2, 3]]), np.full(3, 0.5))
+    sun = Sun(np.array([math.cos(math.radians(30.0)), 0.5, 0.0]), np.ones(3))
+    camera = Camera("down", np.array([-100.0, 50.0, 0.0]), look_rotation((0.0, -1.0, 0.0)), 50.0, 20.0, 20.0,
+                    near=0.5, far=1e4, projection="orthographic")
+    scene = Scene(camera=camera, sun=sun, atmosphere=Atmosphere(), meshes=(floor, wall))
+    sky = sky_light(scene, analytic=True)
+    mean, e_over_pi = sky_hemisphere(scene)
+    assert np.all(e_over_pi > 0.0) and e_over_pi[2] > e_over_pi[0]  # a blue sky
+    (surfaces,), _ = scenery_layers(scene, ("surfaces",), 8, 8, device="cpu", sky=sky)
+    np.testing.assert_allclose(surfaces.radiance, np.broadcast_to(0.5 * e_over_pi, (8, 8, 3)), rtol=1e-5)
+    dark = Scene(camera=camera, sun=sun, meshes=(floor, wall))
+    (unlit,), _ = scenery_layers(dark, ("surfaces",), 8, 8, device="cpu", sky=sky_light(dark, analytic=False))
+    assert np.all(unlit.radiance == 0.0)
+    np.testing.assert_allclose(isotropic_ambient(scene, sky), 0.5 * (mean + 0.5 * e_over_pi))

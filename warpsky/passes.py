@@ -159,20 +159,25 @@ def scenery_sun_transmittance(scene: Scene, device: str):
 
 
 def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: int, *, device: str,
-                   before: list[Layer] | None = None, settings: dict | None = None
+                   before: list[Layer] | None = None, settings: dict | None = None, sky=None
                    ) -> tuple[list[Layer], np.ndarray | None]:
     """The surfaces, height-field and fog passes' Layers for ``scene`` (already lit as the media see it), with the
     ``before`` layers (the media's, the stratiform layers') between the surfaces and the rest; and the surfaces'
     depth (the camera's far distance where no surface is hit; None without a surfaces pass). That depth
     stops the height-field clouds, the haze and the fog (Max: "bounded by the distance to the nearest opaque
-    surface"; Biri: the fog integral runs to the depth buffer). ``settings``: :func:`parse_scenery_settings`'s."""
+    surface"; Biri: the fog integral runs to the depth buffer). ``settings``: :func:`parse_scenery_settings`'s.
+    ``sky``: (mean radiance, E / pi) of the upper hemisphere lighting them (:func:`~warpsky.techniques.sky.light.
+    sky_light`); None: the dome's alone."""
     from warpsky.plan import surfaces_draw_ground
+    from warpsky.techniques.sky.light import isotropic_ambient, sky_light
 
+    sky = sky_light(scene, analytic=False) if sky is None else sky
+    ambient = isotropic_ambient(scene, sky)
     parts, limit = [], None
     if "surfaces" in passes:
         surfaces = _surfaces_pass(device).render(
             scene, width, height, draw_ground=surfaces_draw_ground(scene),
-            sun_transmittance=scenery_sun_transmittance(scene, device))
+            sun_transmittance=scenery_sun_transmittance(scene, device), sky=sky[1])
         parts.append(surfaces)
         limit = surfaces.depth
     parts += before or []
@@ -180,10 +185,11 @@ def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: in
         from warpsky.techniques.heightfield.technique import HeightFieldPass
 
         options = (settings or {}).get("heightfield", {})
-        parts.append(HeightFieldPass(device=device, **options).render(scene, width, height, limit=limit))
+        parts.append(HeightFieldPass(device=device, **options).render(scene, width, height, limit=limit,
+                                                                      ambient=ambient))
     if "fog" in passes:
         from warpsky.techniques.fog.technique import FogPass
 
         options = (settings or {}).get("fog", {})
-        parts.append(FogPass(device=device, **options).render(scene, width, height, limit=limit))
+        parts.append(FogPass(device=device, **options).render(scene, width, height, limit=limit, ambient=ambient))
     return parts, limit

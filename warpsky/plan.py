@@ -79,7 +79,8 @@ class RenderPlan:
             f"technique   {self.technique}",
             f"device      {self.device}",
             f"resolution  {self.width} x {self.height}",
-            "settings    " + ", ".join(f"{k}={_fmt(v)}" for k, v in self.settings_dict().items()),
+            "settings    " + (", ".join(f"{k}={_fmt(v)}" for k, v in self.settings_dict().items())
+                              if "media" in self.passes else f"none: {self.technique} does not run (no voxel media)"),
         ]
         if self.layer_settings is not None:
             lines.append("            " + ", ".join(f"stratiform.{k}={'auto' if v is None else _fmt(v)}"

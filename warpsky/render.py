@@ -27,6 +27,7 @@ from warpsky.resources import check_resources
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene, as_imath_rows
 from warpsky.scene.usd_render import OutputVar, check_outputs
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
+from warpsky.techniques.sky.light import sky_light
 from warpsky.techniques.sky.technique import SkyPass, attenuated_sun
 
 #: Figures of a Monte Carlo render that go into the EXR header (camelCase) and the batch log, where present.
@@ -220,8 +221,9 @@ def render_layers(technique: Technique, scene: Scene, plan: RenderPlan) -> tuple
         opaque = None
         if SCENERY_PASSES & set(plan.passes):
             seen = attenuated_sun(lit) if "sky" in plan.passes else lit
+            sky = sky_light(lit, analytic="sky" in plan.passes)  # from the sun before the air reddens it
             parts, opaque = scenery_layers(seen, plan.passes, width, height, device=plan.device, before=parts,
-                                           settings=plan.scenery_settings)
+                                           settings=plan.scenery_settings, sky=sky)
         main = merge_by_depth(parts, far=lit.camera.far) if len(parts) > 1 else parts[0]
         if "sky" not in plan.passes:
             return main, [main]

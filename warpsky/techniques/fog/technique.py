@@ -79,8 +79,9 @@ class FogPass:
         return (f"FogPass(device={self.device!r}, nodes={self.nodes}, min_pieces={self.min_pieces}, "
                 f"max_pieces={self.max_pieces}, cut_depth={self.cut_depth:g})")
 
-    def march(self, scene: Scene) -> FogMarch:
-        """The kernel's quadrature settings and light for ``scene``."""
+    def march(self, scene: Scene, ambient=None) -> FogMarch:
+        """The kernel's quadrature settings and light for ``scene`` (``ambient``: the isotropic sky radiance, RGB;
+        None: :func:`~warpsky.techniques.dome.ambient_radiance`, the dome's)."""
         abscissae, weights = np.polynomial.legendre.leggauss(self.nodes)
         march = FogMarch()
         march.nodes = wp.array(0.5 * (abscissae + 1.0), dtype=wp.float64, device=self.device)
@@ -93,16 +94,20 @@ class FogPass:
         march.sun_direction = wp.vec3d(*direction.tolist())
         march.sun_irradiance = wp.vec3d(*(np.zeros(3) if light is None else light.irradiance).tolist())
         march.sun_on = int(light is not None and light.lit and direction[1] > 0.0)
-        march.ambient = wp.vec3d(*np.asarray(ambient_radiance(scene), dtype=np.float64).tolist())
+        ambient = ambient_radiance(scene) if ambient is None else ambient
+        march.ambient = wp.vec3d(*np.asarray(ambient, dtype=np.float64).tolist())
         return march
 
-    def render(self, scene: Scene, width: int, height: int, *, limit: np.ndarray | None = None) -> Layer:
+    def render(self, scene: Scene, width: int, height: int, *, limit: np.ndarray | None = None,
+               ambient=None) -> Layer:
         """The fogs of ``scene`` at ``width`` x ``height`` (camera conformed to that aspect ratio).
 
         Args:
             limit: None, or (height, width) float32 camera-space depths [m] of the nearest opaque surface: the fog
                 stops there (the ray distance is depth / cos of its angle to the view axis); it also stops at the
                 camera's far plane.
+            ambient: The isotropic sky radiance lighting the fog, RGB (None: the dome's,
+                :func:`~warpsky.techniques.dome.ambient_radiance`).
         """
         started = time.perf_counter()
         camera = scene.camera.conformed(width, height)
@@ -120,8 +125,8 @@ class FogPass:
             radiance = wp.zeros((height, width), dtype=wp.vec3)
             transmittance = wp.zeros((height, width), dtype=wp.vec3)
             depth = wp.zeros((height, width), dtype=float)
-            inputs = [fogs, self.march(scene), pinhole_camera(camera, width, height), limits, int(limit is not None),
-                      radiance, transmittance, depth]
+            inputs = [fogs, self.march(scene, ambient), pinhole_camera(camera, width, height), limits,
+                      int(limit is not None), radiance, transmittance, depth]
             launch_rows(fog_kernel, height, width, inputs, device)
             wp.synchronize_device(device)
             return Layer(radiance.numpy(), transmittance.numpy(), depth.numpy(),

@@ -111,7 +111,8 @@ class HeightFieldPass:
         return (f"HeightFieldPass(mode={self.mode!r}, step_length={self.step_length}, "
                 f"haze_step_length={self.haze_step_length}, max_steps={self.max_steps}, device={self.device!r})")
 
-    def march_settings(self, scene: Scene, clouds: HeightFieldClouds, has_limit: bool) -> HeightFieldMarch:
+    def march_settings(self, scene: Scene, clouds: HeightFieldClouds, has_limit: bool,
+                       ambient=None) -> HeightFieldMarch:
         cloud_auto, haze_auto = automatic_steps(clouds)
         march = HeightFieldMarch()
         march.cloud_step = float(self.step_length or cloud_auto)
@@ -122,15 +123,18 @@ class HeightFieldPass:
         march.haze_step_max = 0.25 / haze_sigma if haze_sigma > 0.0 else 1.0e30
         march.max_steps = self.max_steps
         march.min_transmittance = self.min_transmittance
-        march.ambient = ambient_vec(scene)
-        march.ambient_on = int(scene.dome is not None)
+        march.ambient = ambient_vec(scene) if ambient is None else wp.vec3(*np.asarray(ambient, np.float64).tolist())
+        march.ambient_on = int(np.any(np.asarray(march.ambient) > 0.0))
         march.sexp = int(self.mode == "sexp")
         march.has_limit = int(has_limit)
         return march
 
-    def render(self, scene: Scene, width: int, height: int, *, limit: np.ndarray | None = None) -> Layer:
+    def render(self, scene: Scene, width: int, height: int, *, limit: np.ndarray | None = None,
+               ambient=None) -> Layer:
         """Render ``scene``'s deck at ``width`` x ``height``. ``limit``: None or (height, width) float32
-        camera-space depths [m] of the nearest opaque surface; rays stop there and at the far clipping plane."""
+        camera-space depths [m] of the nearest opaque surface; rays stop there and at the far clipping plane.
+        ``ambient``: the isotropic sky radiance, RGB (None: the dome's,
+        :func:`~warpsky.techniques.dome.ambient_radiance`)."""
         camera = scene.camera.conformed(width, height)
         clouds = the_deck(scene)
         started = time.perf_counter()
@@ -143,7 +147,7 @@ class HeightFieldPass:
                 raise UsageError(f"height-field pass: limit must be ({height}, {width}) depths, got {limit.shape}")
         device = self.device
         with wp.ScopedDevice(device):
-            march = self.march_settings(scene, clouds, limit is not None)
+            march = self.march_settings(scene, clouds, limit is not None, ambient)
             depth_limit = wp.array(limit if limit is not None else np.zeros((1, 1), np.float32), dtype=float)
             radiance = wp.zeros((height, width), dtype=wp.vec3)
             transmittance = wp.zeros((height, width), dtype=wp.vec3)

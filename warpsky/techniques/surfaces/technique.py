@@ -65,7 +65,7 @@ class SurfacesPass:
 
     # --------------------------------------------------------------------------------------------- public
     def render(self, scene: Scene, width: int, height: int, *, draw_ground: bool = True,
-               sun_transmittance=None) -> Layer:
+               sun_transmittance=None, sky=None) -> Layer:
         """Render the meshes (and the ground plane when ``draw_ground`` and the scene has one).
 
         Args:
@@ -74,6 +74,7 @@ class SurfacesPass:
             draw_ground: Whether to draw ``scene.ground`` (False: another pass draws it).
             sun_transmittance: Optional ``f(points_world (N, 3) float64 [m]) -> (N, 3)`` transmittance towards the
                 sun at the hit points (fog, height-field cloud shadows), multiplied into the sunlight.
+            sky: E / pi [RGB] of the sky's upper hemisphere lighting the surfaces (None: the dome's).
 
         Returns:
             A Layer: radiance, transmittance 0 where a surface is hit and 1 elsewhere, depth of the hit (the
@@ -95,8 +96,10 @@ class SurfacesPass:
             media = VoxelMediaBuffers.upload(scene.media, camera.position, self.device, scene.species,
                                              time_s=scene.time_s)
             lighting = SurfaceLighting()
-            lighting.sky = wp.vec3(*(upper_hemisphere(scene.dome)[1] if scene.dome is not None else np.zeros(3)))
-            lighting.sky_on = int(scene.dome is not None)
+            if sky is None:
+                sky = upper_hemisphere(scene.dome)[1] if scene.dome is not None else np.zeros(3)
+            lighting.sky = wp.vec3(*np.asarray(sky, np.float64).tolist())
+            lighting.sky_on = int(np.any(np.asarray(sky) > 0.0))
             lighting.shadow_step = float(media.min_voxel_size)
             lighting.shadow_bias = SHADOW_BIAS
             radiance = wp.zeros((height, width), dtype=wp.vec3)
