@@ -30,7 +30,7 @@ help:
 	@echo "                          out/valley_fog/ with a contact sheet (about 1 min on 2 CPU cores)"
 	@echo "make sunbeams           - sunbeams through gaps in a Max 1986 cloud deck over the terrain, lighting the"
 	@echo "                          haze, to out/sunbeams/: frame 1 (exact), 4 drifting frames and a contact sheet,"
-	@echo "                          frame 1 with Max's thickness rule (about 6 min on 2 CPU cores)"
+	@echo "                          frame 1 with Max's thickness rule (about 3 min on 2 CPU cores)"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 
