@@ -12,7 +12,7 @@ STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
 	@echo "                          (the render: about 1 min on 2 CPU cores)"
-	@echo "make test               - install into $(VENV) and run every test on the CPU (about 8 min on 2 idle cores)"
+	@echo "make test               - install into $(VENV) and run every test on the CPU (about 8 min on 2 idle cores, cold kernel cache)"
 	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; under 3 min)"
 	@echo "make lint               - ruff"
 	@echo "make bench              - run benchmarks/bench_single_scatter.py (cuda too when present)"
