@@ -233,3 +233,31 @@ def test_the_analytic_sky_lights_surfaces_in_shadow_and_the_fog():
     (unlit,), _ = scenery_layers(dark, ("surfaces",), 8, 8, device="cpu", sky=sky_light(dark, analytic=False))
     assert np.all(unlit.radiance == 0.0)
     np.testing.assert_allclose(isotropic_ambient(scene, sky), 0.5 * (mean + 0.5 * e_over_pi))
+
+
+def test_terrain_shadows_the_sunlit_fog():
+    """A 400 m wall with the sun 30 deg up behind it: fog in its shadow scatters no sunlight (nothing else lights
+    it here), the same fog without the wall does, and fog the shadow does not reach is unchanged."""
+    import math
+
+    from conftest import look_rotation
+
+    from warpsky.scene.analytic_fog import AnalyticFog, ConstantTerm
+    from warpsky.scene.model import Camera, Scene, Sun
+    from warpsky.scene.terrain import TerrainMesh
+
+    wall = TerrainMesh("wall", np.array([[0.0, -10, -500], [0, 400, -500], [0, 400, 500], [0, -10, 500]]),
+                       np.array([[0, 1, 2], [0, 2, 3]]), np.full(3, 0.5))
+    fog = AnalyticFog("fog", (ConstantTerm(0.01),), floor=0.0, top=40.0)
+    sun = Sun(np.array([math.cos(math.radians(30.0)), 0.5, 0.0]), np.ones(3))
+    results = {}
+    for x in (-100.0, 2000.0):  # in the wall's shadow (it reaches x = -693 m at the ground), and far beside it
+        camera = Camera("down", np.array([x, 60.0, 0.0]), look_rotation((0.0, -1.0, 0.0)), 50.0, 10.0, 10.0,
+                        near=0.5, far=1e4, projection="orthographic")
+        for meshes in ((wall,), ()):
+            scene = Scene(camera=camera, sun=sun, meshes=meshes, fogs=(fog,))
+            passes = ("surfaces", "fog") if meshes else ("fog",)
+            parts, _ = scenery_layers(scene, passes, 4, 4, device="cpu")
+            results[x, bool(meshes)] = parts[-1].radiance
+    assert np.all(results[-100.0, True] == 0.0) and np.all(results[-100.0, False] > 1e-4)
+    np.testing.assert_array_equal(results[2000.0, True], results[2000.0, False])

@@ -191,5 +191,7 @@ def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: in
         from warpsky.techniques.fog.technique import FogPass
 
         options = (settings or {}).get("fog", {})
-        parts.append(FogPass(device=device, **options).render(scene, width, height, limit=limit, ambient=ambient))
+        occluders = _surfaces_pass(device).occluders if scene.meshes and "surfaces" in passes else None
+        parts.append(FogPass(device=device, **options).render(scene, width, height, limit=limit, ambient=ambient,
+                                                               occluders=occluders))
     return parts, limit

@@ -272,3 +272,17 @@ def _relative_points(meshes, camera_position) -> np.ndarray:
     """(N, 3) float32 camera-relative points of all meshes, subtracted in float64."""
     eye = np.asarray(camera_position, dtype=np.float64)
     return np.ascontiguousarray(np.concatenate([m.points - eye for m in meshes]), dtype=np.float32)
+
+
+def no_surfaces(device) -> SurfaceMeshes:
+    """A :class:`SurfaceMeshes` with no triangles (every query misses), for kernels that take occluders and a frame
+    without meshes."""
+    out = SurfaceMeshes()
+    out.mesh = wp.uint64(0)
+    out.triangle_material = wp.zeros(1, dtype=wp.int32, device=device)
+    out.materials = wp.zeros(1, dtype=SurfaceMaterial, device=device)
+    out.texels = wp.zeros(1, dtype=wp.vec3, device=device)
+    out.normals = wp.zeros(1, dtype=wp.vec3, device=device)
+    out.smooth = 0
+    out.triangle_count = 0
+    return out

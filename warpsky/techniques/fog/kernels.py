@@ -26,6 +26,7 @@ import math
 import warp as wp
 
 from warpsky.media.analytic_fog import FogSet, fog_density, fogs_optical_depth
+from warpsky.surfaces.mesh import SurfaceMeshes, mesh_occluded
 from warpsky.techniques.common import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
 
 FOUR_PI = wp.constant(wp.float64(4.0 * math.pi))
@@ -46,6 +47,7 @@ class FogMarch:
     sun_irradiance: wp.vec3d  # RGB, at normal incidence
     sun_on: int  # 0: no sun term (none, unlit or at/below the horizon)
     ambient: wp.vec3d  # isotropic sky radiance [irradiance/sr], RGB
+    occluders: SurfaceMeshes  # meshes that shadow the fog from the sun (terrain), camera-relative
 
 
 @wp.struct
@@ -202,6 +204,17 @@ def sun_optical_depth(fogs: FogSet, march: FogMarch, x: wp.vec3d) -> wp.vec3d:
     return fogs_optical_depth(fogs, x, x + length * march.sun_direction)
 
 
+@wp.func
+def sun_blocked(march: FogMarch, x: wp.vec3d) -> bool:
+    """Whether a mesh (terrain) lies between the eye-relative point ``x`` and the sun: a BVH any-hit ray, started
+    2e-5 (1 m + |x|) towards the sun so that float32 rounding near a surface does not hide the point."""
+    if march.occluders.triangle_count == 0:
+        return False
+    p = wp.vec3(float(x[0]), float(x[1]), float(x[2]))
+    d = wp.vec3(float(march.sun_direction[0]), float(march.sun_direction[1]), float(march.sun_direction[2]))
+    return mesh_occluded(march.occluders, p + d * (2.0e-5 * (1.0 + wp.length(p))), d, 1.0e30)
+
+
 @wp.struct
 class FogPoint:
     """The fogs' coefficients at one point, RGB [1/m]."""
@@ -262,7 +275,7 @@ def fog_ray(fogs: FogSet, march: FogMarch, o: wp.vec3d, w: wp.vec3d, t0: wp.floa
             sky_den += weight * seen
             out.opacity += weight * luminance64(seen)
             distance += weight * luminance64(seen) * s
-            if march.sun_on != 0:
+            if march.sun_on != 0 and not sun_blocked(march, x):
                 lit = exp3d(sun_optical_depth(fogs, march, x))
                 sun += weight * wp.cw_mul(wp.cw_mul(point.sun_scattering, view), lit)
         tau += fogs_optical_depth(fogs, o + t * w, o + t_next * w)

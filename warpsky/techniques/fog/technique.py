@@ -32,6 +32,7 @@ from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.analytic_fog import fog_struct
 from warpsky.scene.model import Scene
+from warpsky.surfaces.mesh import no_surfaces
 from warpsky.techniques.base import Layer
 from warpsky.techniques.common import pinhole_camera
 from warpsky.techniques.dome import ambient_radiance
@@ -79,9 +80,10 @@ class FogPass:
         return (f"FogPass(device={self.device!r}, nodes={self.nodes}, min_pieces={self.min_pieces}, "
                 f"max_pieces={self.max_pieces}, cut_depth={self.cut_depth:g})")
 
-    def march(self, scene: Scene, ambient=None) -> FogMarch:
+    def march(self, scene: Scene, ambient=None, occluders=None) -> FogMarch:
         """The kernel's quadrature settings and light for ``scene`` (``ambient``: the isotropic sky radiance, RGB;
-        None: :func:`~warpsky.techniques.dome.ambient_radiance`, the dome's)."""
+        None: :func:`~warpsky.techniques.dome.ambient_radiance`, the dome's; ``occluders``: the
+        :class:`~warpsky.surfaces.mesh.MeshBuffers` of the frame's meshes, which shadow the fog, or None)."""
         abscissae, weights = np.polynomial.legendre.leggauss(self.nodes)
         march = FogMarch()
         march.nodes = wp.array(0.5 * (abscissae + 1.0), dtype=wp.float64, device=self.device)
@@ -94,12 +96,13 @@ class FogPass:
         march.sun_direction = wp.vec3d(*direction.tolist())
         march.sun_irradiance = wp.vec3d(*(np.zeros(3) if light is None else light.irradiance).tolist())
         march.sun_on = int(light is not None and light.lit and direction[1] > 0.0)
+        march.occluders = no_surfaces(self.device) if occluders is None else occluders.surfaces
         ambient = ambient_radiance(scene) if ambient is None else ambient
         march.ambient = wp.vec3d(*np.asarray(ambient, dtype=np.float64).tolist())
         return march
 
     def render(self, scene: Scene, width: int, height: int, *, limit: np.ndarray | None = None,
-               ambient=None) -> Layer:
+               ambient=None, occluders=None) -> Layer:
         """The fogs of ``scene`` at ``width`` x ``height`` (camera conformed to that aspect ratio).
 
         Args:
@@ -108,6 +111,8 @@ class FogPass:
                 camera's far plane.
             ambient: The isotropic sky radiance lighting the fog, RGB (None: the dome's,
                 :func:`~warpsky.techniques.dome.ambient_radiance`).
+            occluders: The frame's meshes (:class:`~warpsky.surfaces.mesh.MeshBuffers`, relative to this camera),
+                whose shadows the sunlit fog lies in (terrain); None: no shadows.
         """
         started = time.perf_counter()
         camera = scene.camera.conformed(width, height)
@@ -125,7 +130,7 @@ class FogPass:
             radiance = wp.zeros((height, width), dtype=wp.vec3)
             transmittance = wp.zeros((height, width), dtype=wp.vec3)
             depth = wp.zeros((height, width), dtype=float)
-            inputs = [fogs, self.march(scene, ambient), pinhole_camera(camera, width, height), limits,
+            inputs = [fogs, self.march(scene, ambient, occluders), pinhole_camera(camera, width, height), limits,
                       int(limit is not None), radiance, transmittance, depth]
             launch_rows(fog_kernel, height, width, inputs, device)
             wp.synchronize_device(device)

@@ -111,6 +111,12 @@ class SurfacesPass:
             stats.update(hits=int(hit.sum()), seconds=time.perf_counter() - started)
             return Layer(radiance.numpy(), transmittance.numpy(), image.depth.numpy(), stats)
 
+    @property
+    def occluders(self) -> MeshBuffers | None:
+        """The meshes of the last frame this pass drew, on its device relative to that frame's camera (for other
+        passes' shadow rays); None before the first."""
+        return self._buffers
+
     def depth_only(self, scene: Scene, width: int, height: int, *, draw_ground: bool = True) -> np.ndarray:
         """(H, W) float32 camera-space depth [m] of the nearest surface (far where none; near everywhere when the
         camera is under the terrain), for the other passes' ``limit``; no shading."""
