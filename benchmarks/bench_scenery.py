@@ -58,7 +58,10 @@ def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -
         from warpsky.techniques.fog.technique import FogPass
 
         fog = FogPass(device=device)
-        row("fog pass", _best(lambda: fog.render(scene, width, height, limit=limit), repeats)[0])
+        occluders = surfaces.occluders if scene.meshes else None
+        row("fog pass (terrain shadows)",
+            _best(lambda: fog.render(scene, width, height, limit=limit, occluders=occluders), repeats)[0])
+        row("fog pass (no shadows)", _best(lambda: fog.render(scene, width, height, limit=limit), repeats)[0])
     if scene.heightfield_clouds:
         from warpsky.techniques.heightfield.technique import HeightFieldPass
 
