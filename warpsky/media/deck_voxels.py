@@ -23,13 +23,12 @@ square, so it is exactly homogeneous there (extinction, albedo and Henyey-Greens
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 
 from warpsky.errors import UsageError
-from warpsky.media.layer_voxels import VOXEL_BUDGET
+from warpsky.media.layer_voxels import VOXEL_BUDGET, ColumnGrid
 from warpsky.scene.heightfield_clouds import HeightFieldClouds, surface_heights
 from warpsky.scene.model import PhaseKind, PhaseModel, VoxelMedium
 
@@ -37,49 +36,13 @@ from warpsky.scene.model import PhaseKind, PhaseModel, VoxelMedium
 CHUNK_SAMPLES = 2**22
 
 
-@dataclasses.dataclass(frozen=True)
-class DeckGrid:
-    """Where a deck's voxels lie, before any is allocated.
-
-    Attributes:
-        origin: World (x, z) [m] of the grid's corner (the outer edge of voxel column (0, 0)).
-        width: Horizontal voxel edge (the same along x and z) [m].
-        height: Vertical voxel edge Δy [m].
-        shape: Voxel counts (n_x, n_y, n_z).
-        floor: World y [m] of the grid's floor (the deck's lowest base).
-    """
-
-    origin: tuple[float, float]
-    width: float
-    height: float
-    shape: tuple[int, int, int]
-    floor: float
-
-    @property
-    def voxels(self) -> int:
-        return math.prod(self.shape)
-
-    def column_centres(self) -> tuple[np.ndarray, np.ndarray]:
-        """World x (n_x,) and z (n_z,) of the voxel column centres [m]."""
-        xs = self.origin[0] + (np.arange(self.shape[0]) + 0.5) * self.width
-        zs = self.origin[1] + (np.arange(self.shape[2]) + 0.5) * self.width
-        return xs, zs
-
-    def world_from_index(self) -> np.ndarray:
-        """4x4 affine map from index coordinates (voxel centres at integers) to world metres."""
-        m = np.eye(4)
-        m[0, 0], m[1, 1], m[2, 2] = self.width, self.height, self.width
-        m[:3, 3] = (self.origin[0] + 0.5 * self.width, self.floor + 0.5 * self.height,
-                    self.origin[1] + 0.5 * self.width)
-        return m
-
-
 def deck_grid(clouds: HeightFieldClouds, centre_xz, half_size: float, width: float, height: float, *,
-              max_voxels: int = VOXEL_BUDGET, setting: str = "voxel") -> DeckGrid:
+              max_voxels: int = VOXEL_BUDGET, setting: str = "voxel") -> ColumnGrid:
     """The grid :func:`voxelize_deck` fills, checked against ``max_voxels`` (nothing is allocated).
 
     The square of half-size ``half_size`` [m] around world ``centre_xz`` is split into whole voxels no wider than
-    ``width`` [m]; rows of ``height`` [m] are stacked from the deck's lowest base until they reach its highest top.
+    ``width`` [m] (square columns); rows of ``height`` [m] are stacked from the deck's lowest base until they reach
+    its highest top.
     ``setting`` names what set the sizes in the error messages."""
     where = f"height-field clouds {clouds.name}"
     for name, value in ((f"{setting} (extent)", half_size), (f"{setting} (width)", width),
@@ -94,7 +57,8 @@ def deck_grid(clouds: HeightFieldClouds, centre_xz, half_size: float, width: flo
                          f"{half_size:g} m gives {shape[0]}x{shape[1]}x{shape[2]} = {math.prod(shape):,} voxels, over "
                          f"the budget of {max_voxels:,}; use larger voxels or a smaller extent")
     cx, cz = (float(v) for v in centre_xz)
-    return DeckGrid((cx - half_size, cz - half_size), 2.0 * half_size / count, float(height), shape, float(low))
+    edge = 2.0 * half_size / count
+    return ColumnGrid((cx - half_size, cz - half_size), (edge, edge), float(height), shape, float(low))
 
 
 def sub_column_offsets(width: float, supersample: int) -> np.ndarray:
@@ -102,12 +66,12 @@ def sub_column_offsets(width: float, supersample: int) -> np.ndarray:
     return ((np.arange(supersample) + 0.5) / supersample - 0.5) * width
 
 
-def cloud_fractions(clouds: HeightFieldClouds, grid: DeckGrid, time_s: float, supersample: int) -> np.ndarray:
+def cloud_fractions(clouds: HeightFieldClouds, grid: ColumnGrid, time_s: float, supersample: int) -> np.ndarray:
     """(n_x, n_y, n_z) float32 partial-volume densities of the deck at ``time_s`` [s] (module docstring)."""
     s = int(supersample)
     nx, ny, nz = grid.shape
     xs, zs = grid.column_centres()
-    offsets = sub_column_offsets(grid.width, s)
+    offsets = sub_column_offsets(grid.width[0], s)
     sub_z = (zs[:, None] + offsets[None, :]).reshape(-1)
     edges = grid.floor - clouds.mean_altitude + np.arange(ny + 1) * grid.height  # row edges above the mean plane
     out = np.empty((nx, ny, nz), np.float32)
@@ -165,10 +129,10 @@ def voxelize_deck(clouds: HeightFieldClouds, time_s: float, centre_xz, half_size
     return cloud, haze_box(clouds, grid)
 
 
-def haze_box(clouds: HeightFieldClouds, grid: DeckGrid) -> VoxelMedium:
+def haze_box(clouds: HeightFieldClouds, grid: ColumnGrid) -> VoxelMedium:
     """The deck's haze as one voxel of density 1 filling [floor, top] over the grid's square."""
     haze = clouds.haze
-    span = grid.width * grid.shape[0]
+    span = grid.width[0] * grid.shape[0]
     floor, top = haze.floor, clouds.haze_top
     m = np.eye(4)
     m[0, 0], m[1, 1], m[2, 2] = span, top - floor, span

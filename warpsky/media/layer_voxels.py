@@ -39,22 +39,23 @@ LAYER_SPECIES = "stratus"
 
 
 @dataclasses.dataclass(frozen=True)
-class LayerGrid:
-    """Where a layer's voxels lie, before any is allocated.
+class ColumnGrid:
+    """Where the voxels of a height-field medium (a stratiform layer, a height-field deck) lie, before any is
+    allocated: columns over a horizontal rectangle, rows stacked from a floor.
 
     Attributes:
         origin: World (x, z) [m] of the grid's corner (the outer edge of voxel column (0, 0)).
         width: Horizontal voxel edges (Δx, Δz) [m].
         height: Vertical voxel edge Δy [m].
         shape: Voxel counts (n_x, n_y, n_z).
-        base: World y [m] of the grid's floor (the layer's base).
+        floor: World y [m] of the grid's floor (a layer's base, a deck's lowest base).
     """
 
     origin: tuple[float, float]
     width: tuple[float, float]
     height: float
     shape: tuple[int, int, int]
-    base: float
+    floor: float
 
     @property
     def voxels(self) -> int:
@@ -70,13 +71,13 @@ class LayerGrid:
         """4x4 affine map from index coordinates (voxel centres at integers) to world metres."""
         m = np.eye(4)
         m[0, 0], m[1, 1], m[2, 2] = self.width[0], self.height, self.width[1]
-        m[:3, 3] = (self.origin[0] + 0.5 * self.width[0], self.base + 0.5 * self.height,
+        m[:3, 3] = (self.origin[0] + 0.5 * self.width[0], self.floor + 0.5 * self.height,
                     self.origin[1] + 0.5 * self.width[1])
         return m
 
 
 def layer_grid(layer: StratiformLayer, voxel: float, *, vertical: float | None = None, top: float | None = None,
-               bounds=None, max_voxels: int = VOXEL_BUDGET, setting: str = "voxel") -> LayerGrid:
+               bounds=None, max_voxels: int = VOXEL_BUDGET, setting: str = "voxel") -> ColumnGrid:
     """The grid :func:`voxelize_layer` fills, checked against ``max_voxels`` (nothing is allocated).
 
     The layer's extent is split into whole voxels no wider than ``voxel`` [m] (so the columns tile it exactly);
@@ -108,7 +109,7 @@ def layer_grid(layer: StratiformLayer, voxel: float, *, vertical: float | None =
                          f"{shape[0]}x{shape[1]}x{shape[2]} = {math.prod(shape):,} voxels, over the budget of "
                          f"{max_voxels:,}; use larger voxels")
     origin = (layer.origin[0] + first[0] * width[0], layer.origin[1] + first[1] * width[1])
-    return LayerGrid(origin, width, float(vertical), shape, float(layer.base_altitude))
+    return ColumnGrid(origin, width, float(vertical), shape, float(layer.base_altitude))
 
 
 def column_thickness(layer: StratiformLayer, xs: np.ndarray, zs: np.ndarray) -> np.ndarray:

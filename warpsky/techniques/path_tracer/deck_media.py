@@ -27,9 +27,9 @@ import math
 
 import numpy as np
 
-from warpsky.media.deck_voxels import DeckGrid, deck_grid, voxelize_deck
+from warpsky.media.deck_voxels import deck_grid, voxelize_deck
 from warpsky.media.heightfield import feature_length
-from warpsky.media.layer_voxels import VOXEL_BUDGET
+from warpsky.media.layer_voxels import VOXEL_BUDGET, ColumnGrid
 from warpsky.resources import MemoryEstimate
 from warpsky.scene.heightfield_clouds import HeightFieldClouds
 from warpsky.scene.model import Scene
@@ -114,7 +114,7 @@ def deck_voxel_sizes(scene: Scene, clouds: HeightFieldClouds, settings, width: i
             rows * (scale if given_height is None else 1.0))
 
 
-def supersample(grid: DeckGrid) -> int:
+def supersample(grid: ColumnGrid) -> int:
     """Sub-columns per column along each axis: 4 while the grid's sub-column samples stay within
     :data:`SUPERSAMPLE_SAMPLES`, else 2, else 1."""
     for s in (4, 2):
@@ -123,7 +123,7 @@ def supersample(grid: DeckGrid) -> int:
     return 1
 
 
-def deck_plan(scene: Scene, settings, width: int, height: int) -> tuple[HeightFieldClouds, DeckGrid, int] | None:
+def deck_plan(scene: Scene, settings, width: int, height: int) -> tuple[HeightFieldClouds, ColumnGrid, int] | None:
     """(deck, grid, sub-columns per axis) of the scene's deck as the path tracer voxelises it (None without a
     deck); a grid over the budget is refused (UsageError naming the settings)."""
     clouds = the_deck(scene)
@@ -141,8 +141,8 @@ def with_deck_as_media(scene: Scene, settings, width: int, height: int) -> Scene
     if planned is None:
         return scene
     clouds, grid, s = planned
-    media = voxelize_deck(clouds, scene.time_s, scene.camera.position[[0, 2]], 0.5 * grid.width * grid.shape[0],
-                          grid.width, grid.height, supersample=s, setting=SETTINGS)
+    media = voxelize_deck(clouds, scene.time_s, scene.camera.position[[0, 2]], 0.5 * grid.width[0] * grid.shape[0],
+                          grid.width[0], grid.height, supersample=s, setting=SETTINGS)
     return dataclasses.replace(scene, media=scene.media + media, heightfield_clouds=())
 
 
@@ -171,8 +171,8 @@ def deck_voxel_features(scene: Scene, settings, width: int, height: int, feature
     how = f" ({', '.join(auto)} auto)" if auto else ""
     haze = ", haze as a homogeneous box over the same square" if clouds.haze is not None else ""
     line = (f"{clouds.name}: Max 1986 deck voxelised for the path tracer at t = {scene.time_s:g} s over a square of "
-            f"half-size {0.5 * grid.width * grid.shape[0]:.4g} m around the camera: {grid.width:.4g} x "
-            f"{grid.width:.4g} x {grid.height:.4g} m voxels{how}, {grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} = "
+            f"half-size {0.5 * grid.width[0] * grid.shape[0]:.4g} m around the camera: {grid.width[0]:.4g} x "
+            f"{grid.width[1]:.4g} x {grid.height:.4g} m voxels{how}, {grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} = "
             f"{grid.voxels:,} ({grid.voxels * 4 / 2**20:.1f} MiB), partial volume ({s}x{s} sub-columns), density "
             f"{clouds.density:g} 1/m{haze}; no height-field pass (multiple scattering traced)")
     out = dict(features)
