@@ -69,6 +69,7 @@ import numpy as np
 
 from warpsky.errors import SceneError
 from warpsky.scene.checks import _vec3
+from warpsky.scene.usd_prims import float_array_attr
 
 #: ``warpsky:kind`` of an analytic fog prim.
 FOG_KIND = "analyticFog"
@@ -310,23 +311,6 @@ class AnalyticFog:
 
 
 # ------------------------------------------------------------------------------------------------------- USD
-def _array_attr(prim, name: str, tc, width: int) -> np.ndarray | None:
-    """An authored array attribute as (N, width) float64 (width 1: (N,)), or None when unauthored."""
-    attr = prim.GetAttribute(name)
-    if not attr or not attr.HasAuthoredValue():
-        return None
-    value = attr.Get(tc)
-    try:
-        array = np.array(value if value is not None else [], dtype=np.float64)
-        array = array.reshape(-1) if width == 1 else array.reshape(-1, width)
-    except (TypeError, ValueError):
-        kind = "float[]" if width == 1 else f"float{width}[]"
-        raise SceneError(f"{prim.GetPath()}.{name} must be a {kind}, got {value!r}") from None
-    if not np.all(np.isfinite(array)):
-        raise SceneError(f"{prim.GetPath()}.{name} must hold finite numbers, got {array.tolist()}")
-    return array
-
-
 def _same_length(prim, arrays: dict) -> int:
     """The common length of the authored arrays in ``arrays`` ({attribute: array or None}); SceneError naming the
     first one that differs from the first authored one."""
@@ -419,9 +403,9 @@ def _read_terms(reader, prim, tc, place: _Placement) -> list:
 
 
 def _cosines(prim, tc, place: _Placement) -> list:
-    arrays = {"warpsky:fog:cosine:amplitudes": _array_attr(prim, "warpsky:fog:cosine:amplitudes", tc, 1),
-              "warpsky:fog:cosine:waveVectors": _array_attr(prim, "warpsky:fog:cosine:waveVectors", tc, 3),
-              "warpsky:fog:cosine:phases": _array_attr(prim, "warpsky:fog:cosine:phases", tc, 1)}
+    arrays = {"warpsky:fog:cosine:amplitudes": float_array_attr(prim, "warpsky:fog:cosine:amplitudes", tc, 1),
+              "warpsky:fog:cosine:waveVectors": float_array_attr(prim, "warpsky:fog:cosine:waveVectors", tc, 3),
+              "warpsky:fog:cosine:phases": float_array_attr(prim, "warpsky:fog:cosine:phases", tc, 1)}
     count = _same_length(prim, arrays)
     amplitudes, waves, phases = arrays.values()
     if count and (amplitudes is None or waves is None):
@@ -436,7 +420,7 @@ def _cosines(prim, tc, place: _Placement) -> list:
 
 
 def _polynomials(reader, prim, tc, place: _Placement) -> list:
-    coefficients = _array_attr(prim, "warpsky:fog:polynomial:coefficients", tc, 1)
+    coefficients = float_array_attr(prim, "warpsky:fog:polynomial:coefficients", tc, 1)
     if coefficients is None or coefficients.size == 0:
         return []
     up = np.array([0.0, 1.0, 0.0]) if getattr(reader, "up_axis", "Y") == "Y" else np.array([0.0, 0.0, 1.0])
@@ -457,7 +441,7 @@ def _polynomials(reader, prim, tc, place: _Placement) -> list:
 
 
 def _blobs(prim, tc, place: _Placement) -> list:
-    arrays = {name: _array_attr(prim, name, tc, width) for name, width in (
+    arrays = {name: float_array_attr(prim, name, tc, width) for name, width in (
         ("warpsky:fog:blob:centers", 3), ("warpsky:fog:blob:strengths", 1), ("warpsky:fog:blob:radii", 1),
         ("warpsky:fog:blob:directions", 3))}
     count = _same_length(prim, arrays)

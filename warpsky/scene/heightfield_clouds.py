@@ -65,6 +65,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from warpsky.errors import SceneError
+from warpsky.scene.usd_prims import float_array_attr
 
 #: ``warpsky:kind`` of a height-field cloud prim.
 HEIGHTFIELD_KIND = "heightFieldClouds"
@@ -296,23 +297,6 @@ class HeightFieldClouds:
 
 
 # ------------------------------------------------------------------------------------------------------ USD
-def _array_attr(prim, name: str, tc, width: int) -> np.ndarray | None:
-    """An authored float[] (width 1) or float2[] (width 2) as a (N,) / (N, 2) float64 array of finite values."""
-    attr = prim.GetAttribute(name)
-    if not attr or not attr.HasAuthoredValue():
-        return None
-    value = attr.Get(tc)
-    kind = "float[]" if width == 1 else f"float{width}[]"
-    try:
-        array = np.array(value, dtype=np.float64)
-        array = array.reshape(-1) if width == 1 else array.reshape(-1, width)
-    except (TypeError, ValueError):
-        raise SceneError(f"{prim.GetPath()}.{name} must be a {kind}, got {value!r}") from None
-    if not np.all(np.isfinite(array)):
-        raise SceneError(f"{prim.GetPath()}.{name} must hold finite values, got {array.tolist()}")
-    return array
-
-
 def _read_haze(reader, prim, tc, mpu: float) -> HazeSpec | None:
     path = prim.GetPath()
     density = reader._color_attr(prim, "warpsky:haze:density", tc)
@@ -352,16 +336,16 @@ def read_heightfield_clouds(reader, prim, time_code) -> HeightFieldClouds:
     world = reader._world(prim, time_code)
     translation = world[:3, 3]
     hf = "warpsky:hf:"
-    poly = _array_attr(prim, hf + "polynomial", time_code, 1)
+    poly = float_array_attr(prim, hf + "polynomial", time_code, 1)
     poly = np.zeros(1) if poly is None else poly
     if poly.size not in (1, 3, 6):
         raise SceneError(f"{path}.{hf}polynomial must hold 1, 3 or 6 coefficients, got {poly.size}")
     poly = np.concatenate([poly, np.zeros(6 - poly.size)]) * np.array([mpu, 1.0, 1.0, 1 / mpu, 1 / mpu, 1 / mpu])
-    waves = _array_attr(prim, hf + "waveVectors", time_code, 2)
+    waves = float_array_attr(prim, hf + "waveVectors", time_code, 2)
     waves = np.zeros((0, 2)) if waves is None else waves / mpu
     arrays = {}
     for attr, scale in (("amplitudes", mpu), ("phases", 1.0), ("waveSpeeds", 1.0)):
-        value = _array_attr(prim, hf + attr, time_code, 1)
+        value = float_array_attr(prim, hf + attr, time_code, 1)
         if value is None and attr == "amplitudes" and len(waves):
             raise SceneError(f"{path}.{hf}amplitudes is missing: {hf}waveVectors has {len(waves)} waves")
         if value is not None and value.size != len(waves):
