@@ -25,16 +25,11 @@ class SceneryReading(StagePrims):
         return 0.0 if time is None else float(time) / float(self.stage.GetTimeCodesPerSecond())
 
     def read_meshes(self, time=None) -> tuple:
-        """Every rendered ``UsdGeomMesh`` at ``time`` as a :class:`~warpsky.scene.terrain.TerrainMesh`."""
-        from pxr import UsdGeom
+        """Every rendered ``UsdGeomMesh`` at ``time`` as a :class:`~warpsky.scene.terrain.TerrainMesh`
+        (:func:`~warpsky.scene.terrain.read_meshes`)."""
+        from warpsky.scene.terrain import read_meshes
 
-        tc = self._time(time)
-        prims = [p for p in self._prims_of(UsdGeom.Mesh) if self._rendered(p, tc)]
-        if not prims:
-            return ()
-        from warpsky.scene.terrain import read_mesh
-
-        return tuple(read_mesh(self, prim, tc) for prim in prims)
+        return read_meshes(self, time)
 
     def _kind_prims(self, kind: str, tc) -> list:
         """Rendered prims with ``warpsky:kind = kind``; a prim carrying the kind's attributes under another kind is
