@@ -214,7 +214,8 @@ def test_the_analytic_sky_lights_surfaces_in_shadow_and_the_fog():
 
     from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
     from warpsky.scene.terrain import TerrainMesh
-    from warpsky.techniques.sky.light import isotropic_ambient, sky_hemisphere, sky_light
+    from warpsky.techniques.dome import isotropic_ambient
+    from warpsky.techniques.sky.light import sky_hemisphere, sky_light
 
     floor = TerrainMesh("floor", np.array([[-500.0, 0, -500], [-500, 0, 500], [500, 0, 500], [500, 0, -500]]),
                         np.array([[0, 1, 2], [0, 2, 3]]), np.full(3, 0.5))

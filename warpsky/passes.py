@@ -169,7 +169,8 @@ def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: in
     ``sky``: (mean radiance, E / pi) of the upper hemisphere lighting them (:func:`~warpsky.techniques.sky.light.
     sky_light`); None: the dome's alone."""
     from warpsky.plan import surfaces_draw_ground
-    from warpsky.techniques.sky.light import isotropic_ambient, sky_light
+    from warpsky.techniques.dome import isotropic_ambient
+    from warpsky.techniques.sky.light import sky_light
 
     sky = sky_light(scene, analytic=False) if sky is None else sky
     ambient = isotropic_ambient(scene, sky)

@@ -42,16 +42,3 @@ def sky_light(scene, *, analytic: bool) -> tuple[np.ndarray, np.ndarray]:
         sky_mean, sky_cosine = sky_hemisphere(scene)
         mean, cosine = mean + sky_mean, cosine + sky_cosine
     return mean, cosine
-
-
-def isotropic_ambient(scene, sky: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """The mean radiance [RGB] reaching a point from all directions under ``sky`` = (mean, E / pi) of the upper
-    hemisphere: half the sky's mean, plus half the light of a Lambertian ground below it that the sky lights
-    (albedo E / pi; the ground plane's albedo, else the meshes' mean albedo, else none)."""
-    mean, cosine = sky
-    albedo = np.zeros(3)
-    if scene.ground is not None:
-        albedo = scene.ground.albedo
-    elif scene.meshes:
-        albedo = np.mean([m.albedo for m in scene.meshes], axis=0)
-    return 0.5 * (mean + albedo * cosine)
