@@ -65,15 +65,19 @@ def shadow_feature(clouds: HeightFieldClouds) -> float:
     return float(min(lengths)) if lengths else feature_length(clouds)
 
 
+def haze_step_bound(clouds: HeightFieldClouds) -> float:
+    """The longest step in clear haze [m]: a quarter of its mean free path in its densest channel (1e30 without
+    haze)."""
+    sigma = float(np.max(clouds.haze.density)) if clouds.haze is not None else 0.0
+    return 0.25 / sigma if sigma > 0.0 else 1.0e30
+
+
 def automatic_steps(clouds: HeightFieldClouds) -> tuple[float, float]:
     """(cloud step, shortest haze step) [m] from the deck's extinction and smallest features (module docstring)."""
     feature = feature_length(clouds)
     sigma = float(np.max(clouds.extinction))
     cloud = min(0.25 / sigma, feature / 16.0) if sigma > 0.0 else feature / 16.0
-    haze_sigma = float(np.max(clouds.haze.density)) if clouds.haze is not None else 0.0
-    shadow = shadow_feature(clouds)
-    haze = min(0.25 / haze_sigma, shadow / 8.0) if haze_sigma > 0.0 else shadow / 8.0
-    return cloud, haze
+    return cloud, min(haze_step_bound(clouds), shadow_feature(clouds) / 8.0)
 
 
 def the_deck(scene: Scene) -> HeightFieldClouds | None:
@@ -119,8 +123,7 @@ class HeightFieldPass:
         march.haze_step = float(self.haze_step_length or haze_auto)
         march.haze_feature = 0.0 if self.haze_step_length else shadow_feature(clouds)
         march.shadow = int(self.mode != "exact")
-        haze_sigma = float(np.max(clouds.haze.density)) if clouds.haze is not None else 0.0
-        march.haze_step_max = 0.25 / haze_sigma if haze_sigma > 0.0 else 1.0e30
+        march.haze_step_max = haze_step_bound(clouds)
         march.max_steps = self.max_steps
         march.min_transmittance = self.min_transmittance
         march.ambient = ambient_vec(scene) if ambient is None else wp.vec3(*np.asarray(ambient, np.float64).tolist())
