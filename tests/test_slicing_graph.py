@@ -155,3 +155,27 @@ def test_the_captured_sweep_allocates_reads_back_and_synchronises_nothing(puff_s
     monkeypatch.setattr(sweep.SliceSweep, "issue", guarded)
     layer = frame(puff_scene, device)
     assert layer.stats["sweep"] == "captured" and same_pixels(layer, graphs(puff_scene))
+
+
+def test_chunks_of_planes_give_the_pixels_of_one_plane_at_a_time(puff_scene, device, monkeypatch):
+    """The sweep in chunks (the light carried through several planes, then the eye through them) computes per texel
+    and per pixel what alternating one light step and one eye step per plane does: a chunk of one plane is that
+    alternation, and every chunking gives its pixels bit for bit."""
+    per_plane = 2 * 12 * 16 * 16
+    layers = {}
+    for planes_per_chunk in (1, 3, 8):
+        monkeypatch.setattr(sweep, "STACK_BYTES", {"cpu": per_plane * planes_per_chunk,
+                                                   "cuda": per_plane * planes_per_chunk})
+        layers[planes_per_chunk] = frame(puff_scene, device)
+    assert float(layers[1].radiance.max()) > 0.0
+    assert same_pixels(layers[1], layers[3]) and same_pixels(layers[1], layers[8])
+
+
+def test_chunk_sizes_fit_the_budget_and_even_out():
+    per_plane = 2 * 12 * 256 * 256
+    most = sweep.STACK_BYTES["cpu"] // per_plane
+    assert sweep.chunk_planes(most, 256, "cpu") == most
+    assert sweep.chunk_planes(most + 1, 256, "cpu") == -(-(most + 1) // 2)  # two even chunks, not most + 1
+    assert sweep.chunk_planes(161, 256, "cpu") * per_plane <= sweep.STACK_BYTES["cpu"]
+    assert sweep.chunk_planes(1, 4096, "cpu") == 1  # one plane per chunk however large the buffer
+    assert sweep.chunk_planes(161, 256, "cuda:0") == 161  # a GPU sweeps the storm's 161 planes in one chunk

@@ -38,7 +38,14 @@ from warpsky.device import launch_rows
 from warpsky.interrupt import check_stop
 from warpsky.media.voxel import VoxelMedia
 from warpsky.techniques.common import PinholeCamera, Sun
-from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, eye_span_kernel
+from warpsky.techniques.slicing.kernels import (
+    AmsTables,
+    EyeBuffers,
+    LightBuffers,
+    PlaneRange,
+    SliceFrame,
+    eye_span_kernel,
+)
 
 #: Capture and replay graphs on CUDA; False: plain launches everywhere (benchmarks compare the two).
 USE_GRAPHS = True
@@ -64,9 +71,25 @@ def sweep_lock(device) -> threading.Lock:
         return _LOCKS.setdefault(name, threading.Lock())
 
 
+#: Bytes the light buffer's copies at a chunk's slice planes may take, per device kind: the sweep runs in as few
+#: chunks as fit (a 256^2 light buffer keeps 42 planes per chunk on the CPU, 170 on a GPU).
+STACK_BYTES = {"cpu": 64 << 20, "cuda": 256 << 20}
+
+
+def chunk_planes(plane_count: int, light_res: int, device) -> int:
+    """Planes per chunk of a sweep of ``plane_count`` planes: as many as :data:`STACK_BYTES` allows, evened out
+    over the chunks so that none is a short remainder."""
+    per_plane = 2 * 12 * light_res * light_res
+    kind = "cpu" if str(device).startswith("cpu") else "cuda"
+    most = max(1, STACK_BYTES[kind] // per_plane)
+    chunks = -(-max(plane_count, 1) // most)
+    return -(-max(plane_count, 1) // chunks)
+
+
 @dataclass
 class SweepBuffers:
-    """The sweep's work arrays on one device: eye accumulators (height, width) and light buffers (res, res)."""
+    """The sweep's work arrays on one device: eye accumulators (height, width), light buffers (res, res), the
+    light buffers' copies at a chunk's planes (chunk, res, res) and the plane positions."""
 
     radiance: wp.array  # radiance towards the eye, RGB
     transmittance: wp.array  # transmittance of the media along the eye ray, RGB
@@ -74,17 +97,38 @@ class SweepBuffers:
     spans: wp.array  # each eye ray's interval [m] inside the media's boxes
     light_i: wp.array  # light-buffer irradiance, RGB
     light_n: wp.array  # light-buffer expected scattering count, RGB
+    stack_i: wp.array  # light_i at each plane of a chunk
+    stack_n: wp.array  # light_n at each plane of a chunk
+    planes: wp.array  # slice positions along the slice axis [m], in sweep order
 
     @classmethod
-    def kept(cls, height: int, width: int, light_res: int, device) -> SweepBuffers:
-        """The buffers kept under ``slicing:*`` for this frame size and light resolution (contents not cleared)."""
+    def kept(cls, height: int, width: int, light_res: int, planes: np.ndarray, device) -> SweepBuffers:
+        """The buffers kept under ``slicing:*`` for this frame size, light resolution and plane count (contents
+        not cleared, except the planes, uploaded when they change)."""
         eye, light = (height, width), (light_res, light_res)
-        return cls(*(device_buffers.reusable(f"slicing:{name}", shape, dtype, device) for name, shape, dtype in (
+        stack = (chunk_planes(len(planes), light_res, device), light_res, light_res)
+        arrays = [device_buffers.reusable(f"slicing:{name}", shape, dtype, device) for name, shape, dtype in (
             ("radiance", eye, wp.vec3), ("transmittance", eye, wp.vec3), ("depth_sum", eye, wp.vec2),
-            ("spans", eye, wp.vec2), ("light_i", light, wp.vec3), ("light_n", light, wp.vec3))))
+            ("spans", eye, wp.vec2), ("light_i", light, wp.vec3), ("light_n", light, wp.vec3),
+            ("stack_i", stack, wp.vec3), ("stack_n", stack, wp.vec3))]
+        return cls(*arrays, device_buffers.upload("slicing:planes", np.asarray(planes, dtype=np.float32), float,
+                                                  device))
 
     def arrays(self) -> tuple[wp.array, ...]:
-        return (self.radiance, self.transmittance, self.depth_sum, self.spans, self.light_i, self.light_n)
+        return (self.radiance, self.transmittance, self.depth_sum, self.spans, self.light_i, self.light_n,
+                self.stack_i, self.stack_n, self.planes)
+
+    def eye(self) -> EyeBuffers:
+        eye = EyeBuffers()
+        eye.radiance, eye.transmittance, eye.depth_sum, eye.spans = (self.radiance, self.transmittance,
+                                                                     self.depth_sum, self.spans)
+        return eye
+
+    def light(self) -> LightBuffers:
+        light = LightBuffers()
+        light.intensity, light.count, light.stack_intensity, light.stack_count = (self.light_i, self.light_n,
+                                                                                  self.stack_i, self.stack_n)
+        return light
 
 
 @dataclass
@@ -114,8 +158,9 @@ class SliceSweep:
                 float(self.sample_length), np.asarray(self.planes, dtype=np.float64).tobytes(), tuple(self.start))
 
     def issue(self, *, capturing: bool) -> None:
-        """Clear the buffers and launch the sweep: plain, the eye gathers through :func:`launch_rows` (row bands on
-        the CPU, a stop request honoured between slices); ``capturing``, one launch each."""
+        """Clear the buffers and launch the sweep, two launches per chunk of planes (the light carried through the
+        chunk, then the eye composited through it): plain, through :func:`launch_rows` (row bands on the CPU, a
+        stop request honoured between bands); ``capturing``, one launch each."""
         b, device = self.buffers, self.device
         height, width = b.radiance.shape
         res = b.light_i.shape[0]
@@ -125,21 +170,21 @@ class SliceSweep:
         b.light_i.fill_(wp.vec3(*self.start))
         b.light_n.zero_()
         wp.launch(eye_span_kernel, dim=(height, width), inputs=[self.media, self.cam, b.spans], device=device)
-        spacing = float(self.frame.spacing)
-        # the light enters the media's extent half a slice before the first plane: carry it there first
-        # (starting it unattenuated at the first plane is a first-order error in the slice count)
-        wp.launch(self.light_kernel, dim=(res, res), inputs=[
-            self.media, self.tables, self.frame, float(self.planes[0]) - 0.5 * spacing, 0.5 * spacing, b.light_i,
-            b.light_n], device=device)
-        for plane in self.planes:
-            eye_inputs = [self.media, self.tables, self.cam, self.frame, float(plane), b.light_i, b.light_n, self.sun,
-                          b.spans, self.sample_length, self.ambient, b.radiance, b.transmittance, b.depth_sum]
+        eye, light = b.eye(), b.light()
+        chunk_size = b.stack_i.shape[0]
+        for first in range(0, len(self.planes), chunk_size):
+            chunk = PlaneRange()
+            chunk.planes, chunk.first = b.planes, first
+            chunk.count, chunk.entry = min(chunk_size, len(self.planes) - first), int(first == 0)
+            light_inputs = [self.media, self.tables, self.frame, chunk, light]
+            eye_inputs = [self.media, self.tables, self.cam, self.frame, chunk, light, self.sun, self.sample_length,
+                          self.ambient, eye]
             if capturing:
+                wp.launch(self.light_kernel, dim=(res, res), inputs=[*light_inputs, 0], device=device)
                 wp.launch(self.eye_kernel, dim=(height, width), inputs=[*eye_inputs, 0], device=device)
             else:
+                launch_rows(self.light_kernel, res, res, light_inputs, device)
                 launch_rows(self.eye_kernel, height, width, eye_inputs, device)
-            wp.launch(self.light_kernel, dim=(res, res), inputs=[
-                self.media, self.tables, self.frame, float(plane), spacing, b.light_i, b.light_n], device=device)
 
 
 def run_sweep(sweep: SliceSweep) -> str:

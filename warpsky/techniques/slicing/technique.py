@@ -23,7 +23,7 @@ from warpsky.techniques.base import Layer, TechniqueSettings, documented, settin
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.dome import ambient_vec, ground_ambient_vec
 from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
-from warpsky.techniques.slicing.sweep import SliceSweep, SweepBuffers, run_sweep, sweep_lock
+from warpsky.techniques.slicing.sweep import SliceSweep, SweepBuffers, chunk_planes, run_sweep, sweep_lock
 from warpsky.techniques.sunlight import sunlight
 
 #: Bytes per pixel of the ground pass's device copy of the layer.
@@ -162,15 +162,16 @@ class Slicing:
     HOST_PIXEL_BYTES = 72
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
-        """Bytes a frame allocates: the eye buffers, the two light buffers (``light_resolution``^2 RGB each) and the
-        media's upload."""
+        """Bytes a frame allocates: the eye buffers, the two light buffers (``light_resolution``^2 RGB each), their
+        copies at a chunk's slice planes and the media's upload."""
         res = int(self.settings.light_resolution)
+        planes = int(self.settings.slice_count or self.AUTO_SLICES[1]) if scene.media else 0
         pixels = width * height
         copies = 0 if str(self.device).startswith("cpu") else 1
         return (MemoryEstimate()
                 .add("images", host=pixels * (self.HOST_PIXEL_BYTES + copies * self.PIXEL_BYTES),
                      device=pixels * (self.PIXEL_BYTES + LAYER_DEVICE_BYTES))
-                .add("light buffers", device=2 * res * res * 12)
+                .add("light buffers", device=2 * res * res * 12 * (1 + chunk_planes(planes, res, self.device)))
                 .add("grids", host=grid_bytes(scene), device=grid_bytes(scene)))
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
@@ -280,7 +281,7 @@ class Slicing:
             cam=pinhole_camera(camera, width, height), frame=frame, sun=sun_struct(sun), ambient=ambient_vec(scene),
             sample_length=float(media.min_voxel_size) / float(settings.eye_samples), planes=planes,
             start=tuple(np.asarray(start, dtype=np.float64).tolist()),
-            buffers=SweepBuffers.kept(height, width, res, self.device))
+            buffers=SweepBuffers.kept(height, width, res, planes, self.device))
 
     @staticmethod
     def _frame(scene: Scene, camera, toward_sun: np.ndarray, slice_count: int, light_res: int):
