@@ -25,6 +25,7 @@ from warpsky.optics.kernels import (
     sample_table,
     scattering_angle,
 )
+from warpsky.optics.oriented_phase import OrientedPhases
 from warpsky.optics.phase import INV_FOUR_PI, PHASE_HG, PHASE_RAYLEIGH, phase_eval, phase_rayleigh
 
 INV_4PI = wp.constant(INV_FOUR_PI)
@@ -39,13 +40,18 @@ class PhaseTables:
 
     values: wp.array(dtype=float)
     cdf: wp.array(dtype=float)
+    oriented: OrientedPhases  # the frame's oriented-ice slices (count 0: none)
 
 
-def phase_tables_struct(tables: DevicePhaseTables) -> PhaseTables:
-    """Kernel view of uploaded phase tables."""
+def phase_tables_struct(tables: DevicePhaseTables, oriented: OrientedPhases | None = None) -> PhaseTables:
+    """Kernel view of uploaded phase tables and the frame's oriented-ice slices (None: no oriented media)."""
     out = PhaseTables()
     out.values = tables.values
     out.cdf = tables.cdf
+    if oriented is None:
+        oriented = OrientedPhases()
+        oriented.count = 0
+    out.oriented = oriented
     return out
 
 

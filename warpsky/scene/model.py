@@ -121,6 +121,35 @@ class DetailSpec:
 
 
 @dataclass(frozen=True)
+class IceCrystals:
+    """How the crystals of an ice field fall (``warpsky:ice:*`` on its field prim).
+
+    ============================== ====== ======== ========== ==================================================
+    attribute                      unit   default  range      meaning
+    ============================== ====== ======== ========== ==================================================
+    ``token warpsky:ice:orientation`` -   random   random,    orientation law: horizontal plates (sundogs, the
+                                                   plate,     circumzenithal arc), horizontal columns (tangent
+                                                   column,    arcs), Parry columns (Parry arcs)
+                                                   parry
+    ``token warpsky:ice:habit``    -      (law)    column,    crystal shape; default plate for ``plate``, column
+                                                   plate      otherwise
+    ``float warpsky:ice:tilt``     deg    1        0 - 90     standard deviation of the crystals' flutter
+    ``float warpsky:ice:fraction`` -      1        0 - 1      number fraction of crystals that follow the law; the
+                                                              rest are randomly oriented columns
+    ============================== ====== ======== ========== ==================================================
+    """
+
+    orientation: str = "random"
+    habit: str = ""
+    tilt_deg: float = 1.0
+    fraction: float = 1.0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.fraction) and 0.0 <= self.fraction <= 1.0):
+            raise SceneError(f"warpsky:ice:fraction must be a number fraction in [0, 1], got {self.fraction!r}")
+
+
+@dataclass(frozen=True)
 class VoxelMedium:
     """A participating medium given by a dense grid of field values.
 
@@ -142,6 +171,7 @@ class VoxelMedium:
         slicing_xi: Riley's back-scatter term ξ [1/sr] for this medium in half-angle slicing (``float
             warpsky:slicing:xi`` on the Volume), or None for the technique's ``xi`` setting.
         detail: Animated density detail (:class:`DetailSpec`, ``warpsky:detail:*`` on the Volume), or None.
+        ice: How an ice field's crystals are oriented (:class:`IceCrystals`), or None (random orientation).
     """
 
     name: str
@@ -154,8 +184,12 @@ class VoxelMedium:
     species: str | None = None
     slicing_xi: float | None = None
     detail: DetailSpec | None = None
+    ice: IceCrystals | None = None
 
     def __post_init__(self):
+        if self.ice is not None and self.species != "ice":
+            raise SceneError(f"medium {self.name}: warpsky:ice:* orients ice crystals; this field is "
+                             f"{self.species or 'not a species field'}, not field:ice")
         if self.detail is not None and not isinstance(self.detail, DetailSpec):
             raise SceneError(f"medium {self.name}: detail must be a DetailSpec or None, got {self.detail!r}")
         if self.slicing_xi is not None and not (math.isfinite(self.slicing_xi) and self.slicing_xi >= 0.0):

@@ -22,7 +22,8 @@ import warp as wp
 from warpsky.kernel_variants import kernel_variants
 from warpsky.media.detail import detailed_value
 from warpsky.media.voxel import VoxelMedia, grid_interval, grid_value, media_functions
-from warpsky.optics.kernels import scattering_angle
+from warpsky.optics.kernels import medium_phase, scattering_angle
+from warpsky.optics.oriented_phase import OrientedPhases, oriented_correction_function
 from warpsky.optics.phase_sampling import phase_sum_function
 from warpsky.techniques.common import (
     Ground,
@@ -36,6 +37,8 @@ from warpsky.techniques.common import (
     luminance,
 )
 from warpsky.techniques.dome import ambient_ground, ambient_scattered
+
+oriented_correction = oriented_correction_function(medium_phase)[0]
 
 
 @wp.struct
@@ -118,6 +121,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
     def single_scatter(
         media: VoxelMedia,
         phase_tables: wp.array(dtype=float),
+        oriented: OrientedPhases,
         cam: PinholeCamera,
         sun: Sun,
         ground: Ground,
@@ -166,6 +170,8 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                 tm = ta + 0.5 * dt
                 here = sample_media(media, origin + tm * view)
                 scatter = scattered_phase(media, here, phase_tables, wp.vec3(0.0), theta)
+                if wp.static(has_tables):  # oriented crystals are ice, a tabulated species
+                    scatter += oriented_correction(media, here, phase_tables, oriented, view, theta)
                 lookups += wp.int64(media.count)
                 tau_eye_b = tau_eye + here.extinction * dt
                 if lit and wp.max(scatter) > 0.0:

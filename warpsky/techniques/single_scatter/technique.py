@@ -13,6 +13,7 @@ from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.kernels import DevicePhaseTables
+from warpsky.optics.oriented_phase import oriented_phases
 from warpsky.optics.tables import build_tables
 from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes, march_work
 from warpsky.scene.model import Scene
@@ -120,7 +121,8 @@ class SingleScatter:
             march.ground_ambient = ground_ambient_vec(scene)
             march.ambient_on = int(scene.dome is not None)
             kernel = single_scatter_kernel(scene.ground is not None, bool(species), media.has_detail)
-            inputs = [media.media, tables.values, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
+            inputs = [media.media, tables.values, oriented_phases(scene, device), pinhole_camera(camera, width, height),
+                      sun_struct(sunlight(scene)),
                       ground_struct(scene.ground, camera.position), march, radiance, transmittance, depth, lookups]
             launch_rows(kernel, height, width, inputs, device)
             wp.synchronize_device(device)
