@@ -300,8 +300,15 @@ def _scattering_angle(sun_elevation: float, elevation: np.ndarray, azimuth: np.n
 def diffraction_bins(equal_area_radius: float, wavelengths, sun_elevation_deg: float, grid: SkyBins) -> np.ndarray:
     """(E, A) Fraunhofer-Kirchhoff diffraction of a disk of ``equal_area_radius`` [m] around the sun, as bin
     averages [1/sr] normalised on ``grid`` (see the module docstring)."""
+    return profile_bins(diffraction_phase(equal_area_radius, wavelengths, angle_grid()), sun_elevation_deg, grid)
+
+
+def profile_bins(profile: np.ndarray, sun_elevation_deg: float, grid: SkyBins) -> np.ndarray:
+    """(E, A) bin averages [1/sr], normalised on ``grid``, of a phase ``profile`` given on the shared scattering
+    angle grid (:func:`~warpsky.optics.grid.angle_grid`) for a sun at ``sun_elevation_deg``: bins within
+    9° of the sun are averaged over 16 x 16 sub-samples (a forward peak narrower than a bin), the others take
+    their centre's value."""
     theta = angle_grid()
-    profile = diffraction_phase(equal_area_radius, wavelengths, theta)
     sun = math.radians(sun_elevation_deg)
     elev = np.radians(grid.elevation_centres_deg())[:, None]
     azim = np.radians(grid.azimuth_centres_deg())[None, :]

@@ -183,30 +183,32 @@ def _oriented_weight(fraction: float, orientation) -> float:
 
 
 def _random_phase_on_bins(phase_table: np.ndarray, grid, elevation_deg: float) -> np.ndarray:
-    """(E, A, 3) random-orientation phase [1/sr] at the bin centres' scattering angles from a sun at
-    ``elevation_deg`` (the species table (3, M) on the shared angle grid, interpolated linearly)."""
-    from warpsky.optics.grid import angle_grid
+    """(E, A, 3) random-orientation phase [1/sr] as bin averages around a sun at ``elevation_deg`` (the species
+    table (3, M) on the shared angle grid), normalised on the bins per channel."""
+    from warpsky.optics.oriented_ice import profile_bins
 
-    e = math.radians(elevation_deg)
-    elev = np.radians(grid.elevation_centres_deg())[:, None]
-    azim = np.radians(grid.azimuth_centres_deg())[None, :]
-    cos_theta = np.sin(elev) * math.sin(e) + np.cos(elev) * math.cos(e) * np.cos(azim)
-    theta = np.arccos(np.clip(cos_theta, -1.0, 1.0))
-    angles = angle_grid()
-    return np.stack([np.interp(theta, angles, phase_table[c]) for c in range(3)], axis=-1)
+    return np.stack([profile_bins(phase_table[c], elevation_deg, grid) for c in range(3)], axis=-1)
 
 
-def oriented_phases(scene, device, slices: tuple | None = None) -> OrientedPhases:
-    """The kernels' :class:`OrientedPhases` for ``scene`` on ``device`` (``slices``: :func:`frame_slices`'
-    result when already computed). Without oriented media it is an empty struct (count 0) that kernels skip."""
+def oriented_phases(scene, device, *, cache: str | None = None) -> OrientedPhases:
+    """The kernels' :class:`OrientedPhases` for ``scene`` on ``device``. Without oriented media it is an empty
+    struct (count 0) that kernels skip. With ``cache`` (a name such as ``"slicing"``) the arrays are kept on the
+    device under ``<cache>:oriented*`` and uploaded only when their contents change
+    (:func:`warpsky.device_buffers.upload`), so a batch's frames pass the same addresses."""
+    from warpsky import device_buffers
     from warpsky.optics.oriented_ice import sun_frame
 
-    values, slice_of, grid = frame_slices(scene) if slices is None else slices
+    values, slice_of, grid = frame_slices(scene)
     out = OrientedPhases()
     out.count = int(values.shape[0])
-    flat = values.reshape(-1) if out.count else np.zeros(1, np.float32)
-    out.values = wp.array(np.ascontiguousarray(flat, dtype=np.float32), dtype=float, device=device)
-    out.slice_of = wp.array(np.asarray(slice_of or [-1], dtype=np.int32), dtype=int, device=device)
+    flat = np.ascontiguousarray(values.reshape(-1) if out.count else np.zeros(1), dtype=np.float32)
+    index = np.asarray(slice_of or [-1], dtype=np.int32)
+    if cache is None:
+        out.values = wp.array(flat, dtype=float, device=device)
+        out.slice_of = wp.array(index, dtype=int, device=device)
+    else:
+        out.values = device_buffers.upload(f"{cache}:oriented", flat, float, device)
+        out.slice_of = device_buffers.upload(f"{cache}:oriented_slice_of", index, int, device)
     direction = scene.sun.direction if scene.sun is not None else np.array([0.0, 1.0, 0.0])
     out.sun_from_world = wp.mat33(*sun_frame(direction).reshape(-1).tolist())
     out.grid = grid.struct()

@@ -37,6 +37,7 @@ import warp as wp
 from warpsky.kernel_variants import kernel_variants
 from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
 from warpsky.optics.kernels import GRID_SIZE, grid_node, scattering_angle
+from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
 from warpsky.techniques.common import (
     Ground,
     PinholeCamera,
@@ -171,6 +172,36 @@ def mixed_ams_scattering(point: MediaPoint, media: VoxelMedia, tables: AmsTables
 
 
 @wp.func
+def order_one_weight(tables: AmsTables, n: float) -> float:
+    """The weight :func:`ams_at` gives Ams_1 at fractional order n."""
+    x = wp.clamp(n, 0.0, float(tables.orders - 1))
+    if x <= 1.0:
+        return x
+    return wp.max(2.0 - x, 0.0)
+
+
+@wp.func
+def oriented_ams_correction(point: MediaPoint, media: VoxelMedia, tables: AmsTables, phases: OrientedPhases,
+                            order: wp.vec3, look: wp.vec3, theta: float) -> wp.vec3:
+    """What oriented ice adds to :func:`mixed_ams_scattering`: light that has not scattered yet (order 1) meets
+    the crystals with the sun's direction, so their share of Ams_1 becomes the frame's oriented slice seen along
+    ``look``; higher orders keep the random-orientation Ams (the light has lost the sun's direction)."""
+    out = wp.vec3(0.0)
+    if phases.count == 0:
+        return out
+    for m in range(media.count):
+        value = point.density[m]
+        index = phases.slice_of[m]
+        if value > 0.0 and index >= 0:
+            s = media.grids[m].scattering * value
+            oriented = oriented_value(phases, index, look)
+            for c in range(3):
+                weight = order_one_weight(tables, order[c])
+                out[c] = out[c] + s[c] * weight * (oriented[c] - ams_value(tables, tables.table_of[m], 1, c, theta))
+    return out
+
+
+@wp.func
 def light_attenuated(point: MediaPoint, media: VoxelMedia, tables: AmsTables, intensity: float, n: float,
                      tau: float, c: int) -> float:
     """Low-albedo mode (Riley Fig. 13): the light buffer is attenuated by extinction, nothing scattered is kept."""
@@ -287,9 +318,9 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
     sample_media = media_functions(has_detail)
 
     @wp.func
-    def gather_sample(media: VoxelMedia, tables: AmsTables, frame: SliceFrame, light_i: wp.array2d(dtype=wp.vec3),
-                      light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3, theta: float, length: float,
-                      ambient: wp.vec3):
+    def gather_sample(media: VoxelMedia, tables: AmsTables, oriented: OrientedPhases, frame: SliceFrame,
+                      light_i: wp.array2d(dtype=wp.vec3), light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3,
+                      view: wp.vec3, theta: float, length: float, ambient: wp.vec3):
         """(light scattered towards the eye, optical depth), RGB, of the piece of the eye ray of ``length`` [m]
         centred on ``p``."""
         point = sample_media(media, p)
@@ -306,6 +337,7 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
         if wp.static(low_albedo):
             order = wp.vec3(1.0)
         phase = mixed_ams_scattering(point, media, tables, order, theta)
+        phase += oriented_ams_correction(point, media, tables, oriented, order, view, theta)
         for c in range(3):
             if scattering[c] > 0.0:
                 p_c = phase[c] / scattering[c]  # xi included, per medium
@@ -319,6 +351,7 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
     def eye_kernel(
         media: VoxelMedia,
         tables: AmsTables,
+        oriented: OrientedPhases,
         cam: PinholeCamera,
         frame: SliceFrame,
         chunk: PlaneRange,
@@ -358,8 +391,8 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
             keep = wp.vec3(1.0)
             for s in range(count):  # front to back inside the slab
                 p = view * (t + (lo + (float(s) + 0.5) * length))
-                scattered, tau = gather_sample(media, tables, frame, light.stack_intensity[k], light.stack_count[k],
-                                               p, theta, length, ambient)
+                scattered, tau = gather_sample(media, tables, oriented, frame, light.stack_intensity[k],
+                                               light.stack_count[k], p, view, theta, length, ambient)
                 contribution += wp.cw_mul(keep, scattered)
                 keep = wp.cw_mul(keep, exp3(tau))
             if keep[0] >= 1.0 and keep[1] >= 1.0 and keep[2] >= 1.0:

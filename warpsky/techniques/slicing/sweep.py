@@ -37,6 +37,7 @@ from warpsky import device_buffers
 from warpsky.device import launch_rows
 from warpsky.interrupt import check_stop
 from warpsky.media.voxel import VoxelMedia
+from warpsky.optics.oriented_phase import OrientedPhases
 from warpsky.techniques.common import PinholeCamera, Sun
 from warpsky.techniques.slicing.kernels import (
     AmsTables,
@@ -141,6 +142,7 @@ class SliceSweep:
     light_kernel: Any
     media: VoxelMedia
     tables: AmsTables
+    oriented: OrientedPhases
     cam: PinholeCamera
     frame: SliceFrame
     sun: Sun
@@ -152,7 +154,8 @@ class SliceSweep:
 
     def key(self) -> tuple:
         """Everything a captured graph of this sweep holds by value or by address."""
-        structs = tuple(bytes(s.__ctype__()) for s in (self.media, self.tables, self.cam, self.frame, self.sun))
+        structs = tuple(bytes(s.__ctype__()) for s in (self.media, self.tables, self.oriented, self.cam, self.frame,
+                                                        self.sun))
         arrays = tuple((a.ptr, a.shape) for a in self.buffers.arrays())
         return (self.eye_kernel, self.light_kernel, structs, arrays, tuple(float(v) for v in self.ambient),
                 float(self.sample_length), np.asarray(self.planes, dtype=np.float64).tobytes(), tuple(self.start))
@@ -177,8 +180,8 @@ class SliceSweep:
             chunk.planes, chunk.first = b.planes, first
             chunk.count, chunk.entry = min(chunk_size, len(self.planes) - first), int(first == 0)
             light_inputs = [self.media, self.tables, self.frame, chunk, light]
-            eye_inputs = [self.media, self.tables, self.cam, self.frame, chunk, light, self.sun, self.sample_length,
-                          self.ambient, eye]
+            eye_inputs = [self.media, self.tables, self.oriented, self.cam, self.frame, chunk, light, self.sun,
+                          self.sample_length, self.ambient, eye]
             if capturing:
                 wp.launch(self.light_kernel, dim=(res, res), inputs=[*light_inputs, 0], device=device)
                 wp.launch(self.eye_kernel, dim=(height, width), inputs=[*eye_inputs, 0], device=device)

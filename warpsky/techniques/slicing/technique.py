@@ -15,6 +15,7 @@ from warpsky import device_buffers
 from warpsky.errors import UsageError
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
+from warpsky.optics.oriented_phase import oriented_phases
 from warpsky.optics.phase import phase_numpy
 from warpsky.optics.tables import ams_table
 from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
@@ -278,6 +279,7 @@ class Slicing:
         return SliceSweep(
             device=self.device, eye_kernel=eye_kernel, light_kernel=light_kernel, media=media.media,
             tables=self._ams_tables(scene, scene.species, int(settings.orders), settings.xi),
+            oriented=oriented_phases(scene, self.device, cache="slicing"),
             cam=pinhole_camera(camera, width, height), frame=frame, sun=sun_struct(sun), ambient=ambient_vec(scene),
             sample_length=float(media.min_voxel_size) / float(settings.eye_samples), planes=planes,
             start=tuple(np.asarray(start, dtype=np.float64).tolist()),
