@@ -7,7 +7,7 @@ PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind family terrain valley-fog sunbeams
+	cumulus-wind family terrain valley-fog sunbeams sundogs
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
@@ -31,6 +31,7 @@ help:
 	@echo "make sunbeams           - sunbeams through gaps in a Max 1986 cloud deck over the terrain, lighting the"
 	@echo "                          haze, to out/sunbeams/: frame 1 (exact), 4 drifting frames and a contact sheet,"
 	@echo "                          frame 1 with Max's thickness rule (about 3 min on 2 CPU cores)"
+	@echo "make sundogs            - cirrostratus of oriented plates and columns at sunset: sundogs, arcs, labelled PNG"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 
@@ -129,3 +130,11 @@ sunbeams: $(STAMP) data/terrain.usda
 
 clean:
 	rm -rf out data .pytest_cache
+
+# Sundogs: oriented ice plates and columns in a cirrostratus sheet at sunset (single scattering: the sheet is thin),
+# the frame as EXR + PNG and a copy with each arc labelled where its closed form puts it.
+sundogs: $(STAMP)
+	$(PY) tools/make_sundogs.py --out data/sundogs
+	$(VENV)/bin/warpsky render usd_scenes/sundogs.usda out/sundogs/sundogs.####.exr --frames 1 --png \
+		--technique single_scatter --res 768x512
+	$(PY) tools/label_halos.py usd_scenes/sundogs.usda out/sundogs/sundogs.0001.png out/sundogs/sundogs_labelled.png
