@@ -546,6 +546,11 @@ def cmd_info(args) -> int:
             f"{float(medium.density.max()):g}, albedo {_fmt3(medium.albedo)}, "
             + (f"{medium.species} phase table" if medium.species else repr(medium.phase))
         )
+        if medium.ice is not None and medium.ice.orientation != "random":
+            ice = medium.ice
+            out.append(f"            oriented ice: {ice.fraction:.3g} of the crystals {ice.habit}s falling as "
+                       f"{ice.orientation}s (tilt {ice.tilt_deg:g}°), the rest random columns; a phase table per "
+                       "frame at the sun's elevation")
         if medium.detail is not None and medium.detail.amplitude > 0.0:
             d = medium.detail
             out.append(f"            advected detail: amplitude {d.amplitude:g}, scale {d.scale:g} m, wind "
