@@ -105,7 +105,10 @@ class HybridSettings(TechniqueSettings):
                 raise UsageError(f"setting {name} must be a positive length in metres, got {value}")
 
     def single_scatter(self) -> SingleScatterSettings:
-        return SingleScatterSettings(step_length=self.step_length, shadow_step_length=self.shadow_step_length)
+        # skylight off: the paths carry the sky's light (traced through the air) and the dome's, first scattering
+        # included, so the march takes the sun alone
+        return SingleScatterSettings(step_length=self.step_length, shadow_step_length=self.shadow_step_length,
+                                     skylight=False)
 
     def path_tracer(self) -> PathTracerSettings:
         return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,

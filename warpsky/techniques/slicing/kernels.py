@@ -20,12 +20,13 @@ Every medium has a table of multiple-scattering distributions Ams_n (n = 0..N) a
 from :mod:`warpsky.optics.tables`, analytic phases in closed form (HG(g)^{*n} = HG(g^n)). Several media at a
 point mix their Ams and F by scattering weight (Riley Eq. 6 applied per order).
 
-A dome lights the media as an unoccluded ambient light (:mod:`warpsky.techniques.dome`): each eye sample adds
-L_mean times its scattering integrated over the sample, (1 - e^-tau) albedo, as if its phase were isotropic and no
-cloud shadowed it. For an albedo-1 medium under a uniform dome this is exactly the white furnace's answer (the
-pixel shows L_mean whatever the optical depth); for darker media and textured domes it overestimates the light
-deep inside thick clouds. The ground reflects albedo E / pi of the dome's upper hemisphere, occluded towards
-the zenith.
+The sky (the dome, the analytic sky of a frame with a sky pass, the ground they light: :mod:`warpsky.techniques.
+skylight`) lights the media as an unoccluded environment on two spherical-harmonic bands per hemisphere: each eye
+sample adds S(v) = max(0, m_up + 3 g M_up . v) + max(0, m_down + 3 g M_down . v), g mixed over the media at the
+sample by scattering weight, times its scattering integrated over the sample, (1 - e^-tau) albedo, as if no cloud
+shadowed it. For an albedo-1 medium under a uniform dome and an isotropic phase this is exactly the white
+furnace's answer (the pixel shows L whatever the optical depth); deep inside thick clouds it overestimates the
+light. The ground reflects albedo E / pi of the sky above it, occluded towards the zenith.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from warpsky.techniques.common import (
 )
 from warpsky.techniques.dome import ambient_ground
 from warpsky.techniques.single_scatter.kernels import media_span, sun_depth_function
+from warpsky.techniques.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 
 
 @wp.struct
@@ -274,7 +276,7 @@ def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = Fals
     Riley's model solved per step (second order in the slice spacing); Riley's Eq. 24 (per-event forward
     fractions, first order) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta), which does not converge); and on
     whether any medium has animated detail (without it the samplers never touch ``details``); the eye kernel also
-    on a dome (its ambient light)."""
+    on ambient light (a dome or sky light)."""
     return slice_eye_kernel(low_albedo, has_detail, has_dome), slice_light_kernel(low_albedo, equation, has_detail)
 
 
@@ -320,7 +322,8 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
     @wp.func
     def gather_sample(media: VoxelMedia, tables: AmsTables, oriented: OrientedPhases, frame: SliceFrame,
                       light_i: wp.array2d(dtype=wp.vec3), light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3,
-                      view: wp.vec3, theta: float, length: float, ambient: wp.vec3):
+                      view: wp.vec3, theta: float, length: float, ambient: AmbientLobes,
+                      asymmetry: wp.array(dtype=wp.vec3)):
         """(light scattered towards the eye, optical depth), RGB, of the piece of the eye ray of ``length`` [m]
         centred on ``p``."""
         point = sample_media(media, p)
@@ -338,13 +341,16 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
             order = wp.vec3(1.0)
         phase = mixed_ams_scattering(point, media, tables, order, theta)
         phase += oriented_ams_correction(point, media, tables, oriented, order, view, theta)
+        sky = wp.vec3(0.0)
+        if wp.static(has_dome):
+            sky = ambient_inscatter(ambient, mixed_asymmetry(media, point, asymmetry), wp.vec3(1.0), wp.vec3(1.0))
         for c in range(3):
             if scattering[c] > 0.0:
                 p_c = phase[c] / scattering[c]  # xi included, per medium
                 # scattering integrated exactly over the piece: (1 - e^-tau) albedo instead of beta_s * length
                 out[c] = light[c] * p_c * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
                 if wp.static(has_dome):
-                    out[c] = out[c] + ambient[c] * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
+                    out[c] = out[c] + sky[c] * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
         return out, tau
 
     @wp.kernel(module="unique")
@@ -358,7 +364,7 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
         light: LightBuffers,
         sun: Sun,
         sample_length: float,
-        ambient: wp.vec3,
+        ambient: SkyEnvironment,
         eye: EyeBuffers,
         row_offset: int,
     ):
@@ -374,6 +380,7 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
         half = 0.5 * frame.spacing / wp.abs(along)
         cos_axis = wp.dot(view, camera_forward(cam))
         theta = scattering_angle(sun.direction, view)
+        lobes = ambient_lobes(ambient, view)
         inside = eye.spans[row, col]
         radiance = eye.radiance[row, col]
         transmittance = eye.transmittance[row, col]
@@ -392,7 +399,8 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
             for s in range(count):  # front to back inside the slab
                 p = view * (t + (lo + (float(s) + 0.5) * length))
                 scattered, tau = gather_sample(media, tables, oriented, frame, light.stack_intensity[k],
-                                               light.stack_count[k], p, view, theta, length, ambient)
+                                               light.stack_count[k], p, view, theta, length, lobes,
+                                               ambient.asymmetry)
                 contribution += wp.cw_mul(keep, scattered)
                 keep = wp.cw_mul(keep, exp3(tau))
             if keep[0] >= 1.0 and keep[1] >= 1.0 and keep[2] >= 1.0:

@@ -39,6 +39,7 @@ from warpsky.interrupt import check_stop
 from warpsky.media.voxel import VoxelMedia
 from warpsky.optics.oriented_phase import OrientedPhases
 from warpsky.techniques.common import PinholeCamera, Sun
+from warpsky.techniques.skylight import SkyEnvironment
 from warpsky.techniques.slicing.kernels import (
     AmsTables,
     EyeBuffers,
@@ -146,7 +147,7 @@ class SliceSweep:
     cam: PinholeCamera
     frame: SliceFrame
     sun: Sun
-    ambient: wp.vec3  # the dome's mean radiance, RGB
+    ambient: SkyEnvironment  # the sky around the media (:mod:`warpsky.techniques.skylight`)
     sample_length: float  # longest eye sample [m]
     planes: np.ndarray  # slice positions along the slice axis [m], in sweep order
     start: tuple[float, float, float]  # irradiance the light buffer starts with, RGB
@@ -155,10 +156,10 @@ class SliceSweep:
     def key(self) -> tuple:
         """Everything a captured graph of this sweep holds by value or by address."""
         structs = tuple(bytes(s.__ctype__()) for s in (self.media, self.tables, self.oriented, self.cam, self.frame,
-                                                        self.sun))
+                                                        self.sun, self.ambient))
         arrays = tuple((a.ptr, a.shape) for a in self.buffers.arrays())
-        return (self.eye_kernel, self.light_kernel, structs, arrays, tuple(float(v) for v in self.ambient),
-                float(self.sample_length), np.asarray(self.planes, dtype=np.float64).tobytes(), tuple(self.start))
+        return (self.eye_kernel, self.light_kernel, structs, arrays, float(self.sample_length),
+                np.asarray(self.planes, dtype=np.float64).tobytes(), tuple(self.start))
 
     def issue(self, *, capturing: bool) -> None:
         """Clear the buffers and launch the sweep, two launches per chunk of planes (the light carried through the

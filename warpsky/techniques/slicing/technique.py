@@ -22,7 +22,7 @@ from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import PhaseKind, Projection, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
-from warpsky.techniques.dome import ambient_vec, ground_ambient_vec
+from warpsky.techniques.skylight import ambient_settings
 from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
 from warpsky.techniques.slicing.sweep import SliceSweep, SweepBuffers, chunk_planes, run_sweep, sweep_lock
 from warpsky.techniques.sunlight import sunlight
@@ -73,6 +73,9 @@ class SlicingSettings(TechniqueSettings):
         LightEquation.CONTINUOUS, help="light-buffer update: 0 = the continuous limit of Riley's model, dI/dtau = "
         "-(1 - alpha F_{n+1}) I solved per step (second order in the slice spacing); 24 = Riley Eq. 24 (first "
         "order); 25 = his GPU shortcut Eq. 25 (tends to no attenuation as slices are added)")
+    skylight: bool = setting(True, help="light the media with the whole sky on two spherical-harmonic bands per "
+                             "hemisphere (the analytic sky of a frame with a sky pass, the dome, the ground they "
+                             "light) through the phase's asymmetry, unoccluded; 0: the dome's mean radiance alone")
 
     def __post_init__(self):
         self.normalise()
@@ -274,13 +277,15 @@ class Slicing:
         frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count), res)
         # a sun set behind the horizon lights nothing, but the media still hide what lies behind them
         start = sun.irradiance if sun is not None and sun.lit else np.zeros(3)
+        environment, _, ambient_on = ambient_settings(scene, skylight=bool(settings.skylight),
+                                                      traces_air=self.traces_air, device=self.device)
         eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
-                                                   media.has_detail, scene.dome is not None)
+                                                   media.has_detail, bool(ambient_on))
         return SliceSweep(
             device=self.device, eye_kernel=eye_kernel, light_kernel=light_kernel, media=media.media,
             tables=self._ams_tables(scene, scene.species, int(settings.orders), settings.xi),
             oriented=oriented_phases(scene, self.device, cache="slicing"),
-            cam=pinhole_camera(camera, width, height), frame=frame, sun=sun_struct(sun), ambient=ambient_vec(scene),
+            cam=pinhole_camera(camera, width, height), frame=frame, sun=sun_struct(sun), ambient=environment,
             sample_length=float(media.min_voxel_size) / float(settings.eye_samples), planes=planes,
             start=tuple(np.asarray(start, dtype=np.float64).tolist()),
             buffers=SweepBuffers.kept(height, width, res, planes, self.device))
@@ -319,8 +324,11 @@ class Slicing:
                 transmittance: wp.array, depth: wp.array) -> None:
         """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel), drawn
         into the device images ``radiance``, ``transmittance`` (RGB) and ``depth`` [m]; ``media`` is the sweep's
-        upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`)."""
-        wp.launch(ground_kernel(media.has_detail, scene.dome is not None), dim=(height, width), inputs=[
+        upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`); the sky above it lights it too, occluded towards
+        the zenith."""
+        _, ground_sky, ambient_on = ambient_settings(scene, skylight=bool(self.settings.skylight),
+                                                     traces_air=self.traces_air, device=self.device)
+        wp.launch(ground_kernel(media.has_detail, bool(ambient_on)), dim=(height, width), inputs=[
             media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
-            ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_ambient_vec(scene),
+            ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_sky,
             radiance, transmittance, depth], device=self.device)
