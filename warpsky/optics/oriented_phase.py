@@ -152,24 +152,32 @@ def frame_slices(scene, *, photons: int = FRAME_PHOTONS) -> tuple[np.ndarray, li
     :func:`~warpsky.optics.oriented_ice.oriented_ice_table`, with a progress line while it builds) and mixed with
     the ``ice`` species' random phase as the module docstring says."""
     from warpsky.optics.oriented_ice import IceOrientation, SkyBins, oriented_ice_table
-    from warpsky.optics.tables import phase_table
-
     grid = SkyBins()
     indices = oriented_media(scene.media)
     slice_of = [-1] * len(scene.media)
     if not indices:
         return np.zeros((0, grid.elevation_bins, grid.azimuth_bins, 3), np.float32), slice_of, grid
     elevation = sun_elevation_deg(scene)
-    random_phase = _random_phase_on_bins(phase_table("ice"), grid, elevation)
     slices = []
     for index in indices:
         spec = scene.media[index].ice
         orientation = IceOrientation(spec.orientation, spec.tilt_deg, spec.habit)
         table = oriented_ice_table(orientation, sun_elevations_deg=(elevation,), grid=grid, photons=photons)
-        weight = _oriented_weight(spec.fraction, orientation)
-        slices.append((weight * table.phase[0] + (1.0 - weight) * random_phase).astype(np.float32))
+        slices.append(mixed_slice(table.phase[0], spec.fraction, orientation, grid, elevation))
         slice_of[index] = len(slices) - 1
     return np.stack(slices), slice_of, grid
+
+
+def mixed_slice(oriented: np.ndarray, fraction: float, orientation, grid, elevation_deg: float) -> np.ndarray:
+    """(E, A, 3) float32: an oriented slice for a sun at ``elevation_deg`` mixed with the ``ice`` species' random
+    phase on the same bins, weighted as the module docstring says."""
+    from warpsky.optics.tables import phase_table
+
+    weight = _oriented_weight(fraction, orientation)
+    if weight >= 1.0:
+        return oriented.astype(np.float32)
+    random_phase = _random_phase_on_bins(phase_table("ice"), grid, elevation_deg)
+    return (weight * oriented + (1.0 - weight) * random_phase).astype(np.float32)
 
 
 def _oriented_weight(fraction: float, orientation) -> float:

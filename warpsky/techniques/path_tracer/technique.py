@@ -16,6 +16,7 @@ from warpsky.media.air import air_struct
 from warpsky.media.voxel import VoxelMediaBuffers
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.oriented_phase import oriented_phases
+from warpsky.optics.oriented_sampling import continuation_tables
 from warpsky.optics.phase_sampling import phase_tables_struct
 from warpsky.optics.tables import build_tables
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, grid_bytes
@@ -191,8 +192,9 @@ class PathTracing:
                                         scene.dome is not None)
         dome = dome_struct(scene.dome, device)
         oriented = oriented_phases(scene, device)
-        self._keep = (tables, media, dome, oriented)  # the structs below point into these buffers
-        self.fixed = [media.media, majorants, phase_tables_struct(tables, oriented),
+        continuation = continuation_tables(scene, device)
+        self._keep = (tables, media, dome, oriented, continuation)  # the structs below point into these buffers
+        self.fixed = [media.media, majorants, phase_tables_struct(tables, oriented, continuation),
                       air_struct(scene.atmosphere if air else None, camera.position), sun_struct(sunlight(scene)),
                       pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position), dome]
 
