@@ -357,3 +357,30 @@ def test_hits_weigh_crystals_by_the_area_they_show_the_sun(device):
         assert table.projected_area[s] == pytest.approx(expected, rel=5e-3), f"sun {sun}°"
     random = _table("random", 0.0, (30.0,), device, 2_000_000)
     assert random.projected_area[0] == pytest.approx(HABITS["column"].mean_projected_area, rel=5e-3)
+
+
+@pytest.mark.parametrize("sun", [0.0, 20.0, 40.0])
+def test_parhelion_distance_from_the_sun_within_a_fifth_of_a_degree(sun, device):
+    """On 0.1° azimuth bins: the parhelion's inner edge, as an angular distance d from the sun
+    (sin(d / 2) = cos e sin(da / 2)), against Bravais' minimum deviation for the band's least-refracted sample
+    wavelength (the edge belongs to the smallest index in the band) within 0.2°, per channel."""
+    from warpsky.optics.ice import ice_refractive_index
+    from warpsky.optics.oriented_ice import trace_oriented
+
+    fine = SkyBins(elevation_step_deg=1.0, azimuth_step_deg=0.1)
+    trace = trace_oriented(IceOrientation("plate", 0.0), sun, PHOTONS, grid=fine, seed=11, device=device)
+    azimuths = fine.azimuth_centres_deg()
+    row = int(round((sun + 90.0) / fine.elevation_step_deg))
+    e = math.radians(sun)
+
+    def distance(da_deg: float) -> float:
+        return math.degrees(2.0 * math.asin(math.cos(e) * math.sin(math.radians(da_deg) / 2.0)))
+
+    for c in range(3):
+        n = float(np.min(ice_refractive_index(band_samples(c)[0])))
+        expected = parhelion_azimuth_deg(n, sun)
+        counts = trace.histogram[c, row]
+        window = (azimuths >= expected - 5.0) & (azimuths <= expected + 5.0)
+        values = counts[window]
+        edge = float(azimuths[window][np.argmax(values >= 0.25 * values.max())])
+        assert abs(distance(edge) - distance(expected)) <= 0.2, (c, distance(edge), distance(expected))
