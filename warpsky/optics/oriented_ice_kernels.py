@@ -38,7 +38,7 @@ import math
 
 import warp as wp
 
-from warpsky.optics.ice_kernels import face_normal, face_offset, fresnel_unpolarised, reflect
+from warpsky.optics.ice_kernels import FATE_MISSED, FATE_TRAPPED, trace_photon
 
 wp.set_module_options({"enable_backward": False})
 
@@ -46,17 +46,12 @@ KIND_RANDOM = 0
 KIND_PLATE = 1
 KIND_COLUMN = 2
 KIND_PARRY = 3
-#: Photon fates returned by :func:`trace_photon`.
-FATE_MISSED = 0
-FATE_LEFT = 1
-FATE_TRAPPED = 2
 #: Tally columns: photons that hit the crystal, missed it, and were still inside after the interaction cap.
 TALLY_HITS = 0
 TALLY_MISSES = 1
 TALLY_TRAPPED = 2
 TALLY_COUNT = 3
 
-_FACE_COUNT = wp.constant(8)
 _HALF_PI = wp.constant(0.5 * math.pi)
 
 
@@ -129,92 +124,6 @@ def sample_orientation(kind: int, tilt: float, state: wp.uint32):
     lean = wp.quat_from_axis_angle(wp.vec3(0.0, 0.0, 1.0), flutter)
     turn = wp.quat_from_axis_angle(up, azimuth)
     return turn * lean * base * wp.quat_from_axis_angle(c_axis, spin), state
-
-
-@wp.func
-def enter_prism(origin: wp.vec3, direction: wp.vec3, half_length: float):
-    """(distance, face) where the ray ``origin + t direction`` enters the prism; face -1 when it misses."""
-    t_in = float(-1.0e30)
-    t_out = float(1.0e30)
-    entry_face = int(-1)
-    for face in range(_FACE_COUNT):
-        normal = face_normal(face)
-        denom = wp.dot(normal, direction)
-        gap = face_offset(face, half_length) - wp.dot(normal, origin)
-        if denom < 0.0:
-            hit = gap / denom
-            if hit > t_in:
-                t_in = hit
-                entry_face = face
-        elif denom > 0.0:
-            t_out = wp.min(t_out, gap / denom)
-        elif gap < 0.0:
-            t_out = float(-1.0e30)  # parallel to a face and outside it
-    if t_in >= t_out:
-        entry_face = -1
-    return t_in, entry_face
-
-
-@wp.func
-def leave_prism(position: wp.vec3, direction: wp.vec3, half_length: float):
-    """(distance, face) to the face a ray inside the prism reaches next."""
-    t_exit = float(1.0e30)
-    exit_face = int(0)
-    for face in range(_FACE_COUNT):
-        normal = face_normal(face)
-        denom = wp.dot(normal, direction)
-        if denom > 0.0:
-            hit = (face_offset(face, half_length) - wp.dot(normal, position)) / denom
-            if hit < t_exit:
-                t_exit = hit
-                exit_face = face
-    return wp.max(t_exit, 0.0), exit_face
-
-
-@wp.func
-def trace_photon(
-    incident: wp.vec3, across_u: wp.vec3, across_v: wp.vec3, half_length: float, eta: float, cap: int,
-    state: wp.uint32,
-):
-    """(fate, outgoing direction) of one photon sent along ``incident`` (crystal frame) at the prism.
-
-    ``across_u``, ``across_v`` span the plane across the beam; the start point is uniform on the square of side
-    2 R around the crystal, R = sqrt(1 + half_length^2). Fates: ``FATE_MISSED``, ``FATE_LEFT``, ``FATE_TRAPPED``.
-    """
-    bound = wp.sqrt(1.0 + half_length * half_length)
-    s = (2.0 * wp.randf(state) - 1.0) * bound
-    t = (2.0 * wp.randf(state) - 1.0) * bound
-    origin = s * across_u + t * across_v - 2.0 * bound * incident
-    t_in, entry_face = enter_prism(origin, incident, half_length)
-    if entry_face < 0:
-        return FATE_MISSED, incident
-
-    # external interface: reflect away or refract in
-    normal = face_normal(entry_face)
-    cos_i = -wp.dot(incident, normal)
-    inv_eta = 1.0 / eta
-    cos_t = wp.sqrt(wp.max(1.0 - inv_eta * inv_eta * (1.0 - cos_i * cos_i), 0.0))
-    if wp.randf(state) < fresnel_unpolarised(1.0, eta, cos_i, cos_t):
-        return FATE_LEFT, reflect(incident, normal)
-    direction = wp.normalize(inv_eta * incident + (inv_eta * cos_i - cos_t) * normal)
-    position = origin + t_in * incident
-
-    # internal interactions until the photon refracts out or meets the cap
-    for _interaction in range(cap):
-        t_exit, exit_face = leave_prism(position, direction, half_length)
-        position = position + t_exit * direction
-        normal = face_normal(exit_face)
-        cos_i = wp.dot(direction, normal)
-        sin_t2 = eta * eta * (1.0 - cos_i * cos_i)
-        if sin_t2 >= 1.0:
-            direction = reflect(direction, normal)  # total internal reflection
-        else:
-            cos_t = wp.sqrt(1.0 - sin_t2)
-            if wp.randf(state) < fresnel_unpolarised(eta, 1.0, cos_i, cos_t):
-                direction = reflect(direction, normal)
-            else:
-                return FATE_LEFT, wp.normalize(eta * direction + (cos_t - eta * cos_i) * normal)
-    return FATE_TRAPPED, direction
 
 
 @wp.func
