@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.errors import UsageError
 from warpsky.media.detail import (
     MediumDetail,
@@ -190,10 +191,12 @@ class VoxelMediaBuffers:
     @classmethod
     def upload(
         cls, media: tuple[VoxelMedium, ...], camera_position: np.ndarray, device, species: tuple[str, ...] = (),
-        *, time_s: float = 0.0,
+        *, time_s: float = 0.0, cache_name: str | None = None,
     ) -> VoxelMediaBuffers:
         """Upload ``media``; a medium of species ``species[i]`` uses phase table i; animated detail at ``time_s``
-        [s] (see :mod:`warpsky.media.detail`)."""
+        [s] (see :mod:`warpsky.media.detail`). With ``cache_name`` the flat value buffer goes through
+        :func:`warpsky.device_buffers.upload` under that name: a frame whose grids hold the same values as the
+        previous one's reuses the device copy (kernels must not write into it)."""
         infos = []
         chunks = []
         offset = 0
@@ -218,7 +221,10 @@ class VoxelMediaBuffers:
         if offset >= 2**31:
             raise ValueError("voxel media exceed 2^31 values; split them or use coarser grids")
         flat = np.concatenate(chunks) if chunks else np.zeros(1, dtype=np.float32)
-        values = wp.array(flat, dtype=float, device=device)
+        if cache_name is None:
+            values = wp.array(flat, dtype=float, device=device)
+        else:
+            values = device_buffers.upload(cache_name, flat, float, device)
         grids = wp.array(infos if infos else [VoxelGrid()], dtype=VoxelGrid, device=device)
         sizes = [float(m.voxel_size.min()) for m in media]
         entries = medium_details(tuple(media), time_s, camera_position, device)

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.errors import UsageError
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, march_work
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
@@ -49,6 +50,8 @@ from warpsky.techniques.path_tracer.technique import (
 from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
 from warpsky.techniques.sky.technique import SkyPass, unattenuated_sun
 
+#: Name under which the multiple-scattering paths keep their device buffers (:mod:`warpsky.device_buffers`).
+BUFFER_NAME = "path_tracer:hybrid"
 #: Pixels whose luminance transmittance is below this count as covered by the media (or an opaque surface).
 COVERED_BELOW = 0.99
 
@@ -229,9 +232,10 @@ class MultipleScattering:
         # With air, paths are traced through it from the sun at the top of the atmosphere: they carry skylight on
         # the media and the air's own multiple scattering; its single scattering is the sky pass's.
         self.tracing = PathTracing(unattenuated_sun(scene), width, height, settings.path_tracer(), device,
-                                   air=scene.atmosphere is not None, multiple_only=True, scale=self.scale)
+                                   air=scene.atmosphere is not None, multiple_only=True, scale=self.scale,
+                                   buffer_name=BUFFER_NAME)
         shape = (self.tracing.height, self.tracing.width)
-        self.halves = [pixel_sums(shape, device), pixel_sums(shape, device)]
+        self.halves = [pixel_sums(shape, device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
         self.counts = [0, 0]
 
     def run(self, single: Layer, started: float) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -283,12 +287,14 @@ class MultipleScattering:
         return image, variance, stats
 
     def half_mean(self, half: int) -> np.ndarray:
-        return self.halves[half].radiance_sum.numpy() / max(self.counts[half], 1)
+        """Mean radiance of ``half``'s paths (a download: the error estimate needs it on the host)."""
+        radiance = device_buffers.download(f"{BUFFER_NAME}:radiance_sum", self.halves[half].radiance_sum)
+        return radiance / max(self.counts[half], 1)
 
     def film(self) -> Layer:
         """Both halves' paths as the path tracer reports its own: their mean, the variance of that mean
         (``aovs["variance"]``) and the tracking counters (``stats``)."""
-        return sums_layer(self.halves, sum(self.counts), far=0.0)
+        return sums_layer(self.halves, sum(self.counts), far=0.0, name=BUFFER_NAME)
 
     def estimate(self, single: np.ndarray, coverage: np.ndarray, covered: np.ndarray) -> float:
         """Estimated relative RMSE of the frame over ``covered`` pixels (0 when nothing is covered)."""

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.air import air_struct
@@ -92,7 +93,7 @@ class PathTracer:
         variance AOV, and the media with their majorants."""
         settings = self.resolved_settings(scene)
         pixels = width * height
-        lanes = gpu_lanes(self.device, pixels, int(settings.spp) // int(settings.samples_per_pass))
+        lanes, _ = gpu_launches(self.device, pixels, int(settings.spp), int(settings.samples_per_pass))
         return (path_tracing_memory(scene, pixels * lanes, int(settings.majorant_block), self.device)
                 .add("images", host=pixels * SUMS_LAYER_BYTES)
                 .add("AOVs", host=pixels * AOV_BYTES))
@@ -106,15 +107,15 @@ class PathTracer:
         settings = self.resolved_settings(scene)
         started = time.perf_counter()
         tracing = PathTracing(scene, width, height, settings, self.device)
-        lanes = gpu_lanes(self.device, width * height, int(settings.spp) // int(settings.samples_per_pass))
-        sums = [pixel_sums((height, width), self.device) for _ in range(lanes)]
-        streams = [wp.Stream(self.device) for _ in range(lanes)] if lanes > 1 else []
-        spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
+        spp = int(settings.spp)
+        lanes, per_pass = gpu_launches(self.device, width * height, spp, int(settings.samples_per_pass))
+        sums = [pixel_sums((height, width), self.device, name=f"path_tracer:lane{lane}") for lane in range(lanes)]
+        streams = lane_streams(self.device, lanes) if lanes > 1 else []
         done = passes = 0
         while done < spp:
             count = min(per_pass, spp - done)
             lane = passes % lanes
-            if streams:
+            if streams:  # entering waits for the device's current stream, where the sums were cleared
                 with wp.ScopedStream(streams[lane]):
                     tracing.launch(sums[lane], done, count)
             else:
@@ -125,7 +126,7 @@ class PathTracer:
                 progress(count)
         wp.synchronize_device(self.device)
         seconds = time.perf_counter() - started
-        layer = sums_layer(sums, spp, float(tracing.camera.far))
+        layer = sums_layer(sums, spp, float(tracing.camera.far), name="path_tracer")
         layer.stats = {"seconds": seconds, "settings": dataclasses.asdict(settings), "spp": spp, **layer.stats,
                        "majorant_cells": tracing.majorant_cells}
         return layer
@@ -136,10 +137,12 @@ class PathTracing:
     :meth:`launch` adds paths per pixel to a :class:`PixelSums` (progressive passes reuse everything).
 
     ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
-    at least twice, for techniques that march single scattering exactly."""
+    at least twice, for techniques that march single scattering exactly. The media's values and majorants go
+    through :func:`warpsky.device_buffers.upload` under ``buffer_name``: the next frame of a batch with the same
+    grids copies nothing."""
 
     def __init__(self, scene: Scene, width: int, height: int, settings: PathTracerSettings, device: str, *,
-                 air: bool = True, multiple_only: bool = False, scale: int = 1):
+                 air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer"):
         self.settings = settings
         self.device = device
         camera = scene.camera.conformed(width, height)
@@ -151,8 +154,10 @@ class PathTracing:
         species = scene.species
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
-            majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device)
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
+                                             cache_name=f"{buffer_name}:media")
+            majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device,
+                                                              cache_name=f"{buffer_name}:majorants")
         self.kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail,
                                         scene.dome is not None)
         dome = dome_struct(scene.dome, device)
@@ -207,14 +212,23 @@ def coarse_camera(camera, width: int, height: int, scale: int):
     ), coarse_w, coarse_h
 
 
-def pixel_sums(shape: tuple[int, int], device) -> PixelSums:
-    """Zeroed per-pixel sums of ``shape`` (rows, columns) on ``device``."""
+#: The fields of :class:`PixelSums` and their element types.
+PIXEL_SUMS_FIELDS = (("radiance_sum", wp.vec3), ("radiance_sq", wp.vec3), ("transmittance_sum", wp.vec3),
+                     ("depth_sum", wp.vec2), ("counters", wp.vec2i))
+
+
+def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> PixelSums:
+    """Zeroed per-pixel sums of ``shape`` (rows, columns) on ``device``. With ``name`` the arrays are
+    :func:`warpsky.device_buffers.reusable` ones (``name:field``), cleared here: a frame of the same size
+    allocates nothing, and sums under one name must not be in use twice at once."""
     out = PixelSums()
-    out.radiance_sum = wp.zeros(shape, dtype=wp.vec3, device=device)
-    out.radiance_sq = wp.zeros(shape, dtype=wp.vec3, device=device)
-    out.transmittance_sum = wp.zeros(shape, dtype=wp.vec3, device=device)
-    out.depth_sum = wp.zeros(shape, dtype=wp.vec2, device=device)
-    out.counters = wp.zeros(shape, dtype=wp.vec2i, device=device)
+    for field, dtype in PIXEL_SUMS_FIELDS:
+        if name is None:
+            array = wp.zeros(shape, dtype=dtype, device=device)
+        else:
+            array = device_buffers.reusable(f"{name}:{field}", shape, dtype, device)
+            array.zero_()
+        setattr(out, field, array)
     return out
 
 
@@ -232,20 +246,58 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     return out
 
 
+#: Threads a GPU keeps resident at once (a large one: 132 SMs x 2048 on an H200, about 2^18).
+GPU_RESIDENT_THREADS = 1 << 18
+#: Most CUDA streams the passes of one frame spread over.
+MAX_LANES = 16
+
+_STREAMS: dict[str, list] = {}
+
+
 def gpu_lanes(device: str, pixels: int, passes: int) -> int:
-    """How many CUDA streams progressive passes spread over: enough threads in flight to fill a GPU (about
-    2^18 resident threads on a large one) when the frame alone has too few pixels; 1 on the CPU."""
+    """How many CUDA streams ``passes`` progressive passes spread over: enough threads in flight to fill a GPU
+    (:data:`GPU_RESIDENT_THREADS`) when the frame alone has too few pixels, at most :data:`MAX_LANES`; 1 on the
+    CPU."""
     if str(device).startswith("cpu"):
         return 1
-    return max(1, min(16, passes, (1 << 18) // max(pixels, 1)))
+    return max(1, min(MAX_LANES, passes, GPU_RESIDENT_THREADS // max(pixels, 1)))
 
 
-def sums_layer(sums: list[PixelSums], spp: int, far: float) -> Layer:
+def gpu_launches(device: str, pixels: int, spp: int, per_pass: int) -> tuple[int, int]:
+    """(lanes, paths per pixel per launch) of a frame of ``pixels`` pixels and ``spp`` paths per pixel.
+
+    The kernel runs one thread per pixel over a launch's paths and adds them to its lane's :class:`PixelSums`
+    in path order, so a lane's sums never race and each pixel is a function of the seed, ``spp`` and the lane
+    split alone. A frame with fewer pixels than :data:`GPU_RESIDENT_THREADS` fills the GPU with lanes: passes
+    on as many CUDA streams run at once, each into its own sums, which :func:`sums_layer` adds. A pass holds
+    at most ``per_pass`` paths per pixel, fewer when ``spp`` would otherwise give fewer passes than the lanes
+    wanted (128 x 128 pixels at 64 paths per pixel: 16 lanes of 4 paths per launch, 2^18 threads in flight
+    instead of 2^14). On the CPU: one lane of ``per_pass`` paths (the row bands of
+    :func:`~warpsky.device.launch_rows` use the cores)."""
+    per_pass = max(1, min(int(per_pass), int(spp)))
+    if str(device).startswith("cpu"):
+        return 1, per_pass
+    wanted = max(1, min(MAX_LANES, GPU_RESIDENT_THREADS // max(pixels, 1)))
+    if wanted > 1:
+        per_pass = max(1, min(per_pass, int(spp) // wanted))
+    return gpu_lanes(device, pixels, -(-int(spp) // per_pass)), per_pass
+
+
+def lane_streams(device: str, lanes: int) -> list:
+    """``lanes`` CUDA streams of ``device``, created once per process and shared by every frame."""
+    kept = _STREAMS.setdefault(str(device), [])
+    while len(kept) < lanes:
+        kept.append(wp.Stream(device))
+    return kept[:lanes]
+
+
+def sums_layer(sums: list[PixelSums], spp: int, far: float, *, name: str = "path_tracer") -> Layer:
     """The layer of ``spp`` paths per pixel accumulated in ``sums`` (one per stream): mean radiance, mean
     transmittance, mean depth of first events (``far`` where none), the variance of the pixel mean as an AOV, and
-    the tracking counters."""
-    def total_of(name):
-        return sum(getattr(s, name).numpy().astype(np.float64) for s in sums)
+    the tracking counters. One download per field and lane, through :func:`warpsky.device_buffers.download`
+    (pinned staging kept under ``name:field``)."""
+    def total_of(field):
+        return sum(device_buffers.download(f"{name}:{field}", getattr(s, field)).astype(np.float64) for s in sums)
 
     total = total_of("radiance_sum")
     squares = total_of("radiance_sq")
@@ -253,7 +305,7 @@ def sums_layer(sums: list[PixelSums], spp: int, far: float) -> Layer:
     variance = np.maximum(squares / spp - mean**2, 0.0) / max(spp - 1, 1)  # of the mean
     depth = total_of("depth_sum")
     depth_mean = np.where(depth[..., 1] > 0, depth[..., 0] / np.maximum(depth[..., 1], 1), np.float32(far))
-    count_values = sum(s.counters.numpy() for s in sums)
+    count_values = sum(device_buffers.download(f"{name}:counters", s.counters) for s in sums)
     return Layer(
         mean.astype(np.float32),
         (total_of("transmittance_sum") / spp).astype(np.float32),

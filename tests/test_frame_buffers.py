@@ -1,0 +1,87 @@
+"""Frames of a batch reuse their device buffers: the second frame of the same stage allocates nothing through
+:mod:`warpsky.device_buffers` and gives the same pixels as a fresh render; the radiosity reads few values back."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import StageSpec, look_rotation, write_stage
+
+from warpsky import device_buffers
+from warpsky.plan import make_plan
+from warpsky.scene.usd import StageReader
+from warpsky.techniques.path_tracer.technique import gpu_launches
+
+SIZE = 12
+
+
+@pytest.fixture
+def stage(tmp_path, homogeneous_npy):
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.15, camera_position=(3.0, 4.0, 42.0),
+                     camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.4, 0.8, 0.3),
+                     ground=(-12.0, 0.3))
+    return write_stage(tmp_path / "box.usda", spec)
+
+
+def render_frame(stage, device, technique, **settings):
+    """One frame as a batch renders it: a new technique instance per frame."""
+    scene = StageReader(stage).scene_at(None)
+    plan = make_plan(scene, technique=technique, settings={k: str(v) for k, v in settings.items()},
+                     resolution=(SIZE, SIZE), device=device)
+    return plan.renderer.render(scene, SIZE, SIZE)
+
+
+def assert_layers_equal(a, b):
+    np.testing.assert_array_equal(a.radiance, b.radiance)
+    np.testing.assert_array_equal(a.transmittance, b.transmittance)
+    np.testing.assert_array_equal(a.depth, b.depth)
+    for name in a.aovs:
+        np.testing.assert_array_equal(a.aovs[name], b.aovs[name])
+
+
+@pytest.mark.parametrize("technique,settings", [
+    ("path_tracer", {"spp": 6, "samples_per_pass": 4, "max_bounces": 8}),
+    ("hybrid", {"spp": 4, "target_error": 0, "denoise": 0, "max_bounces": 8}),
+    ("single_scatter", {}),
+])
+def test_second_frame_allocates_nothing_and_matches_a_fresh_render(stage, device, technique, settings):
+    device_buffers.clear()
+    fresh = render_frame(stage, device, technique, **settings)
+    allocated = device_buffers.allocation_count()
+    second = render_frame(stage, device, technique, **settings)
+    assert device_buffers.allocation_count() == allocated
+    assert_layers_equal(second, fresh)
+
+
+def test_path_tracer_pixels_do_not_depend_on_the_pass_split_on_one_lane(stage):
+    one = render_frame(stage, "cpu", "path_tracer", spp=6, samples_per_pass=6, max_bounces=8)
+    split = render_frame(stage, "cpu", "path_tracer", spp=6, samples_per_pass=1, max_bounces=8)
+    assert_layers_equal(one, split)
+
+
+def test_gpu_launches_fill_the_gpu_on_small_frames():
+    assert gpu_launches("cpu", 128 * 128, 64, 8) == (1, 8)
+    assert gpu_launches("cuda:0", 128 * 128, 64, 64) == (16, 4)  # 2^18 threads in flight, not 2^14
+    assert gpu_launches("cuda:0", 128 * 128, 1024, 64) == (16, 64)
+    assert gpu_launches("cuda:0", 512 * 512, 64, 64) == (1, 64)  # the frame fills the GPU alone
+    assert gpu_launches("cuda:0", 128 * 128, 3, 64) == (3, 1)  # no more lanes than paths
+
+
+def test_sky_pass_second_frame_allocates_nothing(device):
+    from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
+    from warpsky.techniques.sky.technique import SkyPass
+
+    cam = Camera("c", np.array([0.0, 2.0, 0.0]), look_rotation((0.0, 0.3, -1.0)), 20.0, 36.0, 24.0, far=1e5)
+    scene = Scene(cam, Sun((0.3, 0.8, 0.2), (1.0, 1.0, 1.0)), ground=Ground(0.0), atmosphere=Atmosphere())
+    device_buffers.clear()
+    first = SkyPass(device=device).render(scene, SIZE, SIZE)
+    allocated = device_buffers.allocation_count()
+    depth = np.full((SIZE, SIZE), 500.0, np.float32)
+    SkyPass(device=device).render(scene, SIZE, SIZE, media_depth=depth)
+    second = SkyPass(device=device).render(dataclasses.replace(scene), SIZE, SIZE)
+    assert device_buffers.allocation_count() == allocated
+    for a, b in zip(first, second, strict=True):
+        np.testing.assert_array_equal(a.radiance, b.radiance)
+        np.testing.assert_array_equal(a.transmittance, b.transmittance)
