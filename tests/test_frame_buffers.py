@@ -85,3 +85,81 @@ def test_sky_pass_second_frame_allocates_nothing(device):
     for a, b in zip(first, second, strict=True):
         np.testing.assert_array_equal(a.radiance, b.radiance)
         np.testing.assert_array_equal(a.transmittance, b.transmittance)
+
+
+def stratiform_frame(device, radiosity=True):
+    from warpsky.scene.layers import StratiformLayer
+    from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
+    from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
+
+    cam = Camera("c", np.array([0.0, 2.0, 0.0]), look_rotation((0.0, 1.0, -0.2)), 20.0, 36.0, 24.0, far=1e5)
+    scene = Scene(cam, Sun((0.3, 0.8, 0.2), (1.0, 1.0, 1.0)), ground=Ground(0.0, albedo=(0.6, 0.6, 0.6)),
+                  atmosphere=Atmosphere())
+    layer = StratiformLayer(np.full((16, 16), 300.0, np.float32), 1500.0, (-10000.0, -10000.0), (20000.0, 20000.0))
+    return Stratiform(StratiformSettings(radiosity=radiosity), device=device).render(scene, SIZE, SIZE, layer=layer)
+
+
+@pytest.mark.parametrize("radiosity", [True, False])
+def test_stratiform_second_frame_allocates_nothing(device, radiosity):
+    device_buffers.clear()
+    fresh = stratiform_frame(device, radiosity)
+    allocated = device_buffers.allocation_count()
+    second = stratiform_frame(device, radiosity)
+    assert device_buffers.allocation_count() == allocated
+    assert_layers_equal(second, fresh)
+
+
+def radiosity_problem():
+    rng = np.random.default_rng(1)
+    shape = (32, 32)
+    return dict(ground_albedo=np.full(shape, 0.8), cloud_reflectance=rng.uniform(0.3, 0.9, shape),
+                ground_direct=rng.uniform(0.0, 1.0, (*shape, 3)), cloud_source=rng.uniform(0.0, 0.3, (*shape, 3)))
+
+
+def count_downloads(monkeypatch) -> list[str]:
+    names: list[str] = []
+    download = device_buffers.download
+
+    def counted(name, array):
+        names.append(name)
+        return download(name, array)
+
+    monkeypatch.setattr(device_buffers, "download", counted)
+    return names
+
+
+@pytest.mark.parametrize("check_every", [3, 8])
+def test_radiosity_reads_back_every_few_iterations_and_converges_alike(device, monkeypatch, check_every):
+    from warpsky.techniques.radiosity.solver import Radiosity
+
+    tolerance = 1e-5
+    every = Radiosity(tolerance=tolerance, device=device, check_every=1).solve(**radiosity_problem())
+    names = count_downloads(monkeypatch)
+    batched = Radiosity(tolerance=tolerance, device=device, check_every=check_every).solve(**radiosity_problem())
+    assert batched.converged and every.converged
+    assert every.iterations <= batched.iterations < every.iterations + check_every
+    assert batched.history[:every.iterations] == pytest.approx(every.history, rel=1e-6)
+    # the iterations past convergence add less than the tolerance of what the ground received
+    np.testing.assert_allclose(batched.ground_received, every.ground_received,
+                               rtol=check_every * tolerance, atol=1e-7)
+    np.testing.assert_allclose(batched.cloud_received, every.cloud_received, rtol=check_every * tolerance, atol=1e-7)
+    # R_G after the first gather, the exchanged energies every check_every iterations, R_G and R_C at the end
+    assert len(names) == 1 + -(-batched.iterations // check_every) + 2
+
+
+def test_radiosity_default_on_the_cpu_reads_every_iteration():
+    from warpsky.techniques.radiosity.solver import Radiosity
+
+    assert Radiosity(device="cpu").check_every == 1
+    assert Radiosity(device="cuda:0").check_every == 8
+
+
+def test_stratiform_frame_downloads_each_output_once(device, monkeypatch):
+    stratiform_frame(device)  # compiled and warm
+    names = count_downloads(monkeypatch)
+    layer = stratiform_frame(device)
+    iterations = layer.stats["radiosity_iterations"]
+    outputs = [n for n in names if n.startswith("stratiform:")]
+    assert sorted(outputs) == ["stratiform:depth", "stratiform:radiance", "stratiform:transmittance"]
+    checks = -(-iterations // (1 if device == "cpu" else 8))
+    assert len(names) == 3 + 1 + 1 + checks + 2  # outputs, S_G^d, R_G, exchanged energies, R_G and R_C
