@@ -12,7 +12,13 @@ from conftest import StageSpec, look_rotation, write_stage
 from warpsky import device_buffers
 from warpsky.plan import make_plan
 from warpsky.scene.usd import StageReader
-from warpsky.techniques.path_tracer.technique import gpu_launches
+from warpsky.techniques.path_tracer.technique import (
+    PathTracerSettings,
+    PathTracing,
+    per_sample_launches,
+    pixel_sums,
+    sums_layer,
+)
 
 SIZE = 12
 
@@ -55,18 +61,37 @@ def test_second_frame_allocates_nothing_and_matches_a_fresh_render(stage, device
     assert_layers_equal(second, fresh)
 
 
-def test_path_tracer_pixels_do_not_depend_on_the_pass_split_on_one_lane(stage):
+def test_path_tracer_pixels_do_not_depend_on_the_pass_split(stage):
     one = render_frame(stage, "cpu", "path_tracer", spp=6, samples_per_pass=6, max_bounces=8)
     split = render_frame(stage, "cpu", "path_tracer", spp=6, samples_per_pass=1, max_bounces=8)
     assert_layers_equal(one, split)
 
 
-def test_gpu_launches_fill_the_gpu_on_small_frames():
-    assert gpu_launches("cpu", 128 * 128, 64, 8) == (1, 8)
-    assert gpu_launches("cuda:0", 128 * 128, 64, 64) == (16, 4)  # 2^18 threads in flight, not 2^14
-    assert gpu_launches("cuda:0", 128 * 128, 1024, 64) == (16, 64)
-    assert gpu_launches("cuda:0", 512 * 512, 64, 64) == (1, 64)  # the frame fills the GPU alone
-    assert gpu_launches("cuda:0", 128 * 128, 3, 64) == (3, 1)  # no more lanes than paths
+@pytest.mark.parametrize("multiple_only", [False, True])
+def test_one_thread_per_path_adds_the_same_sums_as_one_thread_per_pixel(stage, multiple_only):
+    """The launch a small frame gets on a GPU, run on the CPU: the same pixels, bit for bit, for any split."""
+    scene = StageReader(stage).scene_at(None)
+    settings = PathTracerSettings(spp=5, samples_per_pass=2, max_bounces=8, pixel_jitter=multiple_only)
+    layers = []
+    for per_sample, name in [(False, "test:pixel"), (True, "test:sample")]:
+        tracing = PathTracing(scene, SIZE, SIZE - 2, settings, "cpu", per_sample=per_sample,
+                              multiple_only=multiple_only, buffer_name=name)
+        assert bool(tracing.samples_per_launch) == per_sample
+        sums = pixel_sums((SIZE - 2, SIZE), "cpu", name=name)
+        for first, count in [(0, 2), (2, 1), (3, 2)]:
+            tracing.launch(sums, first, count)
+        layers.append(sums_layer([sums], 5, 1.0e5, name=name))
+    assert layers[0].radiance.any()
+    assert_layers_equal(layers[1], layers[0])
+    assert layers[1].stats == layers[0].stats
+
+
+def test_small_gpu_frames_run_one_thread_per_path():
+    assert per_sample_launches("cpu", 128 * 128, 64) == 0
+    assert per_sample_launches("cuda:0", 128 * 128, 64) == 64  # 2^20 threads per launch, not 2^14
+    assert per_sample_launches("cuda:0", 512 * 512, 64) == 0  # the frame fills the GPU alone
+    assert per_sample_launches("cuda:0", 256 * 256, 64) == 32  # at most 2^21 threads per launch
+    assert per_sample_launches("cuda:0", 16 * 16, 4) == 4
 
 
 def test_sky_pass_second_frame_allocates_nothing(device):

@@ -162,7 +162,8 @@ class Hybrid:
             return estimate
         scale = int(s.ms_scale)
         coarse = -(-width // scale) * -(-height // scale)
-        estimate.merge(path_tracing_memory(scene, 2 * coarse, int(s.majorant_block), self.device))
+        estimate.merge(path_tracing_memory(scene, 2 * coarse, int(s.majorant_block), self.device,
+                                           int(s.samples_per_pass)))
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.atmosphere is not None:
             estimate.add("sky", host=pixels * 64, device=pixels * 40)

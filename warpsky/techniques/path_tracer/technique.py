@@ -23,7 +23,14 @@ from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.dome import dome_struct
-from warpsky.techniques.path_tracer.kernels import PathSettings, PixelSums, path_trace_kernel
+from warpsky.techniques.path_tracer.kernels import (
+    PathSettings,
+    PixelSums,
+    SampleResult,
+    path_sample_kernel,
+    path_trace_kernel,
+    sum_samples_kernel,
+)
 from warpsky.techniques.path_tracer.majorants import upload_majorants
 from warpsky.techniques.sunlight import sunlight
 
@@ -89,12 +96,12 @@ class PathTracer:
         return dataclasses.replace(self.settings, samples_per_pass=min(per_pass, self.settings.spp))
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
-        """Bytes a frame allocates: one :class:`PixelSums` per stream, the float64 sums of :func:`sums_layer`, the
-        variance AOV, and the media with their majorants."""
+        """Bytes a frame allocates: a :class:`PixelSums` (and on a GPU the paths of one launch when the frame is
+        small), the float64 sums of :func:`sums_layer`, the variance AOV, and the media with their majorants."""
         settings = self.resolved_settings(scene)
         pixels = width * height
-        lanes, _ = gpu_launches(self.device, pixels, int(settings.spp), int(settings.samples_per_pass))
-        return (path_tracing_memory(scene, pixels * lanes, int(settings.majorant_block), self.device)
+        return (path_tracing_memory(scene, pixels, int(settings.majorant_block), self.device,
+                                    int(settings.samples_per_pass))
                 .add("images", host=pixels * SUMS_LAYER_BYTES)
                 .add("AOVs", host=pixels * AOV_BYTES))
 
@@ -107,26 +114,18 @@ class PathTracer:
         settings = self.resolved_settings(scene)
         started = time.perf_counter()
         tracing = PathTracing(scene, width, height, settings, self.device)
-        spp = int(settings.spp)
-        lanes, per_pass = gpu_launches(self.device, width * height, spp, int(settings.samples_per_pass))
-        sums = [pixel_sums((height, width), self.device, name=f"path_tracer:lane{lane}") for lane in range(lanes)]
-        streams = lane_streams(self.device, lanes) if lanes > 1 else []
-        done = passes = 0
+        sums = pixel_sums((height, width), self.device, name="path_tracer")
+        spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
+        done = 0
         while done < spp:
             count = min(per_pass, spp - done)
-            lane = passes % lanes
-            if streams:  # entering waits for the device's current stream, where the sums were cleared
-                with wp.ScopedStream(streams[lane]):
-                    tracing.launch(sums[lane], done, count)
-            else:
-                tracing.launch(sums[lane], done, count)
+            tracing.launch(sums, done, count)
             done += count
-            passes += 1
             if progress is not None:
                 progress(count)
         wp.synchronize_device(self.device)
         seconds = time.perf_counter() - started
-        layer = sums_layer(sums, spp, float(tracing.camera.far), name="path_tracer")
+        layer = sums_layer([sums], spp, float(tracing.camera.far), name="path_tracer")
         layer.stats = {"seconds": seconds, "settings": dataclasses.asdict(settings), "spp": spp, **layer.stats,
                        "majorant_cells": tracing.majorant_cells}
         return layer
@@ -139,10 +138,17 @@ class PathTracing:
     ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
     at least twice, for techniques that march single scattering exactly. The media's values and majorants go
     through :func:`warpsky.device_buffers.upload` under ``buffer_name``: the next frame of a batch with the same
-    grids copies nothing."""
+    grids copies nothing.
+
+    How a launch runs (:func:`per_sample_launches`): one thread per pixel looping over the launch's paths, or,
+    for a frame too small to fill a GPU, one thread per path and pixel writing to a kept buffer, then one thread
+    per pixel adding them in path order. Both add the same float32 values in the same order, so a pixel depends
+    on the seed and the path count alone, however the paths are split into launches; ``per_sample`` forces the
+    choice (tests run both on the CPU)."""
 
     def __init__(self, scene: Scene, width: int, height: int, settings: PathTracerSettings, device: str, *,
-                 air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer"):
+                 air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer",
+                 per_sample: bool | None = None):
         self.settings = settings
         self.device = device
         camera = scene.camera.conformed(width, height)
@@ -158,8 +164,17 @@ class PathTracing:
                                              cache_name=f"{buffer_name}:media")
             majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device,
                                                               cache_name=f"{buffer_name}:majorants")
-        self.kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail,
-                                        scene.dome is not None)
+        flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None)
+        capacity = per_sample_launches(device, width * height, int(settings.samples_per_pass or 1))
+        if per_sample is not None:
+            capacity = max(1, int(settings.samples_per_pass or 1)) if per_sample else 0
+        self.samples_per_launch = capacity  # 0: one thread per pixel
+        if capacity:
+            self.kernel = path_sample_kernel(*flags)
+            self.samples = device_buffers.reusable(f"{buffer_name}:samples", (capacity * height, width),
+                                                   SampleResult, device)
+        else:
+            self.kernel = path_trace_kernel(*flags)
         dome = dome_struct(scene.dome, device)
         self._keep = (tables, media, dome)  # the structs below point into these buffers
         self.fixed = [media.media, majorants, phase_tables_struct(tables),
@@ -169,27 +184,42 @@ class PathTracing:
     def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:
         """Add paths ``first_sample .. first_sample + count - 1`` of every pixel to ``sums`` (asynchronous on
         GPUs)."""
-        launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only)
-        launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums], self.device)
+        if not self.samples_per_launch:
+            launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only)
+            launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums], self.device)
+            return
+        end = first_sample + count
+        while first_sample < end:
+            chunk = min(self.samples_per_launch, end - first_sample)
+            launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only)
+            launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, self.samples],
+                        self.device)
+            launch_rows(sum_samples_kernel, self.height, self.width, [self.samples, chunk, sums], self.device)
+            first_sample += chunk
 
 
 #: Bytes per pixel of a :class:`PixelSums` (radiance sum and sum of squares, transmittance RGB, depth vec2, counters).
 PIXEL_SUMS_BYTES = 52
+#: Bytes of a :class:`~warpsky.techniques.path_tracer.kernels.SampleResult` (one path of one pixel).
+SAMPLE_BYTES = 44
 #: Bytes per pixel :func:`sums_layer` holds at once: float64 sums, squares, mean and variance (96), transmittance and
 #: depth sums (40), counters (8), the float32 outputs (40).
 SUMS_LAYER_BYTES = 184
 
 
-def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int, device: str) -> MemoryEstimate:
+def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int, device: str,
+                        samples_per_pass: int = 1) -> MemoryEstimate:
     """Bytes of :class:`PathTracing` and ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device
-    (and their host copies on a GPU), the media and their majorant grids (built on the host from a copy)."""
+    (and their host copies on a GPU), the paths of one launch when they are kept per sample
+    (:func:`per_sample_launches`), the media and their majorant grids (built on the host from a copy)."""
     copies = 0 if str(device).startswith("cpu") else 1
+    samples = per_sample_launches(device, pixel_sums_count, samples_per_pass) * pixel_sums_count * SAMPLE_BYTES
     grids = grid_bytes(scene)
     majorants = sum(4 * math.prod(-(-n // majorant_block) for n in m.shape) for m in scene.media)
     return (MemoryEstimate()
             .add("path sums", host=copies * pixel_sums_count * PIXEL_SUMS_BYTES,
                  device=pixel_sums_count * PIXEL_SUMS_BYTES)
-            .add("grids", host=2 * grids, device=grids + majorants))
+            .add("grids", host=2 * grids, device=grids + majorants + samples))
 
 
 def path_work(settings: PathTracerSettings, pixels: int) -> WorkItem:
@@ -248,53 +278,27 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
 
 #: Threads a GPU keeps resident at once (a large one: 132 SMs x 2048 on an H200, about 2^18).
 GPU_RESIDENT_THREADS = 1 << 18
-#: Most CUDA streams the passes of one frame spread over.
-MAX_LANES = 16
-
-_STREAMS: dict[str, list] = {}
+#: Most threads of one launch when paths run one per thread (bounds the kept paths: 2^21 x 44 bytes = 92 MB).
+GPU_LAUNCH_THREADS = 1 << 21
 
 
-def gpu_lanes(device: str, pixels: int, passes: int) -> int:
-    """How many CUDA streams ``passes`` progressive passes spread over: enough threads in flight to fill a GPU
-    (:data:`GPU_RESIDENT_THREADS`) when the frame alone has too few pixels, at most :data:`MAX_LANES`; 1 on the
-    CPU."""
-    if str(device).startswith("cpu"):
-        return 1
-    return max(1, min(MAX_LANES, passes, GPU_RESIDENT_THREADS // max(pixels, 1)))
+def per_sample_launches(device: str, pixels: int, samples_per_pass: int) -> int:
+    """Paths per pixel of one launch when each path runs on its own thread, or 0 for one thread per pixel.
 
-
-def gpu_launches(device: str, pixels: int, spp: int, per_pass: int) -> tuple[int, int]:
-    """(lanes, paths per pixel per launch) of a frame of ``pixels`` pixels and ``spp`` paths per pixel.
-
-    The kernel runs one thread per pixel over a launch's paths and adds them to its lane's :class:`PixelSums`
-    in path order, so a lane's sums never race and each pixel is a function of the seed, ``spp`` and the lane
-    split alone. A frame with fewer pixels than :data:`GPU_RESIDENT_THREADS` fills the GPU with lanes: passes
-    on as many CUDA streams run at once, each into its own sums, which :func:`sums_layer` adds. A pass holds
-    at most ``per_pass`` paths per pixel, fewer when ``spp`` would otherwise give fewer passes than the lanes
-    wanted (128 x 128 pixels at 64 paths per pixel: 16 lanes of 4 paths per launch, 2^18 threads in flight
-    instead of 2^14). On the CPU: one lane of ``per_pass`` paths (the row bands of
-    :func:`~warpsky.device.launch_rows` use the cores)."""
-    per_pass = max(1, min(int(per_pass), int(spp)))
-    if str(device).startswith("cpu"):
-        return 1, per_pass
-    wanted = max(1, min(MAX_LANES, GPU_RESIDENT_THREADS // max(pixels, 1)))
-    if wanted > 1:
-        per_pass = max(1, min(per_pass, int(spp) // wanted))
-    return gpu_lanes(device, pixels, -(-int(spp) // per_pass)), per_pass
-
-
-def lane_streams(device: str, lanes: int) -> list:
-    """``lanes`` CUDA streams of ``device``, created once per process and shared by every frame."""
-    kept = _STREAMS.setdefault(str(device), [])
-    while len(kept) < lanes:
-        kept.append(wp.Stream(device))
-    return kept[:lanes]
+    One thread per pixel fills a GPU once the frame has :data:`GPU_RESIDENT_THREADS` pixels (512 x 512: 95 M
+    paths/s on an H200) and is what the CPU runs (its row bands use the cores). A smaller frame on a GPU left
+    most of it idle (128 x 128: 2^14 threads, 20 M paths/s): there a launch runs ``samples_per_pass`` paths of
+    every pixel on as many threads (128 x 128 at the GPU default of 64 per pass: 2^20 threads), at most
+    :data:`GPU_LAUNCH_THREADS`. The paths' sums are the same either way (:class:`PathTracing`)."""
+    if str(device).startswith("cpu") or pixels >= GPU_RESIDENT_THREADS:
+        return 0
+    return max(1, min(int(samples_per_pass), GPU_LAUNCH_THREADS // max(pixels, 1)))
 
 
 def sums_layer(sums: list[PixelSums], spp: int, far: float, *, name: str = "path_tracer") -> Layer:
     """The layer of ``spp`` paths per pixel accumulated in ``sums`` (one per stream): mean radiance, mean
     transmittance, mean depth of first events (``far`` where none), the variance of the pixel mean as an AOV, and
-    the tracking counters. One download per field and lane, through :func:`warpsky.device_buffers.download`
+    the tracking counters. One download per field and sums, through :func:`warpsky.device_buffers.download`
     (pinned staging kept under ``name:field``)."""
     def total_of(field):
         return sum(device_buffers.download(f"{name}:{field}", getattr(s, field)).astype(np.float64) for s in sums)
