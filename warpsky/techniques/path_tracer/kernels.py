@@ -76,7 +76,7 @@ class PixelSums:
 
 @wp.struct
 class SampleResult:
-    """One path of one pixel, as :func:`path_sample_kernel` leaves it for :data:`sum_samples_kernel`."""
+    """One path of one pixel, as :func:`path_sample_kernel` leaves it for :func:`sum_samples_kernel`."""
 
     radiance: wp.vec3
     transmittance: wp.vec3  # the primary ray's ratio-tracked transmittance (when counts[2] is 1)
@@ -231,7 +231,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
 def path_sample_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False,
                        has_dome: bool = False) -> wp.Kernel:
     """One thread per (path, pixel): a launch of ``settings.sample_count`` paths over a frame of H rows covers
-    ``sample_count`` x H rows; row r holds path r // H of pixel row r % H. :data:`sum_samples_kernel` adds them."""
+    ``sample_count`` x H rows; row r holds path r // H of pixel row r % H. :func:`sum_samples_kernel` adds them."""
     pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome)
 
     @wp.kernel(module="unique")
@@ -257,19 +257,25 @@ def path_sample_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fa
     return path_sample
 
 
-@wp.kernel
-def sum_samples_kernel(samples: wp.array2d(dtype=SampleResult), sample_count: int, sums: PixelSums,
-                       row_offset: int):
-    """Pixel (row_offset + tid row, tid col): the ``sample_count`` paths :func:`path_sample_kernel` left in
-    ``samples`` added in path order, as :func:`path_trace_kernel` adds them (the same sums, bit for bit)."""
-    r, col = wp.tid()
-    row = r + row_offset
-    height = sums.radiance_sum.shape[0]
-    steps = int(0)
-    capped = int(0)
-    for s in range(sample_count):
-        sample = samples[s * height + row, col]
-        add_sample(sums, row, col, sample)
-        steps += sample.counts[0]
-        capped += sample.counts[1]
-    sums.counters[row, col] = sums.counters[row, col] + wp.vec2i(steps, capped)
+@kernel_variants()
+@functools.cache
+def sum_samples_kernel() -> wp.Kernel:
+    """The per-pixel sum of the paths :func:`path_sample_kernel` left in a buffer."""
+
+    @wp.kernel(module="unique")
+    def sum_samples(samples: wp.array2d(dtype=SampleResult), sample_count: int, sums: PixelSums, row_offset: int):
+        """Pixel (row_offset + tid row, tid col): the ``sample_count`` paths in ``samples`` added in path order, as
+        :func:`path_trace_kernel` adds them (the same sums, bit for bit)."""
+        r, col = wp.tid()
+        row = r + row_offset
+        height = sums.radiance_sum.shape[0]
+        steps = int(0)
+        capped = int(0)
+        for s in range(sample_count):
+            sample = samples[s * height + row, col]
+            add_sample(sums, row, col, sample)
+            steps += sample.counts[0]
+            capped += sample.counts[1]
+        sums.counters[row, col] = sums.counters[row, col] + wp.vec2i(steps, capped)
+
+    return sum_samples

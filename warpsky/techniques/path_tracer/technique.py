@@ -194,7 +194,7 @@ class PathTracing:
             launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only)
             launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, self.samples],
                         self.device)
-            launch_rows(sum_samples_kernel, self.height, self.width, [self.samples, chunk, sums], self.device)
+            launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
             first_sample += chunk
 
 
