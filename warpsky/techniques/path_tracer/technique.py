@@ -32,6 +32,7 @@ from warpsky.techniques.path_tracer.kernels import (
     sum_samples_kernel,
 )
 from warpsky.techniques.path_tracer.majorants import upload_majorants
+from warpsky.techniques.single_scatter.technique import MEDIA_CACHE
 from warpsky.techniques.sunlight import sunlight
 
 
@@ -136,9 +137,10 @@ class PathTracing:
     :meth:`launch` adds paths per pixel to a :class:`PixelSums` (progressive passes reuse everything).
 
     ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
-    at least twice, for techniques that march single scattering exactly. The media's values and majorants go
-    through :func:`warpsky.device_buffers.upload` under ``buffer_name``: the next frame of a batch with the same
-    grids copies nothing.
+    at least twice, for techniques that march single scattering exactly. The media's values (under
+    :data:`MEDIA_CACHE`, shared with the single-scattering march) and majorants go through
+    :func:`warpsky.device_buffers.upload`: the next frame of a batch with the same grids copies nothing; the sums
+    and kept paths are :func:`warpsky.device_buffers.reusable` arrays under ``buffer_name``.
 
     How a launch runs (:func:`per_sample_launches`): one thread per pixel looping over the launch's paths, or,
     for a frame too small to fill a GPU, one thread per path and pixel writing to a kept buffer, then one thread
@@ -161,9 +163,9 @@ class PathTracing:
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
-                                             cache_name=f"{buffer_name}:media")
+                                             cache_name=MEDIA_CACHE)
             majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device,
-                                                              cache_name=f"{buffer_name}:majorants")
+                                                              cache_name="path_tracer:majorants")
         flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None)
         capacity = per_sample_launches(device, width * height, int(settings.samples_per_pass or 1))
         if per_sample is not None:

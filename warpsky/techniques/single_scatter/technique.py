@@ -55,6 +55,9 @@ class SingleScatterSettings(TechniqueSettings):
         )
 
 
+#: Name under which the media's voxel values are kept on the device (:mod:`warpsky.device_buffers`), shared with
+#: the path tracer: hybrid runs both on the same grids and holds one copy.
+MEDIA_CACHE = "voxel_media"
 #: The march's per-pixel outputs: kept across frames as :func:`warpsky.device_buffers.reusable` arrays
 #: ``single_scatter:NAME``, each downloaded once at the end of a frame.
 OUTPUTS = (("radiance", wp.vec3), ("transmittance", wp.vec3), ("depth", float), ("lookups", wp.int64))
@@ -114,7 +117,7 @@ class SingleScatter:
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
-                                             cache_name="single_scatter:media")
+                                             cache_name=MEDIA_CACHE)
             radiance, transmittance, depth, lookups = outputs = [
                 device_buffers.reusable(f"single_scatter:{name}", (height, width), dtype, device)
                 for name, dtype in OUTPUTS]
