@@ -188,3 +188,19 @@ def test_stratiform_frame_downloads_each_output_once(device, monkeypatch):
     assert sorted(outputs) == ["stratiform:depth", "stratiform:radiance", "stratiform:transmittance"]
     checks = -(-iterations // (1 if device == "cpu" else 8))
     assert len(names) == 3 + 1 + 1 + checks + 2  # outputs, S_G^d, R_G, exchanged energies, R_G and R_C
+
+
+def test_refill_reuses_one_array_and_copies_only_changed_bytes(device):
+    import warp as wp
+
+    device_buffers.clear()
+    first = device_buffers.refill("test:map", np.ones((3, 4, 3), np.float32), wp.vec3, device)
+    first.zero_()  # a marker: a refill with the same bytes copies nothing, so it stays
+    same = device_buffers.refill("test:map", np.ones((3, 4, 3), np.float32), wp.vec3, device)
+    assert same is first and not same.numpy().any()
+    changed = device_buffers.refill("test:map", np.full((3, 4, 3), 2.0, np.float32), wp.vec3, device)
+    assert changed is first and device_buffers.allocation_count() == 1
+    np.testing.assert_array_equal(changed.numpy(), 2.0)
+    scalar = device_buffers.refill("test:heights", np.arange(6.0).reshape(2, 3), float, device)
+    assert scalar.shape == (2, 3) and scalar.dtype == wp.float32
+    np.testing.assert_array_equal(scalar.numpy(), np.arange(6.0).reshape(2, 3))
