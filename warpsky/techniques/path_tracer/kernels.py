@@ -1,10 +1,14 @@
-"""The per-pixel kernel of the unbiased volumetric path tracer.
+"""The kernels of the unbiased volumetric path tracer.
 
-Each thread runs a pixel's paths of one launch: the camera ray, its transmittance through every medium by ratio
+One path of a pixel (:func:`sample_function`) is the camera ray, its transmittance through every medium by ratio
 tracking (the layer's transmittance AOV; zero where the ground or sea level ends the ray), then the path: a free
 flight by delta tracking per bounce (:mod:`~warpsky.techniques.path_tracer.tracking`, local majorants from
 :mod:`~warpsky.techniques.path_tracer.majorants`), and at its end a scattering event, a ground bounce or the end of
-the path (:mod:`~warpsky.techniques.path_tracer.events`), with Russian roulette from the third bounce.
+the path (:mod:`~warpsky.techniques.path_tracer.events`), with Russian roulette from the third bounce. Two ways
+to launch it add the same float32 values in the same order: one thread per pixel running the launch's paths one
+after the other (:func:`path_trace_kernel`), or one thread per path and pixel writing a :class:`SampleResult`
+(:func:`path_sample_kernel`), then one thread per pixel adding them in path order (:func:`sum_samples_kernel`);
+the second fills a GPU when the frame has too few pixels.
 
 Warp passes a random state to a function by value, so each function hands back its advanced state and a path
 carries one stream (re-seeding from the stream would replay it: rand_init(randi(s)) is s's next). The order of the
