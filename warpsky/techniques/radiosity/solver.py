@@ -74,7 +74,6 @@ class RadiosityResult:
     seconds: float = 0.0
     device_received: tuple | None = None  # (R_G, R_C) as device arrays, valid until the next solve
 
-
     @property
     def ground_total(self) -> np.ndarray:
         """S_G^d + R_G: everything the ground receives."""
@@ -153,12 +152,12 @@ class Radiosity:
             reflectance, received, emitted, exchanged])
 
     def _buffer(self, name: str, shape, values=None) -> wp.array:
-        """The kept (nu, nv) vec3 buffer ``radiosity:name``, zeroed, or filled with ``values`` (nu, nv[, 3])."""
+        """The kept (nu, nv) vec3 buffer ``radiosity:name``: zeroed, or, read-only, holding ``values`` (nu, nv[, 3])
+        (copied only when they changed since the last solve, :func:`warpsky.device_buffers.refill`)."""
+        if values is not None:
+            return device_buffers.refill(f"radiosity:{name}", _rgb(values, shape), wp.vec3, self.device)
         array = device_buffers.reusable(f"radiosity:{name}", shape, wp.vec3, self.device)
-        if values is None:
-            array.zero_()
-        else:
-            array.assign(_rgb(values, shape))
+        array.zero_()
         return array
 
     def gather(self, exitance) -> np.ndarray:
