@@ -7,12 +7,12 @@ PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind family
+	cumulus-wind family terrain valley-fog sunbeams sundogs
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
 	@echo "                          (the render: about 1 min on 2 CPU cores)"
-	@echo "make test               - install into $(VENV) and run every test on the CPU (about 8 min on 2 idle cores)"
+	@echo "make test               - install into $(VENV) and run every test on the CPU (about 8 min on 2 idle cores, cold kernel cache)"
 	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; under 3 min)"
 	@echo "make lint               - ruff"
 	@echo "make bench              - run benchmarks/bench_single_scatter.py (cuda too when present)"
@@ -25,6 +25,13 @@ help:
 	@echo "make storm-data         - the storm's per-frame NanoVDB fields in data/storm/"
 	@echo "make storm              - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact"
 	@echo "                          sheets, preview (about 3 min once the optics tables are cached)"
+	@echo "make terrain            - the seeded 4 km fractal terrain mesh data/terrain.usda (hills, a north-south valley)"
+	@echo "make valley-fog         - 48 frames of morning fog drifting in the terrain's valley (Biri 2002) to"
+	@echo "                          out/valley_fog/ with a contact sheet (about 1 min on 2 CPU cores)"
+	@echo "make sunbeams           - sunbeams through gaps in a Max 1986 cloud deck over the terrain, lighting the"
+	@echo "                          haze, to out/sunbeams/: frame 1 (exact), 4 drifting frames and a contact sheet,"
+	@echo "                          frame 1 with Max's thickness rule (about 3 min on 2 CPU cores)"
+	@echo "make sundogs            - cirrostratus of oriented plates and columns at sunset: sundogs, arcs, labelled PNG"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 
@@ -104,5 +111,30 @@ storm: $(STAMP) data/storm/.complete
 	$(VENV)/bin/warpsky contact-sheet out/storm/anvil.####.exr -o out/storm/anvil_sheet.png
 	$(VENV)/bin/warpsky preview usd_scenes/storm.usda -o out/storm/preview.png --frame 40
 
+# Terrain, valley fog (Biri 2002) and sunbeams (Max 1986): one terrain mesh, two stages that reference it.
+data/terrain.usda: tools/make_terrain.py $(STAMP)
+	$(PY) tools/make_terrain.py --seed 1 --valley-angle 90 --resolution 257 --out $@
+
+terrain: data/terrain.usda
+
+valley-fog: $(STAMP) data/terrain.usda
+	$(VENV)/bin/warpsky render usd_scenes/valley_fog.usda out/valley_fog/valley_fog.####.exr --png
+	$(VENV)/bin/warpsky contact-sheet out/valley_fog/valley_fog.####.exr -o out/valley_fog/sheet.png
+
+sunbeams: $(STAMP) data/terrain.usda
+	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/sunbeams.####.exr --frames 1 --png
+	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/drift.####.exr --frames 1,17,33,48 --res 192 --png
+	$(VENV)/bin/warpsky contact-sheet out/sunbeams/drift.####.exr -o out/sunbeams/drift_sheet.png
+	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/max-rule.####.exr --frames 1 --png \
+		--set heightfield.mode=max
+
 clean:
 	rm -rf out data .pytest_cache
+
+# Sundogs: oriented ice plates and columns in a cirrostratus sheet at sunset (single scattering: the sheet is thin),
+# the frame as EXR + PNG and a copy with each arc labelled where its closed form puts it.
+sundogs: $(STAMP)
+	$(PY) tools/make_sundogs.py --out data/sundogs
+	$(VENV)/bin/warpsky render usd_scenes/sundogs.usda out/sundogs/sundogs.####.exr --frames 1 --png \
+		--technique single_scatter --res 768x512
+	$(PY) tools/label_halos.py usd_scenes/sundogs.usda out/sundogs/sundogs.0001.png out/sundogs/sundogs_labelled.png

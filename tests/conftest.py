@@ -214,3 +214,12 @@ def species_phase(optics_cache):
         return memo[name]
 
     return get
+
+
+def run_cli(args, capsys):
+    """Run the ``warpsky`` command in this process: (exit code, stdout, stderr)."""
+    from warpsky.cli import main
+
+    code = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err

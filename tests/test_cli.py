@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import StageSpec, write_stage
+from conftest import run_cli as run
 
 from warpsky.cli import main
 from warpsky.output.exr import read_exr
@@ -14,12 +15,6 @@ from warpsky.render import EXR_CHANNELS
 @pytest.fixture
 def good_stage(tmp_path, homogeneous_npy):
     return write_stage(tmp_path / "good.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
-
-
-def run(args, capsys):
-    code = main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_render_writes_exr_with_channels_and_metadata(tmp_path, good_stage, capsys):

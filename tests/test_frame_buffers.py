@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import dataclasses
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -59,6 +61,27 @@ def test_second_frame_allocates_nothing_and_matches_a_fresh_render(stage, device
     second = render_frame(stage, device, technique, **settings)
     assert device_buffers.allocation_count() == allocated
     assert_layers_equal(second, fresh)
+
+
+@pytest.mark.parametrize("technique,settings", [
+    ("path_tracer", {"spp": 16, "samples_per_pass": 1, "max_bounces": 8}),
+    ("hybrid", {"spp": 8, "samples_per_pass": 1, "target_error": 0, "denoise": 0, "max_bounces": 8}),
+])
+def test_frames_rendered_at_once_by_threads_do_not_share_kept_buffers(stage, technique, settings):
+    """Two threads of one process rendering frames at once (a multi-threaded Dask worker) take turns on the kept
+    arrays: each frame equals the one rendered alone (without the lock, one frame's passes zero or add into the
+    other's sums)."""
+    alone = render_frame(stage, "cpu", technique, **settings)
+    start = threading.Barrier(3)
+
+    def frames():
+        start.wait()
+        return [render_frame(stage, "cpu", technique, **settings) for _ in range(3)]
+
+    with ThreadPoolExecutor(3) as pool:
+        results = [layer for future in [pool.submit(frames) for _ in range(3)] for layer in future.result()]
+    for layer in results:
+        assert_layers_equal(layer, alone)
 
 
 def test_path_tracer_pixels_do_not_depend_on_the_pass_split(stage):
@@ -132,6 +155,22 @@ def test_stratiform_second_frame_allocates_nothing(device, radiosity):
     second = stratiform_frame(device, radiosity)
     assert device_buffers.allocation_count() == allocated
     assert_layers_equal(second, fresh)
+
+
+def test_stratiform_frames_rendered_at_once_by_threads_match_one_alone():
+    """The stratiform pass and its radiosity hold their kept arrays (R_G and R_C included) until the shading kernel
+    has read them: threads rendering at once get the frame rendered alone."""
+    alone = stratiform_frame("cpu")
+    start = threading.Barrier(3)
+
+    def frames():
+        start.wait()
+        return [stratiform_frame("cpu") for _ in range(3)]
+
+    with ThreadPoolExecutor(3) as pool:
+        results = [layer for future in [pool.submit(frames) for _ in range(3)] for layer in future.result()]
+    for layer in results:
+        assert_layers_equal(layer, alone)
 
 
 def radiosity_problem():

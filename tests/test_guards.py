@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import StageSpec, write_stage
+from conftest import run_cli as run
 
 from warpsky.cli import main
 from warpsky.device import RowBands
@@ -26,12 +27,6 @@ REPO = Path(__file__).resolve().parents[1]
 def box_stage(tmp_path, homogeneous_npy):
     """A 20 m box of constant density 40 m in front of the camera (4^3 voxels of 5 m)."""
     return write_stage(tmp_path / "box.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
-
-
-def run(args, capsys):
-    code = main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def files_in(directory: Path) -> list[str]:
@@ -81,17 +76,18 @@ def test_huge_frame_is_refused_by_the_estimate_without_allocating(tmp_path, box_
 
 
 def test_huge_frame_is_refused_with_a_small_peak_memory(tmp_path, box_stage):
-    """The process refusing 100000^2 never grows far beyond its imports (peak RSS of the child itself)."""
+    """The process refusing 100000^2 never grows far beyond its imports. The child reports its own peak resident
+    set (VmHWM, which starts afresh at exec; rusage's ru_maxrss would count the pytest process it forked from)."""
     out = tmp_path / "o" / "f.exr"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    proc = subprocess.Popen([sys.executable, "-m", "warpsky", "render", str(box_stage), str(out), "--res",
-                             "100000x100000", "--device", "cpu"], stderr=subprocess.PIPE, env=env, cwd=REPO)
-    err = proc.stderr.read().decode()
-    _, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    assert proc.returncode == 2, err
-    assert usage.ru_maxrss * 1024 < 2 * 2**30, usage.ru_maxrss  # imports take about 0.3 GiB
-    assert "TiB of host memory" in err and not out.exists()
+    argv = ["render", str(box_stage), str(out), "--res", "100000x100000", "--device", "cpu"]
+    child = ("import sys\nfrom warpsky.cli import main\ncode = main(sys.argv[1:])\n"
+             "print(next(line for line in open('/proc/self/status') if line.startswith('VmHWM')))\nsys.exit(code)")
+    proc = subprocess.run([sys.executable, "-c", child, *argv], capture_output=True, text=True, env=env, cwd=REPO)
+    assert proc.returncode == 2, proc.stderr
+    peak_kib = int(proc.stdout.split()[1])
+    assert peak_kib * 1024 < 2 * 2**30, proc.stdout  # imports take about 0.3 GiB
+    assert "TiB of host memory" in proc.stderr and not out.exists()
 
 
 def test_max_memory_refuses_a_small_frame_and_the_default_renders_it(tmp_path, box_stage, capsys):

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import StageSpec, look_rotation, write_stage
+from conftest import run_cli as run
 
 import warpsky
-from warpsky.cli import main
 from warpsky.output.exr import read_exr
 
 #: lin_rec709 -> ACEScg (Bradford D65 -> ACES white), as published with the ACES CG configs.
@@ -18,12 +18,6 @@ REC709_TO_ACESCG = np.array([[0.61309732, 0.33952285, 0.04737928],
                              [0.07019422, 0.91635557, 0.01345020],
                              [0.02061560, 0.10956983, 0.86981457]])
 FAST = ["--device", "cpu", "--technique", "single_scatter", "--set", "step_length=1"]
-
-
-def run(args, capsys):
-    code = main([str(a) for a in args])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 @pytest.fixture
@@ -192,6 +186,7 @@ def test_info_lists_settings_products_and_vars(stage, capsys):
     ("technique_aov", "RenderVar /Render/P/v: source single_scatter is written by technique hybrid, not "
                       "single_scatter"),
     ("not_exr", "/Render/P.productName 'x.png' must end in .exr"),
+    ("dome_texture_missing", "/World/Dome.inputs:texture:file"),
 ])
 def test_bad_render_prims_exit_2_and_write_nothing(tmp_path, stage, capsys, monkeypatch, case, expected):
     monkeypatch.chdir(tmp_path)
@@ -199,10 +194,18 @@ def test_bad_render_prims_exit_2_and_write_nothing(tmp_path, stage, capsys, monk
            "technique_aov": ("v", "single_scatter", "color3f", "raw")}.get(case, ("v", "color", "color4f", "raw"))
     name = {"no_name": None, "not_exr": "x.png"}.get(case, "out/p.exr")
     add_render(stage, {"P": (name, None, None, [var], None)})
+    if case == "dome_texture_missing":
+        from pxr import Sdf, Usd, UsdLux
+
+        usd = Usd.Stage.Open(str(stage))
+        UsdLux.DomeLight.Define(usd, "/World/Dome").CreateTextureFileAttr(Sdf.AssetPath("sky/nowhere.exr"))
+        usd.GetRootLayer().Save()
+        expected += ": texture file "  # and then the file
     args = ["render", stage, *FAST] + (["--settings", "/World/Camera"] if case == "settings_not_settings" else [])
     code, _, err = run(args, capsys)
     assert code == 2
     assert expected in err and len(err.strip().splitlines()) == 1, err
+    assert case != "dome_texture_missing" or "nowhere.exr" in err
     assert not (tmp_path / "out").exists()
 
 

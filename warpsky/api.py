@@ -84,8 +84,9 @@ def with_product(options: RenderOptions, product: ProductSpec, *, explicit: set[
     return replace(options, **changes)
 
 
-def _reader_and_options(stage, options: RenderOptions, product: str | None, settings_prim: str | None,
-                        explicit: set[str]):
+def open_stage(stage, options: RenderOptions, settings_prim: str | None, *, explicit: set[str] = frozenset()):
+    """(reader, render spec or None, options with the render settings applied): the stage opened with the options'
+    composition, reopened when the settings' ``includedPurposes`` change what renders."""
     from warpsky.scene.usd import StageReader
 
     reader = StageReader(stage, options.stage)
@@ -93,13 +94,24 @@ def _reader_and_options(stage, options: RenderOptions, product: str | None, sett
     options = with_render_settings(options, spec, explicit=explicit)
     if options.stage != reader.options:  # the settings' includedPurposes
         reader = StageReader(stage, options.stage)
+    return reader, spec, options
+
+
+def _planned(stage, time, product: str | None, settings_prim: str | None, kwargs: dict):
+    """(reader, scene, plan, options) of one frame of ``stage``, with ``product``'s outputs when given."""
+    from warpsky.device import init_warp
+
+    init_warp()
+    explicit = {k for k, v in kwargs.items() if v is not None}
+    reader, spec, options = open_stage(stage, render_options(**kwargs), settings_prim, explicit=explicit)
     if product is not None:
         products = {p.path: p for p in (spec.products if spec else ())}
         if product not in products:
             known = ", ".join(products) or "none"
             raise SceneError(f"product {product} is not among the render settings' products (known: {known})")
         options = with_product(options, products[product], explicit=explicit)
-    return reader, options
+    scene, plan = plan_frame(reader, time, options)
+    return reader, scene, plan, options
 
 
 def render_stage(stage: str | os.PathLike, time: float | None = None, *, product: str | None = None,
@@ -111,12 +123,7 @@ def render_stage(stage: str | os.PathLike, time: float | None = None, *, product
     :class:`~warpsky.render.RenderedImage`: ``frame.rgba`` / ``frame.transmittance`` / ``frame.depth`` /
     ``frame.aovs``, the output's ``channels``, its ``metadata`` and OpenEXR ``attributes``.
     """
-    from warpsky.device import init_warp
-
-    init_warp()
-    explicit = {k for k, v in kwargs.items() if v is not None}
-    reader, options = _reader_and_options(stage, render_options(**kwargs), product, settings_prim, explicit)
-    scene, plan = plan_frame(reader, time, options)
+    reader, scene, plan, options = _planned(stage, time, product, settings_prim, kwargs)
     return render_image(scene, plan, options, stage=reader.path, time_code=time)
 
 
@@ -124,16 +131,12 @@ def render_to_exr(stage: str | os.PathLike, out: str | os.PathLike, time: float 
                   product: str | None = None, settings_prim: str | None = None, **kwargs) -> Path:
     """Render ``stage`` at ``time`` and write ``out`` atomically (plus a PNG preview with ``png=True``); returns
     the EXR's path. Arguments as :func:`render_stage`."""
-    from warpsky.device import init_warp
-
     if not str(out).lower().endswith(".exr"):
         raise UsageError(f"output {str(out)!r} must end in .exr")
-    init_warp()
-    explicit = {k for k, v in kwargs.items() if v is not None}
-    reader, options = _reader_and_options(stage, render_options(**kwargs), product, settings_prim, explicit)
-    scene, plan = plan_frame(reader, time, options)
+    reader, scene, plan, options = _planned(stage, time, product, settings_prim, kwargs)
     Path(out).parent.mkdir(parents=True, exist_ok=True)
     return write_frame(scene, plan, Path(out), options, stage=reader.path, time_code=time).exr
 
 
-__all__ = ["FULL_WINDOW", "render_options", "render_stage", "render_to_exr", "with_product", "with_render_settings"]
+__all__ = ["FULL_WINDOW", "open_stage", "render_options", "render_stage", "render_to_exr", "with_product",
+           "with_render_settings"]

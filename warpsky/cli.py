@@ -13,7 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import warpsky
-from warpsky.api import render_options, with_product, with_render_settings
+from warpsky.api import open_stage, render_options, with_product
 from warpsky.batch.frames import FramePattern, parse_frame_spec
 from warpsky.batch.run import (
     DaskExecutor,
@@ -38,7 +38,6 @@ from warpsky.output.products import FULL_WINDOW
 from warpsky.render import plan_frame
 from warpsky.resources import parse_size, resource_lines
 from warpsky.scene.usd import StageReader
-from warpsky.scene.usd_render import read_render_spec
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, settings_table, technique_class, technique_names
 from warpsky.techniques.stratiform.technique import StratiformSettings
 
@@ -114,6 +113,16 @@ def settings_help() -> str:
         if name == DEFAULT_TECHNIQUE:
             sections.append("  stratiform layers (prefix stratiform., also with slicing and single_scatter):\n"
                             + settings_table(StratiformSettings, indent=4))
+    sections.append("  terrain scenery passes (any technique but path_tracer):\n"
+                    "    heightfield.mode            exact | max | sexp (default exact): the sunlight reaching a point "
+                    "of the deck or the haze\n"
+                    "                                by the exact sun-ray optical depth, Max's thickness rule, or "
+                    "Max's sexp\n"
+                    "    heightfield.step_length, heightfield.haze_step_length [m], heightfield.max_steps, "
+                    "heightfield.min_transmittance\n"
+                    "    fog.nodes (4), fog.min_pieces (4), fog.max_pieces (64): Gauss-Legendre nodes and pieces of "
+                    "the fog's sunlight integral\n"
+                    "    fog.cut_depth (40): optical depth after which the rest of a ray is dropped")
     return ("technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default; whole numbers for\n"
             "counts, 0/1 or true/false for switches):\n" + "\n".join(sections) + "\n")
 
@@ -320,14 +329,11 @@ def _explicit(args) -> set[str]:
     return {name for name, value in given.items() if value}
 
 
-def shots(args, reader) -> tuple[object, list[tuple[str, object]]]:
+def shots(args) -> tuple[object, list[tuple[str, object]]]:
     """(the reader, [(output pattern, options)]): one shot per RenderProduct of the stage's render settings, or
     the command line's OUT with the settings' camera and resolution when there are no products."""
-    options = _render_options(args)
-    spec = read_render_spec(reader.stage, args.settings_prim, reader.meters_per_unit)
-    options = with_render_settings(options, spec, explicit=_explicit(args))
-    if options.stage != reader.options:  # the settings' includedPurposes
-        reader = StageReader(args.stage, options.stage)
+    reader, spec, options = open_stage(args.stage, _render_options(args), args.settings_prim,
+                                       explicit=_explicit(args))
     for note in spec.notes if spec else ():
         print(f"warpsky: note: {note}", file=sys.stderr)
     products = list(spec.products) if spec else []
@@ -402,7 +408,7 @@ def cmd_render(args) -> int:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
     if args.retries < 0:
         raise UsageError(f"--retries must be >= 0, got {args.retries}")
-    reader, planned = shots(args, StageReader(args.stage, _render_options(args).stage))
+    reader, planned = shots(args)
     batches = []
     for group in _same_render(planned):  # products that differ only in their vars and window: one render
         pattern, jobs = _shot_jobs(args, reader, *group[0])
@@ -507,11 +513,7 @@ def cmd_info(args) -> int:
     import numpy as np
 
     options = _render_options(args)
-    reader = StageReader(args.stage, options.stage)
-    spec = read_render_spec(reader.stage, args.settings_prim, reader.meters_per_unit)
-    options = with_render_settings(options, spec, explicit=_explicit(args))
-    if options.stage != reader.options:
-        reader = StageReader(args.stage, options.stage)
+    reader, spec, options = open_stage(args.stage, options, args.settings_prim, explicit=_explicit(args))
     products = list(spec.products) if spec else []
     if args.products:
         products = [p for p in products if p.path in args.products]
@@ -544,6 +546,11 @@ def cmd_info(args) -> int:
             f"{float(medium.density.max()):g}, albedo {_fmt3(medium.albedo)}, "
             + (f"{medium.species} phase table" if medium.species else repr(medium.phase))
         )
+        if medium.ice is not None and medium.ice.orientation != "random":
+            ice = medium.ice
+            out.append(f"            oriented ice: {ice.fraction:.3g} of the crystals {ice.habit}s falling as "
+                       f"{ice.orientation}s (tilt {ice.tilt_deg:g}°), the rest random columns; a phase table per "
+                       "frame at the sun's elevation")
         if medium.detail is not None and medium.detail.amplitude > 0.0:
             d = medium.detail
             out.append(f"            advected detail: amplitude {d.amplitude:g}, scale {d.scale:g} m, wind "

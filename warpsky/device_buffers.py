@@ -15,6 +15,12 @@ from pageable memory). Three tools, each named by the caller so that different u
 - :func:`download`: a host copy of a device array; on CUDA through a pinned staging buffer kept per name (a copy
   from pinned memory runs at the bus's full rate; from pageable memory the driver stages it itself).
 
+Kept arrays are one set per name and device in a process, so a user of :func:`reusable` or :func:`refill` arrays
+holds :func:`exclusive` for their names from filling them to its last download: two frames rendered at once by
+threads of one process (a multi-threaded Dask worker, the Python API called from threads) then take turns instead
+of writing into each other's arrays. :func:`upload` needs no lock: it replaces a kept array rather than writing
+into it, and whoever holds the previous one keeps it.
+
 :func:`allocation_count` counts the arrays these functions allocated, for tests and benchmarks.
 """
 
@@ -31,6 +37,7 @@ _ARRAYS: dict[tuple[str, str], tuple[tuple, wp.array]] = {}  # (name, device) ->
 _UPLOADS: dict[tuple[str, str], tuple[tuple, wp.array]] = {}  # (name, device) -> ((digest, shape, dtype), array)
 _STAGING: dict[tuple[str, str], tuple[tuple, wp.array]] = {}  # (name, device) -> ((shape, dtype), pinned array)
 _FILLED: dict[tuple[str, str], tuple] = {}  # (name, device) -> ((digest, dtype), the filled array)
+_SCOPES: dict[tuple[str, str], threading.RLock] = {}  # (scope, device) -> its lock
 _COUNT = [0]
 
 
@@ -52,18 +59,31 @@ def _device_name(device) -> str:
     return str(wp.get_device(device))
 
 
+def exclusive(scope: str, device) -> threading.RLock:
+    """The lock of the arrays named ``scope:*`` on ``device``, to hold (``with``) while using them; reentrant, so a
+    function holding it may call another that takes it too. Locks of different scopes nest in one order only."""
+    key = (scope, _device_name(device))
+    with _LOCK:
+        return _SCOPES.setdefault(key, threading.RLock())
+
+
 def reusable(name: str, shape, dtype, device) -> wp.array:
     """The device array kept under ``name`` for this ``shape``, ``dtype`` and ``device`` (allocated on first use or
     when the shape changes; contents not cleared)."""
     shape = (int(shape),) if np.isscalar(shape) else tuple(int(n) for n in shape)
-    key, spec = (name, _device_name(device)), (shape, dtype)
+    return _kept(_ARRAYS, (name, _device_name(device)), (shape, dtype),
+                 lambda: wp.empty(shape, dtype=dtype, device=device))
+
+
+def _kept(store: dict, key: tuple, spec: tuple, make):
+    """``store``'s array under ``key`` when it was made for ``spec``, else a new one from ``make()`` kept there."""
     with _LOCK:
-        kept = _ARRAYS.get(key)
+        kept = store.get(key)
         if kept is not None and kept[0] == spec:
             return kept[1]
-        array = wp.empty(shape, dtype=dtype, device=device)
+        array = make()
         _COUNT[0] += 1
-        _ARRAYS[key] = (spec, array)
+        store[key] = (spec, array)
         return array
 
 
@@ -75,16 +95,8 @@ def upload(name: str, values: np.ndarray, dtype, device) -> wp.array:
     """A device array holding ``values`` (converted to ``dtype``), uploaded only when ``name`` does not already hold
     the same contents on ``device``. Callers must not write into the returned array."""
     values = np.ascontiguousarray(values)
-    key = (name, _device_name(device))
     spec = (_digest(values), values.shape, str(values.dtype), dtype)
-    with _LOCK:
-        kept = _UPLOADS.get(key)
-        if kept is not None and kept[0] == spec:
-            return kept[1]
-        array = wp.array(values, dtype=dtype, device=device)
-        _COUNT[0] += 1
-        _UPLOADS[key] = (spec, array)
-        return array
+    return _kept(_UPLOADS, (name, _device_name(device)), spec, lambda: wp.array(values, dtype=dtype, device=device))
 
 
 def download(name: str, array: wp.array) -> np.ndarray:

@@ -14,19 +14,25 @@ import warpsky.evaluation.stratiform_reference as stratiform_reference
 import warpsky.evaluation.stratiform_slab as evaluation_slab
 import warpsky.media.advection_kernels as advection_kernels
 import warpsky.media.fields as fields
+import warpsky.media.heightfield as heightfield_media
 import warpsky.optics.ice_kernels as ice_kernels
 import warpsky.optics.kernels as optics
+import warpsky.optics.oriented_ice_kernels as oriented_ice_kernels
+import warpsky.techniques.fog.kernels as fog_kernels
+import warpsky.techniques.heightfield.kernels as heightfield_kernels
 import warpsky.techniques.path_tracer.kernels  # noqa: F401  (registers its kernel factory)
 import warpsky.techniques.radiosity.kernels as radiosity
 import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its kernel factories)
 import warpsky.techniques.sky.kernels as sky
 import warpsky.techniques.slicing.kernels as slicing  # (also registers its kernel factories)
 import warpsky.techniques.stratiform.kernels as stratiform_kernels
+import warpsky.techniques.surfaces.kernels as surfaces_kernels
 from warpsky.kernel_variants import variant_modules
 
 #: Modules holding plain (not factory-made) kernels.
 PLAIN_MODULES = (fields, optics, ice_kernels, sky, evaluation_slab, stratiform_reference, radiosity, stratiform_kernels,
-                 advection_kernels, slicing)
+                 advection_kernels, slicing, surfaces_kernels, fog_kernels, heightfield_media, heightfield_kernels,
+                 oriented_ice_kernels)
 
 def kernel_modules() -> list:
     """Warp ``Module`` objects for every kernel warpsky can launch."""

@@ -5,13 +5,21 @@ Layers are composited front to back (:mod:`warpsky.composite`):
 
 - ``media``: the voxel technique (:class:`~warpsky.techniques.base.Technique`), on :func:`media_scene`;
 - ``stratiform``: :class:`StratiformPass`, one Layer per stratiform layer, merged with the media by depth;
+- ``surfaces``: :class:`~warpsky.techniques.surfaces.technique.SurfacesPass`, the meshes (terrain) and, in a scene
+  without voxel media and stratiform layers, the ground plane; its depth stops the two passes below;
+- ``heightfield``: :class:`~warpsky.techniques.heightfield.technique.HeightFieldPass`, Max's clouds and haze;
+- ``fog``: :class:`~warpsky.techniques.fog.technique.FogPass`, Biri's analytic fog;
 - ``sky``: :class:`~warpsky.techniques.sky.technique.SkyPass`, the air in front of the merged layer and behind
   it (with the sun's disk).
+
+All but the sky are merged by depth (:func:`~warpsky.composite.merge_by_depth`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+
+import numpy as np
 
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer
@@ -19,6 +27,45 @@ from warpsky.techniques.sky.analytic import sun_transmittance
 from warpsky.techniques.sky.technique import attenuated_sun
 from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
 from warpsky.techniques.sunlight import light_elevation_sine, visible_sun
+
+#: The passes :func:`scenery_layers` runs.
+SCENERY_PASSES = frozenset({"surfaces", "heightfield", "fog"})
+#: ``--set PASS.NAME=VALUE`` settings of the height-field and fog passes: their keyword arguments and types
+#: (documented on :class:`~warpsky.techniques.heightfield.technique.HeightFieldPass` and
+#: :class:`~warpsky.techniques.fog.technique.FogPass`).
+SCENERY_SETTINGS = {
+    "heightfield": {"mode": str, "step_length": float, "haze_step_length": float, "max_steps": int,
+                    "min_transmittance": float},
+    "fog": {"nodes": int, "min_pieces": int, "max_pieces": int, "cut_depth": float},
+}
+
+
+def parse_scenery_settings(values: dict[str, str]) -> dict[str, dict]:
+    """``{"heightfield.mode": "max", ...}`` as ``{"heightfield": {"mode": "max"}, ...}``, typed and checked by
+    building the passes (a bad name or value is a one-line UsageError naming the setting)."""
+    from warpsky.errors import UsageError
+
+    out: dict[str, dict] = {}
+    for key, text in values.items():
+        prefix, _, name = key.partition(".")
+        kinds = SCENERY_SETTINGS[prefix]
+        if name not in kinds:
+            raise UsageError(f"unknown setting {key}; {prefix} settings: "
+                             f"{', '.join(prefix + '.' + n for n in kinds)}")
+        try:
+            out.setdefault(prefix, {})[name] = kinds[name](text)
+        except ValueError:
+            raise UsageError(f"setting {key} must be {'a whole number' if kinds[name] is int else 'a number'}, "
+                             f"got {text!r}") from None
+    if "heightfield" in out:
+        from warpsky.techniques.heightfield.technique import HeightFieldPass
+
+        HeightFieldPass(**out["heightfield"])
+    if "fog" in out:
+        from warpsky.techniques.fog.technique import FogPass
+
+        FogPass(**out["fog"])
+    return out
 
 
 def media_scene(scene: Scene, passes: tuple[str, ...]) -> Scene:
@@ -65,3 +112,87 @@ class StratiformPass:
             part.stats["layer"] = layer.name
             parts.append(part)
         return parts
+
+
+_SURFACE_PASSES: dict = {}
+
+
+def _surfaces_pass(device: str):
+    """One surfaces pass per device for the process: it keeps its BVH, which the next frame refits when only the
+    points or the camera moved (an animated batch, a turntable)."""
+    from warpsky.techniques.surfaces.technique import SurfacesPass
+
+    if device not in _SURFACE_PASSES:
+        _SURFACE_PASSES[device] = SurfacesPass(device=device)
+    return _SURFACE_PASSES[device]
+
+
+def scenery_sun_transmittance(scene: Scene, device: str):
+    """``points (N, 3) world -> (N, 3)``: the sunlight's transmittance through the scene's height-field clouds,
+    fog and stratiform layers (the voxel media's shadows the surfaces pass traces itself); None when the scene has
+    none of them."""
+    parts = []
+    if scene.heightfield_clouds:
+        from warpsky.techniques.heightfield.technique import heightfield_sun_transmittance
+
+        # the exact sun-ray optical depth: Max's thickness rule fails for decks thicker than their features
+        parts.append(lambda s, points, d: heightfield_sun_transmittance(s, points, d, exact=True))
+    if scene.fogs:
+        from warpsky.techniques.fog.technique import fog_sun_transmittance
+
+        parts.append(fog_sun_transmittance)
+    if scene.layers and scene.sun is not None:
+        from warpsky.media.stratiform import layer_sun_transmittance
+
+        for layer in scene.layers:
+            parts.append(lambda s, points, d, layer=layer: layer_sun_transmittance(layer, points, s.sun.direction, d))
+    if not parts:
+        return None
+
+    def transmittance(points):
+        out = 1.0
+        for part in parts:
+            out = out * part(scene, points, device)
+        return out
+
+    return transmittance
+
+
+def scenery_layers(scene: Scene, passes: tuple[str, ...], width: int, height: int, *, device: str,
+                   before: list[Layer] | None = None, settings: dict | None = None, sky=None
+                   ) -> tuple[list[Layer], np.ndarray | None]:
+    """The surfaces, height-field and fog passes' Layers for ``scene`` (already lit as the media see it), with the
+    ``before`` layers (the media's, the stratiform layers') between the surfaces and the rest; and the surfaces'
+    depth (the camera's far distance where no surface is hit; None without a surfaces pass). That depth
+    stops the height-field clouds, the haze and the fog (Max: "bounded by the distance to the nearest opaque
+    surface"; Biri: the fog integral runs to the depth buffer). ``settings``: :func:`parse_scenery_settings`'s.
+    ``sky``: (mean radiance, E / pi) of the upper hemisphere lighting them (:func:`~warpsky.techniques.sky.light.
+    sky_light`); None: the dome's alone."""
+    from warpsky.plan import surfaces_draw_ground
+    from warpsky.techniques.dome import isotropic_ambient
+    from warpsky.techniques.sky.light import sky_light
+
+    sky = sky_light(scene, analytic=False) if sky is None else sky
+    ambient = isotropic_ambient(scene, sky)
+    parts, limit = [], None
+    if "surfaces" in passes:
+        surfaces = _surfaces_pass(device).render(
+            scene, width, height, draw_ground=surfaces_draw_ground(scene),
+            sun_transmittance=scenery_sun_transmittance(scene, device), sky=sky[1])
+        parts.append(surfaces)
+        limit = surfaces.depth
+    parts += before or []
+    if "heightfield" in passes:
+        from warpsky.techniques.heightfield.technique import HeightFieldPass
+
+        options = (settings or {}).get("heightfield", {})
+        parts.append(HeightFieldPass(device=device, **options).render(scene, width, height, limit=limit,
+                                                                      ambient=ambient))
+    if "fog" in passes:
+        from warpsky.techniques.fog.technique import FogPass
+
+        options = (settings or {}).get("fog", {})
+        occluders = _surfaces_pass(device).occluders if scene.meshes and "surfaces" in passes else None
+        parts.append(FogPass(device=device, **options).render(scene, width, height, limit=limit, ambient=ambient,
+                                                               occluders=occluders))
+    return parts, limit

@@ -14,9 +14,12 @@ import numpy as np
 
 from warpsky.errors import UsageError
 from warpsky.optics.tables import is_cached
+from warpsky.passes import SCENERY_SETTINGS, parse_scenery_settings
 from warpsky.resources import MemoryEstimate, WorkEstimate, frame_memory, frame_work
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique, parse_settings, technique_class
+from warpsky.techniques.path_tracer.deck_media import deck_voxel_features, traces_decks
+from warpsky.techniques.path_tracer.layer_media import layer_voxel_features, traces_layers
 from warpsky.techniques.stratiform.technique import StratiformSettings, radiosity_grid
 
 DEFAULT_WIDTH = 512
@@ -45,6 +48,8 @@ class RenderPlan:
             batch's resume check and the EXR metadata share it); empty until then.
         memory: Bytes the frame will allocate, by part (:func:`warpsky.resources.frame_memory`).
         work: Worst-case kernel iterations of the frame (:func:`warpsky.resources.frame_work`).
+        scenery_settings: ``--set heightfield.*`` / ``fog.*`` values by pass
+            (:func:`warpsky.passes.parse_scenery_settings`).
     """
 
     technique: str
@@ -59,12 +64,14 @@ class RenderPlan:
     settings_hash: str = ""
     memory: MemoryEstimate = field(default_factory=MemoryEstimate)
     work: WorkEstimate = field(default_factory=WorkEstimate)
+    scenery_settings: dict = field(default_factory=dict)
 
     def settings_dict(self) -> dict:
         return dataclasses.asdict(self.settings)
 
     def settings_json(self) -> str:
         extra = {} if self.layer_settings is None else {"stratiform": dataclasses.asdict(self.layer_settings)}
+        extra.update(self.scenery_settings)
         return json.dumps({"technique": self.technique, **self.settings_dict(), **extra}, sort_keys=True)
 
     def describe(self) -> str:
@@ -72,17 +79,22 @@ class RenderPlan:
             f"technique   {self.technique}",
             f"device      {self.device}",
             f"resolution  {self.width} x {self.height}",
-            "settings    " + ", ".join(f"{k}={_fmt(v)}" for k, v in self.settings_dict().items()),
+            "settings    " + (", ".join(f"{k}={_fmt(v)}" for k, v in self.settings_dict().items())
+                              if "media" in self.passes else f"none: {self.technique} does not run (no voxel media)"),
         ]
         if self.layer_settings is not None:
             lines.append("            " + ", ".join(f"stratiform.{k}={'auto' if v is None else _fmt(v)}"
                                                   for k, v in dataclasses.asdict(self.layer_settings).items()))
+        for name, values in self.scenery_settings.items():
+            lines.append("            " + ", ".join(f"{name}.{k}={_fmt(v)}" for k, v in values.items()))
         lines.append(f"passes      {' -> '.join(self.passes)} -> composite")
         lines += [f"{name:<11} {state}" for name, state in self.features.items()]
         return "\n".join(lines)
 
 
 def _fmt(value) -> str:
+    if value is None:
+        return "auto"
     if isinstance(value, bool):
         return str(int(value))
     if isinstance(value, enum.Enum):
@@ -119,24 +131,60 @@ def make_plan(
     settings = dict(settings or {})
     layer_values = {k[len(LAYER_SETTING_PREFIX):]: settings.pop(k) for k in list(settings)
                     if k.startswith(LAYER_SETTING_PREFIX)}
+    scenery_settings = parse_scenery_settings({k: settings.pop(k) for k in list(settings)
+                                               if k.split(".")[0] in SCENERY_SETTINGS})
     renderer = cls(parse_settings(cls.Settings, settings), device=device)
     renderer.settings = renderer.resolved_settings(scene)
     width, height = resolve_resolution(scene, resolution)
     layer_settings = None
-    if scene.layers:
+    traced_layers = bool(scene.layers) and traces_layers(cls)  # voxelised by the technique: no stratiform pass
+    if scene.layers and not traced_layers:
         if not cls.renders_layers:
             raise UsageError(f"technique {technique} does not render stratiform layers "
                              f"({', '.join(layer.name for layer in scene.layers)}); use slicing or single_scatter")
         layer_settings = parse_settings(StratiformSettings, layer_values)
+    scenery = scene_has_scenery(scene)
+    traced_deck = bool(scene.heightfield_clouds) and traces_decks(cls)  # voxelised by it: no height-field pass
+    refused = [(what, objects) for what, objects in (
+        ("meshes", scene.meshes), ("analytic fog", scene.fogs),
+        ("height-field clouds", () if traced_deck else scene.heightfield_clouds)) if objects]
+    if refused and cls.traces_air:
+        named = "; ".join(f"{what} ({', '.join(o.name for o in objects)})" for what, objects in refused)
+        raise UsageError(f"technique {technique} does not render {named}; use hybrid, slicing or single_scatter")
     passes = tuple(name for name, runs in (
-        ("media", bool(scene.media) or not scene.layers),
-        ("stratiform", bool(scene.layers)),
+        ("surfaces", surfaces_pass_runs(scene) and not traced_deck),
+        ("media", bool(scene.media) or traced_layers or traced_deck or not (scene.layers or scenery)),
+        ("stratiform", bool(scene.layers) and not traced_layers),
+        ("heightfield", bool(scene.heightfield_clouds) and not traced_deck),
+        ("fog", bool(scene.fogs)),
         ("sky", scene.atmosphere is not None and not cls.traces_air),
     ) if runs)
     plan = RenderPlan(technique, renderer.settings, device, width, height, renderer, passes,
-                      _features(scene, technique, layer_settings, layer_values), layer_settings)
+                      _features(scene, technique, layer_settings, layer_values), layer_settings,
+                      scenery_settings=scenery_settings)
+    if traced_layers:
+        plan.features = layer_voxel_features(scene, renderer.settings, plan.features)
+    if traced_deck:
+        plan.features = deck_voxel_features(scene, renderer.settings, width, height, plan.features)
     plan.memory, plan.work = frame_memory(scene, plan), frame_work(scene, plan)
     return plan
+
+
+def scene_has_scenery(scene: Scene) -> bool:
+    """Whether ``scene`` holds meshes, height-field clouds or analytic fog (each drawn by its own pass)."""
+    return bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
+
+
+def surfaces_pass_runs(scene: Scene) -> bool:
+    """The surfaces pass draws the meshes, and the ground plane when no other pass would (no voxel media, no
+    stratiform layers) in a scene of terrain, height-field clouds or fog."""
+    return bool(scene.meshes) or (scene.ground is not None and scene_has_scenery(scene)
+                                  and not scene.media and not scene.layers)
+
+
+def surfaces_draw_ground(scene: Scene) -> bool:
+    """Whether the surfaces pass, rather than the voxel technique or the stratiform pass, draws the ground plane."""
+    return scene.ground is not None and not scene.media and not scene.layers
 
 
 def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) -> dict[str, str]:
@@ -169,6 +217,7 @@ def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) 
         unused = f" (unused: {', '.join(LAYER_SETTING_PREFIX + k for k in layer_values)})" if layer_values else ""
         features["layers"] = ('no layers (no prim with warpsky:kind = "stratiformLayer"): stratiform pass and '
                               "radiosity not built" + unused)
+    features.update(_scenery_features(scene))
     species = scene.species
     if species:
         states = [f"{name} ({'cached' if is_cached(name) else 'to build'})" for name in species]
@@ -187,6 +236,35 @@ def _features(scene: Scene, technique: str, layer_settings, layer_values: dict) 
                                f"{tex.size[0]:g} x {tex.size[1]:g} m (stratiform pass only)")
     if scene.ground is not None and scene.layers:
         features["ground"] += "; drawn by the stratiform pass (layer shadows, radiosity), voxel media cast no shadow"
+    elif scene.ground is not None and surfaces_pass_runs(scene) and surfaces_draw_ground(scene):
+        features["ground"] += "; drawn by the surfaces pass (shadows of fog and height-field clouds)"
+    return features
+
+
+def _scenery_features(scene: Scene) -> dict[str, str]:
+    """One line each for the meshes, the height-field clouds and the analytic fog: what is built for them, or that
+    nothing is."""
+    features = {}
+    if scene.meshes:
+        triangles = sum(len(m.triangles) for m in scene.meshes)
+        features["meshes"] = (f"{len(scene.meshes)} mesh(es) ({', '.join(m.name for m in scene.meshes)}), "
+                              f"{triangles:,} triangles: one Warp BVH, surfaces pass")
+    else:
+        features["meshes"] = "none (no Mesh prim): no BVH built"
+    if scene.heightfield_clouds:
+        lines = []
+        for clouds in scene.heightfield_clouds:
+            haze = "with haze" if clouds.haze is not None else "no haze"
+            lines.append(f"{clouds.name}: mean plane {clouds.mean_altitude:g} m, {len(clouds.amplitudes)} waves, "
+                         f"density {clouds.density:g} 1/m, {haze}")
+        features["heightfield"] = "; ".join(lines) + " (Max 1986; single scattering, mode heightfield.mode)"
+    else:
+        features["heightfield"] = 'none (no prim with warpsky:kind = "heightFieldClouds")'
+    if scene.fogs:
+        features["fog"] = "; ".join(f"{fog.name}: {fog.describe()}" for fog in scene.fogs) + \
+            " (Biri 2002, closed-form optical depths)"
+    else:
+        features["fog"] = 'none (no prim with warpsky:kind = "analyticFog")'
     return features
 
 

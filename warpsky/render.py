@@ -21,13 +21,14 @@ from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_
 from warpsky.output.exr import write_channels
 from warpsky.output.png import write_png
 from warpsky.output.products import FULL_WINDOW, default_outputs, frame_channels, required_channels, window_pixels
-from warpsky.passes import StratiformPass, media_scene
+from warpsky.passes import SCENERY_PASSES, StratiformPass, media_scene, scenery_layers
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.resources import check_resources
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene, as_imath_rows
 from warpsky.scene.usd_render import OutputVar, check_outputs
 from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
-from warpsky.techniques.sky.technique import SkyPass
+from warpsky.techniques.sky.light import sky_light
+from warpsky.techniques.sky.technique import SkyPass, attenuated_sun
 
 #: Figures of a Monte Carlo render that go into the EXR header (camelCase) and the batch log, where present.
 QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths", "paths")
@@ -217,12 +218,19 @@ def render_layers(technique: Technique, scene: Scene, plan: RenderPlan) -> tuple
             parts.append(run.render(media_scene(lit, plan.passes), width, height))
         if "stratiform" in plan.passes:
             parts += StratiformPass(plan.layer_settings, device=plan.device).render(lit, width, height)
-            main = merge_by_depth(parts, far=lit.camera.far)
-        else:
-            main = parts[0]
+        opaque = None
+        if SCENERY_PASSES & set(plan.passes):
+            seen = attenuated_sun(lit) if "sky" in plan.passes else lit
+            sky = sky_light(lit, analytic="sky" in plan.passes)  # from the sun before the air reddens it
+            parts, opaque = scenery_layers(seen, plan.passes, width, height, device=plan.device, before=parts,
+                                           settings=plan.scenery_settings, sky=sky)
+        main = merge_by_depth(parts, far=lit.camera.far) if len(parts) > 1 else parts[0]
         if "sky" not in plan.passes:
             return main, [main]
-        front, back = SkyPass(device=plan.device).render(lit, width, height, media_depth=main.depth)
+        # The air in front runs to a surface where one is hit (the haze and fog in front of it are thin enough
+        # that the order of air and fog along the ray matters little), else to the merged layer's depth.
+        air_depth = main.depth if opaque is None else np.where(opaque < lit.camera.far, opaque, main.depth)
+        front, back = SkyPass(device=plan.device).render(lit, width, height, media_depth=air_depth)
         return main, [front, main, back]
 
     main, layers = lit_by(scene, technique)
@@ -362,5 +370,5 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
     if scene.layers:
         keys = ("layer", "radiosity", "radiosity_iterations", "radiosity_residual", "radiosity_converged", "seconds")
         metadata["stratiform"] = json.dumps([{k: part[k] for k in keys if k in part}
-                                             for part in layer.stats["parts"] if "layer" in part])
+                                             for part in layer.stats.get("parts", [layer.stats]) if "layer" in part])
     return metadata

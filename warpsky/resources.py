@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from warpsky.errors import WarpskyError
+from warpsky.scene.camera import Projection
 
 #: Most worst-case kernel iterations (grid lookups, path events) one pixel may take.
 MAX_WORK_PER_PIXEL = 1.0e8
@@ -187,17 +188,65 @@ def media_diagonal(media) -> float:
     return float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
 
 
+#: Camera rays per image axis whose path through each medium's box bounds the march (the corners included).
+CHORD_RAYS = 33
+
+
+def box_chords(medium, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Length [m] of each ray ``origin + t d`` (t >= 0, (N, 3) unit world directions) inside ``medium``'s box."""
+    index_from_world = np.linalg.inv(medium.world_from_index)
+    o = (index_from_world @ np.append(origin, 1.0))[:3]
+    d = directions @ index_from_world[:3, :3].T  # index units per metre along each ray
+    lo, hi = -0.5, np.asarray(medium.shape, dtype=np.float64) - 0.5
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta = (lo - o) / d
+        tb = (hi - o) / d
+    inside = (o >= lo) & (o <= hi)
+    near = np.where(d == 0.0, np.where(inside, -np.inf, np.inf), np.minimum(ta, tb))
+    far = np.where(d == 0.0, np.where(inside, np.inf, -np.inf), np.maximum(ta, tb))
+    enter = np.maximum(near.max(axis=1), 0.0)
+    leave = far.min(axis=1)
+    return np.where(leave > enter, leave - enter, 0.0)
+
+
+def longest_chord(medium, direction: np.ndarray) -> float:
+    """Longest segment [m] along ``direction`` that fits in ``medium``'s box: min over its axes of the box's edge
+    over the direction's component along that axis (in index units)."""
+    d = np.linalg.inv(medium.world_from_index)[:3, :3] @ np.asarray(direction, dtype=np.float64)
+    edges = np.asarray(medium.shape, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        return float(np.min(np.where(np.abs(d) > 0.0, edges / np.abs(d), np.inf)))
+
+
+def camera_chord(scene) -> float:
+    """The longest path [m] a camera ray takes through the media (summed over their boxes), over a
+    :data:`CHORD_RAYS` square grid of the frame's rays, corners included; the boxes' diagonal for an
+    orthographic camera (its rays do not share an origin)."""
+    camera = scene.camera
+    if camera.projection is not Projection.PERSPECTIVE:
+        return media_diagonal(scene.media)
+    steps = np.linspace(0.0, 1.0, CHORD_RAYS)
+    directions = np.array([camera.pixel_direction(x, y, 1, 1) for y in steps for x in steps])
+    chords = sum(box_chords(m, np.asarray(camera.position, dtype=np.float64), directions) for m in scene.media)
+    return float(np.max(chords))
+
+
 def march_work(scene, pixels: int, step: float, shadow_step: float) -> list[WorkItem]:
     """Grid lookups of the single-scattering march: per eye step one lookup per medium and a shadow march through
-    every medium towards the sun (one lookup per shadow step), over the longest path through the media."""
+    every medium towards the sun (one lookup per shadow step). The eye's path is the longest of the frame's rays
+    through the media (:func:`camera_chord`, plus a tenth for rays between the sampled ones); the sun's, the
+    longest segment along the sun that fits in each box (the boxes' diagonal without a sun)."""
     if not scene.media:
         return []
-    eye_steps = math.ceil(media_diagonal(scene.media) / step)
-    shadow_steps = sum(math.ceil(media_diagonal((m,)) / shadow_step) for m in scene.media)
+    eye_path = min(1.1 * camera_chord(scene), media_diagonal(scene.media))
+    eye_steps = math.ceil(eye_path / step)
+    sun = scene.sun.direction if scene.sun is not None else None
+    shadow_steps = sum(math.ceil(min(media_diagonal((m,)), longest_chord(m, sun) if sun is not None else math.inf)
+                                 / shadow_step) for m in scene.media)
     per_pixel = eye_steps * (len(scene.media) + shadow_steps) + shadow_steps
     return [WorkItem("march lookups", float(per_pixel), pixels,
                      f"step_length={step:g} m and shadow_step_length={shadow_step:g} m over "
-                     f"{media_diagonal(scene.media):.4g} m of media")]
+                     f"{eye_path:.4g} m of media")]
 
 
 # ------------------------------------------------------------------------------------------------- passes
@@ -216,6 +265,13 @@ def frame_memory(scene, plan) -> MemoryEstimate:
         estimate.add("stratiform layers", host=pixels * (LAYER_BYTES * (0 if cpu else layers) + 40 * (layers + 1)),
                      device=pixels * LAYER_BYTES * layers)
         estimate.add("radiosity", device=radiosity_bytes(scene, plan.layer_settings))
+    if "surfaces" in plan.passes:
+        triangles = sum(len(m.triangles) for m in scene.meshes)
+        # points (12 B) and indices (12 B per triangle) plus Warp's BVH (about 64 B per triangle), per-pixel hits
+        estimate.add("meshes", host=40 * triangles, device=88 * triangles + pixels * LAYER_BYTES)
+    for name in ("heightfield", "fog"):
+        if name in plan.passes:
+            estimate.add(name, host=pixels * (0 if cpu else LAYER_BYTES), device=pixels * LAYER_BYTES)
     if "sky" in plan.passes:
         estimate.add("sky", host=pixels * (20 + (0 if cpu else 36)), device=pixels * 40)
     estimate.add("composite and EXR", host=pixels * COMPOSITE_BYTES)

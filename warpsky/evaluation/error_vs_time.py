@@ -14,10 +14,25 @@ column              meaning
 rel_rmse            sqrt(mean((x - r)^2)) / mean(r), over covered pixels and channels
 mean_rel, p95_rel   mean and 95th percentile of |x - r| / max(r, 1e-2 mean(r)) per covered pixel/channel
 bias                (mean(x) - mean(r)) / mean(r): the part of the error more samples do not remove
+net_rmse            rel_rmse with the reference's own variance taken out (an estimate of the error against
+                    the exact image; see :func:`error_metrics`)
 =================== ===================================================================================
 
 The reference's own noise is reported as ``reference_rel_noise`` (relative standard error of the covered mean,
 and per-pixel relative RMS noise): errors below it are not resolved.
+
+Stratiform layers (Bouthors 2006) are judged too: the reference path-traces them voxelised
+(:mod:`warpsky.techniques.path_tracer.layer_media`), while the other techniques run next to the stratiform pass.
+Their rows read ``<technique> + stratiform pass`` when the stage also holds voxel media; on a stage of layers
+alone every voxel technique's frame is the stratiform pass's, so one row family, ``stratiform pass (Bouthors
+2006)``, walks the radiosity buffers' resolution (``stratiform.radiosity_detail``). Both sides see the ground at its
+uniform albedo: the ground's albedo map, which the path tracer does not trace, is left out of the measured scene.
+
+Height-field cloud decks (Max 1986) likewise: the reference path-traces the deck and its haze voxelised
+(:mod:`warpsky.techniques.path_tracer.deck_media`); on a deck stage without voxel media every voxel technique's
+frame is the height-field pass's, measured once per mode (``height-field pass (Max 1986, exact)``, ``max``,
+``sexp``) along ``heightfield.step_length``. That pass is single scattering only, so its bias against the
+path-traced multiple scattering is expected to be negative.
 """
 
 from __future__ import annotations
@@ -40,6 +55,8 @@ from warpsky.errors import UsageError
 from warpsky.files import atomic_write, cache_dir
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.render import render_layers
+from warpsky.techniques.base import technique_class
+from warpsky.techniques.path_tracer.deck_media import traces_decks
 
 #: Techniques the report knows how to walk, with their quality ladders.
 LADDERS = {
@@ -50,6 +67,14 @@ LADDERS = {
 }
 #: Ladder settings given in voxel edges (multiplied by the scene's smallest voxel edge).
 VOXEL_SETTINGS = ("step_length", "shadow_step_length")
+#: Row name of the stratiform pass measured on a stage of layers without voxel media, and its ladder.
+STRATIFORM_ROW = "stratiform pass (Bouthors 2006)"
+STRATIFORM_LADDER = [{"stratiform.radiosity_detail": d} for d in (0, 1, 2)]
+#: Row names of the height-field pass (Max 1986) measured on a deck stage without voxel media, one per mode, and
+#: its ladder: ``heightfield.step_length`` as these multiples of the pass's automatic cloud step.
+HEIGHTFIELD_ROW = "height-field pass (Max 1986, {mode})"
+HEIGHTFIELD_MODES = ("exact", "max", "sexp")
+HEIGHTFIELD_STEPS = (2.0, 1.0, 0.5)
 
 
 @dataclass
@@ -80,7 +105,8 @@ def _reference_key(scene, width, height, device, spp, seed) -> str:
 def frame_plan(scene, technique: str, values: dict, width: int, height: int, device: str) -> RenderPlan:
     """The plan of one measured frame: ``technique`` with the settings ``values`` (numbers), resolved for
     ``scene``."""
-    return make_plan(scene, technique=technique, settings={k: repr(v) for k, v in values.items()},
+    return make_plan(scene, technique=technique,
+                     settings={k: v if isinstance(v, str) else repr(v) for k, v in values.items()},
                      resolution=(width, height), device=device)
 
 
@@ -137,7 +163,53 @@ def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray,
 
 
 def setting_label(values: dict) -> str:
-    return ", ".join(f"{k}={v:g}" for k, v in values.items() if k != "shadow_step_length")
+    return ", ".join(f"{k.split('.')[-1]}={v if isinstance(v, str) else format(v, '.4g')}"
+                     for k, v in values.items() if k not in ("shadow_step_length", "heightfield.mode"))
+
+
+def comparable_scene(scene, log=print):
+    """``scene`` as both sides of the report can render it: with stratiform layers, the ground's albedo map (which
+    only the stratiform pass reads) is left out, so both see the ground's uniform albedo."""
+    ground = scene.ground
+    if not scene.layers or ground is None or ground.albedo_map is None:
+        return scene
+    log(f"ground {ground.name}: albedo map left out of the comparison (the path tracer traces a uniform ground); "
+        f"both sides use albedo {np.round(ground.albedo, 3).tolist()}")
+    return dataclasses.replace(scene, ground=dataclasses.replace(ground, albedo_map=None))
+
+
+def measured_rows(scene, techniques: list[str]) -> list[tuple[str, str, list[dict]]]:
+    """(row name, technique that renders it, ladder) per measured row family. Next to stratiform layers a voxel
+    technique's rows name the stratiform pass too; on a stage of layers alone its frame is the stratiform pass's,
+    measured once along :data:`STRATIFORM_LADDER`."""
+    out = []
+    for name in techniques:
+        if scene.heightfield_clouds and not traces_decks(technique_class(name)):
+            out += heightfield_rows(scene, name, out)
+        elif not scene.layers or not technique_class(name).renders_layers:
+            out.append((name, name, LADDERS[name]))
+        elif scene.media:
+            out.append((f"{name} + stratiform pass", name, LADDERS[name]))
+        elif STRATIFORM_ROW not in (row for row, _, _ in out):
+            out.append((STRATIFORM_ROW, name, STRATIFORM_LADDER))
+    return out
+
+
+def heightfield_rows(scene, name: str, so_far: list) -> list[tuple[str, str, list[dict]]]:
+    """The rows of a voxel technique ``name`` on a stage with a height-field deck: with voxel media, its own
+    ladder next to the height-field pass; without, the height-field pass's frame alone, once per mode along
+    :data:`HEIGHTFIELD_STEPS` (none when ``so_far`` already holds them)."""
+    if scene.media:
+        return [(f"{name} + height-field pass", name, LADDERS[name])]
+    first = HEIGHTFIELD_ROW.format(mode=HEIGHTFIELD_MODES[0])
+    if first in (row for row, _, _ in so_far):
+        return []
+    from warpsky.techniques.heightfield.technique import automatic_steps, the_deck
+
+    step = automatic_steps(the_deck(scene))[0]
+    return [(HEIGHTFIELD_ROW.format(mode=mode), name,
+             [{"heightfield.mode": mode, "heightfield.step_length": factor * step} for factor in HEIGHTFIELD_STEPS])
+            for mode in HEIGHTFIELD_MODES]
 
 
 def run_report(
@@ -159,8 +231,10 @@ def run_report(
     if unknown:
         raise UsageError(f"error-vs-time cannot measure {', '.join(unknown)} (yet); available: "
                          f"{', '.join(LADDERS)}")
-    if not scene.media:
-        raise UsageError("the stage holds no media: nothing to measure")
+    if not scene.media and not scene.layers and not scene.heightfield_clouds:
+        raise UsageError("the stage holds no media, no stratiform layers and no height-field clouds: nothing to "
+                         "measure")
+    scene = comparable_scene(scene, log)
     radiance_ref, trans_ref, var_ref, ref_seconds, cached = reference_image(
         scene, width, height, device, spp=reference_spp, seed=reference_seed, use_cache=use_cache)
     log(f"reference: path_tracer {reference_spp} spp, {'loaded from cache' if cached else f'{ref_seconds:.1f} s'}")
@@ -169,25 +243,26 @@ def run_report(
     mean_r = float(radiance_ref[covered].mean()) if covered.any() else 0.0
     noise_mean = float(np.sqrt(var_ref[covered].sum()) / max(radiance_ref[covered].sum(), 1e-30))
     noise_pixel = float(np.sqrt(var_ref[covered].mean()) / max(mean_r, 1e-30))
-    voxel = min(float(m.voxel_size.min()) for m in scene.media)
+    voxel = min((float(m.voxel_size.min()) for m in scene.media), default=1.0)
     rows = []
     share = budget / max(len(techniques), 1)
-    for name in techniques:
+    for label, name, ladder in measured_rows(scene, techniques):
         spent = 0.0
         warmed = False
-        for rung in LADDERS[name]:
+        for rung in ladder:
             values = {k: (v * voxel if k in VOXEL_SETTINGS else v) for k, v in rung.items()}
             plan = frame_plan(scene, name, values, width, height, device)
-            if not warmed:
-                plan.renderer.render(scene, min(width, 8), min(height, 8))  # compile / load: not timed
+            if not warmed:  # compile / load every pass of the frame: not timed
+                render_frame_radiance(frame_plan(scene, name, values, min(width, 8), min(height, 8), device), scene)
                 warmed = True
             started = time.perf_counter()
             radiance, _, _, _ = render_frame_radiance(plan, scene)
             seconds = time.perf_counter() - started
             spent += seconds
-            row = Row(name, setting_label(rung), seconds, **error_metrics(radiance, radiance_ref, covered))
+            row = Row(label, setting_label(rung), seconds,
+                      **error_metrics(radiance, radiance_ref, covered, reference_variance=var_ref))
             rows.append(row)
-            log(f"  {name:<15} {row.setting:<22} {seconds:8.3f} s  rel RMSE {row.rel_rmse:.4f}")
+            log(f"  {label:<15} {row.setting:<22} {seconds:8.3f} s  rel RMSE {row.rel_rmse:.4f}")
             if spent > share:
                 break
     return Report(rows, {"spp": reference_spp, "seconds": ref_seconds, "cached": cached,
@@ -196,11 +271,12 @@ def run_report(
 
 
 def format_table(report: Report) -> str:
-    lines = [f"{'technique':<15} {'setting':<22} {'seconds':>9} {'rel RMSE':>9} {'mean rel':>9} {'p95 rel':>9} "
-             f"{'bias':>8}"]
+    wide = max([15, *(len(r.technique) for r in report.rows)])
+    lines = [f"{'technique':<{wide}} {'setting':<22} {'seconds':>9} {'rel RMSE':>9} {'mean rel':>9} {'p95 rel':>9} "
+             f"{'bias':>8} {'net RMSE':>9}"]
     for r in report.rows:
-        lines.append(f"{r.technique:<15} {r.setting:<22} {r.seconds:>9.3f} {r.rel_rmse:>9.4f} {r.mean_rel:>9.4f} "
-                     f"{r.p95_rel:>9.4f} {r.bias:>+8.4f}")
+        lines.append(f"{r.technique:<{wide}} {r.setting:<22} {r.seconds:>9.3f} {r.rel_rmse:>9.4f} {r.mean_rel:>9.4f} "
+                     f"{r.p95_rel:>9.4f} {r.bias:>+8.4f} {r.net_rmse:>9.4f}")
     ref = report.reference
     lines.append(f"reference: path_tracer {ref['spp']} spp on {ref['width']}x{ref['height']}, "
                  f"{ref['covered_pixels']} covered pixels; its own noise: {ref['rel_noise_per_pixel']:.4f} per pixel, "

@@ -171,3 +171,24 @@ def at_time(layer: StratiformLayer, device: str = "cpu") -> StratiformLayer:
     if layer.advection is None:
         return layer
     return dataclasses.replace(layer, thickness=thickness_at_time(layer, device), advection=None)
+
+
+def layer_sun_transmittance(layer: StratiformLayer, points: np.ndarray, sun_direction, device: str = "cpu"
+                            ) -> np.ndarray:
+    """(N, 3) transmittance of the direct sunlight through ``layer`` at world ``points`` (N, 3) [m] below its
+    base: exp(-kappa t / sin e), t the thickness where the ray towards the sun pierces the cloud base (a locally
+    flat slab crossed at the sun's elevation e; Max 1986's shadow rule with the slant path). Points above the base,
+    and a sun at or below the horizon, are not dimmed; the light the layer scatters down is not included."""
+    points = np.asarray(points, dtype=np.float64)
+    out = np.ones((len(points), 3))
+    sun = np.asarray(sun_direction, dtype=np.float64)
+    if sun[1] <= 0.0 or not len(points):
+        return out
+    resolved = at_time(layer, device)
+    below = points[:, 1] < layer.base_altitude
+    reach = (layer.base_altitude - points[below, 1]) / sun[1]
+    pierce = points[below] + reach[:, None] * sun
+    thickness = sample_thickness(signed_thickness(resolved.thickness), layer.origin, layer.size,
+                                 pierce[:, 0], pierce[:, 2])
+    out[below] = np.exp(-layer.extinction * thickness / sun[1])[:, None]
+    return out

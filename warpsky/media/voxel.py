@@ -191,12 +191,13 @@ class VoxelMediaBuffers:
     @classmethod
     def upload(
         cls, media: tuple[VoxelMedium, ...], camera_position: np.ndarray, device, species: tuple[str, ...] = (),
-        *, time_s: float = 0.0, cache_name: str | None = None,
+        *, time_s: float = 0.0, cache: str | None = None,
     ) -> VoxelMediaBuffers:
         """Upload ``media``; a medium of species ``species[i]`` uses phase table i; animated detail at ``time_s``
-        [s] (see :mod:`warpsky.media.detail`). With ``cache_name`` the flat value buffer goes through
-        :func:`warpsky.device_buffers.upload` under that name: a frame whose grids hold the same values as the
-        previous one's reuses the device copy (kernels must not write into it)."""
+        [s] (see :mod:`warpsky.media.detail`). With ``cache`` (a name such as ``"slicing"``) the values, grid
+        structs and details go through :func:`warpsky.device_buffers.upload` as ``<cache>:values``,
+        ``<cache>:grids`` and ``<cache>:details``: kept on the device across frames and uploaded only when their
+        contents change (the returned arrays are then shared: do not write into them)."""
         infos = []
         chunks = []
         offset = 0
@@ -221,12 +222,19 @@ class VoxelMediaBuffers:
         if offset >= 2**31:
             raise ValueError("voxel media exceed 2^31 values; split them or use coarser grids")
         flat = np.concatenate(chunks) if chunks else np.zeros(1, dtype=np.float32)
-        if cache_name is None:
-            values = wp.array(flat, dtype=float, device=device)
-        else:
-            values = device_buffers.upload(cache_name, flat, float, device)
-        grids = wp.array(infos if infos else [VoxelGrid()], dtype=VoxelGrid, device=device)
         sizes = [float(m.voxel_size.min()) for m in media]
         entries = medium_details(tuple(media), time_s, camera_position, device)
-        details = wp.array(entries if entries else [MediumDetail()], dtype=MediumDetail, device=device)
+        grid_list, entries_or_dummy = infos if infos else [VoxelGrid()], entries if entries else [MediumDetail()]
+        if cache is None:
+            values = wp.array(flat, dtype=float, device=device)
+            grids = wp.array(grid_list, dtype=VoxelGrid, device=device)
+            details = wp.array(entries_or_dummy, dtype=MediumDetail, device=device)
+        else:
+            values = device_buffers.upload(f"{cache}:values", flat.astype(np.float32, copy=False), float, device)
+            # structs travel as NumPy records so that their bytes key the upload
+            grids = device_buffers.upload(f"{cache}:grids", wp.array(grid_list, dtype=VoxelGrid, device="cpu").numpy(),
+                                          VoxelGrid, device)
+            details = device_buffers.upload(
+                f"{cache}:details", wp.array(entries_or_dummy, dtype=MediumDetail, device="cpu").numpy(),
+                MediumDetail, device)
         return cls(values, grids, len(infos), min(sizes) if sizes else 1.0, details, entries is not None)

@@ -25,6 +25,8 @@ from warpsky.optics.kernels import (
     sample_table,
     scattering_angle,
 )
+from warpsky.optics.oriented_phase import OrientedPhases
+from warpsky.optics.oriented_sampling import OrientedTables, directional_sample, directional_value
 from warpsky.optics.phase import INV_FOUR_PI, PHASE_HG, PHASE_RAYLEIGH, phase_eval, phase_rayleigh
 
 INV_4PI = wp.constant(INV_FOUR_PI)
@@ -39,13 +41,25 @@ class PhaseTables:
 
     values: wp.array(dtype=float)
     cdf: wp.array(dtype=float)
+    oriented: OrientedPhases  # the frame's oriented-ice slices, for the sun's light (count 0: none)
+    continuation: OrientedTables  # oriented ice for any incoming direction, to continue paths (count 0: none)
 
 
-def phase_tables_struct(tables: DevicePhaseTables) -> PhaseTables:
-    """Kernel view of uploaded phase tables."""
+def phase_tables_struct(tables: DevicePhaseTables, oriented: OrientedPhases | None = None,
+                        continuation: OrientedTables | None = None) -> PhaseTables:
+    """Kernel view of uploaded phase tables and of oriented ice: the frame's slices for the sun's light and the
+    tables that continue paths (None: no oriented media)."""
     out = PhaseTables()
     out.values = tables.values
     out.cdf = tables.cdf
+    if oriented is None:
+        oriented = OrientedPhases()
+        oriented.count = 0
+    if continuation is None:
+        continuation = OrientedTables()
+        continuation.count = 0
+    out.oriented = oriented
+    out.continuation = continuation
     return out
 
 
@@ -109,6 +123,40 @@ class PhaseSample:
     direction: wp.vec3
     weight: wp.vec3  # combined phase / sampling pdf, per channel
     state: wp.uint32
+
+
+@wp.func
+def continuation_terms(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, d: wp.vec3, s: wp.vec3,
+                       theta: float) -> wp.vec4:
+    """What oriented ice changes in a continued path's mixture, for light from ``s`` scattered along ``d``:
+    (sum of scattering_m (T_m(-d, -s) - P_m(theta)) RGB [1/(m sr)], sum of mean scattering_m (T_m green - its
+    table's sampling density at theta) [1/(m sr)]) over the oriented media m at ``point``: their random table
+    replaced by the oriented one in the phase and in the sampling density."""
+    out = wp.vec4(0.0)
+    for m in range(media.count):
+        value = point.density[m]
+        index = tables.continuation.table_of[m]
+        if value > 0.0 and index >= 0:
+            grid = media.grids[m]
+            oriented = directional_value(tables.continuation, index, -d, -s)
+            difference = wp.cw_mul(grid.scattering * value, oriented - medium_phase(tables.values, grid.phase_kind,
+                                                                                   grid.phase_g, theta))
+            density = oriented[SAMPLED_CHANNEL] - table_pdf(tables.cdf, sampled_row(grid.phase_kind), theta)
+            out += wp.vec4(difference[0], difference[1], difference[2], mean3(grid.scattering) * value * density)
+    return out
+
+
+@wp.func
+def oriented_share(media: VoxelMedia, point: MediaPoint, rayleigh: wp.vec3, extra: wp.vec3) -> wp.vec3:
+    """``extra`` [1/(m sr)] divided by the summed scattering at ``point`` (Rayleigh included), per channel."""
+    total = rayleigh
+    for m in range(media.count):
+        total += media.grids[m].scattering * point.density[m]
+    out = wp.vec3(0.0)
+    for c in range(3):
+        if total[c] > 0.0:
+            out[c] = extra[c] / total[c]
+    return out
 
 
 @functools.cache
@@ -183,15 +231,22 @@ def mixture_functions(has_tables: bool):
         chosen = wp.clamp(chosen, 0, wp.max(media.count - 1, 0))
         u = wp.randf(state)
         cos_theta = 1.0 - 2.0 * u
+        oriented = int(-1)
         if not use_air:
             grid = media.grids[chosen]
             if grid.phase_kind >= TABLE_KIND:
                 if wp.static(has_tables):
                     cos_theta = wp.cos(sample_table(tables.cdf, sampled_row(grid.phase_kind), u)[0])
+                    if tables.continuation.count > 0:
+                        oriented = tables.continuation.table_of[chosen]
             elif grid.phase_kind == PHASE_HG:
                 cos_theta = hg_sample_cos(grid.phase_g, u)
         out = PhaseSample()
         out.direction = rotate_about(d, cos_theta, 2.0 * wp.pi * wp.randf(state))
+        if wp.static(has_tables):
+            if oriented >= 0:  # oriented ice: its table for light arriving along d (six more draws)
+                source, state = directional_sample(tables.continuation, oriented, d, state)
+                out.direction = source
         theta = scattering_angle(d, out.direction)
         pdf = air_w * INV_4PI
         for m in range(media.count):
@@ -202,11 +257,20 @@ def mixture_functions(has_tables: bool):
                     pdf += w * model_pdf(tables.cdf, grid.phase_kind, grid.phase_g, theta)
                 else:
                     pdf += w * model_pdf(tables.cdf, wp.min(grid.phase_kind, PHASE_RAYLEIGH), grid.phase_g, theta)
+        phase_extra = wp.vec3(0.0)
+        if wp.static(has_tables):
+            if tables.continuation.count > 0:
+                terms = continuation_terms(media, point, tables, d, out.direction, theta)
+                pdf += terms[3]
+                phase_extra = wp.vec3(terms[0], terms[1], terms[2])
         pdf = pdf / wp.max(total, 1.0e-30)
         out.state = state
         out.weight = wp.vec3(0.0)
         if pdf > 0.0:
-            out.weight = mixture_phase(media, point, tables.values, rayleigh, theta) / pdf
+            phase = mixture_phase(media, point, tables.values, rayleigh, theta)
+            if wp.static(has_tables):
+                phase += oriented_share(media, point, rayleigh, phase_extra)
+            out.weight = wp.max(phase, wp.vec3(0.0)) / pdf
         return out
 
     return mixture_phase, sample_mixture

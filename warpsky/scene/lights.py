@@ -105,7 +105,7 @@ class Dome:
         x0, y0 = np.minimum(np.floor(x).astype(int), width - 1), np.minimum(np.floor(y).astype(int), height - 1)
         x1, y1 = np.minimum(x0 + 1, width - 1), np.minimum(y0 + 1, height - 1)
         fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-        tex = self.texture.astype(np.float64)
+        tex = self.texture  # gathered texels become float64 in the weighting (no copy of the whole map)
         top = tex[y0, x0] * (1.0 - fx) + tex[y0, x1] * fx
         bottom = tex[y1, x0] * (1.0 - fx) + tex[y1, x1] * fx
         return self.color * (top * (1.0 - fy) + bottom * fy)

@@ -121,6 +121,35 @@ class DetailSpec:
 
 
 @dataclass(frozen=True)
+class IceCrystals:
+    """How the crystals of an ice field fall (``warpsky:ice:*`` on its field prim).
+
+    ============================== ====== ======== ========== ==================================================
+    attribute                      unit   default  range      meaning
+    ============================== ====== ======== ========== ==================================================
+    ``token warpsky:ice:orientation`` -   random   random,    orientation law: horizontal plates (sundogs, the
+                                                   plate,     circumzenithal arc), horizontal columns (tangent
+                                                   column,    arcs), Parry columns (Parry arcs)
+                                                   parry
+    ``token warpsky:ice:habit``    -      (law)    column,    crystal shape; default plate for ``plate``, column
+                                                   plate      otherwise
+    ``float warpsky:ice:tilt``     deg    1        0 - 90     standard deviation of the crystals' flutter
+    ``float warpsky:ice:fraction`` -      1        0 - 1      number fraction of crystals that follow the law; the
+                                                              rest are randomly oriented columns
+    ============================== ====== ======== ========== ==================================================
+    """
+
+    orientation: str = "random"
+    habit: str = ""
+    tilt_deg: float = 1.0
+    fraction: float = 1.0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.fraction) and 0.0 <= self.fraction <= 1.0):
+            raise SceneError(f"warpsky:ice:fraction must be a number fraction in [0, 1], got {self.fraction!r}")
+
+
+@dataclass(frozen=True)
 class VoxelMedium:
     """A participating medium given by a dense grid of field values.
 
@@ -142,6 +171,7 @@ class VoxelMedium:
         slicing_xi: Riley's back-scatter term ξ [1/sr] for this medium in half-angle slicing (``float
             warpsky:slicing:xi`` on the Volume), or None for the technique's ``xi`` setting.
         detail: Animated density detail (:class:`DetailSpec`, ``warpsky:detail:*`` on the Volume), or None.
+        ice: How an ice field's crystals are oriented (:class:`IceCrystals`), or None (random orientation).
     """
 
     name: str
@@ -154,8 +184,12 @@ class VoxelMedium:
     species: str | None = None
     slicing_xi: float | None = None
     detail: DetailSpec | None = None
+    ice: IceCrystals | None = None
 
     def __post_init__(self):
+        if self.ice is not None and self.species != "ice":
+            raise SceneError(f"medium {self.name}: warpsky:ice:* orients ice crystals; this field is "
+                             f"{self.species or 'not a species field'}, not field:ice")
         if self.detail is not None and not isinstance(self.detail, DetailSpec):
             raise SceneError(f"medium {self.name}: detail must be a DetailSpec or None, got {self.detail!r}")
         if self.slicing_xi is not None and not (math.isfinite(self.slicing_xi) and self.slicing_xi >= 0.0):
@@ -296,6 +330,12 @@ class Scene:
         extra_suns: Further DistantLights after the first (e.g. a moon); every pass runs once per light and the
             radiance adds up (light transport is linear in the lights).
         dome: The environment (``UsdLuxDomeLight``), or None (also for a black dome).
+        meshes: Opaque Lambertian surfaces (``UsdGeomMesh``, e.g. terrain), ray cast through Warp's BVH
+            (:class:`~warpsky.scene.terrain.TerrainMesh`).
+        heightfield_clouds: Constant-density clouds between two height fields about a mean plane, with the haze
+            below them (Max 1986; :class:`~warpsky.scene.heightfield_clouds.HeightFieldClouds`).
+        fogs: Fog whose extinction is a sum of functions with closed-form line integrals (Biri et al. 2002;
+            :class:`~warpsky.scene.analytic_fog.AnalyticFog`).
     """
 
     camera: Camera
@@ -310,9 +350,14 @@ class Scene:
     layers: tuple[StratiformLayer, ...] = ()
     extra_suns: tuple[Sun, ...] = ()
     dome: Dome | None = None
+    meshes: tuple = ()
+    heightfield_clouds: tuple = ()
+    fogs: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "media", tuple(self.media))
+        for name in ("meshes", "heightfield_clouds", "fogs"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "extra_suns", tuple(self.extra_suns))
         if self.dome is not None and not self.dome.active:
             object.__setattr__(self, "dome", None)  # a black dome renders exactly as none

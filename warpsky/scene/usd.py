@@ -4,7 +4,8 @@ Stage units are converted here: ``upAxis`` Y or Z and ``metersPerUnit`` become w
 Every problem is a :class:`SceneError` naming the prim, attribute or file. :class:`StageReader` reads the camera,
 atmosphere and render settings itself; its parts read the rest: :mod:`warpsky.scene.usd_lights` (suns and dome),
 :mod:`warpsky.scene.usd_volumes` (voxel media),
-:mod:`warpsky.scene.usd_surfaces` (ground and stratiform layers) on :mod:`warpsky.scene.usd_prims` (transforms,
+:mod:`warpsky.scene.usd_surfaces` (ground and stratiform layers), :mod:`warpsky.scene.usd_scenery` (meshes,
+height-field clouds, analytic fog) on :mod:`warpsky.scene.usd_prims` (transforms,
 visibility, typed attributes). :mod:`warpsky.scene.usd_composition` decides how the stage is composed (payloads
 loaded or not, variant selections, which purposes render: :class:`StageOptions`). pxr is imported inside the
 methods (a heavy import).
@@ -21,6 +22,9 @@ What is read (the README's "USD attributes" section lists the same with units an
   ``warpsky:albedoMap`` / ``warpsky:albedoMapSize`` (:class:`~warpsky.scene.layers.GroundTexture`).
 - Prims with ``warpsky:kind = "stratiformLayer"``: stratiform cloud layers, ``warpsky:stratiform:*`` and
   ``warpsky:advection:*`` (:class:`~warpsky.scene.layers.StratiformLayer`, ``ThicknessAdvection``).
+- ``UsdGeomMesh``: opaque Lambertian surfaces such as terrain (:class:`~warpsky.scene.terrain.TerrainMesh`).
+- Prims with ``warpsky:kind = "heightFieldClouds"`` (``warpsky:hf:*``, ``warpsky:haze:*``) and
+  ``warpsky:kind = "analyticFog"`` (``warpsky:fog:*``): :mod:`warpsky.scene.usd_scenery`.
 - ``UsdRenderSettings``: ``resolution`` and ``camera`` as defaults for the command line.
 """
 
@@ -38,6 +42,7 @@ from warpsky.scene.model import Atmosphere, Camera, Scene
 from warpsky.scene.usd_composition import StageOptions, apply_variants, composition_summary
 from warpsky.scene.usd_layers import composition_problem, open_layers, tf_message
 from warpsky.scene.usd_lights import LightReading
+from warpsky.scene.usd_scenery import SceneryReading
 from warpsky.scene.usd_surfaces import SurfaceReading
 from warpsky.scene.usd_volumes import VolumeReading
 
@@ -53,7 +58,7 @@ class TimeRange:
     authored: bool
 
 
-class StageReader(LightReading, VolumeReading, SurfaceReading):
+class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading):
     """An open stage plus the caches that make reading many frames cheap.
 
     Args:
@@ -130,21 +135,13 @@ class StageReader(LightReading, VolumeReading, SurfaceReading):
         renderSettingsPrimPath, else the first one), if any; :mod:`warpsky.scene.usd_render` reads the rest."""
         from pxr import UsdRender
 
-        from warpsky.scene.usd_render import find_settings
+        from warpsky.scene.usd_render import base_values, find_settings
 
         prim = find_settings(self.stage, None)
         if prim is None:
             return None, None
-        settings = UsdRender.Settings(prim)
-        resolution = None
-        res_attr = settings.GetResolutionAttr()
-        if res_attr.HasAuthoredValue():
-            res = res_attr.Get()
-            if res[0] <= 0 or res[1] <= 0:
-                raise SceneError(f"{prim.GetPath()}.resolution must be positive, got {tuple(res)}")
-            resolution = (int(res[0]), int(res[1]))
-        targets = settings.GetCameraRel().GetTargets()
-        return resolution, (str(targets[0]) if targets else None)
+        camera, resolution, _, _ = base_values(UsdRender.Settings(prim), None)
+        return resolution, camera
 
     def resolve_camera_path(self, camera_path: str | None) -> str:
         from pxr import Sdf, UsdGeom
@@ -261,4 +258,7 @@ class StageReader(LightReading, VolumeReading, SurfaceReading):
             resolution=resolution,
             time_codes_per_second=float(self.stage.GetTimeCodesPerSecond()),
             layers=self.read_layers(time),
+            meshes=self.read_meshes(time),
+            heightfield_clouds=self.read_heightfield_clouds(time),
+            fogs=self.read_fogs(time),
         )

@@ -136,7 +136,7 @@ def read_render_spec(stage, settings_path: str | None, meters_per_unit: float = 
     if prim is None:
         return None
     settings = UsdRender.Settings(prim)
-    base = _base_values(settings, None)
+    base = base_values(settings, None)
     notes = []
     bindings = [str(p) for p in (settings.GetMaterialBindingPurposesAttr().Get() or []) if str(p)]
     if settings.GetMaterialBindingPurposesAttr().HasAuthoredValue():
@@ -154,7 +154,7 @@ def read_render_spec(stage, settings_path: str | None, meters_per_unit: float = 
     return RenderSpec(str(prim.GetPath()), *base, purposes, colorspace, tuple(products), tuple(notes))
 
 
-def _base_values(schema, inherited) -> tuple:
+def base_values(schema, inherited) -> tuple:
     """(camera, resolution, pixel aspect, data window) of a RenderSettingsBase prim; unauthored values come from
     ``inherited`` (a product inherits its settings')."""
     prim = schema.GetPrim()
@@ -200,7 +200,7 @@ def _product(stage, product, base) -> ProductSpec:
     name = frame_placeholder(name)
     if not name.lower().endswith(".exr"):
         raise SceneError(f"{path}.productName {name!r} must end in .exr (warpsky writes OpenEXR products)")
-    values = _base_values(product, base)
+    values = base_values(product, base)
     targets = product.GetOrderedVarsRel().GetTargets()
     if not targets:
         raise SceneError(f"{path}.orderedVars names no RenderVar; expected at least one (e.g. sourceName color)")

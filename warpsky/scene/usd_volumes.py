@@ -35,7 +35,7 @@ import numpy as np
 from warpsky.errors import SceneError
 from warpsky.media.fields import level_set_advice, load_field
 from warpsky.optics.species import get_species
-from warpsky.scene.model import FIELD_SPECIES, DetailSpec, PhaseKind, PhaseModel, VoxelMedium
+from warpsky.scene.model import FIELD_SPECIES, DetailSpec, IceCrystals, PhaseKind, PhaseModel, VoxelMedium
 from warpsky.scene.usd_prims import StagePrims
 
 PHASE_TOKENS = {"isotropic": PhaseKind.ISOTROPIC, "hg": PhaseKind.HG, "rayleigh": PhaseKind.RAYLEIGH}
@@ -120,14 +120,43 @@ class VolumeReading(StagePrims):
                     )
                 scale = scale * np.array(get_species(species).extinction_cross_section)
             albedo = self._float_attr(field_prim, "warpsky:albedo", tc, volume_albedo)
+            ice = self._read_ice(field_prim, name, tc)
             try:
                 media.append(VoxelMedium(
                     f"{path}:{name}" if species else path, grid.values, volume_world @ local_from_index, scale,
                     albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi, detail,
+                    ice,
                 ))
             except SceneError as exc:
                 raise SceneError(f"Volume {path}: {exc}") from None
         return media
+
+    def _read_ice(self, field_prim, name: str, tc) -> IceCrystals | None:
+        """``warpsky:ice:*`` of a field prim (see IceCrystals); None when none is authored. Refused on any field
+        but ``field:ice``, naming the attribute."""
+        from warpsky.optics.oriented_ice import parse_orientation
+
+        where = str(field_prim.GetPath())
+        names = sorted(a.GetName() for a in field_prim.GetAttributes() if a.GetName().startswith("warpsky:ice:")
+                       and a.HasAuthoredValue())
+        if not names:
+            return None
+        if name != "ice":
+            raise SceneError(f"{where}.{names[0]}: crystal orientation applies to the field:ice of a Volume; this "
+                             f"prim is its field:{name}")
+        known = {f"warpsky:ice:{n}" for n in ("orientation", "habit", "tilt", "fraction")}
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise SceneError(f"{where}.{unknown[0]} is not an ice attribute; expected one of "
+                             f"{', '.join(sorted(known))}")
+        orientation = self._token_attr(field_prim, "warpsky:ice:orientation", tc, "random")
+        habit = self._token_attr(field_prim, "warpsky:ice:habit", tc, "plate" if orientation == "plate" else "column")
+        tilt = self._float_attr(field_prim, "warpsky:ice:tilt", tc, 1.0)
+        fraction = self._float_attr(field_prim, "warpsky:ice:fraction", tc, 1.0)
+        law = parse_orientation(habit, orientation, tilt, where)
+        if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
+            raise SceneError(f"{where}.warpsky:ice:fraction must be a number fraction in [0, 1], got {fraction!r}")
+        return IceCrystals(law.kind, law.habit, law.tilt_deg, fraction)
 
     def _read_detail(self, prim, tc) -> DetailSpec | None:
         """``warpsky:detail:*`` of a Volume (see DetailSpec); None when absent or amplitude 0 (detail off)."""

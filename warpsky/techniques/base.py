@@ -50,6 +50,8 @@ class Technique(Protocol):
       so no sky pass runs around its layer and its media see unreddened sunlight.
     - ``renders_layers``: the technique can run next to the stratiform pass (it renders the voxel media without the
       ground, which the lowest stratiform layer draws).
+    - ``traces_layers`` (optional, default False): the technique traces the stratiform layers itself, voxelised
+      (:mod:`warpsky.techniques.path_tracer.layer_media`), so no stratiform pass runs.
     """
 
     name: ClassVar[str]

@@ -101,8 +101,20 @@ def ambient_radiance(scene) -> np.ndarray:
         return np.zeros(3)
     if scene.ground is None:
         return mean_radiance(scene.dome)
-    mean, cosine_mean = upper_hemisphere(scene.dome)
-    return 0.5 * (mean + scene.ground.albedo * cosine_mean)
+    return isotropic_ambient(scene, upper_hemisphere(scene.dome))
+
+
+def isotropic_ambient(scene, sky: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The mean radiance [RGB] reaching a point from all directions under ``sky`` = (mean, E / pi) of the upper
+    hemisphere: half the sky's mean, plus half the light of a Lambertian ground below it that the sky lights
+    (albedo E / pi; the ground plane's albedo, else the meshes' mean albedo, else none)."""
+    mean, cosine = sky
+    albedo = np.zeros(3)
+    if scene.ground is not None:
+        albedo = scene.ground.albedo
+    elif scene.meshes:
+        albedo = np.mean([m.albedo for m in scene.meshes], axis=0)
+    return 0.5 * (mean + albedo * cosine)
 
 
 def ambient_vec(scene) -> wp.vec3:

@@ -108,7 +108,10 @@ class HybridSettings(TechniqueSettings):
                 raise UsageError(f"setting {name} must be a positive length in metres, got {value}")
 
     def single_scatter(self) -> SingleScatterSettings:
-        return SingleScatterSettings(step_length=self.step_length, shadow_step_length=self.shadow_step_length)
+        # skylight off: the paths carry the sky's light (traced through the air) and the dome's, first scattering
+        # included, so the march takes the sun alone
+        return SingleScatterSettings(step_length=self.step_length, shadow_step_length=self.shadow_step_length,
+                                     skylight=False)
 
     def path_tracer(self) -> PathTracerSettings:
         return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,
@@ -163,7 +166,7 @@ class Hybrid:
         scale = int(s.ms_scale)
         coarse = -(-width // scale) * -(-height // scale)
         estimate.merge(path_tracing_memory(scene, 2 * coarse, int(s.majorant_block), self.device,
-                                           int(s.samples_per_pass)))
+                                           int(s.samples_per_pass), film_pixels=coarse))
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.atmosphere is not None:
             estimate.add("sky", host=pixels * 64, device=pixels * 40)
@@ -192,8 +195,9 @@ class Hybrid:
         variance = np.zeros_like(single.radiance)
         lit = (scene.sun is not None and scene.media) or (scene.dome is not None and (scene.media or scene.ground))
         if settings.multiple_scattering and lit:
-            multiple, variance, ms_stats = MultipleScattering(scene, width, height, settings, self.device).run(
-                single, started)
+            with device_buffers.exclusive(BUFFER_NAME, self.device):  # the halves and kept paths
+                multiple, variance, ms_stats = MultipleScattering(scene, width, height, settings, self.device).run(
+                    single, started)
             stats.update(ms_stats)
             if scene.atmosphere is not None:
                 multiple, variance = behind_front_air(scene, width, height, single.depth, multiple, variance,

@@ -15,12 +15,15 @@ import warp as wp
 
 from warpsky.media.air import Air, air_coefficient, air_scattering, sea_level_distance
 from warpsky.media.voxel import VoxelMedia, media_functions
-from warpsky.optics.kernels import scattering_angle
+from warpsky.optics.kernels import medium_phase, scattering_angle
+from warpsky.optics.oriented_phase import oriented_correction_function
 from warpsky.optics.phase_sampling import PhaseTables, mixture_functions
 from warpsky.techniques.common import Ground, Sun
 from warpsky.techniques.dome import DomeLight, dome_radiance
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.tracking import Transmittance, tracking_functions
+
+oriented_mixture_correction = oriented_correction_function(medium_phase)[1]
 
 #: What ends a ray before the far distance: nothing, the ground plane, or sea level (the air's floor).
 SURFACE_NONE = wp.constant(0)
@@ -238,7 +241,11 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
             tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state)
             out.state = tr_sun.state
             out.steps = out.steps + tr_sun.steps
-            phase = mixture_phase(media, point, tables.values, rayleigh, scattering_angle(sun.direction, out.direction))
+            theta = scattering_angle(sun.direction, out.direction)
+            phase = mixture_phase(media, point, tables.values, rayleigh, theta)
+            if wp.static(has_tables):  # oriented crystals are ice, a tabulated species: their sunlit phase
+                phase += oriented_mixture_correction(media, point, tables.values, tables.oriented, rayleigh,
+                                                     out.direction, theta)
             out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, phase),
                                                     wp.cw_mul(sun.irradiance, tr_sun.value))
         ps = sample_mixture(media, point, tables, rayleigh, out.direction, out.state)

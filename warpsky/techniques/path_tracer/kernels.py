@@ -5,10 +5,10 @@ tracking (the layer's transmittance AOV; zero where the ground or sea level ends
 flight by delta tracking per bounce (:mod:`~warpsky.techniques.path_tracer.tracking`, local majorants from
 :mod:`~warpsky.techniques.path_tracer.majorants`), and at its end a scattering event, a ground bounce or the end of
 the path (:mod:`~warpsky.techniques.path_tracer.events`), with Russian roulette from the third bounce. Two ways
-to launch it add the same float32 values in the same order: one thread per pixel running the launch's paths one
-after the other (:func:`path_trace_kernel`), or one thread per path and pixel writing a :class:`SampleResult`
-(:func:`path_sample_kernel`), then one thread per pixel adding them in path order (:func:`sum_samples_kernel`);
-the second fills a GPU when the frame has too few pixels.
+to launch it (both :func:`path_trace_kernel`) add the same float32 values in the same order: one thread per pixel
+running the launch's paths one after the other, or one thread per path and pixel writing a :class:`SampleResult`,
+then one thread per pixel adding them in path order (:func:`sum_samples_kernel`); the second fills a GPU when the
+frame has too few pixels.
 
 Warp passes a random state to a function by value, so each function hands back its advanced state and a path
 carries one stream (re-seeding from the stream would replay it: rand_init(randi(s)) is s's next). The order of the
@@ -80,7 +80,7 @@ class PixelSums:
 
 @wp.struct
 class SampleResult:
-    """One path of one pixel, as :func:`path_sample_kernel` leaves it for :func:`sum_samples_kernel`."""
+    """One path of one pixel, as :func:`path_trace_kernel` leaves it for :func:`sum_samples_kernel`."""
 
     radiance: wp.vec3
     transmittance: wp.vec3  # the primary ray's ratio-tracked transmittance (when counts[2] is 1)
@@ -196,7 +196,11 @@ def add_sample(sums: PixelSums, row: int, col: int, sample: SampleResult):
 @functools.cache
 def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False,
                       has_dome: bool = False) -> wp.Kernel:
-    """The per-pixel progressive path tracer: one thread per pixel runs the launch's paths in path order."""
+    """The progressive path tracer in both launch shapes (one kernel per scene kind, hence one CUDA module, for
+    frames of any size). With ``samples`` empty (None), one thread per pixel runs the launch's
+    ``settings.sample_count`` paths in path order into ``sums``. Otherwise one thread per (path, pixel): a launch
+    over a frame of H rows covers ``sample_count`` x H rows, row r running path r // H of pixel row r % H into
+    ``samples[r]`` (``sums`` untouched); :func:`sum_samples_kernel` then adds them."""
     pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome)
 
     @wp.kernel(module="unique")
@@ -211,60 +215,39 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
         dome: DomeLight,
         settings: PathSettings,
         sums: PixelSums,
-        row_offset: int,
-    ):
-        """Pixel (row_offset + tid row, tid col): ``settings.sample_count`` paths added to ``sums``."""
-        r, col = wp.tid()
-        row = r + row_offset
-        steps = int(0)
-        capped = int(0)
-        for s in range(settings.sample_count):
-            sample = pixel_sample(media, majorants, phase_tables, air, sun, cam, ground, dome, settings, row, col,
-                                  settings.first_sample + s)
-            add_sample(sums, row, col, sample)
-            steps += sample.counts[0]
-            capped += sample.counts[1]
-        sums.counters[row, col] = sums.counters[row, col] + wp.vec2i(steps, capped)
-
-    return path_trace
-
-
-@kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True),
-                 has_dome=(False, True))
-@functools.cache
-def path_sample_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False,
-                       has_dome: bool = False) -> wp.Kernel:
-    """One thread per (path, pixel): a launch of ``settings.sample_count`` paths over a frame of H rows covers
-    ``sample_count`` x H rows; row r holds path r // H of pixel row r % H. :func:`sum_samples_kernel` adds them."""
-    pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome)
-
-    @wp.kernel(module="unique")
-    def path_sample(
-        media: VoxelMedia,
-        majorants: Majorants,
-        phase_tables: PhaseTables,
-        air: Air,
-        sun: Sun,
-        cam: PinholeCamera,
-        ground: Ground,
-        dome: DomeLight,
-        settings: PathSettings,
         samples: wp.array2d(dtype=SampleResult),
         row_offset: int,
     ):
+        """Thread (row_offset + tid row, tid col): its paths (see the factory) into ``sums`` or ``samples``."""
         r, col = wp.tid()
         row = r + row_offset
-        s = row // cam.height
-        samples[row, col] = pixel_sample(media, majorants, phase_tables, air, sun, cam, ground, dome, settings,
-                                         row - s * cam.height, col, settings.first_sample + s)
+        keep = samples.shape[0] != 0
+        path = row // cam.height  # 0 with one thread per pixel
+        pixel_row = row - path * cam.height
+        count = settings.sample_count
+        if keep:
+            count = 1
+        steps = int(0)
+        capped = int(0)
+        for s in range(count):
+            sample = pixel_sample(media, majorants, phase_tables, air, sun, cam, ground, dome, settings, pixel_row,
+                                  col, settings.first_sample + path + s)
+            if keep:
+                samples[row, col] = sample
+            else:
+                add_sample(sums, pixel_row, col, sample)
+                steps += sample.counts[0]
+                capped += sample.counts[1]
+        if not keep:
+            sums.counters[pixel_row, col] = sums.counters[pixel_row, col] + wp.vec2i(steps, capped)
 
-    return path_sample
+    return path_trace
 
 
 @kernel_variants()
 @functools.cache
 def sum_samples_kernel() -> wp.Kernel:
-    """The per-pixel sum of the paths :func:`path_sample_kernel` left in a buffer."""
+    """The per-pixel sum of the paths :func:`path_trace_kernel` left in a buffer (one thread per path and pixel)."""
 
     @wp.kernel(module="unique")
     def sum_samples(samples: wp.array2d(dtype=SampleResult), sample_count: int, sums: PixelSums, row_offset: int):

@@ -16,6 +16,8 @@ from warpsky.errors import UsageError
 from warpsky.media.air import air_struct
 from warpsky.media.voxel import VoxelMediaBuffers
 from warpsky.optics.kernels import DevicePhaseTables
+from warpsky.optics.oriented_phase import oriented_phases
+from warpsky.optics.oriented_sampling import continuation_tables
 from warpsky.optics.phase_sampling import phase_tables_struct
 from warpsky.optics.tables import build_tables
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, grid_bytes
@@ -23,14 +25,15 @@ from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.dome import dome_struct
+from warpsky.techniques.path_tracer.deck_media import deck_voxel_memory, with_deck_as_media
 from warpsky.techniques.path_tracer.kernels import (
     PathSettings,
     PixelSums,
     SampleResult,
-    path_sample_kernel,
     path_trace_kernel,
     sum_samples_kernel,
 )
+from warpsky.techniques.path_tracer.layer_media import layer_voxel_memory, with_layers_as_media
 from warpsky.techniques.path_tracer.majorants import upload_majorants
 from warpsky.techniques.single_scatter.technique import MEDIA_CACHE
 from warpsky.techniques.sunlight import sunlight
@@ -54,6 +57,24 @@ class PathTracerSettings(TechniqueSettings):
                                            auto="8 on the CPU, 64 on GPUs (at most spp)")
     pixel_jitter: bool = setting(False, help="0: every path through the pixel centre, like the other techniques "
                                  "(the reference compares pixel for pixel); 1: box-filtered pixels")
+    layer_voxel: float | None = setting(None, unit="m", range="> 0", help="vertical edge of the voxels a stratiform "
+                                        "layer is traced as (partial volume: each column's optical depth is exact)",
+                                        auto="the layer's largest thickness / 32, grown with layer_voxel_width until "
+                                        "the grid fits 2^27 voxels")
+    layer_voxel_width: float | None = setting(None, unit="m", range="> 0", help="horizontal edge of those voxels",
+                                              auto="half a texel of the layer's thickness map, grown with layer_voxel "
+                                              "until the grid fits 2^27 voxels")
+    deck_extent: float | None = setting(None, unit="m", range="> 0", help="half-size of the square around the "
+                                        "camera over which a height-field cloud deck and its haze are voxelised",
+                                        auto="where the frame's rays enter the deck's band or haze, plus the "
+                                        "distance that dims them below 1%, at most 50 km")
+    deck_voxel_width: float | None = setting(None, unit="m", range="> 0", help="horizontal edge of the deck's "
+                                             "voxels (partial volume: 4x4 sub-columns when cheap)",
+                                             auto="the deck's smallest feature / 8, grown with deck_voxel until "
+                                             "the grid fits 2^27 voxels")
+    deck_voxel: float | None = setting(None, unit="m", range="> 0", help="vertical edge of the deck's voxels "
+                                       "(each column's optical depth is exact)", auto="the deck's band height / 32, "
+                                       "grown with deck_voxel_width until the grid fits 2^27 voxels")
 
     def __post_init__(self):
         self.normalise()
@@ -67,6 +88,10 @@ class PathTracerSettings(TechniqueSettings):
             raise UsageError(f"setting environment must be a finite radiance >= 0, got {self.environment}")
         if self.samples_per_pass is not None and not self.samples_per_pass >= 1:
             raise UsageError(f"setting samples_per_pass must be >= 1, got {self.samples_per_pass}")
+        for name in ("layer_voxel", "layer_voxel_width", "deck_extent", "deck_voxel_width", "deck_voxel"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0.0):
+                raise UsageError(f"setting {name} must be a positive length [m] or auto, got {value}")
 
 
 class PathTracer:
@@ -74,15 +99,21 @@ class PathTracer:
     next-event estimation toward the sun, phase sampling from the optics tables, all media combined (Riley Eq. 6),
     the scene's atmosphere as a Rayleigh medium of exponential density (then it also draws the sun's disk),
     Russian roulette, a Lambertian ground, an optional uniform environment and the scene's dome (light of paths
-    that escape after a bounce; the composite draws it behind the camera rays). Progressive: samples accumulate
-    per pixel with their running variance (``Layer.aovs["variance"]``, the variance of the pixel mean)."""
+    that escape after a bounce; the composite draws it behind the camera rays). Stratiform layers are voxelised
+    (:mod:`.layer_media`) and traced as media, and so is a height-field cloud deck with its haze
+    (:mod:`.deck_media`). Progressive: samples accumulate per pixel with their running
+    variance (``Layer.aovs["variance"]``, the variance of the pixel mean)."""
 
     name = "path_tracer"
     Settings = PathTracerSettings
     #: The atmosphere is traced as a medium: no separate sky pass.
     traces_air = True
-    #: Stratiform layers are not traced.
+    #: It does not run next to the stratiform pass ...
     renders_layers = False
+    #: ... it traces the layers itself, voxelised (``layer_voxel``, ``layer_voxel_width``).
+    traces_layers = True
+    #: It traces a height-field cloud deck itself too, voxelised (``deck_extent``, ``deck_voxel*``).
+    traces_decks = True
 
     def __init__(self, settings: PathTracerSettings | None = None, *, device: str = "cpu"):
         self.settings = settings or PathTracerSettings()
@@ -104,7 +135,9 @@ class PathTracer:
         return (path_tracing_memory(scene, pixels, int(settings.majorant_block), self.device,
                                     int(settings.samples_per_pass))
                 .add("images", host=pixels * SUMS_LAYER_BYTES)
-                .add("AOVs", host=pixels * AOV_BYTES))
+                .add("AOVs", host=pixels * AOV_BYTES)
+                .merge(layer_voxel_memory(scene, settings))
+                .merge(deck_voxel_memory(scene, settings, width, height)))
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Worst-case path events: every path runs to the bounce cap."""
@@ -114,19 +147,21 @@ class PathTracer:
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> Layer:
         settings = self.resolved_settings(scene)
         started = time.perf_counter()
-        tracing = PathTracing(scene, width, height, settings, self.device)
-        sums = pixel_sums((height, width), self.device, name="path_tracer")
-        spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
-        done = 0
-        while done < spp:
-            count = min(per_pass, spp - done)
-            tracing.launch(sums, done, count)
-            done += count
-            if progress is not None:
-                progress(count)
-        wp.synchronize_device(self.device)
-        seconds = time.perf_counter() - started
-        layer = sums_layer([sums], spp, float(tracing.camera.far), name="path_tracer")
+        scene = with_deck_as_media(with_layers_as_media(scene, settings, self.device), settings, width, height)
+        with device_buffers.exclusive("path_tracer", self.device):  # the sums and kept paths below
+            tracing = PathTracing(scene, width, height, settings, self.device)
+            sums = pixel_sums((height, width), self.device, name="path_tracer")
+            spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
+            done = 0
+            while done < spp:
+                count = min(per_pass, spp - done)
+                tracing.launch(sums, done, count)
+                done += count
+                if progress is not None:
+                    progress(count)
+            wp.synchronize_device(self.device)
+            seconds = time.perf_counter() - started
+            layer = sums_layer([sums], spp, float(tracing.camera.far), name="path_tracer")
         layer.stats = {"seconds": seconds, "settings": dataclasses.asdict(settings), "spp": spp, **layer.stats,
                        "majorant_cells": tracing.majorant_cells}
         return layer
@@ -163,7 +198,7 @@ class PathTracing:
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
-                                             cache_name=MEDIA_CACHE)
+                                             cache=MEDIA_CACHE)
             majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device,
                                                               cache_name="path_tracer:majorants")
         flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None)
@@ -171,15 +206,16 @@ class PathTracing:
         if per_sample is not None:
             capacity = max(1, int(settings.samples_per_pass or 1)) if per_sample else 0
         self.samples_per_launch = capacity  # 0: one thread per pixel
+        self.kernel = path_trace_kernel(*flags)
+        self.samples = None  # the kernel's "one thread per pixel"
         if capacity:
-            self.kernel = path_sample_kernel(*flags)
             self.samples = device_buffers.reusable(f"{buffer_name}:samples", (capacity * height, width),
                                                    SampleResult, device)
-        else:
-            self.kernel = path_trace_kernel(*flags)
         dome = dome_struct(scene.dome, device)
-        self._keep = (tables, media, dome)  # the structs below point into these buffers
-        self.fixed = [media.media, majorants, phase_tables_struct(tables),
+        oriented = oriented_phases(scene, device)
+        continuation = continuation_tables(scene, device)
+        self._keep = (tables, media, dome, oriented, continuation)  # the structs below point into these buffers
+        self.fixed = [media.media, majorants, phase_tables_struct(tables, oriented, continuation),
                       air_struct(scene.atmosphere if air else None, camera.position), sun_struct(sunlight(scene)),
                       pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position), dome]
 
@@ -188,13 +224,13 @@ class PathTracing:
         GPUs)."""
         if not self.samples_per_launch:
             launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only)
-            launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums], self.device)
+            launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums, None], self.device)
             return
         end = first_sample + count
         while first_sample < end:
             chunk = min(self.samples_per_launch, end - first_sample)
             launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only)
-            launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, self.samples],
+            launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, sums, self.samples],
                         self.device)
             launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
             first_sample += chunk
@@ -210,12 +246,14 @@ SUMS_LAYER_BYTES = 184
 
 
 def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int, device: str,
-                        samples_per_pass: int = 1) -> MemoryEstimate:
-    """Bytes of :class:`PathTracing` and ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device
-    (and their host copies on a GPU), the paths of one launch when they are kept per sample
-    (:func:`per_sample_launches`), the media and their majorant grids (built on the host from a copy)."""
+                        samples_per_pass: int = 1, *, film_pixels: int | None = None) -> MemoryEstimate:
+    """Bytes of :class:`PathTracing` on a film of ``film_pixels`` pixels (default ``pixel_sums_count``) and
+    ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device (and their host copies on a GPU), the
+    paths of one launch when they are kept per sample (:func:`per_sample_launches`), the media and their majorant
+    grids (built on the host from a copy)."""
     copies = 0 if str(device).startswith("cpu") else 1
-    samples = per_sample_launches(device, pixel_sums_count, samples_per_pass) * pixel_sums_count * SAMPLE_BYTES
+    film = pixel_sums_count if film_pixels is None else film_pixels
+    samples = per_sample_launches(device, film, samples_per_pass) * film * SAMPLE_BYTES
     grids = grid_bytes(scene)
     majorants = sum(4 * math.prod(-(-n // majorant_block) for n in m.shape) for m in scene.media)
     return (MemoryEstimate()

@@ -163,7 +163,7 @@ class Radiosity:
     def gather(self, exitance) -> np.ndarray:
         """One pass: irradiance (nu, nv, 3) received from the other plane's ``exitance`` (nu, nv[, 3])."""
         shape = np.asarray(exitance).shape[:2]
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.device), device_buffers.exclusive("radiosity", self.device):
             received = self._buffer("received", shape)
             emitted = self._buffer("emitted", shape)
             ones = self._buffer("ones", shape, 1.0)
@@ -187,7 +187,7 @@ class Radiosity:
             if padded != tuple(shape):
                 raise ValueError(f"rings need buffer sizes that are multiples of {2 ** (self.detail + 3)}, got {shape}"
                                  f" (use pyramid_shape)")
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.device), device_buffers.exclusive("radiosity", self.device):
             rho_g = self._buffer("ground_albedo", shape, ground_albedo)
             rho_c = self._buffer("cloud_reflectance", shape, cloud_reflectance)
             r_g, r_c = self._buffer("ground_received", shape), self._buffer("cloud_received", shape)
@@ -245,7 +245,7 @@ def ground_direct(cloud_transmittance, *, pixel: float, h: float, sun_direction,
     if sun[1] <= 0.0:
         return np.zeros_like(tc)
     shift = h / sun[1] * sun / pixel  # texels from the ground point to the sun ray's cloud-base crossing
-    with wp.ScopedDevice(device):
+    with wp.ScopedDevice(device), device_buffers.exclusive("radiosity", device):
         shape = tc.shape[:2]
         out = device_buffers.reusable("radiosity:ground_direct", shape, wp.vec3, device)
         out.zero_()

@@ -6,11 +6,13 @@ sample plus sample to eye) is taken as linear between the step's ends, where sha
 step's contribution is then integrated exactly (:func:`exp_lerp_mean`), which keeps a homogeneous medium exact
 and any optical depth per step from 1e-9 to 1e5 finite and non-negative.
 
-A dome lights the media as an ambient light (:mod:`warpsky.techniques.dome`): sigma_s L_mean per metre, occluded by
-the transmittance towards the zenith, which a second shadow march per step takes at the step's midpoint (it
-doubles the cost of the march); the ground reflects albedo E / pi of the dome's upper hemisphere under the same
-occlusion. Dome light scattered
-more than once, and the direction-dependence of a textured dome, are left out.
+The sky lights the media as an environment on two spherical-harmonic bands per hemisphere
+(:mod:`warpsky.techniques.skylight`: the dome, the analytic sky when the frame has a sky pass, the ground they light):
+sigma_s S(v) per metre, S(v) = T_up max(0, m_up + 3 g M_up . v) + T_down max(0, m_down + 3 g M_down . v) with g
+mixed over the media at the step's midpoint by scattering weight. T_up is the transmittance towards the zenith,
+which a second shadow march per step takes at the step's midpoint; T_down, towards the nadir, a third, only when
+the lower hemisphere holds light. The ground reflects albedo E / pi of the sky above it, occluded towards the
+zenith. Light of the sky scattered more than once, and the sky's structure beyond the first band, are left out.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ import warp as wp
 from warpsky.kernel_variants import kernel_variants
 from warpsky.media.detail import detailed_value
 from warpsky.media.voxel import VoxelMedia, grid_interval, grid_value, media_functions
-from warpsky.optics.kernels import scattering_angle
+from warpsky.optics.kernels import medium_phase, scattering_angle
+from warpsky.optics.oriented_phase import OrientedPhases, oriented_correction_function
 from warpsky.optics.phase_sampling import phase_sum_function
 from warpsky.techniques.common import (
     Ground,
@@ -35,7 +38,10 @@ from warpsky.techniques.common import (
     exp_lerp_mean3,
     luminance,
 )
-from warpsky.techniques.dome import ambient_ground, ambient_scattered
+from warpsky.techniques.dome import ambient_ground
+from warpsky.techniques.skylight import SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
+
+oriented_correction = oriented_correction_function(medium_phase)[0]
 
 
 @wp.struct
@@ -45,9 +51,9 @@ class MarchSettings:
     step: float  # eye-ray step [m]
     shadow_step: float  # shadow-ray step towards the sun [m]
     min_transmittance: float  # stop once the luminance transmittance falls below this
-    ambient: wp.vec3  # mean radiance L_mean arriving at the media from the dome (and the ground it lights), RGB
-    ground_ambient: wp.vec3  # E / pi of the dome's upper hemisphere: what a white ground reflects, RGB
-    ambient_on: int  # 1: light the media and the ground with them (a scene with a dome)
+    environment: SkyEnvironment  # the sky around the media (dome, analytic sky, ground) and the media's asymmetry
+    ground_ambient: wp.vec3  # E / pi of the sky above the ground: what a white ground reflects, RGB
+    ambient_on: int  # 1: light the media and the ground with them (a dome or sky light)
 
 
 @functools.cache
@@ -118,6 +124,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
     def single_scatter(
         media: VoxelMedia,
         phase_tables: wp.array(dtype=float),
+        oriented: OrientedPhases,
         cam: PinholeCamera,
         sun: Sun,
         ground: Ground,
@@ -148,6 +155,7 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                     t_end = t_ground
                     hit_ground = True
 
+        lobes = ambient_lobes(march.environment, view)
         span = media_span(media, origin, view, t_near, t_end)
         t0 = span[0]
         t1 = span[1]
@@ -166,6 +174,8 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                 tm = ta + 0.5 * dt
                 here = sample_media(media, origin + tm * view)
                 scatter = scattered_phase(media, here, phase_tables, wp.vec3(0.0), theta)
+                if wp.static(has_tables):  # oriented crystals are ice, a tabulated species
+                    scatter += oriented_correction(media, here, phase_tables, oriented, view, theta)
                 lookups += wp.int64(media.count)
                 tau_eye_b = tau_eye + here.extinction * dt
                 if lit and wp.max(scatter) > 0.0:
@@ -185,8 +195,14 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
                 if march.ambient_on != 0 and wp.max(here.scattering) > 0.0:
                     up = sun_optical_depth(media, origin, tm, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
                     lookups += wp.int64(up[3])
-                    ambient = ambient_scattered(here.scattering, march.ambient, wp.vec3(up[0], up[1], up[2]))
-                    light += wp.cw_mul(ambient, exp_lerp_mean3(tau_eye, tau_eye_b)) * dt
+                    t_down = wp.vec3(0.0)
+                    if march.environment.lower_lit != 0:
+                        down = sun_optical_depth(media, origin, tm, view, wp.vec3(0.0, -1.0, 0.0), march.shadow_step)
+                        lookups += wp.int64(down[3])
+                        t_down = exp3(wp.vec3(down[0], down[1], down[2]))
+                    g = mixed_asymmetry(media, here, march.environment.asymmetry)
+                    sky = ambient_inscatter(lobes, g, exp3(wp.vec3(up[0], up[1], up[2])), t_down)
+                    light += wp.cw_mul(wp.cw_mul(here.scattering, sky), exp_lerp_mean3(tau_eye, tau_eye_b)) * dt
                 opacity = luminance(exp3(tau_eye)) - luminance(exp3(tau_eye_b))
                 depth_sum += opacity * tm * cos_axis
                 weight_sum += opacity

@@ -14,13 +14,14 @@ from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.kernels import DevicePhaseTables
+from warpsky.optics.oriented_phase import oriented_phases
 from warpsky.optics.tables import build_tables
 from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes, march_work
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
-from warpsky.techniques.dome import ambient_vec, ground_ambient_vec
 from warpsky.techniques.single_scatter.kernels import MarchSettings, single_scatter_kernel
+from warpsky.techniques.skylight import ambient_settings
 from warpsky.techniques.sunlight import sunlight
 
 
@@ -36,6 +37,10 @@ class SingleScatterSettings(TechniqueSettings):
                                                auto="1 x the smallest voxel edge")
     min_transmittance: float = setting(1.0e-4, range="[0, 1)", help="stop the eye march once the luminance "
                                        "transmittance falls below this (the view is this opaque)")
+    skylight: bool = setting(True, help="light the media with the whole sky on two spherical-harmonic bands per "
+                             "hemisphere: the analytic sky of a frame with a sky pass, the dome, the ground they "
+                             "light, seen through the phase's asymmetry; 0: the dome's mean radiance alone, "
+                             "occluded towards the zenith")
 
     def __post_init__(self):
         self.normalise()
@@ -70,7 +75,9 @@ class SingleScatter:
     by their scattering coefficients, Riley Eq. 6) -> attenuated along the eye ray. A ground plane, if present,
     is lit by the sun through the media and hides what lies below it. No light bounces between the ground and
     the media, and no multiple scattering: clouds come out darker than in reality, which is the point of this
-    mode as a reference for the faster multiple-scattering techniques.
+    mode as a reference for the faster multiple-scattering techniques. The sky (dome, analytic sky, the ground
+    they light) scatters once too, from its first two spherical-harmonic bands per hemisphere, occluded towards
+    the zenith and nadir (:mod:`~warpsky.techniques.skylight`; setting ``skylight``).
     """
 
     name = "single_scatter"
@@ -114,10 +121,10 @@ class SingleScatter:
         started = time.perf_counter()
         species = scene.species
         check_field_count(scene.media, "single_scatter", " or use technique path_tracer")
-        with wp.ScopedDevice(device):
+        with wp.ScopedDevice(device), device_buffers.exclusive("single_scatter", device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
-                                             cache_name=MEDIA_CACHE)
+                                             cache=MEDIA_CACHE)
             radiance, transmittance, depth, lookups = outputs = [
                 device_buffers.reusable(f"single_scatter:{name}", (height, width), dtype, device)
                 for name, dtype in OUTPUTS]
@@ -127,11 +134,11 @@ class SingleScatter:
             march.step = float(settings.step_length)
             march.shadow_step = float(settings.shadow_step_length)
             march.min_transmittance = float(settings.min_transmittance)
-            march.ambient = ambient_vec(scene)
-            march.ground_ambient = ground_ambient_vec(scene)
-            march.ambient_on = int(scene.dome is not None)
+            march.environment, march.ground_ambient, march.ambient_on = ambient_settings(
+                scene, skylight=bool(settings.skylight), traces_air=self.traces_air, device=device)
             kernel = single_scatter_kernel(scene.ground is not None, bool(species), media.has_detail)
-            inputs = [media.media, tables.values, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
+            inputs = [media.media, tables.values, oriented_phases(scene, device), pinhole_camera(camera, width, height),
+                      sun_struct(sunlight(scene)),
                       ground_struct(scene.ground, camera.position), march, radiance, transmittance, depth, lookups]
             launch_rows(kernel, height, width, inputs, device)
             images = {name: device_buffers.download(f"single_scatter:{name}", array)

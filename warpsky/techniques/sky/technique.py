@@ -80,7 +80,7 @@ class SkyPass:
         camera = scene.camera.conformed(width, height)
         far = float(camera.far)
         depth = np.full((height, width), far, np.float32) if media_depth is None else media_depth
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.device), device_buffers.exclusive("sky", self.device):
             shape = (height, width)
             front, front_t, back = outputs = [device_buffers.reusable(f"sky:{name}", shape, wp.vec3, self.device)
                                               for name in OUTPUTS]

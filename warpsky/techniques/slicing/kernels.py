@@ -1,24 +1,32 @@
 """Kernels of half-angle slicing with multiple-scattering phase functions (Riley 2004 §4.2, §5; Kniss et al.).
 
 Positions are camera-relative metres. Slices are the planes dot(s, x) = c_k perpendicular to the slice axis s; the
-host walks them in increasing c, which always moves away from the sun. Per slice, :func:`eye_kernel` composites the
-slice's slab (half a spacing either side of its plane) into the eye buffer (front to back or back to front, Eq. 26)
-reading the light buffer, then :func:`light_kernel` carries the light buffer to the next slice (Eq. 25). The eye
+host walks them in increasing c, which always moves away from the sun. Per slice, the eye composites the slice's
+slab (half a spacing either side of its plane) into the eye buffer (front to back or back to front, Eq. 26) reading
+the light buffer as it reaches that plane, and the light buffer is carried on to the next slice (Eq. 25). The eye
 samples each slab's piece of its ray, cut to the media's boxes, at a fraction of a voxel: one sample per plane
 would count a thin sheet in whole slices, a count that changes from one image row to the next. The light buffer
 is a square grid in the plane perpendicular to the light, so a texel follows its own light ray from slice to slice
-(no resampling).
+(no resampling) and no texel reads another.
+
+That independence lets the sweep run in chunks of planes rather than slice by slice: :func:`slice_light_kernel`
+carries each texel through a chunk's planes, keeping a copy of the buffer at every plane, then
+:func:`slice_eye_kernel` composites every pixel through the chunk's slabs, each reading its plane's copy. The
+arithmetic per texel and per pixel is the same, in the same order, as alternating one eye step and one light step
+per slice; the frame takes two launches per chunk instead of two per slice, and each launch is large enough to
+split over CPU cores.
 
 Every medium has a table of multiple-scattering distributions Ams_n (n = 0..N) and forward fractions F_n: species
 from :mod:`warpsky.optics.tables`, analytic phases in closed form (HG(g)^{*n} = HG(g^n)). Several media at a
 point mix their Ams and F by scattering weight (Riley Eq. 6 applied per order).
 
-A dome lights the media as an unoccluded ambient light (:mod:`warpsky.techniques.dome`): each eye sample adds
-L_mean times its scattering integrated over the sample, (1 - e^-tau) albedo, as if its phase were isotropic and no
-cloud shadowed it. For an albedo-1 medium under a uniform dome this is exactly the white furnace's answer (the
-pixel shows L_mean whatever the optical depth); for darker media and textured domes it overestimates the light
-deep inside thick clouds. The ground reflects albedo E / pi of the dome's upper hemisphere, occluded towards
-the zenith.
+The sky (the dome, the analytic sky of a frame with a sky pass, the ground they light: :mod:`warpsky.techniques.
+skylight`) lights the media as an unoccluded environment on two spherical-harmonic bands per hemisphere: each eye
+sample adds S(v) = max(0, m_up + 3 g M_up . v) + max(0, m_down + 3 g M_down . v), g mixed over the media at the
+sample by scattering weight, times its scattering integrated over the sample, (1 - e^-tau) albedo, as if no cloud
+shadowed it. For an albedo-1 medium under a uniform dome and an isotropic phase this is exactly the white
+furnace's answer (the pixel shows L whatever the optical depth); deep inside thick clouds it overestimates the
+light. The ground reflects albedo E / pi of the sky above it, occluded towards the zenith.
 """
 
 from __future__ import annotations
@@ -30,6 +38,7 @@ import warp as wp
 from warpsky.kernel_variants import kernel_variants
 from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
 from warpsky.optics.kernels import GRID_SIZE, grid_node, scattering_angle
+from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
 from warpsky.techniques.common import (
     Ground,
     PinholeCamera,
@@ -41,6 +50,7 @@ from warpsky.techniques.common import (
 )
 from warpsky.techniques.dome import ambient_ground
 from warpsky.techniques.single_scatter.kernels import media_span, sun_depth_function
+from warpsky.techniques.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 
 
 @wp.struct
@@ -164,6 +174,36 @@ def mixed_ams_scattering(point: MediaPoint, media: VoxelMedia, tables: AmsTables
 
 
 @wp.func
+def order_one_weight(tables: AmsTables, n: float) -> float:
+    """The weight :func:`ams_at` gives Ams_1 at fractional order n."""
+    x = wp.clamp(n, 0.0, float(tables.orders - 1))
+    if x <= 1.0:
+        return x
+    return wp.max(2.0 - x, 0.0)
+
+
+@wp.func
+def oriented_ams_correction(point: MediaPoint, media: VoxelMedia, tables: AmsTables, phases: OrientedPhases,
+                            order: wp.vec3, look: wp.vec3, theta: float) -> wp.vec3:
+    """What oriented ice adds to :func:`mixed_ams_scattering`: light that has not scattered yet (order 1) meets
+    the crystals with the sun's direction, so their share of Ams_1 becomes the frame's oriented slice seen along
+    ``look``; higher orders keep the random-orientation Ams (the light has lost the sun's direction)."""
+    out = wp.vec3(0.0)
+    if phases.count == 0:
+        return out
+    for m in range(media.count):
+        value = point.density[m]
+        index = phases.slice_of[m]
+        if value > 0.0 and index >= 0:
+            s = media.grids[m].scattering * value
+            oriented = oriented_value(phases, index, look)
+            for c in range(3):
+                weight = order_one_weight(tables, order[c])
+                out[c] = out[c] + s[c] * weight * (oriented[c] - ams_value(tables, tables.table_of[m], 1, c, theta))
+    return out
+
+
+@wp.func
 def light_attenuated(point: MediaPoint, media: VoxelMedia, tables: AmsTables, intensity: float, n: float,
                      tau: float, c: int) -> float:
     """Low-albedo mode (Riley Fig. 13): the light buffer is attenuated by extinction, nothing scattered is kept."""
@@ -236,21 +276,54 @@ def slicing_kernels(low_albedo: bool, equation: int = 0, has_detail: bool = Fals
     Riley's model solved per step (second order in the slice spacing); Riley's Eq. 24 (per-event forward
     fractions, first order) or Eq. 25 (his GPU shortcut (alpha F)^(beta Delta), which does not converge); and on
     whether any medium has animated detail (without it the samplers never touch ``details``); the eye kernel also
-    on a dome (its ambient light)."""
+    on ambient light (a dome or sky light)."""
     return slice_eye_kernel(low_albedo, has_detail, has_dome), slice_light_kernel(low_albedo, equation, has_detail)
+
+
+@wp.struct
+class EyeBuffers:
+    """The eye's accumulators over the image (height, width)."""
+
+    radiance: wp.array2d(dtype=wp.vec3)  # radiance towards the eye, RGB
+    transmittance: wp.array2d(dtype=wp.vec3)  # transmittance of the media along the eye ray, RGB
+    depth_sum: wp.array2d(dtype=wp.vec2)  # (sum of weight * depth [m], sum of weight)
+    spans: wp.array2d(dtype=wp.vec2)  # each eye ray's interval [m] inside the media's boxes
+
+
+@wp.struct
+class LightBuffers:
+    """The light buffer (res, res) as it leaves the last slice done, and its copies at each slice plane of the
+    chunk of planes being swept (chunk, res, res)."""
+
+    intensity: wp.array2d(dtype=wp.vec3)  # irradiance, RGB
+    count: wp.array2d(dtype=wp.vec3)  # expected scattering count, RGB
+    stack_intensity: wp.array3d(dtype=wp.vec3)
+    stack_count: wp.array3d(dtype=wp.vec3)
+
+
+@wp.struct
+class PlaneRange:
+    """Slice planes ``first .. first + count - 1`` of the sweep, positions along the slice axis [m] in sweep
+    order; ``entry``: the chunk starts the sweep (the light first enters the media's extent)."""
+
+    planes: wp.array(dtype=float)
+    first: int
+    count: int
+    entry: int
 
 
 @kernel_variants(low_albedo=(False, True), has_detail=(False, True), has_dome=(False, True))
 @functools.cache
 def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool = False):
-    """The eye gather of one slice (see :func:`slicing_kernels`)."""
+    """The eye gather of a chunk of slices (see :func:`slicing_kernels`)."""
 
     sample_media = media_functions(has_detail)
 
     @wp.func
-    def gather_sample(media: VoxelMedia, tables: AmsTables, frame: SliceFrame, light_i: wp.array2d(dtype=wp.vec3),
-                      light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3, theta: float, length: float,
-                      ambient: wp.vec3):
+    def gather_sample(media: VoxelMedia, tables: AmsTables, oriented: OrientedPhases, frame: SliceFrame,
+                      light_i: wp.array2d(dtype=wp.vec3), light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3,
+                      view: wp.vec3, theta: float, length: float, ambient: AmbientLobes,
+                      asymmetry: wp.array(dtype=wp.vec3)):
         """(light scattered towards the eye, optical depth), RGB, of the piece of the eye ray of ``length`` [m]
         centred on ``p``."""
         point = sample_media(media, p)
@@ -267,74 +340,85 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
         if wp.static(low_albedo):
             order = wp.vec3(1.0)
         phase = mixed_ams_scattering(point, media, tables, order, theta)
+        phase += oriented_ams_correction(point, media, tables, oriented, order, view, theta)
+        sky = wp.vec3(0.0)
+        if wp.static(has_dome):
+            sky = ambient_inscatter(ambient, mixed_asymmetry(media, point, asymmetry), wp.vec3(1.0), wp.vec3(1.0))
         for c in range(3):
             if scattering[c] > 0.0:
                 p_c = phase[c] / scattering[c]  # xi included, per medium
                 # scattering integrated exactly over the piece: (1 - e^-tau) albedo instead of beta_s * length
                 out[c] = light[c] * p_c * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
                 if wp.static(has_dome):
-                    out[c] = out[c] + ambient[c] * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
+                    out[c] = out[c] + sky[c] * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
         return out, tau
 
     @wp.kernel(module="unique")
     def eye_kernel(
         media: VoxelMedia,
         tables: AmsTables,
+        oriented: OrientedPhases,
         cam: PinholeCamera,
         frame: SliceFrame,
-        plane: float,
-        light_i: wp.array2d(dtype=wp.vec3),
-        light_n: wp.array2d(dtype=wp.vec3),
+        chunk: PlaneRange,
+        light: LightBuffers,
         sun: Sun,
-        spans: wp.array2d(dtype=wp.vec2),
         sample_length: float,
-        ambient: wp.vec3,
-        radiance: wp.array2d(dtype=wp.vec3),
-        transmittance: wp.array2d(dtype=wp.vec3),
-        depth_sum: wp.array2d(dtype=wp.vec2),
+        ambient: SkyEnvironment,
+        eye: EyeBuffers,
         row_offset: int,
     ):
-        """Composite the slab of the slice plane ``plane`` (half a spacing either side) into the eye buffers (Riley
-        Eq. 26), sampling the pixel's eye ray inside it and inside its ``spans`` at most ``sample_length`` [m]
-        apart."""
+        """Composite the slabs of the chunk's slice planes (half a spacing either side of each), in sweep order,
+        into the eye buffers (Riley Eq. 26), each reading the light buffer kept at its plane and sampling the
+        pixel's eye ray inside the slab and inside its ``spans`` at most ``sample_length`` [m] apart."""
         r, col = wp.tid()
         row = r + row_offset
         view = camera_ray(cam, row, col)
         along = wp.dot(frame.axis, view)
         if wp.abs(along) < 1.0e-6:
             return
-        t = plane / along
         half = 0.5 * frame.spacing / wp.abs(along)
         cos_axis = wp.dot(view, camera_forward(cam))
-        # the slab's piece of the eye ray, relative to the plane (an uncut slab's one sample lies on the plane)
-        inside = spans[row, col]
-        lo = wp.max(-half, inside[0] - t)
-        hi = wp.min(half, inside[1] - t)
-        if hi <= lo:
-            return
-        count = wp.min(int(wp.ceil((hi - lo) / sample_length)), MAX_EYE_SAMPLES)
-        length = (hi - lo) / float(count)
         theta = scattering_angle(sun.direction, view)
-        contribution = wp.vec3(0.0)
-        keep = wp.vec3(1.0)
-        for k in range(count):  # front to back inside the slab
-            p = view * (t + (lo + (float(k) + 0.5) * length))
-            scattered, tau = gather_sample(media, tables, frame, light_i, light_n, p, theta, length, ambient)
-            contribution += wp.cw_mul(keep, scattered)
-            keep = wp.cw_mul(keep, exp3(tau))
-        if keep[0] >= 1.0 and keep[1] >= 1.0 and keep[2] >= 1.0:
-            return
-        before = transmittance[row, col]
-        if frame.front_to_back != 0:
-            radiance[row, col] = radiance[row, col] + wp.cw_mul(before, contribution)
-        else:
-            radiance[row, col] = wp.cw_mul(radiance[row, col], keep) + contribution
-        transmittance[row, col] = wp.cw_mul(before, keep)
-        opacity = 1.0 - (keep[0] + keep[1] + keep[2]) / 3.0
-        weight = opacity * (before[0] + before[1] + before[2]) / 3.0
-        if frame.front_to_back == 0:
-            weight = opacity
-        depth_sum[row, col] = depth_sum[row, col] + wp.vec2(weight * t * cos_axis, weight)
+        lobes = ambient_lobes(ambient, view)
+        inside = eye.spans[row, col]
+        radiance = eye.radiance[row, col]
+        transmittance = eye.transmittance[row, col]
+        depth_sum = eye.depth_sum[row, col]
+        for k in range(chunk.count):
+            t = chunk.planes[chunk.first + k] / along
+            # the slab's piece of the eye ray, relative to the plane (an uncut slab's one sample lies on the plane)
+            lo = wp.max(-half, inside[0] - t)
+            hi = wp.min(half, inside[1] - t)
+            if hi <= lo:
+                continue
+            count = wp.min(int(wp.ceil((hi - lo) / sample_length)), MAX_EYE_SAMPLES)
+            length = (hi - lo) / float(count)
+            contribution = wp.vec3(0.0)
+            keep = wp.vec3(1.0)
+            for s in range(count):  # front to back inside the slab
+                p = view * (t + (lo + (float(s) + 0.5) * length))
+                scattered, tau = gather_sample(media, tables, oriented, frame, light.stack_intensity[k],
+                                               light.stack_count[k], p, view, theta, length, lobes,
+                                               ambient.asymmetry)
+                contribution += wp.cw_mul(keep, scattered)
+                keep = wp.cw_mul(keep, exp3(tau))
+            if keep[0] >= 1.0 and keep[1] >= 1.0 and keep[2] >= 1.0:
+                continue
+            before = transmittance
+            if frame.front_to_back != 0:
+                radiance = radiance + wp.cw_mul(before, contribution)
+            else:
+                radiance = wp.cw_mul(radiance, keep) + contribution
+            transmittance = wp.cw_mul(before, keep)
+            opacity = 1.0 - (keep[0] + keep[1] + keep[2]) / 3.0
+            weight = opacity * (before[0] + before[1] + before[2]) / 3.0
+            if frame.front_to_back == 0:
+                weight = opacity
+            depth_sum = depth_sum + wp.vec2(weight * t * cos_axis, weight)
+        eye.radiance[row, col] = radiance
+        eye.transmittance[row, col] = transmittance
+        eye.depth_sum[row, col] = depth_sum
 
     return eye_kernel
 
@@ -352,45 +436,62 @@ def eye_span_kernel(media: VoxelMedia, cam: PinholeCamera, spans: wp.array2d(dty
 @kernel_variants(low_albedo=(False, True), equation=(0, 24, 25), has_detail=(False, True))
 @functools.cache
 def slice_light_kernel(low_albedo: bool, equation: int = 0, has_detail: bool = False):
-    """The light-buffer update from one slice to the next (see :func:`slicing_kernels`)."""
+    """The light buffer carried through a chunk of slices (see :func:`slicing_kernels`)."""
 
     sample_media = media_functions(has_detail)
     carry_light = light_update(low_albedo, equation)
+
+    @wp.func
+    def carry(media: VoxelMedia, tables: AmsTables, frame: SliceFrame, base: wp.vec3, plane: float,
+              advance: float, intensity: wp.vec3, n: wp.vec3):
+        """(irradiance, scattering count) of the texel whose light ray passes ``base``, carried from the slice
+        plane ``plane`` to ``plane + advance`` (along the slice axis)."""
+        along = wp.dot(frame.axis, frame.light_dir)
+        # the texel's light ray meets this slice at base + a l with dot(s, .) = plane; step to the next slice
+        a = (plane - wp.dot(frame.axis, base)) / along
+        step = advance / along
+        point = sample_media(media, base + frame.light_dir * (a + 0.5 * step))
+        extinction = point.extinction
+        scattering = point.scattering
+        if wp.max(extinction) <= 0.0:
+            return intensity, n
+        out = wp.vec3(0.0)
+        count = n
+        for c in range(3):
+            tau = extinction[c] * step
+            out[c] = carry_light(point, media, tables, intensity[c], n[c], tau, c)
+            count[c] = n[c] + (scattering[c] / extinction[c]) * tau  # Eq. 22: n = -alpha ln T
+        return out, count
 
     @wp.kernel(module="unique")
     def light_kernel(
         media: VoxelMedia,
         tables: AmsTables,
         frame: SliceFrame,
-        plane: float,
-        advance: float,
-        light_i: wp.array2d(dtype=wp.vec3),
-        light_n: wp.array2d(dtype=wp.vec3),
+        chunk: PlaneRange,
+        light: LightBuffers,
+        row_offset: int,
     ):
-        """Carry the light buffer from the slice plane ``plane`` to ``plane + advance`` (along the slice axis)."""
-        j, i = wp.tid()
+        """Keep the texel's light at each of the chunk's slice planes and carry it through their slabs; the chunk
+        that starts the sweep first carries the light from half a spacing before its first plane, where it enters
+        the media's extent."""
+        r, i = wp.tid()
+        j = r + row_offset
         scale = frame.light_size / float(frame.light_res)
         base = frame.light_origin + frame.light_u * ((float(i) + 0.5) * scale) + frame.light_v * (
             (float(j) + 0.5) * scale)
-        along = wp.dot(frame.axis, frame.light_dir)
-        # the texel's light ray meets this slice at base + a l with dot(s, .) = plane; step to the next slice
-        a = (plane - wp.dot(frame.axis, base)) / along
-        step = advance / along
-        mid = base + frame.light_dir * (a + 0.5 * step)
-        n = light_n[j, i]
-        point = sample_media(media, mid)
-        extinction = point.extinction
-        scattering = point.scattering
-        if wp.max(extinction) <= 0.0:
-            return
-        intensity = light_i[j, i]
-        out = wp.vec3(0.0)
-        for c in range(3):
-            tau = extinction[c] * step
-            out[c] = carry_light(point, media, tables, intensity[c], n[c], tau, c)
-            n[c] = n[c] + (scattering[c] / extinction[c]) * tau  # Eq. 22: n = -alpha ln T
-        light_i[j, i] = out
-        light_n[j, i] = n
+        intensity = light.intensity[j, i]
+        n = light.count[j, i]
+        spacing = frame.spacing
+        if chunk.entry != 0:
+            intensity, n = carry(media, tables, frame, base, chunk.planes[chunk.first] - 0.5 * spacing,
+                                 0.5 * spacing, intensity, n)
+        for k in range(chunk.count):
+            light.stack_intensity[k, j, i] = intensity
+            light.stack_count[k, j, i] = n
+            intensity, n = carry(media, tables, frame, base, chunk.planes[chunk.first + k], spacing, intensity, n)
+        light.intensity[j, i] = intensity
+        light.count[j, i] = n
 
     return light_kernel
 
@@ -432,7 +533,7 @@ def ground_kernel(has_detail: bool = False, has_dome: bool = False):
         before = transmittance[row, col]
         radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground.albedo, lit))
         if wp.static(has_dome):
-            up = sun_optical_depth(media, t, view, wp.vec3(0.0, 1.0, 0.0), shadow_step)
+            up = sun_optical_depth(media, wp.vec3(0.0), t, view, wp.vec3(0.0, 1.0, 0.0), shadow_step)
             shown = ambient_ground(ground.albedo, ground_ambient, wp.vec3(up[0], up[1], up[2]))
             radiance[row, col] = radiance[row, col] + wp.cw_mul(before, shown)
         if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows

@@ -11,24 +11,20 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.device import launch_rows
+from warpsky import device_buffers
 from warpsky.errors import UsageError
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
+from warpsky.optics.oriented_phase import oriented_phases
 from warpsky.optics.phase import phase_numpy
 from warpsky.optics.tables import ams_table
 from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import PhaseKind, Projection, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
-from warpsky.techniques.dome import ambient_vec, ground_ambient_vec
-from warpsky.techniques.slicing.kernels import (
-    AmsTables,
-    SliceFrame,
-    eye_span_kernel,
-    ground_kernel,
-    slicing_kernels,
-)
+from warpsky.techniques.skylight import ambient_settings
+from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
+from warpsky.techniques.slicing.sweep import SliceSweep, SweepBuffers, chunk_planes, run_sweep, sweep_lock
 from warpsky.techniques.sunlight import sunlight
 
 #: Bytes per pixel of the ground pass's device copy of the layer.
@@ -77,6 +73,9 @@ class SlicingSettings(TechniqueSettings):
         LightEquation.CONTINUOUS, help="light-buffer update: 0 = the continuous limit of Riley's model, dI/dtau = "
         "-(1 - alpha F_{n+1}) I solved per step (second order in the slice spacing); 24 = Riley Eq. 24 (first "
         "order); 25 = his GPU shortcut Eq. 25 (tends to no attenuation as slices are added)")
+    skylight: bool = setting(True, help="light the media with the whole sky on two spherical-harmonic bands per "
+                             "hemisphere (the analytic sky of a frame with a sky pass, the dome, the ground they "
+                             "light) through the phase's asymmetry, unoccluded; 0: the dome's mean radiance alone")
 
     def __post_init__(self):
         self.normalise()
@@ -167,15 +166,16 @@ class Slicing:
     HOST_PIXEL_BYTES = 72
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
-        """Bytes a frame allocates: the eye buffers, the two light buffers (``light_resolution``^2 RGB each) and the
-        media's upload."""
+        """Bytes a frame allocates: the eye buffers, the two light buffers (``light_resolution``^2 RGB each), their
+        copies at a chunk's slice planes and the media's upload."""
         res = int(self.settings.light_resolution)
+        planes = int(self.settings.slice_count or self.AUTO_SLICES[1]) if scene.media else 0
         pixels = width * height
         copies = 0 if str(self.device).startswith("cpu") else 1
         return (MemoryEstimate()
                 .add("images", host=pixels * (self.HOST_PIXEL_BYTES + copies * self.PIXEL_BYTES),
                      device=pixels * (self.PIXEL_BYTES + LAYER_DEVICE_BYTES))
-                .add("light buffers", device=2 * res * res * 12)
+                .add("light buffers", device=2 * res * res * 12 * (1 + chunk_planes(planes, res, self.device)))
                 .add("grids", host=grid_bytes(scene), device=grid_bytes(scene)))
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
@@ -210,13 +210,15 @@ class Slicing:
         """The device Ams tables of the scene's media, with each medium's table index and xi (its own
         ``warpsky:slicing:xi`` or the setting ``xi``)."""
         tables, forwards, index = self._tables(scene, species, orders)
-        ams = AmsTables()
-        ams.ams = wp.array(np.stack(tables).astype(np.float32).reshape(-1), dtype=float)
-        ams.forward = wp.array(np.stack(forwards).astype(np.float32).reshape(-1), dtype=float)
+        xi_of = [xi if m.slicing_xi is None else m.slicing_xi for m in scene.media]
+        ams = AmsTables()  # kept on the device across frames, uploaded again only when a table changes
+        ams.ams = device_buffers.upload("slicing:ams", np.stack(tables).astype(np.float32).reshape(-1), float,
+                                        self.device)
+        ams.forward = device_buffers.upload("slicing:forward", np.stack(forwards).astype(np.float32).reshape(-1),
+                                            float, self.device)
         ams.orders = orders + 1
-        ams.table_of = wp.array(np.asarray(index, dtype=np.int32), dtype=int)
-        ams.xi_of = wp.array(np.asarray([xi if m.slicing_xi is None else m.slicing_xi for m in scene.media],
-                                        dtype=np.float32), dtype=float)
+        ams.table_of = device_buffers.upload("slicing:table_of", np.asarray(index, dtype=np.int32), int, self.device)
+        ams.xi_of = device_buffers.upload("slicing:xi_of", np.asarray(xi_of, dtype=np.float32), float, self.device)
         return ams
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
@@ -224,57 +226,69 @@ class Slicing:
         camera = scene.camera.conformed(width, height)
         device = self.device
         started = time.perf_counter()
-        orders = int(settings.orders)
-        shape = (height, width)
         far = np.float32(camera.far)
-        sun = sunlight(scene)
         with wp.ScopedDevice(device):
-            radiance = wp.zeros(shape, dtype=wp.vec3)
-            transmittance = wp.full(shape, wp.vec3(1.0, 1.0, 1.0), dtype=wp.vec3)
-            depth_sum = wp.zeros(shape, dtype=wp.vec2)
-            slices = 0
-            species = scene.species
-            # uploaded once for the sweep and the ground pass (with detail this also advects its noise to time_s)
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
+            # uploaded for the sweep and the ground pass only when the contents changed since the last frame (with
+            # detail this also advects its noise to time_s)
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, scene.species, time_s=scene.time_s,
+                                             cache="slicing")
             if scene.media:
                 check_field_count(scene.media, "slicing", " or use technique path_tracer")
-                ams = self._ams_tables(scene, species, orders, settings.xi)
-                toward_sun = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])  # unlit: any axis
-                frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count),
-                                            int(settings.light_resolution))
-                res = int(settings.light_resolution)
-                # a sun set behind the horizon lights nothing, but the media still hide what lies behind them
-                start = sun.irradiance if sun is not None and sun.lit else np.zeros(3)
-                light_i = wp.full((res, res), wp.vec3(*np.asarray(start, dtype=np.float64).tolist()), dtype=wp.vec3)
-                light_n = wp.zeros((res, res), dtype=wp.vec3)
-                eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
-                                                           media.has_detail, scene.dome is not None)
-                cam = pinhole_camera(camera, width, height)
-                sun_view = sun_struct(sun)
-                spacing = float(frame.spacing)
-                sample_length = float(media.min_voxel_size) / float(settings.eye_samples)
-                spans = wp.empty(shape, dtype=wp.vec2)
-                wp.launch(eye_span_kernel, dim=shape, inputs=[media.media, cam, spans])
-                # the light enters the media's extent half a slice before the first plane: carry it there first
-                # (starting it unattenuated at the first plane is a first-order error in the slice count)
-                wp.launch(light_kernel, dim=(res, res), inputs=[
-                    media.media, ams, frame, float(planes[0]) - 0.5 * spacing, 0.5 * spacing, light_i, light_n])
-                for plane in planes:
-                    launch_rows(eye_kernel, height, width, [
-                        media.media, ams, cam, frame, float(plane), light_i, light_n, sun_view, spans,
-                        sample_length, ambient_vec(scene), radiance, transmittance, depth_sum], device)
-                    wp.launch(light_kernel, dim=(res, res), inputs=[
-                        media.media, ams, frame, float(plane), spacing, light_i, light_n])
-                    slices += 1
-            wp.synchronize_device(device)
-            depth = depth_sum.numpy()
-            depth_mean = np.where(depth[..., 1] > 1e-6, depth[..., 0] / np.maximum(depth[..., 1], 1e-30), far)
-            layer = Layer(radiance.numpy(), transmittance.numpy(), depth_mean.astype(np.float32), stats={
+                sweep = self._sweep(scene, settings, camera, width, height, media)
+                with sweep_lock(device):
+                    how = run_sweep(sweep)
+                    radiance, transmittance, depth = self._finish(scene, camera, width, height, media, sweep.buffers)
+                slices = len(sweep.planes)
+            else:
+                how, slices = "none", 0
+                shape = (height, width)
+                images = [wp.zeros(shape, dtype=wp.vec3), wp.full(shape, wp.vec3(1.0, 1.0, 1.0), dtype=wp.vec3),
+                          wp.full(shape, far, dtype=float)]
+                if scene.ground is not None:
+                    self._ground(scene, camera, width, height, media, *images)
+                radiance, transmittance, depth = (image.numpy() for image in images)
+            layer = Layer(radiance, transmittance, depth, stats={
                 "seconds": time.perf_counter() - started, "settings": dataclasses.asdict(settings),
-                "slices": slices})
-        if scene.ground is not None:
-            self._ground(scene, camera, width, height, layer, media)
+                "slices": slices, "sweep": how})
         return layer
+
+    def _finish(self, scene: Scene, camera, width: int, height: int, media: VoxelMediaBuffers,
+                buffers: SweepBuffers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(radiance, transmittance, depth [m]) of the frame after its sweep: the mean depth divided out on the
+        host, the ground drawn on the sweep's images still on the device, then one download per image."""
+        far = np.float32(camera.far)
+        depth_sum = device_buffers.download("slicing:depth_sum", buffers.depth_sum)
+        depth = np.where(depth_sum[..., 1] > 1e-6, depth_sum[..., 0] / np.maximum(depth_sum[..., 1], 1e-30), far)
+        depth = depth.astype(np.float32)
+        if scene.ground is not None:
+            depth_image = device_buffers.reusable("slicing:depth", (height, width), float, self.device)
+            depth_image.assign(depth)
+            self._ground(scene, camera, width, height, media, buffers.radiance, buffers.transmittance, depth_image)
+            depth = device_buffers.download("slicing:depth", depth_image)
+        return (device_buffers.download("slicing:radiance", buffers.radiance),
+                device_buffers.download("slicing:transmittance", buffers.transmittance), depth)
+
+    def _sweep(self, scene: Scene, settings: SlicingSettings, camera, width: int, height: int,
+               media: VoxelMediaBuffers) -> SliceSweep:
+        """The frame's sweep: slice geometry, Ams tables and kernel arguments, on the kept ``slicing:*`` buffers."""
+        sun = sunlight(scene)
+        toward_sun = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])  # unlit: any axis
+        res = int(settings.light_resolution)
+        frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count), res)
+        # a sun set behind the horizon lights nothing, but the media still hide what lies behind them
+        start = sun.irradiance if sun is not None and sun.lit else np.zeros(3)
+        environment, _, ambient_on = ambient_settings(scene, skylight=bool(settings.skylight),
+                                                      traces_air=self.traces_air, device=self.device)
+        eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
+                                                   media.has_detail, bool(ambient_on))
+        return SliceSweep(
+            device=self.device, eye_kernel=eye_kernel, light_kernel=light_kernel, media=media.media,
+            tables=self._ams_tables(scene, scene.species, int(settings.orders), settings.xi),
+            oriented=oriented_phases(scene, self.device, cache="slicing"),
+            cam=pinhole_camera(camera, width, height), frame=frame, sun=sun_struct(sun), ambient=environment,
+            sample_length=float(media.min_voxel_size) / float(settings.eye_samples), planes=planes,
+            start=tuple(np.asarray(start, dtype=np.float64).tolist()),
+            buffers=SweepBuffers.kept(height, width, res, planes, self.device))
 
     @staticmethod
     def _frame(scene: Scene, camera, toward_sun: np.ndarray, slice_count: int, light_res: int):
@@ -306,15 +320,15 @@ class Slicing:
         frame.front_to_back = int(front_to_back)
         return frame, planes
 
-    def _ground(self, scene: Scene, camera, width: int, height: int, layer: Layer, media) -> None:
-        """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel);
-        ``media`` is the sweep's upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`)."""
-        with wp.ScopedDevice(self.device):
-            radiance = wp.array(layer.radiance, dtype=wp.vec3)
-            transmittance = wp.array(layer.transmittance, dtype=wp.vec3)
-            depth = wp.array(layer.depth, dtype=float)
-            wp.launch(ground_kernel(media.has_detail, scene.dome is not None), dim=(height, width), inputs=[
-                media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
-                ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_ambient_vec(scene),
-                radiance, transmittance, depth])
-            layer.radiance, layer.transmittance, layer.depth = radiance.numpy(), transmittance.numpy(), depth.numpy()
+    def _ground(self, scene: Scene, camera, width: int, height: int, media: VoxelMediaBuffers, radiance: wp.array,
+                transmittance: wp.array, depth: wp.array) -> None:
+        """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel), drawn
+        into the device images ``radiance``, ``transmittance`` (RGB) and ``depth`` [m]; ``media`` is the sweep's
+        upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`); the sky above it lights it too, occluded towards
+        the zenith."""
+        _, ground_sky, ambient_on = ambient_settings(scene, skylight=bool(self.settings.skylight),
+                                                     traces_air=self.traces_air, device=self.device)
+        wp.launch(ground_kernel(media.has_detail, bool(ambient_on)), dim=(height, width), inputs=[
+            media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
+            ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_sky,
+            radiance, transmittance, depth], device=self.device)

@@ -192,7 +192,9 @@ class Stratiform:
         if scene.dome is not None:
             sky = sky + upper_hemisphere(scene.dome)[1]  # the dome joins the uniform-equivalent sky above it
         stats = {"radiosity": bool(self.settings.radiosity_for(layer))}
-        with wp.ScopedDevice(self.device):
+        # the radiosity's R_G and R_C stay in its kept arrays until the shading kernel has read them
+        with (wp.ScopedDevice(self.device), device_buffers.exclusive("stratiform", self.device),
+              device_buffers.exclusive("radiosity", self.device)):
             slab_optics, tables, params = optics.device_inputs(self.device, cache_name="stratiform")
             g = LayerGeometry()
             g.base = float(layer.base_altitude - eye[1])

@@ -1,0 +1,1 @@
+"""Opaque surfaces on the device: triangle meshes through Warp's BVH."""

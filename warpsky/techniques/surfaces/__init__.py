@@ -1,0 +1,1 @@
+"""Opaque Lambertian surfaces: triangle meshes (terrain) through a BVH, and the ground plane."""
