@@ -1,5 +1,8 @@
 """Benchmark: the path tracer on the demo cumulus at optical scales 1x, 4x, 16x — paths/s, samples/s and the
-tracking cost per path (tentative collisions), with local majorants (8-voxel cells) and one global majorant.
+tracking cost per path (tentative collisions), with local majorants (8-voxel cells) and one global majorant,
+paths per pixel of one launch (0: one thread per pixel) and device arrays allocated by the frame
+(:mod:`warpsky.device_buffers`: the sums and kept paths are reused; a majorant grid of another cell size is a new
+upload).
 
 Runs on the CPU and on every CUDA device present. Timings exclude the first (compiling) render of each device and
 say so. No pass/fail: goals are read by people. With Mitsuba 3 installed (extra ``compare``), the same scene without
@@ -34,9 +37,10 @@ def main(argv=None) -> int:
 
     import warp as wp
 
+    from warpsky import device_buffers
     from warpsky.device import cpu_thread_count, init_warp
     from warpsky.scene.usd import StageReader
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings, per_sample_launches
 
     init_warp()
     devices = args.devices.split(",") if args.devices else ["cpu"] + [
@@ -55,9 +59,12 @@ def main(argv=None) -> int:
             scene = dataclasses.replace(base, media=media)
             for block in (8, 100000):
                 settings = PathTracerSettings(spp=spp, majorant_block=block)
+                allocated = device_buffers.allocation_count()
                 started = time.perf_counter()
-                layer = PathTracer(settings, device=device).render(scene, size, size)
+                tracer = PathTracer(settings, device=device)
+                layer = tracer.render(scene, size, size)
                 seconds = time.perf_counter() - started
+                per_pass = int(tracer.resolved_settings(scene).samples_per_pass)
                 paths = size * size * spp
                 rows.append({
                     "device": device, "scale": scale, "majorant": "local 8" if block == 8 else "global",
@@ -65,6 +72,8 @@ def main(argv=None) -> int:
                     "steps_per_path": layer.stats["tracking_steps"] / paths,
                     "capped_paths": layer.stats["capped_paths"],
                     "mean_radiance": float(layer.radiance.mean()),
+                    "samples_per_launch": per_sample_launches(device, size * size, per_pass),
+                    "allocations": device_buffers.allocation_count() - allocated,
                 })
     compare = []
     try:
@@ -96,10 +105,12 @@ def main(argv=None) -> int:
                             "warpsky_mean": float(layer.radiance.mean()), "mitsuba_mean": float(mean.mean()),
                             "efficiency_ratio": ours / theirs})
     print(f"path tracer, {args.stage.name}, {size}x{size}, {spp} spp; excludes the first compile")
-    print(f"{'device':<8} {'scale':>5} {'majorant':>9} {'s':>7} {'k paths/s':>10} {'steps/path':>11} {'capped':>7}")
+    print(f"{'device':<8} {'scale':>5} {'majorant':>9} {'s':>7} {'k paths/s':>10} {'steps/path':>11} {'capped':>7} "
+          f"{'spp/launch':>10} {'allocs':>6}")
     for r in rows:
         print(f"{r['device']:<8} {r['scale']:>5g} {r['majorant']:>9} {r['seconds']:>7.2f} "
-              f"{r['paths_per_s'] / 1e3:>10.1f} {r['steps_per_path']:>11.1f} {r['capped_paths']:>7}")
+              f"{r['paths_per_s'] / 1e3:>10.1f} {r['steps_per_path']:>11.1f} {r['capped_paths']:>7} "
+              f"{r['samples_per_launch']:>10} {r['allocations']:>6}")
     if compare:
         print(f"\nvs Mitsuba 3 volpath llvm_ad_rgb (cpu, no ground, {spp * 16} spp, box-filtered pixels)")
         print(f"{'scale':>5} {'warpsky s':>10} {'mitsuba s':>10} {'mean ws':>9} {'mean mi':>9} "

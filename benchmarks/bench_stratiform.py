@@ -1,5 +1,6 @@
 """Stratiform layer + radiosity timings (Bouthors 2006 §6): ms per frame at 1024x768 with ~50% of the pixels on
-clouds and a 512² thickness map, radiosity ms per iteration and iterations to converge; cpu and cuda when present.
+clouds and a 512² thickness map, radiosity ms per iteration and iterations to converge, device arrays allocated
+per warm frame (:mod:`warpsky.device_buffers`; 0 when every buffer is reused); cpu and cuda when present.
 With ``--slab-table`` also prints the slab-vs-Monte-Carlo table (per order and total, the paper's 9 cases).
 
     python benchmarks/bench_stratiform.py [--device cpu|cuda|all] [--json] [--slab-table --photons 400000]
@@ -21,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 def frame_benchmark(device: str, width: int, height: int, repeats: int) -> dict:
     from conftest import look_rotation
 
+    from warpsky import device_buffers
     from warpsky.media.stratiform import GroundTexture, StratiformLayer, procedural_thickness
     from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
     from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
@@ -35,16 +37,18 @@ def frame_benchmark(device: str, width: int, height: int, repeats: int) -> dict:
     technique = Stratiform(StratiformSettings(radiosity=1), device=device)
     out = technique.render(scene, width, height, layer=layer, ground_texture=texture)  # compile + warm up
     shading, total = [], []
+    allocated = device_buffers.allocation_count()
     for _ in range(repeats):
         out = technique.render(scene, width, height, layer=layer, ground_texture=texture)
         shading.append(out.stats["shading_seconds"])
         total.append(out.stats["seconds"])
+    allocations = (device_buffers.allocation_count() - allocated) / max(repeats, 1)
     covered = float(np.mean(out.transmittance[..., 1] < 0.999))
     return {"device": device, "width": width, "height": height, "covered_fraction": covered,
             "shading_ms": 1e3 * min(shading), "frame_ms": 1e3 * min(total),
             "radiosity_iterations": out.stats["radiosity_iterations"],
             "radiosity_ms_per_iteration": 1e3 * out.stats["radiosity_seconds"] / out.stats["radiosity_iterations"],
-            "radiosity_residual": out.stats["radiosity_residual"]}
+            "radiosity_residual": out.stats["radiosity_residual"], "allocations_per_frame": allocations}
 
 
 def main(argv=None) -> int:
@@ -81,11 +85,12 @@ def main(argv=None) -> int:
         print(json.dumps(result, indent=2))
         return 0
     print(f"{'device':<8} {'size':>10} {'covered':>8} {'shading ms':>11} {'frame ms':>9} {'fps':>7} {'rad it':>7} "
-          f"{'ms/it':>7} {'residual':>9}")
+          f"{'ms/it':>7} {'residual':>9} {'allocs':>6}")
     for r in rows:
         print(f"{r['device']:<8} {r['width']:>5}x{r['height']:<4} {r['covered_fraction']:8.2f} {r['shading_ms']:11.1f} "
               f"{r['frame_ms']:9.1f} {1e3 / r['frame_ms']:7.1f} {r['radiosity_iterations']:7d} "
-              f"{r['radiosity_ms_per_iteration']:7.2f} {r['radiosity_residual']:9.2e}")
+              f"{r['radiosity_ms_per_iteration']:7.2f} {r['radiosity_residual']:9.2e} "
+              f"{r['allocations_per_frame']:6.1f}")
     if args.slab_table:
         print(result["slab_table"])
     return 0

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.errors import UsageError
 from warpsky.media.detail import (
     MediumDetail,
@@ -229,8 +230,6 @@ class VoxelMediaBuffers:
             grids = wp.array(grid_list, dtype=VoxelGrid, device=device)
             details = wp.array(entries_or_dummy, dtype=MediumDetail, device=device)
         else:
-            from warpsky import device_buffers
-
             values = device_buffers.upload(f"{cache}:values", flat.astype(np.float32, copy=False), float, device)
             # structs travel as NumPy records so that their bytes key the upload
             grids = device_buffers.upload(f"{cache}:grids", wp.array(grid_list, dtype=VoxelGrid, device="cpu").numpy(),

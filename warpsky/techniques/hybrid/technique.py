@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.errors import UsageError
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, march_work
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
@@ -49,6 +50,8 @@ from warpsky.techniques.path_tracer.technique import (
 from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
 from warpsky.techniques.sky.technique import SkyPass, unattenuated_sun
 
+#: Name under which the multiple-scattering paths keep their device buffers (:mod:`warpsky.device_buffers`).
+BUFFER_NAME = "path_tracer:hybrid"
 #: Pixels whose luminance transmittance is below this count as covered by the media (or an opaque surface).
 COVERED_BELOW = 0.99
 
@@ -162,7 +165,8 @@ class Hybrid:
             return estimate
         scale = int(s.ms_scale)
         coarse = -(-width // scale) * -(-height // scale)
-        estimate.merge(path_tracing_memory(scene, 2 * coarse, int(s.majorant_block), self.device))
+        estimate.merge(path_tracing_memory(scene, 2 * coarse, int(s.majorant_block), self.device,
+                                           int(s.samples_per_pass), film_pixels=coarse))
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.atmosphere is not None:
             estimate.add("sky", host=pixels * 64, device=pixels * 40)
@@ -191,8 +195,9 @@ class Hybrid:
         variance = np.zeros_like(single.radiance)
         lit = (scene.sun is not None and scene.media) or (scene.dome is not None and (scene.media or scene.ground))
         if settings.multiple_scattering and lit:
-            multiple, variance, ms_stats = MultipleScattering(scene, width, height, settings, self.device).run(
-                single, started)
+            with device_buffers.exclusive(BUFFER_NAME, self.device):  # the halves and kept paths
+                multiple, variance, ms_stats = MultipleScattering(scene, width, height, settings, self.device).run(
+                    single, started)
             stats.update(ms_stats)
             if scene.atmosphere is not None:
                 multiple, variance = behind_front_air(scene, width, height, single.depth, multiple, variance,
@@ -232,9 +237,10 @@ class MultipleScattering:
         # With air, paths are traced through it from the sun at the top of the atmosphere: they carry skylight on
         # the media and the air's own multiple scattering; its single scattering is the sky pass's.
         self.tracing = PathTracing(unattenuated_sun(scene), width, height, settings.path_tracer(), device,
-                                   air=scene.atmosphere is not None, multiple_only=True, scale=self.scale)
+                                   air=scene.atmosphere is not None, multiple_only=True, scale=self.scale,
+                                   buffer_name=BUFFER_NAME)
         shape = (self.tracing.height, self.tracing.width)
-        self.halves = [pixel_sums(shape, device), pixel_sums(shape, device)]
+        self.halves = [pixel_sums(shape, device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
         self.counts = [0, 0]
 
     def run(self, single: Layer, started: float) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -286,12 +292,14 @@ class MultipleScattering:
         return image, variance, stats
 
     def half_mean(self, half: int) -> np.ndarray:
-        return self.halves[half].radiance_sum.numpy() / max(self.counts[half], 1)
+        """Mean radiance of ``half``'s paths (a download: the error estimate needs it on the host)."""
+        radiance = device_buffers.download(f"{BUFFER_NAME}:radiance_sum", self.halves[half].radiance_sum)
+        return radiance / max(self.counts[half], 1)
 
     def film(self) -> Layer:
         """Both halves' paths as the path tracer reports its own: their mean, the variance of that mean
         (``aovs["variance"]``) and the tracking counters (``stats``)."""
-        return sums_layer(self.halves, sum(self.counts), far=0.0)
+        return sums_layer(self.halves, sum(self.counts), far=0.0, name=BUFFER_NAME)
 
     def estimate(self, single: np.ndarray, coverage: np.ndarray, covered: np.ndarray) -> float:
         """Estimated relative RMSE of the frame over ``covered`` pixels (0 when nothing is covered)."""

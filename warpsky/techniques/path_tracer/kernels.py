@@ -1,10 +1,14 @@
-"""The per-pixel kernel of the unbiased volumetric path tracer.
+"""The kernels of the unbiased volumetric path tracer.
 
-Each thread runs a pixel's paths of one launch: the camera ray, its transmittance through every medium by ratio
+One path of a pixel (:func:`sample_function`) is the camera ray, its transmittance through every medium by ratio
 tracking (the layer's transmittance AOV; zero where the ground or sea level ends the ray), then the path: a free
 flight by delta tracking per bounce (:mod:`~warpsky.techniques.path_tracer.tracking`, local majorants from
 :mod:`~warpsky.techniques.path_tracer.majorants`), and at its end a scattering event, a ground bounce or the end of
-the path (:mod:`~warpsky.techniques.path_tracer.events`), with Russian roulette from the third bounce.
+the path (:mod:`~warpsky.techniques.path_tracer.events`), with Russian roulette from the third bounce. Two ways
+to launch it (both :func:`path_trace_kernel`) add the same float32 values in the same order: one thread per pixel
+running the launch's paths one after the other, or one thread per path and pixel writing a :class:`SampleResult`,
+then one thread per pixel adding them in path order (:func:`sum_samples_kernel`); the second fills a GPU when the
+frame has too few pixels.
 
 Warp passes a random state to a function by value, so each function hands back its advanced state and a path
 carries one stream (re-seeding from the stream would replay it: rand_init(randi(s)) is s's next). The order of the
@@ -74,13 +78,20 @@ class PixelSums:
     counters: wp.array2d(dtype=wp.vec2i)  # (tracking steps, capped paths)
 
 
-@kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True),
-                 has_dome=(False, True))
+@wp.struct
+class SampleResult:
+    """One path of one pixel, as :func:`path_trace_kernel` leaves it for :func:`sum_samples_kernel`."""
+
+    radiance: wp.vec3
+    transmittance: wp.vec3  # the primary ray's ratio-tracked transmittance (when counts[2] is 1)
+    depth: wp.vec2  # (depth of the first event, 1), or (0, 0) when the first flight ended nowhere
+    counts: wp.vec3i  # (tracking steps, 1 if capped, 1 if the transmittance was tracked)
+
+
 @functools.cache
-def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False,
-                      has_dome: bool = False) -> wp.Kernel:
-    """The per-pixel progressive path tracer, specialised on ground, tabulated species, animated detail and a
-    dome (a scene without one runs exactly the code it ran before domes existed)."""
+def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
+    """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
+    without a dome runs exactly the code it ran before domes existed)."""
     _media_at, delta_track, ratio_track = tracking_functions(has_detail)
     primary_end, flight_end, sun_reaches = surface_functions(has_ground)
     scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
@@ -128,6 +139,70 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
             path = roulette(path, bounce)
         return path
 
+    @wp.func
+    def pixel_sample(media: VoxelMedia, majorants: Majorants, phase_tables: PhaseTables, air: Air, sun: Sun,
+                     cam: PinholeCamera, ground: Ground, dome: DomeLight, settings: PathSettings, row: int, col: int,
+                     sample: int) -> SampleResult:
+        """Path ``sample`` of pixel (row, col): the camera ray (jittered in the pixel when asked), the primary
+        transmittance, the path, the depth of its first event. Its random stream depends on the seed, the pixel and
+        the path index alone."""
+        state = wp.rand_init(settings.seed + sample * SAMPLE_STRIDE, row * cam.width + col)
+        view = camera_ray(cam, row, col)
+        eye = camera_ray_origin(cam, row, col, 0.5, 0.5)
+        if settings.pixel_jitter != 0:
+            # a box-filtered pixel, as Mitsuba and pbrt sample it (used by the Mitsuba cross-check)
+            fx = wp.randf(state)
+            fy = wp.randf(state)
+            view = camera_ray_at(cam, row, col, fx, fy)
+            eye = camera_ray_origin(cam, row, col, fx, fy)
+        cos_axis = wp.dot(view, camera_forward(cam))
+        t_near = cam.near / cos_axis
+        t_far = cam.far / cos_axis
+        origin = eye + view * t_near
+        first = primary_end(air, ground, origin, view, t_far - t_near)
+        out = SampleResult()
+        steps = int(0)
+        tracked = int(0)
+        if first.surface == SURFACE_NONE and settings.multiple_only == 0:
+            tr = ratio_track(media, majorants, air, origin, view, first.t, state)
+            state = tr.state
+            out.transmittance = tr.value
+            steps = tr.steps
+            tracked = 1
+        path = trace_path(media, majorants, phase_tables, air, sun, ground, dome, settings, sun_reaches(sun, air),
+                          start_path(origin, view, state, steps), first)
+        if path.hit != 0:
+            out.depth = wp.vec2((t_near + path.first_t) * cos_axis, 1.0)
+        out.radiance = path.radiance
+        out.counts = wp.vec3i(path.steps, path.capped, tracked)
+        return out
+
+    return pixel_sample
+
+
+@wp.func
+def add_sample(sums: PixelSums, row: int, col: int, sample: SampleResult):
+    """Add one path's radiance, its square, its tracked transmittance and its depth to pixel (row, col)."""
+    if sample.counts[2] != 0:
+        sums.transmittance_sum[row, col] = sums.transmittance_sum[row, col] + sample.transmittance
+    if sample.depth[1] != 0.0:
+        sums.depth_sum[row, col] = sums.depth_sum[row, col] + sample.depth
+    sums.radiance_sum[row, col] = sums.radiance_sum[row, col] + sample.radiance
+    sums.radiance_sq[row, col] = sums.radiance_sq[row, col] + wp.cw_mul(sample.radiance, sample.radiance)
+
+
+@kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True),
+                 has_dome=(False, True))
+@functools.cache
+def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False,
+                      has_dome: bool = False) -> wp.Kernel:
+    """The progressive path tracer in both launch shapes (one kernel per scene kind, hence one CUDA module, for
+    frames of any size). With ``samples`` empty (None), one thread per pixel runs the launch's
+    ``settings.sample_count`` paths in path order into ``sums``. Otherwise one thread per (path, pixel): a launch
+    over a frame of H rows covers ``sample_count`` x H rows, row r running path r // H of pixel row r % H into
+    ``samples[r]`` (``sums`` untouched); :func:`sum_samples_kernel` then adds them."""
+    pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome)
+
     @wp.kernel(module="unique")
     def path_trace(
         media: VoxelMedia,
@@ -140,48 +215,54 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
         dome: DomeLight,
         settings: PathSettings,
         sums: PixelSums,
+        samples: wp.array2d(dtype=SampleResult),
         row_offset: int,
     ):
-        """Pixel (row_offset + tid row, tid col): ``settings.sample_count`` paths added to ``sums``. Per sample: the
-        camera ray (jittered in the pixel when asked), the primary transmittance AOV, the path, the depth AOV where
-        its first flight ended in a medium or on the ground."""
+        """Thread (row_offset + tid row, tid col): its paths (see the factory) into ``sums`` or ``samples``."""
         r, col = wp.tid()
         row = r + row_offset
-        centre = camera_ray(cam, row, col)
-        centre_origin = camera_ray_origin(cam, row, col, 0.5, 0.5)
-        axis = camera_forward(cam)
-        sun_on = sun_reaches(sun, air)
-        pixel = row * cam.width + col
+        keep = samples.shape[0] != 0
+        path = row // cam.height  # 0 with one thread per pixel
+        pixel_row = row - path * cam.height
+        count = settings.sample_count
+        if keep:
+            count = 1
         steps = int(0)
         capped = int(0)
-        for s in range(settings.sample_count):
-            state = wp.rand_init(settings.seed + (settings.first_sample + s) * SAMPLE_STRIDE, pixel)
-            view = centre
-            eye = centre_origin
-            if settings.pixel_jitter != 0:
-                # a box-filtered pixel, as Mitsuba and pbrt sample it (used by the Mitsuba cross-check)
-                fx = wp.randf(state)
-                fy = wp.randf(state)
-                view = camera_ray_at(cam, row, col, fx, fy)
-                eye = camera_ray_origin(cam, row, col, fx, fy)
-            cos_axis = wp.dot(view, axis)
-            t_near = cam.near / cos_axis
-            t_far = cam.far / cos_axis
-            origin = eye + view * t_near
-            first = primary_end(air, ground, origin, view, t_far - t_near)
-            if first.surface == SURFACE_NONE and settings.multiple_only == 0:
-                tr = ratio_track(media, majorants, air, origin, view, first.t, state)
-                state = tr.state
-                sums.transmittance_sum[row, col] = sums.transmittance_sum[row, col] + tr.value
-                steps += tr.steps
-            path = trace_path(media, majorants, phase_tables, air, sun, ground, dome, settings, sun_on,
-                              start_path(origin, view, state, steps), first)
-            steps = path.steps
-            capped += path.capped
-            if path.hit != 0:
-                sums.depth_sum[row, col] = sums.depth_sum[row, col] + wp.vec2((t_near + path.first_t) * cos_axis, 1.0)
-            sums.radiance_sum[row, col] = sums.radiance_sum[row, col] + path.radiance
-            sums.radiance_sq[row, col] = sums.radiance_sq[row, col] + wp.cw_mul(path.radiance, path.radiance)
-        sums.counters[row, col] = sums.counters[row, col] + wp.vec2i(steps, capped)
+        for s in range(count):
+            sample = pixel_sample(media, majorants, phase_tables, air, sun, cam, ground, dome, settings, pixel_row,
+                                  col, settings.first_sample + path + s)
+            if keep:
+                samples[row, col] = sample
+            else:
+                add_sample(sums, pixel_row, col, sample)
+                steps += sample.counts[0]
+                capped += sample.counts[1]
+        if not keep:
+            sums.counters[pixel_row, col] = sums.counters[pixel_row, col] + wp.vec2i(steps, capped)
 
     return path_trace
+
+
+@kernel_variants()
+@functools.cache
+def sum_samples_kernel() -> wp.Kernel:
+    """The per-pixel sum of the paths :func:`path_trace_kernel` left in a buffer (one thread per path and pixel)."""
+
+    @wp.kernel(module="unique")
+    def sum_samples(samples: wp.array2d(dtype=SampleResult), sample_count: int, sums: PixelSums, row_offset: int):
+        """Pixel (row_offset + tid row, tid col): the ``sample_count`` paths in ``samples`` added in path order, as
+        :func:`path_trace_kernel` adds them (the same sums, bit for bit)."""
+        r, col = wp.tid()
+        row = r + row_offset
+        height = sums.radiance_sum.shape[0]
+        steps = int(0)
+        capped = int(0)
+        for s in range(sample_count):
+            sample = samples[s * height + row, col]
+            add_sample(sums, row, col, sample)
+            steps += sample.counts[0]
+            capped += sample.counts[1]
+        sums.counters[row, col] = sums.counters[row, col] + wp.vec2i(steps, capped)
+
+    return sum_samples

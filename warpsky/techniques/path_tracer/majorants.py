@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.media.air import Air, air_coefficient
 from warpsky.media.detail import detail_factor_bound
 from warpsky.media.voxel import VoxelMedia, grid_interval
@@ -132,9 +133,11 @@ def majorant_grid(density: np.ndarray, block: int) -> np.ndarray:
     return full.reshape(cells[0], block, cells[1], block, cells[2], block).max(axis=(1, 3, 5))
 
 
-def upload_majorants(media: tuple[VoxelMedium, ...], block: int, device) -> tuple[Majorants, int]:
+def upload_majorants(media: tuple[VoxelMedium, ...], block: int, device, *,
+                     cache_name: str | None = None) -> tuple[Majorants, int]:
     """Majorant grids of ``media`` (cells of ``block`` voxels, bounds on extinction times the detail bound, with
-    :data:`MAJORANT_MARGIN`) uploaded to ``device``, and the number of cells."""
+    :data:`MAJORANT_MARGIN`) uploaded to ``device``, and the number of cells. With ``cache_name`` the bounds go
+    through :func:`warpsky.device_buffers.upload` (no copy when the previous frame's bounds were the same)."""
     mgrids, chunks, offset = [], [], 0
     for medium in media:
         bound = majorant_grid(medium.density, block) * float(np.max(medium.extinction_scale))
@@ -148,6 +151,10 @@ def upload_majorants(media: tuple[VoxelMedium, ...], block: int, device) -> tupl
         chunks.append(bound.reshape(-1))
         offset += bound.size
     out = Majorants()
-    out.values = wp.array(np.concatenate(chunks) if chunks else np.zeros(1, np.float32), dtype=float, device=device)
+    values = np.concatenate(chunks) if chunks else np.zeros(1, np.float32)
+    if cache_name is None:
+        out.values = wp.array(values, dtype=float, device=device)
+    else:
+        out.values = device_buffers.upload(cache_name, values, float, device)
     out.grids = wp.array(mgrids if mgrids else [MajorantGrid()], dtype=MajorantGrid, device=device)
     return out, offset

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.air import air_struct
@@ -25,9 +26,16 @@ from warpsky.techniques.base import Layer, TechniqueSettings, documented, settin
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.dome import dome_struct
 from warpsky.techniques.path_tracer.deck_media import deck_voxel_memory, with_deck_as_media
-from warpsky.techniques.path_tracer.kernels import PathSettings, PixelSums, path_trace_kernel
+from warpsky.techniques.path_tracer.kernels import (
+    PathSettings,
+    PixelSums,
+    SampleResult,
+    path_trace_kernel,
+    sum_samples_kernel,
+)
 from warpsky.techniques.path_tracer.layer_media import layer_voxel_memory, with_layers_as_media
 from warpsky.techniques.path_tracer.majorants import upload_majorants
+from warpsky.techniques.single_scatter.technique import MEDIA_CACHE
 from warpsky.techniques.sunlight import sunlight
 
 
@@ -120,12 +128,12 @@ class PathTracer:
         return dataclasses.replace(self.settings, samples_per_pass=min(per_pass, self.settings.spp))
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
-        """Bytes a frame allocates: one :class:`PixelSums` per stream, the float64 sums of :func:`sums_layer`, the
-        variance AOV, and the media with their majorants."""
+        """Bytes a frame allocates: a :class:`PixelSums` (and on a GPU the paths of one launch when the frame is
+        small), the float64 sums of :func:`sums_layer`, the variance AOV, and the media with their majorants."""
         settings = self.resolved_settings(scene)
         pixels = width * height
-        lanes = gpu_lanes(self.device, pixels, int(settings.spp) // int(settings.samples_per_pass))
-        return (path_tracing_memory(scene, pixels * lanes, int(settings.majorant_block), self.device)
+        return (path_tracing_memory(scene, pixels, int(settings.majorant_block), self.device,
+                                    int(settings.samples_per_pass))
                 .add("images", host=pixels * SUMS_LAYER_BYTES)
                 .add("AOVs", host=pixels * AOV_BYTES)
                 .merge(layer_voxel_memory(scene, settings))
@@ -140,27 +148,20 @@ class PathTracer:
         settings = self.resolved_settings(scene)
         started = time.perf_counter()
         scene = with_deck_as_media(with_layers_as_media(scene, settings, self.device), settings, width, height)
-        tracing = PathTracing(scene, width, height, settings, self.device)
-        lanes = gpu_lanes(self.device, width * height, int(settings.spp) // int(settings.samples_per_pass))
-        sums = [pixel_sums((height, width), self.device) for _ in range(lanes)]
-        streams = [wp.Stream(self.device) for _ in range(lanes)] if lanes > 1 else []
-        spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
-        done = passes = 0
-        while done < spp:
-            count = min(per_pass, spp - done)
-            lane = passes % lanes
-            if streams:
-                with wp.ScopedStream(streams[lane]):
-                    tracing.launch(sums[lane], done, count)
-            else:
-                tracing.launch(sums[lane], done, count)
-            done += count
-            passes += 1
-            if progress is not None:
-                progress(count)
-        wp.synchronize_device(self.device)
-        seconds = time.perf_counter() - started
-        layer = sums_layer(sums, spp, float(tracing.camera.far))
+        with device_buffers.exclusive("path_tracer", self.device):  # the sums and kept paths below
+            tracing = PathTracing(scene, width, height, settings, self.device)
+            sums = pixel_sums((height, width), self.device, name="path_tracer")
+            spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
+            done = 0
+            while done < spp:
+                count = min(per_pass, spp - done)
+                tracing.launch(sums, done, count)
+                done += count
+                if progress is not None:
+                    progress(count)
+            wp.synchronize_device(self.device)
+            seconds = time.perf_counter() - started
+            layer = sums_layer([sums], spp, float(tracing.camera.far), name="path_tracer")
         layer.stats = {"seconds": seconds, "settings": dataclasses.asdict(settings), "spp": spp, **layer.stats,
                        "majorant_cells": tracing.majorant_cells}
         return layer
@@ -171,10 +172,20 @@ class PathTracing:
     :meth:`launch` adds paths per pixel to a :class:`PixelSums` (progressive passes reuse everything).
 
     ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
-    at least twice, for techniques that march single scattering exactly."""
+    at least twice, for techniques that march single scattering exactly. The media's values (under
+    :data:`MEDIA_CACHE`, shared with the single-scattering march) and majorants go through
+    :func:`warpsky.device_buffers.upload`: the next frame of a batch with the same grids copies nothing; the sums
+    and kept paths are :func:`warpsky.device_buffers.reusable` arrays under ``buffer_name``.
+
+    How a launch runs (:func:`per_sample_launches`): one thread per pixel looping over the launch's paths, or,
+    for a frame too small to fill a GPU, one thread per path and pixel writing to a kept buffer, then one thread
+    per pixel adding them in path order. Both add the same float32 values in the same order, so a pixel depends
+    on the seed and the path count alone, however the paths are split into launches; ``per_sample`` forces the
+    choice (tests run both on the CPU)."""
 
     def __init__(self, scene: Scene, width: int, height: int, settings: PathTracerSettings, device: str, *,
-                 air: bool = True, multiple_only: bool = False, scale: int = 1):
+                 air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer",
+                 per_sample: bool | None = None):
         self.settings = settings
         self.device = device
         camera = scene.camera.conformed(width, height)
@@ -186,10 +197,20 @@ class PathTracing:
         species = scene.species
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
-            majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device)
-        self.kernel = path_trace_kernel(scene.ground is not None, bool(species), media.has_detail,
-                                        scene.dome is not None)
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
+                                             cache=MEDIA_CACHE)
+            majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device,
+                                                              cache_name="path_tracer:majorants")
+        flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None)
+        capacity = per_sample_launches(device, width * height, int(settings.samples_per_pass or 1))
+        if per_sample is not None:
+            capacity = max(1, int(settings.samples_per_pass or 1)) if per_sample else 0
+        self.samples_per_launch = capacity  # 0: one thread per pixel
+        self.kernel = path_trace_kernel(*flags)
+        self.samples = None  # the kernel's "one thread per pixel"
+        if capacity:
+            self.samples = device_buffers.reusable(f"{buffer_name}:samples", (capacity * height, width),
+                                                   SampleResult, device)
         dome = dome_struct(scene.dome, device)
         oriented = oriented_phases(scene, device)
         continuation = continuation_tables(scene, device)
@@ -201,27 +222,44 @@ class PathTracing:
     def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:
         """Add paths ``first_sample .. first_sample + count - 1`` of every pixel to ``sums`` (asynchronous on
         GPUs)."""
-        launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only)
-        launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums], self.device)
+        if not self.samples_per_launch:
+            launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only)
+            launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums, None], self.device)
+            return
+        end = first_sample + count
+        while first_sample < end:
+            chunk = min(self.samples_per_launch, end - first_sample)
+            launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only)
+            launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, sums, self.samples],
+                        self.device)
+            launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
+            first_sample += chunk
 
 
 #: Bytes per pixel of a :class:`PixelSums` (radiance sum and sum of squares, transmittance RGB, depth vec2, counters).
 PIXEL_SUMS_BYTES = 52
+#: Bytes of a :class:`~warpsky.techniques.path_tracer.kernels.SampleResult` (one path of one pixel).
+SAMPLE_BYTES = 44
 #: Bytes per pixel :func:`sums_layer` holds at once: float64 sums, squares, mean and variance (96), transmittance and
 #: depth sums (40), counters (8), the float32 outputs (40).
 SUMS_LAYER_BYTES = 184
 
 
-def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int, device: str) -> MemoryEstimate:
-    """Bytes of :class:`PathTracing` and ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device
-    (and their host copies on a GPU), the media and their majorant grids (built on the host from a copy)."""
+def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int, device: str,
+                        samples_per_pass: int = 1, *, film_pixels: int | None = None) -> MemoryEstimate:
+    """Bytes of :class:`PathTracing` on a film of ``film_pixels`` pixels (default ``pixel_sums_count``) and
+    ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device (and their host copies on a GPU), the
+    paths of one launch when they are kept per sample (:func:`per_sample_launches`), the media and their majorant
+    grids (built on the host from a copy)."""
     copies = 0 if str(device).startswith("cpu") else 1
+    film = pixel_sums_count if film_pixels is None else film_pixels
+    samples = per_sample_launches(device, film, samples_per_pass) * film * SAMPLE_BYTES
     grids = grid_bytes(scene)
     majorants = sum(4 * math.prod(-(-n // majorant_block) for n in m.shape) for m in scene.media)
     return (MemoryEstimate()
             .add("path sums", host=copies * pixel_sums_count * PIXEL_SUMS_BYTES,
                  device=pixel_sums_count * PIXEL_SUMS_BYTES)
-            .add("grids", host=2 * grids, device=grids + majorants))
+            .add("grids", host=2 * grids, device=grids + majorants + samples))
 
 
 def path_work(settings: PathTracerSettings, pixels: int) -> WorkItem:
@@ -244,14 +282,23 @@ def coarse_camera(camera, width: int, height: int, scale: int):
     ), coarse_w, coarse_h
 
 
-def pixel_sums(shape: tuple[int, int], device) -> PixelSums:
-    """Zeroed per-pixel sums of ``shape`` (rows, columns) on ``device``."""
+#: The fields of :class:`PixelSums` and their element types.
+PIXEL_SUMS_FIELDS = (("radiance_sum", wp.vec3), ("radiance_sq", wp.vec3), ("transmittance_sum", wp.vec3),
+                     ("depth_sum", wp.vec2), ("counters", wp.vec2i))
+
+
+def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> PixelSums:
+    """Zeroed per-pixel sums of ``shape`` (rows, columns) on ``device``. With ``name`` the arrays are
+    :func:`warpsky.device_buffers.reusable` ones (``name:field``), cleared here: a frame of the same size
+    allocates nothing, and sums under one name must not be in use twice at once."""
     out = PixelSums()
-    out.radiance_sum = wp.zeros(shape, dtype=wp.vec3, device=device)
-    out.radiance_sq = wp.zeros(shape, dtype=wp.vec3, device=device)
-    out.transmittance_sum = wp.zeros(shape, dtype=wp.vec3, device=device)
-    out.depth_sum = wp.zeros(shape, dtype=wp.vec2, device=device)
-    out.counters = wp.zeros(shape, dtype=wp.vec2i, device=device)
+    for field, dtype in PIXEL_SUMS_FIELDS:
+        if name is None:
+            array = wp.zeros(shape, dtype=dtype, device=device)
+        else:
+            array = device_buffers.reusable(f"{name}:{field}", shape, dtype, device)
+            array.zero_()
+        setattr(out, field, array)
     return out
 
 
@@ -269,20 +316,32 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     return out
 
 
-def gpu_lanes(device: str, pixels: int, passes: int) -> int:
-    """How many CUDA streams progressive passes spread over: enough threads in flight to fill a GPU (about
-    2^18 resident threads on a large one) when the frame alone has too few pixels; 1 on the CPU."""
-    if str(device).startswith("cpu"):
-        return 1
-    return max(1, min(16, passes, (1 << 18) // max(pixels, 1)))
+#: Threads a GPU keeps resident at once (a large one: 132 SMs x 2048 on an H200, about 2^18).
+GPU_RESIDENT_THREADS = 1 << 18
+#: Most threads of one launch when paths run one per thread (bounds the kept paths: 2^21 x 44 bytes = 92 MB).
+GPU_LAUNCH_THREADS = 1 << 21
 
 
-def sums_layer(sums: list[PixelSums], spp: int, far: float) -> Layer:
+def per_sample_launches(device: str, pixels: int, samples_per_pass: int) -> int:
+    """Paths per pixel of one launch when each path runs on its own thread, or 0 for one thread per pixel.
+
+    One thread per pixel fills a GPU once the frame has :data:`GPU_RESIDENT_THREADS` pixels (512 x 512: 95 M
+    paths/s on an H200) and is what the CPU runs (its row bands use the cores). A smaller frame on a GPU left
+    most of it idle (128 x 128: 2^14 threads, 20 M paths/s): there a launch runs ``samples_per_pass`` paths of
+    every pixel on as many threads (128 x 128 at the GPU default of 64 per pass: 2^20 threads), at most
+    :data:`GPU_LAUNCH_THREADS`. The paths' sums are the same either way (:class:`PathTracing`)."""
+    if str(device).startswith("cpu") or pixels >= GPU_RESIDENT_THREADS:
+        return 0
+    return max(1, min(int(samples_per_pass), GPU_LAUNCH_THREADS // max(pixels, 1)))
+
+
+def sums_layer(sums: list[PixelSums], spp: int, far: float, *, name: str = "path_tracer") -> Layer:
     """The layer of ``spp`` paths per pixel accumulated in ``sums`` (one per stream): mean radiance, mean
     transmittance, mean depth of first events (``far`` where none), the variance of the pixel mean as an AOV, and
-    the tracking counters."""
-    def total_of(name):
-        return sum(getattr(s, name).numpy().astype(np.float64) for s in sums)
+    the tracking counters. One download per field and sums, through :func:`warpsky.device_buffers.download`
+    (pinned staging kept under ``name:field``)."""
+    def total_of(field):
+        return sum(device_buffers.download(f"{name}:{field}", getattr(s, field)).astype(np.float64) for s in sums)
 
     total = total_of("radiance_sum")
     squares = total_of("radiance_sq")
@@ -290,7 +349,7 @@ def sums_layer(sums: list[PixelSums], spp: int, far: float) -> Layer:
     variance = np.maximum(squares / spp - mean**2, 0.0) / max(spp - 1, 1)  # of the mean
     depth = total_of("depth_sum")
     depth_mean = np.where(depth[..., 1] > 0, depth[..., 0] / np.maximum(depth[..., 1], 1), np.float32(far))
-    count_values = sum(s.counters.numpy() for s in sums)
+    count_values = sum(device_buffers.download(f"{name}:counters", s.counters) for s in sums)
     return Layer(
         mean.astype(np.float32),
         (total_of("transmittance_sum") / spp).astype(np.float32),

@@ -10,7 +10,14 @@ gaps arrives here too), R_G = S_G^i, dR_G = ρ_G (S_G^d + S_G^i). One iteration 
 ground -> cloud (E_C = gather(dR_G), R_C += E_C, dR_C = ρ_C E_C) and cloud -> ground (E_G, R_G += E_G,
 dR_G = ρ_G E_G). The residual after an iteration is the luminance of E_G over that of everything the ground has
 received (S_G^d + R_G); iterations stop when it falls below ``tolerance``, or at ``max_iterations`` with a warning
-stating the residual.
+stating the residual. Each iteration's exchanged energy stays on the device (one value per iteration); the host
+reads them every ``check_every`` iterations (on a GPU each read waits for the device, so by default every 8: up to
+7 iterations run past convergence, each adding less than the tolerance; on the CPU a read is free: every
+iteration, the stopping point exactly).
+
+Buffers are :func:`warpsky.device_buffers.reusable` arrays (``radiosity:NAME``) kept across frames; a solve reads
+back R_G after the first gather (the total the residual divides by), the exchanged energies, and R_G and R_C at
+the end. :attr:`RadiosityResult.device_received` keeps R_G and R_C on the device for the shading kernel.
 
 Gathers: ``rings`` — §5.3's three square rings of exterior size h, 2h, 8h, read as MIP levels detail, detail + 1 and
 detail + 3 of the emitter with weights 0.4, 0.387, 0.213 (the form factors 0.5, 0.3, 0.18 rounded up to keep the
@@ -28,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.scene.model import LUMINANCE_WEIGHTS
 from warpsky.techniques.radiosity.kernels import (
     downsample_kernel,
@@ -64,6 +72,7 @@ class RadiosityResult:
     converged: bool
     history: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    device_received: tuple | None = None  # (R_G, R_C) as device arrays, valid until the next solve
 
     @property
     def ground_total(self) -> np.ndarray:
@@ -94,10 +103,11 @@ class Radiosity:
         tolerance: Stop when an iteration's exchanged energy ratio falls below this.
         max_iterations: Cap on iterations (a warning reports the residual when reached).
         device: Warp device.
+        check_every: Iterations between host reads of the exchanged energy; default 1 on the CPU, 8 on GPUs.
     """
 
     def __init__(self, *, pixel_over_h: float = 1.0, method: str = "rings", tolerance: float = 1e-4,
-                 max_iterations: int = 64, device: str = "cpu"):
+                 max_iterations: int = 64, device: str = "cpu", check_every: int | None = None):
         if method not in ("rings", "exact"):
             raise ValueError(f"method must be 'rings' or 'exact', got {method!r}")
         detail = -math.log2(pixel_over_h) if pixel_over_h > 0 else float("nan")
@@ -105,6 +115,11 @@ class Radiosity:
             raise ValueError(f"rings need pixel_over_h = 2^-k (k >= 0), got {pixel_over_h}")
         if not (tolerance > 0 and max_iterations >= 1):
             raise ValueError("tolerance must be > 0 and max_iterations >= 1")
+        if check_every is None:
+            check_every = 1 if str(device).startswith("cpu") else 8
+        if not check_every >= 1:
+            raise ValueError(f"check_every must be >= 1, got {check_every}")
+        self.check_every = int(check_every)
         self.pixel_over_h = float(pixel_over_h)
         self.detail = int(detail) if method == "rings" else 0
         self.method = method
@@ -127,8 +142,8 @@ class Radiosity:
         levels = [source]
         for _ in range(self.detail + 3):
             src = levels[-1]
-            dst = self._scratch.setdefault((src.shape[0] // 2, src.shape[1] // 2, len(levels)),
-                                           wp.zeros((src.shape[0] // 2, src.shape[1] // 2), dtype=wp.vec3))
+            dst = device_buffers.reusable(f"radiosity:level{len(levels)}", (src.shape[0] // 2, src.shape[1] // 2),
+                                          wp.vec3, self.device)
             wp.launch(downsample_kernel, dim=dst.shape, inputs=[src, dst])
             levels.append(dst)
         m = self.detail
@@ -136,17 +151,25 @@ class Radiosity:
             levels[m], levels[m + 1], levels[m + 3], float(2**m), float(2 ** (m + 1)), float(2 ** (m + 3)),
             reflectance, received, emitted, exchanged])
 
+    def _buffer(self, name: str, shape, values=None) -> wp.array:
+        """The kept (nu, nv) vec3 buffer ``radiosity:name``: zeroed, or, read-only, holding ``values`` (nu, nv[, 3])
+        (copied only when they changed since the last solve, :func:`warpsky.device_buffers.refill`)."""
+        if values is not None:
+            return device_buffers.refill(f"radiosity:{name}", _rgb(values, shape), wp.vec3, self.device)
+        array = device_buffers.reusable(f"radiosity:{name}", shape, wp.vec3, self.device)
+        array.zero_()
+        return array
+
     def gather(self, exitance) -> np.ndarray:
         """One pass: irradiance (nu, nv, 3) received from the other plane's ``exitance`` (nu, nv[, 3])."""
         shape = np.asarray(exitance).shape[:2]
-        self._scratch = {}
-        with wp.ScopedDevice(self.device):
-            received = wp.zeros(shape, dtype=wp.vec3)
-            emitted = wp.zeros(shape, dtype=wp.vec3)
-            ones = wp.array(np.ones((*shape, 3), np.float32), dtype=wp.vec3)
-            self._gather(wp.array(_rgb(exitance, shape), dtype=wp.vec3), ones, received, emitted,
-                         wp.zeros(1, dtype=float))
-            return received.numpy()
+        with wp.ScopedDevice(self.device), device_buffers.exclusive("radiosity", self.device):
+            received = self._buffer("received", shape)
+            emitted = self._buffer("emitted", shape)
+            ones = self._buffer("ones", shape, 1.0)
+            exchanged = device_buffers.reusable("radiosity:exchanged", 1, float, self.device)
+            self._gather(self._buffer("source", shape, exitance), ones, received, emitted, exchanged)
+            return device_buffers.download("radiosity:received", received)
 
     def solve(self, *, ground_albedo, cloud_reflectance, ground_direct, cloud_source=None) -> RadiosityResult:
         """Iterate to convergence.
@@ -164,36 +187,21 @@ class Radiosity:
             if padded != tuple(shape):
                 raise ValueError(f"rings need buffer sizes that are multiples of {2 ** (self.detail + 3)}, got {shape}"
                                  f" (use pyramid_shape)")
-        self._scratch = {}
-        with wp.ScopedDevice(self.device):
-            rho_g = wp.array(_rgb(ground_albedo, shape), dtype=wp.vec3)
-            rho_c = wp.array(_rgb(cloud_reflectance, shape), dtype=wp.vec3)
-            ones = wp.array(np.ones((*shape, 3), np.float32), dtype=wp.vec3)
-            r_g = wp.zeros(shape, dtype=wp.vec3)
-            r_c = wp.zeros(shape, dtype=wp.vec3)
-            d_g = wp.zeros(shape, dtype=wp.vec3)
-            d_c = wp.zeros(shape, dtype=wp.vec3)
-            exchanged = wp.zeros(1, dtype=float)
+        with wp.ScopedDevice(self.device), device_buffers.exclusive("radiosity", self.device):
+            rho_g = self._buffer("ground_albedo", shape, ground_albedo)
+            rho_c = self._buffer("cloud_reflectance", shape, cloud_reflectance)
+            r_g, r_c = self._buffer("ground_received", shape), self._buffer("cloud_received", shape)
+            d_g, d_c = self._buffer("ground_emitted", shape), self._buffer("cloud_emitted", shape)
+            exchanged = device_buffers.reusable("radiosity:exchanged", 1, float, self.device)
             source = _rgb(cloud_source if cloud_source is not None else 0.0, shape)
             if np.any(source > 0):
-                self._gather(wp.array(source, dtype=wp.vec3), ones, r_g, d_g, exchanged)
-            initial = r_g.numpy() + _rgb(direct, shape)
-            d_g = wp.array(initial * _rgb(ground_albedo, shape), dtype=wp.vec3)
+                self._gather(self._buffer("source", shape, source), self._buffer("ones", shape, 1.0), r_g, d_g,
+                             exchanged)
+            initial = device_buffers.download("radiosity:ground_received", r_g) + _rgb(direct, shape)
+            d_g.assign(initial * _rgb(ground_albedo, shape))
             total = float(initial.reshape(-1, 3).sum(axis=0) @ LUMINANCE_WEIGHTS)
-            history: list[float] = []
-            residual = 0.0 if total <= 0 else float("inf")
             started = time.perf_counter()
-            iterations = 0
-            while total > 0 and iterations < self.max_iterations:
-                self._gather(d_g, rho_c, r_c, d_c, exchanged)
-                self._gather(d_c, rho_g, r_g, d_g, exchanged)
-                gained = float(exchanged.numpy()[0])
-                total += gained
-                residual = gained / total
-                history.append(residual)
-                iterations += 1
-                if residual < self.tolerance:
-                    break
+            history, residual = self._iterate(rho_g, rho_c, r_g, r_c, d_g, d_c, total)
             wp.synchronize_device()
             seconds = time.perf_counter() - started
             converged = residual < self.tolerance
@@ -201,8 +209,31 @@ class Radiosity:
                 warnings.warn(f"radiosity stopped at the cap of {self.max_iterations} iterations with residual "
                               f"{residual:.3g} (tolerance {self.tolerance:g}): ground and cloud albedos near 1 "
                               "converge slowly", RadiosityWarning, stacklevel=2)
-            return RadiosityResult(r_g.numpy(), r_c.numpy(), _rgb(direct, shape), iterations, residual, converged,
-                                   history, seconds)
+            return RadiosityResult(device_buffers.download("radiosity:ground_received", r_g),
+                                   device_buffers.download("radiosity:cloud_received", r_c), _rgb(direct, shape),
+                                   len(history), residual, converged, history, seconds, device_received=(r_g, r_c))
+
+    def _iterate(self, rho_g, rho_c, r_g, r_c, d_g, d_c, total: float) -> tuple[list[float], float]:
+        """Iterations from the initial state (``total``: luminance the ground has received so far): (residual
+        after each, the last). Iteration i leaves its exchanged energy in ``gains[i]``; the host reads them every
+        :attr:`check_every` iterations and stops at the first residual below the tolerance it has read."""
+        gains = device_buffers.reusable("radiosity:gains", self.max_iterations, float, self.device)
+        scratch = device_buffers.reusable("radiosity:exchanged", 1, float, self.device)
+        history: list[float] = []
+        residual = 0.0 if total <= 0 else float("inf")
+        iterations = 0
+        while total > 0 and iterations < self.max_iterations and not residual < self.tolerance:
+            batch = min(self.check_every, self.max_iterations - iterations)
+            for i in range(iterations, iterations + batch):
+                self._gather(d_g, rho_c, r_c, d_c, scratch)
+                self._gather(d_c, rho_g, r_g, d_g, gains[i:i + 1])
+            read = device_buffers.download("radiosity:gains", gains)
+            for gained in read[iterations:iterations + batch]:
+                total += float(gained)
+                residual = float(gained) / total
+                history.append(residual)
+            iterations += batch
+        return history, residual
 
 
 def ground_direct(cloud_transmittance, *, pixel: float, h: float, sun_direction, sun_irradiance,
@@ -214,9 +245,13 @@ def ground_direct(cloud_transmittance, *, pixel: float, h: float, sun_direction,
     if sun[1] <= 0.0:
         return np.zeros_like(tc)
     shift = h / sun[1] * sun / pixel  # texels from the ground point to the sun ray's cloud-base crossing
-    with wp.ScopedDevice(device):
-        out = wp.zeros(tc.shape[:2], dtype=wp.vec3)
-        wp.launch(ground_direct_kernel, dim=tc.shape[:2], inputs=[
-            wp.array(tc, dtype=wp.vec3), float(shift[0]), float(shift[2]),
+    with wp.ScopedDevice(device), device_buffers.exclusive("radiosity", device):
+        shape = tc.shape[:2]
+        out = device_buffers.reusable("radiosity:ground_direct", shape, wp.vec3, device)
+        out.zero_()
+        transmittance = device_buffers.reusable("radiosity:cloud_transmittance", shape, wp.vec3, device)
+        transmittance.assign(tc)
+        wp.launch(ground_direct_kernel, dim=shape, inputs=[
+            transmittance, float(shift[0]), float(shift[2]),
             wp.vec3(*(np.asarray(sun_irradiance, dtype=np.float64) * sun[1]).tolist()), out])
-        return out.numpy()
+        return device_buffers.download("radiosity:ground_direct", out)

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
@@ -57,6 +58,14 @@ class SingleScatterSettings(TechniqueSettings):
             step_length=self.step_length or 0.5 * min_voxel_size,
             shadow_step_length=self.shadow_step_length or 1.0 * min_voxel_size,
         )
+
+
+#: Name under which the media's voxel values are kept on the device (:mod:`warpsky.device_buffers`), shared with
+#: the path tracer: hybrid runs both on the same grids and holds one copy.
+MEDIA_CACHE = "voxel_media"
+#: The march's per-pixel outputs: kept across frames as :func:`warpsky.device_buffers.reusable` arrays
+#: ``single_scatter:NAME``, each downloaded once at the end of a frame.
+OUTPUTS = (("radiance", wp.vec3), ("transmittance", wp.vec3), ("depth", float), ("lookups", wp.int64))
 
 
 class SingleScatter:
@@ -112,13 +121,15 @@ class SingleScatter:
         started = time.perf_counter()
         species = scene.species
         check_field_count(scene.media, "single_scatter", " or use technique path_tracer")
-        with wp.ScopedDevice(device):
+        with wp.ScopedDevice(device), device_buffers.exclusive("single_scatter", device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s)
-            radiance = wp.zeros((height, width), dtype=wp.vec3)
-            transmittance = wp.zeros((height, width), dtype=wp.vec3)
-            depth = wp.zeros((height, width), dtype=float)
-            lookups = wp.zeros((height, width), dtype=wp.int64)
+            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
+                                             cache=MEDIA_CACHE)
+            radiance, transmittance, depth, lookups = outputs = [
+                device_buffers.reusable(f"single_scatter:{name}", (height, width), dtype, device)
+                for name, dtype in OUTPUTS]
+            for array in outputs:
+                array.zero_()
             march = MarchSettings()
             march.step = float(settings.step_length)
             march.shadow_step = float(settings.shadow_step_length)
@@ -130,16 +141,9 @@ class SingleScatter:
                       sun_struct(sunlight(scene)),
                       ground_struct(scene.ground, camera.position), march, radiance, transmittance, depth, lookups]
             launch_rows(kernel, height, width, inputs, device)
-            wp.synchronize_device(device)
+            images = {name: device_buffers.download(f"single_scatter:{name}", array)
+                      for (name, _), array in zip(OUTPUTS, outputs, strict=True)}
             seconds = time.perf_counter() - started
-            layer = Layer(
-                radiance.numpy(),
-                transmittance.numpy(),
-                depth.numpy(),
-                stats={
-                    "seconds": seconds,
-                    "lookups": int(lookups.numpy().sum()),
-                    "settings": dataclasses.asdict(settings),
-                },
-            )
-        return layer
+        return Layer(images["radiance"], images["transmittance"], images["depth"],
+                     stats={"seconds": seconds, "lookups": int(images["lookups"].sum()),
+                            "settings": dataclasses.asdict(settings)})

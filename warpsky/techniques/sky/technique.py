@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.scene.model import Scene
 from warpsky.techniques.base import Layer
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
@@ -61,6 +62,11 @@ def unattenuated_sun(scene: Scene) -> Scene:
     return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=irradiance))
 
 
+#: The sky pass's outputs (front radiance, front transmittance, back radiance): kept across frames as
+#: :func:`warpsky.device_buffers.reusable` arrays ``sky:NAME``, each downloaded once at the end of a frame.
+OUTPUTS = ("front", "front_transmittance", "back")
+
+
 class SkyPass:
     """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk): the
     ``sky`` pass of a frame, run when the scene has an atmosphere and the technique does not trace the air."""
@@ -74,20 +80,23 @@ class SkyPass:
         camera = scene.camera.conformed(width, height)
         far = float(camera.far)
         depth = np.full((height, width), far, np.float32) if media_depth is None else media_depth
-        with wp.ScopedDevice(self.device):
+        with wp.ScopedDevice(self.device), device_buffers.exclusive("sky", self.device):
             shape = (height, width)
-            front = wp.zeros(shape, dtype=wp.vec3)
-            front_t = wp.zeros(shape, dtype=wp.vec3)
-            back = wp.zeros(shape, dtype=wp.vec3)
+            front, front_t, back = outputs = [device_buffers.reusable(f"sky:{name}", shape, wp.vec3, self.device)
+                                              for name in OUTPUTS]
+            for array in outputs:
+                array.zero_()
+            depth_in = device_buffers.reusable("sky:media_depth", shape, float, self.device)
+            depth_in.assign(np.ascontiguousarray(depth, dtype=np.float32))
             wp.launch(sky_kernel, dim=shape, inputs=[
                 pinhole_camera(camera, width, height), float(camera.position[1] + atm.altitude),
                 wp.vec3(*atm.beta_sea_level.tolist()), float(atm.gamma),
                 sun_struct(sunlight(scene), unlit_direction=BELOW),
                 int(scene.ground is not None), ground_struct(scene.ground, camera.position),
-                wp.array(np.ascontiguousarray(depth, dtype=np.float32)), front, front_t, back,
+                depth_in, front, front_t, back,
             ])
-            wp.synchronize_device(self.device)
-            front_layer = Layer(front.numpy(), front_t.numpy(), np.full(shape, far, np.float32))
-            back_layer = Layer(back.numpy(), np.zeros((height, width, 3), np.float32),
-                               np.full(shape, far, np.float32))
+            images = [device_buffers.download(f"sky:{name}", array) for name, array in zip(OUTPUTS, outputs,
+                                                                                           strict=True)]
+            front_layer = Layer(images[0], images[1], np.full(shape, far, np.float32))
+            back_layer = Layer(images[2], np.zeros((height, width, 3), np.float32), np.full(shape, far, np.float32))
         return front_layer, back_layer

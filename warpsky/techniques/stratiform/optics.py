@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.optics.grid import angle_grid, sphere_integral
+from warpsky import device_buffers
+from warpsky.optics.grid import angle_grid, cumulative, sphere_integral
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.tables import modified_mie_table, phase_table
 from warpsky.techniques.stratiform.model1d import APPENDIX_B, KAPPA_REFERENCE
@@ -54,16 +55,26 @@ class StratiformOptics:
         """κ / κ_ref: metres of this layer to Appendix B's reference metres."""
         return self.kappa / KAPPA_REFERENCE
 
-    def device_inputs(self, device):
-        """(SlabOptics struct, DevicePhaseTables of [P_S, P²], Appendix B as a flat float array) on ``device``."""
+    def device_inputs(self, device, *, cache_name: str | None = None):
+        """(SlabOptics struct, DevicePhaseTables of [P_S, P²], Appendix B as a flat float array) on ``device``.
+        With ``cache_name`` the tables and parameters go through :func:`warpsky.device_buffers.upload` (copied
+        once while they stay the same)."""
         optics = SlabOptics()
         optics.kappa = float(self.kappa)
         optics.kappa_s = wp.vec3(*self.kappa_s.tolist())
         optics.to_reference = float(self.to_reference)
         optics.forward_msq = wp.vec3(*self.forward_msq.tolist())
-        tables = DevicePhaseTables.upload(np.stack([self.p_s, self.p2]), device)
-        params = wp.array(APPENDIX_B.reshape(-1).astype(np.float32), dtype=float, device=device)
-        return optics, tables, params
+        phase = np.stack([self.p_s, self.p2])
+        params = APPENDIX_B.reshape(-1).astype(np.float32)
+        if cache_name is None:
+            return optics, DevicePhaseTables.upload(phase, device), wp.array(params, dtype=float, device=device)
+        phase = np.asarray(phase, dtype=np.float64)
+        tables = DevicePhaseTables(
+            device_buffers.upload(f"{cache_name}:phase", phase.reshape(-1).astype(np.float32), float, device),
+            device_buffers.upload(f"{cache_name}:phase_cdf", cumulative(phase).reshape(-1).astype(np.float32), float,
+                                  device),
+            phase.shape[0])
+        return optics, tables, device_buffers.upload(f"{cache_name}:params", params, float, device)
 
 
 def stratiform_optics(number_density: float = 3.0e8, effective_radius: float = 7.0e-6) -> StratiformOptics:

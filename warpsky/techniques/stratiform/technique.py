@@ -14,7 +14,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
+from warpsky import device_buffers
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.stratiform import GroundTexture, StratiformLayer, at_time, sample_thickness, signed_thickness
@@ -105,6 +107,19 @@ def _sample(map2d: np.ndarray, origin, size, xs: np.ndarray, zs: np.ndarray) -> 
     return map2d[i, j]
 
 
+#: The pass's per-pixel outputs: kept across frames as :func:`warpsky.device_buffers.reusable` arrays
+#: ``stratiform:NAME``, each downloaded once at the end of a frame.
+OUTPUTS = (("radiance", wp.vec3), ("transmittance", wp.vec3), ("depth", float))
+
+
+def _device_rgb(name: str, values, device):
+    """``values`` (nu, nv, 3) as a vec3 device array: as they are when already on the device (the radiosity's
+    buffers), else refilled under ``name``."""
+    if isinstance(values, wp.array):
+        return values
+    return device_buffers.refill(name, np.asarray(values, dtype=np.float32), wp.vec3, device)
+
+
 class Stratiform:
     """Bouthors 2006 stratiform layer + radiosity. ``render`` takes the layer (and ground texture) explicitly."""
 
@@ -120,7 +135,8 @@ class Stratiform:
 
     def radiosity_inputs(self, scene: Scene, layer: StratiformLayer, texture: GroundTexture | None, optics,
                          sky: np.ndarray):
-        """(grid box (x0, z0, sx, sz), R_G, R_C, RadiosityResult or None) on the shared low-resolution grid."""
+        """(grid box (x0, z0, sx, sz), R_G, R_C, RadiosityResult or None) on the shared low-resolution grid; R_G
+        and R_C are the solver's device arrays when it ran, host arrays otherwise."""
         s = self.settings
         ground = scene.ground
         h = layer.base_altitude - ground.height
@@ -157,7 +173,7 @@ class Stratiform:
         if s.radiosity_for(layer):
             result = solver.solve(ground_albedo=rho_g, cloud_reflectance=rho_c, ground_direct=direct,
                                   cloud_source=source)
-            return box, result.ground_received, result.cloud_received, result
+            return box, *result.device_received, result
         return box, solver.gather(source), np.zeros((*shape, 3), np.float32), None
 
     def render(self, scene: Scene, width: int, height: int, *, layer: StratiformLayer,
@@ -165,8 +181,6 @@ class Stratiform:
         """Render ``layer`` (at its time, when advected) over the scene's ground, textured by ``ground_texture``
         (default: the ground's ``albedo_map``). ``draw_ground=False`` leaves the ground out of the image (another
         layer draws it) while the radiosity still lights this layer's base."""
-        import warp as wp
-
         started = time.perf_counter()
         layer = at_time(layer, self.device)
         if ground_texture is None and scene.ground is not None:
@@ -178,8 +192,10 @@ class Stratiform:
         if scene.dome is not None:
             sky = sky + upper_hemisphere(scene.dome)[1]  # the dome joins the uniform-equivalent sky above it
         stats = {"radiosity": bool(self.settings.radiosity_for(layer))}
-        with wp.ScopedDevice(self.device):
-            slab_optics, tables, params = optics.device_inputs(self.device)
+        # the radiosity's R_G and R_C stay in its kept arrays until the shading kernel has read them
+        with (wp.ScopedDevice(self.device), device_buffers.exclusive("stratiform", self.device),
+              device_buffers.exclusive("radiosity", self.device)):
+            slab_optics, tables, params = optics.device_inputs(self.device, cache_name="stratiform")
             g = LayerGeometry()
             g.base = float(layer.base_altitude - eye[1])
             g.x0 = float(layer.origin[0] - eye[0])
@@ -200,24 +216,28 @@ class Stratiform:
                 albedo = np.broadcast_to(ground.albedo if ground is not None else np.zeros(3), (2, 2, 3))
                 abox = (-1e9, -1e9, 2e9, 2e9)
             rel = lambda b: wp.vec4(b[0] - eye[0], b[1] - eye[2], b[2], b[3])  # noqa: E731
-            shape = (height, width)
-            radiance = wp.zeros(shape, dtype=wp.vec3)
-            transmittance = wp.zeros(shape, dtype=wp.vec3)
-            depth = wp.zeros(shape, dtype=float)
+            radiance, transmittance, depth = outputs = [
+                device_buffers.reusable(f"stratiform:{name}", (height, width), dtype, self.device)
+                for name, dtype in OUTPUTS]
+            for array in outputs:
+                array.zero_()
+            thickness = device_buffers.refill("stratiform:thickness", signed_thickness(layer.thickness), float,
+                                              self.device)
             inputs = [
-                pinhole_camera(camera, width, height), wp.array(signed_thickness(layer.thickness), dtype=float), g,
+                pinhole_camera(camera, width, height), thickness, g,
                 tables.values, params, slab_optics,
                 sun_struct(sunlight(scene), unlit_direction=(0.0, -1.0, 0.0)), wp.vec3(*sky.tolist()),
                 int(ground is not None and draw_ground), ground_struct(ground, eye),
-                wp.array(np.ascontiguousarray(albedo, dtype=np.float32), dtype=wp.vec3), rel(abox),
-                wp.array(np.ascontiguousarray(r_g, dtype=np.float32), dtype=wp.vec3),
-                wp.array(np.ascontiguousarray(r_c, dtype=np.float32), dtype=wp.vec3), rel(box),
+                device_buffers.refill("stratiform:albedo", np.asarray(albedo, dtype=np.float32), wp.vec3, self.device),
+                rel(abox), _device_rgb("stratiform:ground_received", r_g, self.device),
+                _device_rgb("stratiform:cloud_received", r_c, self.device), rel(box),
                 radiance, transmittance, depth,
             ]
             render_started = time.perf_counter()
             launch_rows(stratiform_kernel, height, width, inputs, self.device)
             wp.synchronize_device(self.device)
             stats["shading_seconds"] = time.perf_counter() - render_started
-            out = Layer(radiance.numpy(), transmittance.numpy(), depth.numpy(), stats)
+            out = Layer(*(device_buffers.download(f"stratiform:{name}", array)
+                          for (name, _), array in zip(OUTPUTS, outputs, strict=True)), stats)
         stats["seconds"] = time.perf_counter() - started
         return out
