@@ -163,11 +163,14 @@ def directional_sample(tables: OrientedTables, table: int, d: wp.vec3, state: wp
     return -wp.normalize(look), state
 
 
-def continuation_tables(scene, device, *, elevations=None, photons: int | None = None) -> OrientedTables:
+def continuation_tables(scene, device, *, elevations=None, photons: int | None = None,
+                        cache: str | None = None) -> OrientedTables:
     """The kernels' :class:`OrientedTables` of ``scene``'s oriented media (an empty struct without any): each
     oriented table built at ``elevations`` (default :data:`SAMPLING_ELEVATIONS`, evenly spaced from 0) with
     ``photons`` per channel (default :data:`SAMPLING_PHOTONS`), cached on disk, mixed with the random crystals,
-    renormalised per channel, with the green channel's CDFs."""
+    renormalised per channel, with the green channel's CDFs. With ``cache`` (a name) the arrays are kept on the
+    device under ``<cache>:continuation*`` and uploaded only when their contents change."""
+    from warpsky import device_buffers
     from warpsky.optics.oriented_ice import IceOrientation, SkyBins, oriented_ice_table, slice_cdf
     from warpsky.optics.oriented_phase import mixed_slice, oriented_media
 
@@ -203,8 +206,11 @@ def continuation_tables(scene, device, *, elevations=None, photons: int | None =
         return np.ascontiguousarray(np.concatenate([p.reshape(-1) for p in parts]) if parts else np.zeros(1),
                                     dtype=np.float32)
 
-    out.values = wp.array(flat(values), dtype=float, device=device)
-    out.marginal = wp.array(flat(marginals), dtype=float, device=device)
-    out.conditional = wp.array(flat(conditionals), dtype=float, device=device)
-    out.table_of = wp.array(np.asarray(table_of, dtype=np.int32), dtype=int, device=device)
+    arrays = {"values": (flat(values), float), "marginal": (flat(marginals), float),
+              "conditional": (flat(conditionals), float), "table_of": (np.asarray(table_of, dtype=np.int32), int)}
+    for name, (array, dtype) in arrays.items():
+        if cache is None:
+            setattr(out, name, wp.array(array, dtype=dtype, device=device))
+        else:
+            setattr(out, name, device_buffers.upload(f"{cache}:continuation_{name}", array, dtype, device))
     return out

@@ -212,8 +212,8 @@ class PathTracing:
             self.samples = device_buffers.reusable(f"{buffer_name}:samples", (capacity * height, width),
                                                    SampleResult, device)
         dome = dome_struct(scene.dome, device)
-        oriented = oriented_phases(scene, device)
-        continuation = continuation_tables(scene, device)
+        oriented = oriented_phases(scene, device, cache="path_tracer")
+        continuation = continuation_tables(scene, device, cache="path_tracer")
         self._keep = (tables, media, dome, oriented, continuation)  # the structs below point into these buffers
         self.fixed = [media.media, majorants, phase_tables_struct(tables, oriented, continuation),
                       air_struct(scene.atmosphere if air else None, camera.position), sun_struct(sunlight(scene)),
