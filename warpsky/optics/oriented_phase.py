@@ -17,11 +17,9 @@ with S the crystals' surface areas and theta the scattering angle of the look di
 stays what the stage gives, the same from every direction (oriented crystals present more area to some directions
 than others; that dependence is left out).
 
-Which light uses the slice: the sunlight scattered once towards the eye (single_scatter, hybrid's march) and the
-sunlight reaching every path vertex of the path tracer (next-event estimation). Light scattered again inside the
-ice is spread by the species' random-orientation table (the path tracer samples new directions from it): the
-halos and arcs come from the sun's single scattering; the diffuse light scattered twice or more is given the
-random crystals' angular spread.
+Which light uses the slice: the sunlight scattered once towards the eye (single_scatter, hybrid's march, slicing's
+first order) and the sunlight reaching every path vertex of the path tracer (next-event estimation). Paths that go
+on scattering through oriented ice use the table for any incoming direction (:mod:`warpsky.optics.oriented_sampling`).
 """
 
 from __future__ import annotations
@@ -152,6 +150,7 @@ def frame_slices(scene, *, photons: int = FRAME_PHOTONS) -> tuple[np.ndarray, li
     :func:`~warpsky.optics.oriented_ice.oriented_ice_table`, with a progress line while it builds) and mixed with
     the ``ice`` species' random phase as the module docstring says."""
     from warpsky.optics.oriented_ice import IceOrientation, SkyBins, oriented_ice_table
+
     grid = SkyBins()
     indices = oriented_media(scene.media)
     slice_of = [-1] * len(scene.media)
