@@ -131,6 +131,7 @@ def delta_m_slab(tau: float, view_mu) -> tuple[np.ndarray, np.ndarray]:
     return slab_radiance(phase, tau * kept, 1.0, view_mu, nodes=96)
 
 
+@pytest.mark.slow
 def test_flat_layer_against_the_slab_solution(device):
     """A flat stratiform layer 10 m thick, 20 km wide, κ chosen for τ = 2, sun at the zenith: the path-traced
     radiance reflected at 60° from the vertical and transmitted at 45.6° (μ = 0.5, 0.7) equals the delta-M
@@ -159,6 +160,7 @@ def test_flat_layer_against_the_slab_solution(device):
 
 
 # ----------------------------------------------------------------------------------------- voxel convergence
+@pytest.mark.slow
 def test_halving_the_voxels_changes_a_cloudy_region_by_under_5_percent(device):
     """A broken 100 m deck (τ up to 4.6) seen from the ground, the sun 50° up: halving both automatic voxel edges
     (62.5 m x 3.125 m) changes the mean radiance of the pixels the cloud covers by less than 5 % (measured on the

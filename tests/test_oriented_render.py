@@ -126,6 +126,7 @@ def test_ice_attributes_are_read_and_bad_ones_named(tmp_path):
         StageReader(sheet_stage(tmp_path / "cloud.usda", attributes=PLATES, field="cloud")).scene_at(None)
 
 
+@pytest.mark.slow
 def test_slice_mixes_oriented_and_random_crystals_by_number_and_area(tmp_path, optics_cache):
     """A fraction of oriented crystals weighs their table by number times surface; the slice stays normalised."""
     from warpsky.optics.oriented_ice import SkyBins
@@ -169,6 +170,7 @@ def test_sundogs_sit_where_bravais_puts_them_on_both_sides(tmp_path, device, opt
         assert band[int(peak)] > 3.0 * np.median(band), side
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("technique,settings,tolerance", [
     ("path_tracer", {"spp": "256", "seed": "1"}, 0.1),  # tolerance: the window mean's noise it must reach
     ("slicing", {"low_albedo": "true", "light_resolution": "64"}, 0.15),
@@ -204,6 +206,7 @@ def test_techniques_agree_with_the_march_on_a_thin_sheet(tmp_path, device, optic
             assert np.allclose(measured, expected, rtol=tolerance)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sun,tilt,height,pitch", [
     (0.0, 0.3, 0.0, 10.0),  # the sun on the horizon
     (90.0, 0.3, 0.0, 60.0),  # the sun at the zenith: no sundogs

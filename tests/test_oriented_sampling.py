@@ -88,6 +88,7 @@ def test_sampler_draws_the_table_and_its_weights_integrate_the_phase(tmp_path, d
     assert abs(counts[~used].sum() - sparse) < 5.0 * np.sqrt(sparse) + 5.0
 
 
+@pytest.mark.slow
 def test_white_furnace_with_oriented_plates(tmp_path, device, optics_cache, small_tables):
     """Oriented plates of albedo 1 in a uniform white environment, no sun: every path's weight averages to one, so
     every pixel sees the environment, through as many oriented scatterings as the box takes."""
