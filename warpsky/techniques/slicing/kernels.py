@@ -21,12 +21,14 @@ from :mod:`warpsky.optics.tables`, analytic phases in closed form (HG(g)^{*n} = 
 point mix their Ams and F by scattering weight (Riley Eq. 6 applied per order).
 
 The sky (the dome, the analytic sky of a frame with a sky pass, the ground they light: :mod:`warpsky.techniques.
-skylight`) lights the media as an unoccluded environment on two spherical-harmonic bands per hemisphere: each eye
-sample adds S(v) = max(0, m_up + 3 g M_up . v) + max(0, m_down + 3 g M_down . v), g mixed over the media at the
-sample by scattering weight, times its scattering integrated over the sample, (1 - e^-tau) albedo, as if no cloud
-shadowed it. For an albedo-1 medium under a uniform dome and an isotropic phase this is exactly the white
-furnace's answer (the pixel shows L whatever the optical depth); deep inside thick clouds it overestimates the
-light. The ground reflects albedo E / pi of the sky above it, occluded towards the zenith.
+skylight`) lights the media as an environment on two spherical-harmonic bands per hemisphere: each eye sample adds
+S(v) = T_up max(0, m_up + 3 g M_up . v) + T_down max(0, m_down + 3 g M_down . v), g mixed over the media at the
+sample by scattering weight, times its scattering integrated over the sample, (1 - e^-tau) albedo. T_up and T_down
+are the media's transmittances straight up and down from the sample, interpolated from a grid of column optical
+depths computed once per frame (:mod:`~warpsky.techniques.slicing.occlusion`), as the march takes them per sample.
+With ``skylight`` off the dome's mean radiance lights every sample unoccluded (the white furnace's answer for an
+albedo-1 medium; too bright deep inside thick clouds). The ground reflects albedo E / pi of the sky above it,
+occluded towards the zenith.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ from warpsky.techniques.common import (
 from warpsky.techniques.dome import ambient_ground
 from warpsky.techniques.single_scatter.kernels import media_span, sun_depth_function
 from warpsky.techniques.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
+from warpsky.techniques.slicing.occlusion import SkyShadow, sky_transmittances
 
 
 @wp.struct
@@ -320,9 +323,9 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
     sample_media = media_functions(has_detail)
 
     @wp.func
-    def gather_sample(media: VoxelMedia, tables: AmsTables, oriented: OrientedPhases, frame: SliceFrame,
-                      light_i: wp.array2d(dtype=wp.vec3), light_n: wp.array2d(dtype=wp.vec3), p: wp.vec3,
-                      view: wp.vec3, theta: float, length: float, ambient: AmbientLobes,
+    def gather_sample(media: VoxelMedia, tables: AmsTables, oriented: OrientedPhases, shadow: SkyShadow,
+                      frame: SliceFrame, light_i: wp.array2d(dtype=wp.vec3), light_n: wp.array2d(dtype=wp.vec3),
+                      p: wp.vec3, view: wp.vec3, theta: float, length: float, ambient: AmbientLobes,
                       asymmetry: wp.array(dtype=wp.vec3)):
         """(light scattered towards the eye, optical depth), RGB, of the piece of the eye ray of ``length`` [m]
         centred on ``p``."""
@@ -343,7 +346,8 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
         phase += oriented_ams_correction(point, media, tables, oriented, order, view, theta)
         sky = wp.vec3(0.0)
         if wp.static(has_dome):
-            sky = ambient_inscatter(ambient, mixed_asymmetry(media, point, asymmetry), wp.vec3(1.0), wp.vec3(1.0))
+            t_up, t_down = sky_transmittances(shadow, p)
+            sky = ambient_inscatter(ambient, mixed_asymmetry(media, point, asymmetry), t_up, t_down)
         for c in range(3):
             if scattering[c] > 0.0:
                 p_c = phase[c] / scattering[c]  # xi included, per medium
@@ -358,6 +362,7 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
         media: VoxelMedia,
         tables: AmsTables,
         oriented: OrientedPhases,
+        shadow: SkyShadow,
         cam: PinholeCamera,
         frame: SliceFrame,
         chunk: PlaneRange,
@@ -398,7 +403,7 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
             keep = wp.vec3(1.0)
             for s in range(count):  # front to back inside the slab
                 p = view * (t + (lo + (float(s) + 0.5) * length))
-                scattered, tau = gather_sample(media, tables, oriented, frame, light.stack_intensity[k],
+                scattered, tau = gather_sample(media, tables, oriented, shadow, frame, light.stack_intensity[k],
                                                light.stack_count[k], p, view, theta, length, lobes,
                                                ambient.asymmetry)
                 contribution += wp.cw_mul(keep, scattered)

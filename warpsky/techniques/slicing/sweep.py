@@ -48,6 +48,7 @@ from warpsky.techniques.slicing.kernels import (
     SliceFrame,
     eye_span_kernel,
 )
+from warpsky.techniques.slicing.occlusion import SkyShadow
 
 #: Capture and replay graphs on CUDA; False: plain launches everywhere (benchmarks compare the two).
 USE_GRAPHS = True
@@ -144,6 +145,7 @@ class SliceSweep:
     media: VoxelMedia
     tables: AmsTables
     oriented: OrientedPhases
+    shadow: SkyShadow
     cam: PinholeCamera
     frame: SliceFrame
     sun: Sun
@@ -155,8 +157,8 @@ class SliceSweep:
 
     def key(self) -> tuple:
         """Everything a captured graph of this sweep holds by value or by address."""
-        structs = tuple(bytes(s.__ctype__()) for s in (self.media, self.tables, self.oriented, self.cam, self.frame,
-                                                        self.sun, self.ambient))
+        structs = tuple(bytes(s.__ctype__()) for s in (self.media, self.tables, self.oriented, self.shadow, self.cam,
+                                                        self.frame, self.sun, self.ambient))
         arrays = tuple((a.ptr, a.shape) for a in self.buffers.arrays())
         return (self.eye_kernel, self.light_kernel, structs, arrays, float(self.sample_length),
                 np.asarray(self.planes, dtype=np.float64).tobytes(), tuple(self.start))
@@ -181,7 +183,8 @@ class SliceSweep:
             chunk.planes, chunk.first = b.planes, first
             chunk.count, chunk.entry = min(chunk_size, len(self.planes) - first), int(first == 0)
             light_inputs = [self.media, self.tables, self.frame, chunk, light]
-            eye_inputs = [self.media, self.tables, self.oriented, self.cam, self.frame, chunk, light, self.sun,
+            eye_inputs = [self.media, self.tables, self.oriented, self.shadow, self.cam, self.frame, chunk, light,
+                          self.sun,
                           self.sample_length, self.ambient, eye]
             if capturing:
                 wp.launch(self.light_kernel, dim=(res, res), inputs=[*light_inputs, 0], device=device)

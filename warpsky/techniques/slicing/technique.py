@@ -24,6 +24,7 @@ from warpsky.techniques.base import Layer, TechniqueSettings, documented, settin
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.skylight import ambient_settings
 from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
+from warpsky.techniques.slicing.occlusion import sky_shadow
 from warpsky.techniques.slicing.sweep import SliceSweep, SweepBuffers, chunk_planes, run_sweep, sweep_lock
 from warpsky.techniques.sunlight import sunlight
 
@@ -75,7 +76,8 @@ class SlicingSettings(TechniqueSettings):
         "order); 25 = his GPU shortcut Eq. 25 (tends to no attenuation as slices are added)")
     skylight: bool = setting(True, help="light the media with the whole sky on two spherical-harmonic bands per "
                              "hemisphere (the analytic sky of a frame with a sky pass, the dome, the ground they "
-                             "light) through the phase's asymmetry, unoccluded; 0: the dome's mean radiance alone")
+                             "light) through the phase's asymmetry, occluded towards the zenith and nadir; "
+                             "0: the dome's mean radiance alone, unoccluded")
 
     def __post_init__(self):
         self.normalise()
@@ -285,6 +287,8 @@ class Slicing:
             device=self.device, eye_kernel=eye_kernel, light_kernel=light_kernel, media=media.media,
             tables=self._ams_tables(scene, scene.species, int(settings.orders), settings.xi),
             oriented=oriented_phases(scene, self.device, cache="slicing"),
+            shadow=sky_shadow(media, media_corners(scene, camera.position), float(media.min_voxel_size),
+                              self.device, on=bool(ambient_on) and bool(settings.skylight)),
             cam=pinhole_camera(camera, width, height), frame=frame, sun=sun_struct(sun), ambient=environment,
             sample_length=float(media.min_voxel_size) / float(settings.eye_samples), planes=planes,
             start=tuple(np.asarray(start, dtype=np.float64).tolist()),
