@@ -520,9 +520,11 @@ def ground_kernel(has_detail: bool = False, has_dome: bool = False):
         radiance: wp.array2d(dtype=wp.vec3),
         transmittance: wp.array2d(dtype=wp.vec3),
         depth: wp.array2d(dtype=float),
+        row_offset: int,
     ):
         """The Lambertian ground behind the media, lit by the sun through them; it ends every ray that reaches it."""
-        row, col = wp.tid()
+        r, col = wp.tid()
+        row = r + row_offset
         view = camera_ray(cam, row, col)
         if view[1] >= 0.0 or ground.offset >= 0.0:
             return

@@ -17,6 +17,7 @@ import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
+from warpsky.device import launch_rows
 from warpsky.kernel_variants import kernel_variants
 from warpsky.media.voxel import VoxelMedia, media_functions
 
@@ -86,8 +87,9 @@ def column_depth_kernel(has_detail: bool = False):
     sample_media = media_functions(has_detail)
 
     @wp.kernel(module="unique")
-    def column_depths(media: VoxelMedia, shadow: SkyShadow):
-        i, k = wp.tid()
+    def column_depths(media: VoxelMedia, shadow: SkyShadow, row_offset: int):
+        r, k = wp.tid()
+        i = r + row_offset
         ny = shadow.up.shape[1]
         h = shadow.cell[1] / float(SUBSTEPS)
         base = shadow.origin + wp.vec3(float(i) * shadow.cell[0], 0.0, float(k) * shadow.cell[2])
@@ -129,6 +131,6 @@ def sky_shadow(media_buffers, corners: np.ndarray, finest: float, device, *, on:
     shape = tuple(int(n) for n in nodes)
     out.up = device_buffers.reusable("slicing:sky_shadow_up", shape, wp.vec3, device)
     out.down = device_buffers.reusable("slicing:sky_shadow_down", shape, wp.vec3, device)
-    wp.launch(column_depth_kernel(media_buffers.has_detail), dim=(shape[0], shape[2]),
-              inputs=[media_buffers.media, out], device=device)
+    launch_rows(column_depth_kernel(media_buffers.has_detail), shape[0], shape[2], [media_buffers.media, out],
+                device)
     return out

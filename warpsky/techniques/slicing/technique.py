@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -12,6 +13,7 @@ import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
+from warpsky.device import launch_rows
 from warpsky.errors import UsageError
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
@@ -93,9 +95,11 @@ class SlicingSettings(TechniqueSettings):
             raise UsageError(f"setting xi must be a finite phase value >= 0 [1/sr], got {self.xi}")
 
 
+@functools.lru_cache(maxsize=64)
 def analytic_ams(kind: PhaseKind, g: float, orders: int) -> tuple[np.ndarray, np.ndarray]:
     """Closed-form Ams_0..N (N+1, 3, M) and F_n (N+1, 3) for an analytic phase: HG(g)^{*n} = HG(g^n); Rayleigh
-    (1/4pi)(1 + 5 (1/10)^n P_2); isotropic 1/4pi."""
+    (1/4pi)(1 + 5 (1/10)^n P_2); isotropic 1/4pi. Kept per (kind, g, orders): a frame's tables cost no host time
+    after the first (callers must not write into the arrays)."""
     mu = np.cos(angle_grid())
     rows = [delta_table()]
     for n in range(1, orders + 1):
@@ -224,6 +228,7 @@ class Slicing:
         return ams
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
+        self._frame_ambient = None
         settings = self.resolved_settings(scene)
         camera = scene.camera.conformed(width, height)
         device = self.device
@@ -279,8 +284,7 @@ class Slicing:
         frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count), res)
         # a sun set behind the horizon lights nothing, but the media still hide what lies behind them
         start = sun.irradiance if sun is not None and sun.lit else np.zeros(3)
-        environment, _, ambient_on = ambient_settings(scene, skylight=bool(settings.skylight),
-                                                      traces_air=self.traces_air, device=self.device)
+        environment, _, ambient_on = self._ambient(scene, settings)
         eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
                                                    media.has_detail, bool(ambient_on))
         return SliceSweep(
@@ -330,9 +334,16 @@ class Slicing:
         into the device images ``radiance``, ``transmittance`` (RGB) and ``depth`` [m]; ``media`` is the sweep's
         upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`); the sky above it lights it too, occluded towards
         the zenith."""
-        _, ground_sky, ambient_on = ambient_settings(scene, skylight=bool(self.settings.skylight),
-                                                     traces_air=self.traces_air, device=self.device)
-        wp.launch(ground_kernel(media.has_detail, bool(ambient_on)), dim=(height, width), inputs=[
+        _, ground_sky, ambient_on = self._ambient(scene, self.settings)
+        launch_rows(ground_kernel(media.has_detail, bool(ambient_on)), height, width, [
             media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
             ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_sky,
-            radiance, transmittance, depth], device=self.device)
+            radiance, transmittance, depth], self.device)
+
+    def _ambient(self, scene: Scene, settings: SlicingSettings):
+        """:func:`~warpsky.techniques.skylight.ambient_settings` of the frame being rendered, computed once (the
+        sweep and the ground both need it; :meth:`render` forgets it when a frame starts)."""
+        if getattr(self, "_frame_ambient", None) is None:
+            self._frame_ambient = ambient_settings(scene, skylight=bool(settings.skylight),
+                                                   traces_air=self.traces_air, device=self.device)
+        return self._frame_ambient
