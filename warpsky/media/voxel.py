@@ -42,6 +42,28 @@ class VoxelGrid:
     phase_g: float  # HG asymmetry
 
 
+@wp.struct
+class TrilinearCell:
+    """The grid cell around a point in index coordinates: its lower and upper node and the point's fractions."""
+
+    lo: wp.vec3i
+    hi: wp.vec3i
+    frac: wp.vec3
+
+
+@wp.func
+def trilinear_cell(p: wp.vec3, n: wp.vec3i) -> TrilinearCell:
+    """The cell of index position ``p`` in a grid of ``n`` nodes per axis, ``p`` clamped to [0, n - 1]."""
+    x = wp.clamp(p[0], 0.0, float(n[0] - 1))
+    y = wp.clamp(p[1], 0.0, float(n[1] - 1))
+    z = wp.clamp(p[2], 0.0, float(n[2] - 1))
+    out = TrilinearCell()
+    out.lo = wp.vec3i(wp.min(int(x), n[0] - 1), wp.min(int(y), n[1] - 1), wp.min(int(z), n[2] - 1))
+    out.hi = wp.vec3i(wp.min(out.lo[0] + 1, n[0] - 1), wp.min(out.lo[1] + 1, n[1] - 1), wp.min(out.lo[2] + 1, n[2] - 1))
+    out.frac = wp.vec3(x - float(out.lo[0]), y - float(out.lo[1]), z - float(out.lo[2]))
+    return out
+
+
 @wp.func
 def grid_value(values: wp.array(dtype=float), grid: VoxelGrid, p: wp.vec3) -> float:
     """Trilinear field value at index position ``p``; zero outside the box [-0.5, n - 0.5], clamped inside it."""
@@ -50,18 +72,18 @@ def grid_value(values: wp.array(dtype=float), grid: VoxelGrid, p: wp.vec3) -> fl
         return 0.0
     if p[0] > float(n[0]) - 0.5 or p[1] > float(n[1]) - 0.5 or p[2] > float(n[2]) - 0.5:
         return 0.0
-    x = wp.clamp(p[0], 0.0, float(n[0] - 1))
-    y = wp.clamp(p[1], 0.0, float(n[1] - 1))
-    z = wp.clamp(p[2], 0.0, float(n[2] - 1))
-    i0 = wp.min(int(x), n[0] - 1)
-    j0 = wp.min(int(y), n[1] - 1)
-    k0 = wp.min(int(z), n[2] - 1)
-    i1 = wp.min(i0 + 1, n[0] - 1)
-    j1 = wp.min(j0 + 1, n[1] - 1)
-    k1 = wp.min(k0 + 1, n[2] - 1)
-    fx = x - float(i0)
-    fy = y - float(j0)
-    fz = z - float(k0)
+    cell = trilinear_cell(p, n)
+    lo = cell.lo
+    hi = cell.hi
+    i0 = lo[0]
+    j0 = lo[1]
+    k0 = lo[2]
+    i1 = hi[0]
+    j1 = hi[1]
+    k1 = hi[2]
+    fx = cell.frac[0]
+    fy = cell.frac[1]
+    fz = cell.frac[2]
     sy = n[2]
     sx = n[1] * n[2]
     b = grid.offset

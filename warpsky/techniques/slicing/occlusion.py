@@ -19,7 +19,7 @@ import warp as wp
 from warpsky import device_buffers
 from warpsky.device import launch_rows
 from warpsky.kernel_variants import kernel_variants
-from warpsky.media.voxel import VoxelMedia, media_functions
+from warpsky.media.voxel import VoxelMedia, media_functions, trilinear_cell
 
 #: Most grid nodes along one axis of the occlusion grid.
 MAX_NODES = 64
@@ -48,25 +48,16 @@ class SkyShadow:
 @wp.func
 def shadow_depth(grid: wp.array3d(dtype=wp.vec3), shadow: SkyShadow, p: wp.vec3) -> wp.vec3:
     """Trilinear optical depth of ``grid`` at camera-relative ``p`` (clamped to the box)."""
-    n = wp.vec3i(grid.shape[0], grid.shape[1], grid.shape[2])
-    q = wp.cw_div(p - shadow.origin, shadow.cell)
-    x = wp.clamp(q[0], 0.0, float(n[0] - 1))
-    y = wp.clamp(q[1], 0.0, float(n[1] - 1))
-    z = wp.clamp(q[2], 0.0, float(n[2] - 1))
-    i0 = wp.min(int(x), n[0] - 1)
-    j0 = wp.min(int(y), n[1] - 1)
-    k0 = wp.min(int(z), n[2] - 1)
-    i1 = wp.min(i0 + 1, n[0] - 1)
-    j1 = wp.min(j0 + 1, n[1] - 1)
-    k1 = wp.min(k0 + 1, n[2] - 1)
-    fx = x - float(i0)
-    fy = y - float(j0)
-    fz = z - float(k0)
-    c00 = grid[i0, j0, k0] * (1.0 - fz) + grid[i0, j0, k1] * fz
-    c01 = grid[i0, j1, k0] * (1.0 - fz) + grid[i0, j1, k1] * fz
-    c10 = grid[i1, j0, k0] * (1.0 - fz) + grid[i1, j0, k1] * fz
-    c11 = grid[i1, j1, k0] * (1.0 - fz) + grid[i1, j1, k1] * fz
-    return (c00 * (1.0 - fy) + c01 * fy) * (1.0 - fx) + (c10 * (1.0 - fy) + c11 * fy) * fx
+    cell = trilinear_cell(wp.cw_div(p - shadow.origin, shadow.cell),
+                          wp.vec3i(grid.shape[0], grid.shape[1], grid.shape[2]))
+    lo = cell.lo
+    hi = cell.hi
+    f = cell.frac
+    c00 = grid[lo[0], lo[1], lo[2]] * (1.0 - f[2]) + grid[lo[0], lo[1], hi[2]] * f[2]
+    c01 = grid[lo[0], hi[1], lo[2]] * (1.0 - f[2]) + grid[lo[0], hi[1], hi[2]] * f[2]
+    c10 = grid[hi[0], lo[1], lo[2]] * (1.0 - f[2]) + grid[hi[0], lo[1], hi[2]] * f[2]
+    c11 = grid[hi[0], hi[1], lo[2]] * (1.0 - f[2]) + grid[hi[0], hi[1], hi[2]] * f[2]
+    return (c00 * (1.0 - f[1]) + c01 * f[1]) * (1.0 - f[0]) + (c10 * (1.0 - f[1]) + c11 * f[1]) * f[0]
 
 
 @wp.func
