@@ -24,6 +24,7 @@ import warpsky.techniques.path_tracer.kernels  # noqa: F401  (registers its kern
 import warpsky.techniques.radiosity.kernels as radiosity
 import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its kernel factories)
 import warpsky.techniques.sky.kernels as sky
+import warpsky.techniques.slicing.ground  # noqa: F401  (registers its kernel factory)
 import warpsky.techniques.slicing.kernels as slicing  # (also registers its kernel factories)
 import warpsky.techniques.stratiform.kernels as stratiform_kernels
 import warpsky.techniques.surfaces.kernels as surfaces_kernels

@@ -25,7 +25,8 @@ from warpsky.scene.model import PhaseKind, Projection, Scene
 from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
 from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
 from warpsky.techniques.skylight import ambient_settings
-from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, ground_kernel, slicing_kernels
+from warpsky.techniques.slicing.ground import ground_kernel
+from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, slicing_kernels
 from warpsky.techniques.slicing.occlusion import sky_shadow
 from warpsky.techniques.slicing.sweep import SliceSweep, SweepBuffers, chunk_planes, run_sweep, sweep_lock
 from warpsky.techniques.sunlight import sunlight
