@@ -24,6 +24,7 @@ on scattering through oriented ice use the table for any incoming direction (:mo
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -84,6 +85,18 @@ def oriented_value(phases: OrientedPhases, slice_index: int, look: wp.vec3) -> w
     return low * (1.0 - fy) + high * fy
 
 
+@wp.func
+def per_unit_scattering(point: MediaPoint, rayleigh: wp.vec3, value: wp.vec3) -> wp.vec3:
+    """``value`` [1/(m sr)] divided by the scattering coefficient at ``point``, the media's plus ``rayleigh`` [1/m]
+    of air, per channel (0 where nothing scatters): a sum over components in Riley Eq. 6 made a phase [1/sr]."""
+    total = rayleigh + point.scattering
+    out = wp.vec3(0.0)
+    for c in range(3):
+        if total[c] > 0.0:
+            out[c] = value[c] / total[c]
+    return out
+
+
 def oriented_correction_function(sample_phase):
     """``(oriented_correction, oriented_mixture_correction)``.
 
@@ -113,19 +126,12 @@ def oriented_correction_function(sample_phase):
                                     theta: float) -> wp.vec3:
         """The same for a mixture phase (Riley Eq. 6, normalised by the summed scattering, ``rayleigh`` [1/m] of
         air included): the correction divided by that sum [1/sr]."""
-        out = wp.vec3(0.0)
         if phases.count == 0:
-            return out
-        total = rayleigh
-        for m in range(media.count):
-            total += media.grids[m].scattering * point.density[m]
-        extra = oriented_correction(media, point, tables, phases, look, theta)
-        for c in range(3):
-            if total[c] > 0.0:
-                out[c] = extra[c] / total[c]
-        return out
+            return wp.vec3(0.0)
+        return per_unit_scattering(point, rayleigh, oriented_correction(media, point, tables, phases, look, theta))
 
     return oriented_correction, oriented_mixture_correction
+
 
 
 def sun_elevation_deg(scene) -> float:
@@ -149,7 +155,7 @@ def frame_slices(scene, *, photons: int = FRAME_PHOTONS) -> tuple[np.ndarray, li
     One slice per oriented medium, its oriented table built at the frame's sun elevation (cached on disk by
     :func:`~warpsky.optics.oriented_ice.oriented_ice_table`, with a progress line while it builds) and mixed with
     the ``ice`` species' random phase as the module docstring says."""
-    from warpsky.optics.oriented_ice import IceOrientation, SkyBins, oriented_ice_table
+    from warpsky.optics.oriented_ice import SkyBins
 
     grid = SkyBins()
     indices = oriented_media(scene.media)
@@ -159,12 +165,22 @@ def frame_slices(scene, *, photons: int = FRAME_PHOTONS) -> tuple[np.ndarray, li
     elevation = sun_elevation_deg(scene)
     slices = []
     for index in indices:
-        spec = scene.media[index].ice
-        orientation = IceOrientation(spec.orientation, spec.tilt_deg, spec.habit)
-        table = oriented_ice_table(orientation, sun_elevations_deg=(elevation,), grid=grid, photons=photons)
-        slices.append(mixed_slice(table.phase[0], spec.fraction, orientation, grid, elevation))
+        slices.append(_frame_slice(scene.media[index].ice, elevation, photons))
         slice_of[index] = len(slices) - 1
     return np.stack(slices), slice_of, grid
+
+
+@functools.lru_cache(maxsize=8)
+def _frame_slice(spec, elevation_deg: float, photons: int) -> np.ndarray:
+    """The mixed slice of an ice field's crystals (:class:`~warpsky.scene.model.IceCrystals`) for a sun at
+    ``elevation_deg``, kept per process: the frames of a batch, and hybrid's march and paths within a frame, share
+    it instead of loading and mixing the table again (callers must not write into it)."""
+    from warpsky.optics.oriented_ice import IceOrientation, SkyBins, oriented_ice_table
+
+    grid = SkyBins()
+    orientation = IceOrientation(spec.orientation, spec.tilt_deg, spec.habit)
+    table = oriented_ice_table(orientation, sun_elevations_deg=(elevation_deg,), grid=grid, photons=photons)
+    return mixed_slice(table.phase[0], spec.fraction, orientation, grid, elevation_deg)
 
 
 def mixed_slice(oriented: np.ndarray, fraction: float, orientation, grid, elevation_deg: float) -> np.ndarray:

@@ -21,6 +21,7 @@ channel is 1 and the other channels carry their ratio to green (the dispersion o
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -163,6 +164,29 @@ def directional_sample(tables: OrientedTables, table: int, d: wp.vec3, state: wp
     return -wp.normalize(look), state
 
 
+@functools.lru_cache(maxsize=4)
+def _medium_tables(spec, elevations: tuple, photons: int) -> tuple[list, list, list]:
+    """(mixed slices, green marginal CDFs, green conditional CDFs) of an ice field's crystals
+    (:class:`~warpsky.scene.model.IceCrystals`) at ``elevations``, kept per process so that the frames of a batch
+    do not load, mix and integrate the table again (callers must not write into them)."""
+    from warpsky.optics.oriented_ice import IceOrientation, SkyBins, oriented_ice_table, slice_cdf
+    from warpsky.optics.oriented_phase import mixed_slice
+
+    grid = SkyBins()
+    solid = grid.solid_angles()[:, :, None]
+    orientation = IceOrientation(spec.orientation, spec.tilt_deg, spec.habit)
+    table = oriented_ice_table(orientation, sun_elevations_deg=elevations, grid=grid, photons=photons)
+    values, marginals, conditionals = [], [], []
+    for k, elevation in enumerate(elevations):
+        mixed = mixed_slice(table.phase[k], spec.fraction, orientation, grid, elevation)
+        mixed = mixed / np.maximum((mixed * solid).sum(axis=(0, 1)), 1e-300)
+        marginal, conditional = slice_cdf(mixed, grid)
+        values.append(mixed.astype(np.float32))
+        marginals.append(marginal[:, SAMPLED].astype(np.float32))
+        conditionals.append(conditional[:, :, SAMPLED].astype(np.float32))
+    return values, marginals, conditionals
+
+
 def continuation_tables(scene, device, *, elevations=None, photons: int | None = None,
                         cache: str | None = None) -> OrientedTables:
     """The kernels' :class:`OrientedTables` of ``scene``'s oriented media (an empty struct without any): each
@@ -171,8 +195,8 @@ def continuation_tables(scene, device, *, elevations=None, photons: int | None =
     renormalised per channel, with the green channel's CDFs. With ``cache`` (a name) the arrays are kept on the
     device under ``<cache>:continuation*`` and uploaded only when their contents change."""
     from warpsky import device_buffers
-    from warpsky.optics.oriented_ice import IceOrientation, SkyBins, oriented_ice_table, slice_cdf
-    from warpsky.optics.oriented_phase import mixed_slice, oriented_media
+    from warpsky.optics.oriented_ice import SkyBins
+    from warpsky.optics.oriented_phase import oriented_media
 
     elevations = np.asarray(SAMPLING_ELEVATIONS if elevations is None else elevations, dtype=np.float64)
     steps = np.diff(elevations)
@@ -183,18 +207,12 @@ def continuation_tables(scene, device, *, elevations=None, photons: int | None =
     indices = oriented_media(scene.media)
     table_of = [-1] * max(len(scene.media), 1)
     values, marginals, conditionals = [], [], []
-    solid = grid.solid_angles()[:, :, None]
     for index in indices:
-        spec = scene.media[index].ice
-        orientation = IceOrientation(spec.orientation, spec.tilt_deg, spec.habit)
-        table = oriented_ice_table(orientation, sun_elevations_deg=elevations, grid=grid, photons=photons)
-        for k, elevation in enumerate(elevations):
-            mixed = mixed_slice(table.phase[k], spec.fraction, orientation, grid, float(elevation))
-            mixed = mixed / np.maximum((mixed * solid).sum(axis=(0, 1)), 1e-300)
-            marginal, conditional = slice_cdf(mixed, grid)
-            values.append(mixed.astype(np.float32))
-            marginals.append(marginal[:, SAMPLED].astype(np.float32))
-            conditionals.append(conditional[:, :, SAMPLED].astype(np.float32))
+        table_values, table_marginals, table_conditionals = _medium_tables(
+            scene.media[index].ice, tuple(float(e) for e in elevations), photons)
+        values += table_values
+        marginals += table_marginals
+        conditionals += table_conditionals
         table_of[index] = len(values) // len(elevations) - 1
     out = OrientedTables()
     out.count = len(indices)

@@ -25,7 +25,7 @@ from warpsky.optics.kernels import (
     sample_table,
     scattering_angle,
 )
-from warpsky.optics.oriented_phase import OrientedPhases
+from warpsky.optics.oriented_phase import OrientedPhases, per_unit_scattering
 from warpsky.optics.oriented_sampling import OrientedTables, directional_sample, directional_value
 from warpsky.optics.phase import INV_FOUR_PI, PHASE_HG, PHASE_RAYLEIGH, phase_eval, phase_rayleigh
 
@@ -146,19 +146,6 @@ def continuation_terms(media: VoxelMedia, point: MediaPoint, tables: PhaseTables
     return out
 
 
-@wp.func
-def oriented_share(media: VoxelMedia, point: MediaPoint, rayleigh: wp.vec3, extra: wp.vec3) -> wp.vec3:
-    """``extra`` [1/(m sr)] divided by the summed scattering at ``point`` (Rayleigh included), per channel."""
-    total = rayleigh
-    for m in range(media.count):
-        total += media.grids[m].scattering * point.density[m]
-    out = wp.vec3(0.0)
-    for c in range(3):
-        if total[c] > 0.0:
-            out[c] = extra[c] / total[c]
-    return out
-
-
 @functools.cache
 def phase_sum_function(has_tables: bool):
     """``scattered_phase(media, point, tables, start, theta) -> vec3``: ``start`` plus the sum over the media at
@@ -269,7 +256,7 @@ def mixture_functions(has_tables: bool):
         if pdf > 0.0:
             phase = mixture_phase(media, point, tables.values, rayleigh, theta)
             if wp.static(has_tables):
-                phase += oriented_share(media, point, rayleigh, phase_extra)
+                phase += per_unit_scattering(point, rayleigh, phase_extra)
             out.weight = wp.max(phase, wp.vec3(0.0)) / pdf
         return out
 
