@@ -229,7 +229,6 @@ class Slicing:
         return ams
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
-        self._frame_ambient = None
         settings = self.resolved_settings(scene)
         camera = scene.camera.conformed(width, height)
         device = self.device
@@ -240,12 +239,16 @@ class Slicing:
             # detail this also advects its noise to time_s)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, scene.species, time_s=scene.time_s,
                                              cache="slicing")
+            # the sky's light on the media and the ground: (environment, E / pi at the ground, 1 when any)
+            ambient = ambient_settings(scene, skylight=bool(settings.skylight), traces_air=self.traces_air,
+                                       device=device)
             if scene.media:
                 check_field_count(scene.media, "slicing", " or use technique path_tracer")
-                sweep = self._sweep(scene, settings, camera, width, height, media)
+                sweep = self._sweep(scene, settings, camera, width, height, media, ambient)
                 with sweep_lock(device):
                     how = run_sweep(sweep)
-                    radiance, transmittance, depth = self._finish(scene, camera, width, height, media, sweep.buffers)
+                    radiance, transmittance, depth = self._finish(scene, camera, width, height, media, sweep.buffers,
+                                                                  ambient)
                 slices = len(sweep.planes)
             else:
                 how, slices = "none", 0
@@ -253,7 +256,7 @@ class Slicing:
                 images = [wp.zeros(shape, dtype=wp.vec3), wp.full(shape, wp.vec3(1.0, 1.0, 1.0), dtype=wp.vec3),
                           wp.full(shape, far, dtype=float)]
                 if scene.ground is not None:
-                    self._ground(scene, camera, width, height, media, *images)
+                    self._ground(scene, camera, width, height, media, ambient, *images)
                 radiance, transmittance, depth = (image.numpy() for image in images)
             layer = Layer(radiance, transmittance, depth, stats={
                 "seconds": time.perf_counter() - started, "settings": dataclasses.asdict(settings),
@@ -261,7 +264,7 @@ class Slicing:
         return layer
 
     def _finish(self, scene: Scene, camera, width: int, height: int, media: VoxelMediaBuffers,
-                buffers: SweepBuffers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                buffers: SweepBuffers, ambient: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(radiance, transmittance, depth [m]) of the frame after its sweep: the mean depth divided out on the
         host, the ground drawn on the sweep's images still on the device, then one download per image."""
         far = np.float32(camera.far)
@@ -271,13 +274,14 @@ class Slicing:
         if scene.ground is not None:
             depth_image = device_buffers.reusable("slicing:depth", (height, width), float, self.device)
             depth_image.assign(depth)
-            self._ground(scene, camera, width, height, media, buffers.radiance, buffers.transmittance, depth_image)
+            self._ground(scene, camera, width, height, media, ambient, buffers.radiance, buffers.transmittance,
+                         depth_image)
             depth = device_buffers.download("slicing:depth", depth_image)
         return (device_buffers.download("slicing:radiance", buffers.radiance),
                 device_buffers.download("slicing:transmittance", buffers.transmittance), depth)
 
     def _sweep(self, scene: Scene, settings: SlicingSettings, camera, width: int, height: int,
-               media: VoxelMediaBuffers) -> SliceSweep:
+               media: VoxelMediaBuffers, ambient: tuple) -> SliceSweep:
         """The frame's sweep: slice geometry, Ams tables and kernel arguments, on the kept ``slicing:*`` buffers."""
         sun = sunlight(scene)
         toward_sun = sun.direction if sun is not None else np.array([0.0, 1.0, 0.0])  # unlit: any axis
@@ -285,7 +289,7 @@ class Slicing:
         frame, planes = self._frame(scene, camera, toward_sun, int(settings.slice_count), res)
         # a sun set behind the horizon lights nothing, but the media still hide what lies behind them
         start = sun.irradiance if sun is not None and sun.lit else np.zeros(3)
-        environment, _, ambient_on = self._ambient(scene, settings)
+        environment, _, ambient_on = ambient
         eye_kernel, light_kernel = slicing_kernels(bool(settings.low_albedo), int(settings.light_equation),
                                                    media.has_detail, bool(ambient_on))
         return SliceSweep(
@@ -329,22 +333,14 @@ class Slicing:
         frame.front_to_back = int(front_to_back)
         return frame, planes
 
-    def _ground(self, scene: Scene, camera, width: int, height: int, media: VoxelMediaBuffers, radiance: wp.array,
-                transmittance: wp.array, depth: wp.array) -> None:
+    def _ground(self, scene: Scene, camera, width: int, height: int, media: VoxelMediaBuffers, ambient: tuple,
+                radiance: wp.array, transmittance: wp.array, depth: wp.array) -> None:
         """Lambertian ground behind the media, lit by the sun through them (shadow rays marched per voxel), drawn
         into the device images ``radiance``, ``transmittance`` (RGB) and ``depth`` [m]; ``media`` is the sweep's
         upload (:class:`~warpsky.media.voxel.VoxelMediaBuffers`); the sky above it lights it too, occluded towards
         the zenith."""
-        _, ground_sky, ambient_on = self._ambient(scene, self.settings)
+        _, ground_sky, ambient_on = ambient
         launch_rows(ground_kernel(media.has_detail, bool(ambient_on)), height, width, [
             media.media, pinhole_camera(camera, width, height), sun_struct(sunlight(scene)),
             ground_struct(scene.ground, camera.position), float(media.min_voxel_size), ground_sky,
             radiance, transmittance, depth], self.device)
-
-    def _ambient(self, scene: Scene, settings: SlicingSettings):
-        """:func:`~warpsky.techniques.skylight.ambient_settings` of the frame being rendered, computed once (the
-        sweep and the ground both need it; :meth:`render` forgets it when a frame starts)."""
-        if getattr(self, "_frame_ambient", None) is None:
-            self._frame_ambient = ambient_settings(scene, skylight=bool(settings.skylight),
-                                                   traces_air=self.traces_air, device=self.device)
-        return self._frame_ambient
