@@ -32,7 +32,7 @@ def _best(call, repeats: int) -> tuple[float, object]:
 
 
 def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -> list[dict]:
-    from warpsky.passes import scenery_layers
+    from warpsky.passes.frame import scenery_layers
     from warpsky.plan import make_plan, surfaces_draw_ground
     from warpsky.render import RenderOptions, render_image
     from warpsky.scene.usd import StageReader
@@ -47,7 +47,7 @@ def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -
         rows.append({"stage": stage, "device": device, "what": what, "width": width, "height": height,
                      "ms": 1e3 * seconds, **extra})
 
-    from warpsky.passes import _surfaces_pass
+    from warpsky.passes.frame import _surfaces_pass
 
     surfaces = _surfaces_pass(device)
     seconds, layer = _best(lambda: surfaces.render(scene, width, height, draw_ground=surfaces_draw_ground(scene)),
@@ -55,7 +55,7 @@ def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -
     row("surfaces pass", seconds, triangles=int(layer.stats.get("triangles", 0)))
     limit = layer.depth
     if scene.fogs:
-        from warpsky.techniques.fog.technique import FogPass
+        from warpsky.passes.fog.fog import FogPass
 
         fog = FogPass(device=device)
         occluders = surfaces.occluders if scene.meshes else None
@@ -63,7 +63,7 @@ def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -
             _best(lambda: fog.render(scene, width, height, limit=limit, occluders=occluders), repeats)[0])
         row("fog pass (no shadows)", _best(lambda: fog.render(scene, width, height, limit=limit), repeats)[0])
     if scene.heightfield_clouds:
-        from warpsky.techniques.heightfield.technique import HeightFieldPass
+        from warpsky.passes.heightfield.heightfield import HeightFieldPass
 
         for mode in ("exact", "max", "sexp"):
             clouds = HeightFieldPass(device=device, mode=mode)

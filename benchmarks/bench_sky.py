@@ -28,9 +28,9 @@ def main(argv=None) -> int:
     import warp as wp
 
     from warpsky.device import init_warp
+    from warpsky.media import air_analytic as sky
+    from warpsky.passes.sky.sky import SkyPass
     from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
-    from warpsky.techniques.sky import analytic as sky
-    from warpsky.techniques.sky.technique import SkyPass
 
     init_warp()
     devices = ["cpu"] + [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]

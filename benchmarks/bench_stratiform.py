@@ -24,8 +24,8 @@ def frame_benchmark(device: str, width: int, height: int, repeats: int) -> dict:
 
     from warpsky import device_buffers
     from warpsky.media.stratiform import GroundTexture, StratiformLayer, procedural_thickness
+    from warpsky.passes.stratiform.stratiform import Stratiform, StratiformSettings
     from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
-    from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
 
     layer = StratiformLayer(procedural_thickness(512, cover=0.5, max_thickness=500.0, seed=2), 1200.0,
                             (-12000.0, -12000.0), (24000.0, 24000.0))
@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     result = {"frames": rows}
     if args.slab_table:
         from warpsky.evaluation.stratiform_compare import compare_case, format_table
-        from warpsky.techniques.stratiform.optics import stratiform_optics
+        from warpsky.passes.stratiform.optics import stratiform_optics
 
         started = time.perf_counter()
         optics = stratiform_optics()

@@ -12,6 +12,8 @@ from scipy.integrate import quad
 
 from warpsky.errors import SceneError
 from warpsky.media.analytic_fog import FogSet, fog_density, fog_optical_depth, fog_struct
+from warpsky.passes.fog.fog import FogPass, fog_sun_transmittance
+from warpsky.passes.fog.kernels import FogMarch, fog_ray
 from warpsky.scene.analytic_fog import (
     AnalyticFog,
     BlobTerm,
@@ -21,8 +23,6 @@ from warpsky.scene.analytic_fog import (
     read_analytic_fog,
 )
 from warpsky.scene.model import Camera, Scene, Sun
-from warpsky.techniques.fog.kernels import FogMarch, fog_ray
-from warpsky.techniques.fog.technique import FogPass, fog_sun_transmittance
 
 CAMERA = np.array([3.0, 10.0, -7.0])
 

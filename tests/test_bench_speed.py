@@ -9,7 +9,7 @@ from conftest import StageSpec, look_rotation, write_stage
 
 from warpsky.cli import main
 from warpsky.evaluation.speed import COLUMNS, STRATIFORM, format_table, monte_carlo, plan_rows
-from warpsky.techniques.base import Layer
+from warpsky.layer import Layer
 
 
 def _box_stage(tmp_path, volume):

@@ -226,7 +226,8 @@ def test_failed_frame_keeps_finished_frames(tmp_path, capsys):
 def test_every_technique_declares_the_protocol():
     import dataclasses
 
-    from warpsky.techniques.base import field_kinds, technique_class, technique_names
+    from warpsky.settings import field_kinds
+    from warpsky.techniques.base import technique_class, technique_names
 
     for name in technique_names():
         cls = technique_class(name)
@@ -237,7 +238,7 @@ def test_every_technique_declares_the_protocol():
 
 
 def test_settings_are_parsed_by_their_declared_types(tmp_path, good_stage, capsys):
-    from warpsky.techniques.base import parse_settings
+    from warpsky.settings import parse_settings
     from warpsky.techniques.path_tracer.technique import PathTracerSettings
     from warpsky.techniques.slicing.technique import LightEquation, SlicingSettings
 
@@ -265,8 +266,8 @@ def test_settings_are_parsed_by_their_declared_types(tmp_path, good_stage, capsy
 def test_render_help_lists_every_setting_with_its_metadata(capsys):
     import dataclasses
 
+    from warpsky.passes.stratiform.stratiform import StratiformSettings
     from warpsky.techniques.base import technique_class, technique_names
-    from warpsky.techniques.stratiform.technique import StratiformSettings
 
     with pytest.raises(SystemExit):
         main(["render", "--help"])

@@ -13,11 +13,11 @@ from conftest import StageSpec, look_rotation, write_stage
 
 from warpsky.composite import composite
 from warpsky.errors import SceneError
+from warpsky.light.dome import DomeLight, dome_radiance, dome_struct, mean_radiance, upper_hemisphere
 from warpsky.plan import make_plan
 from warpsky.render import render_layers
 from warpsky.scene.model import Dome
 from warpsky.scene.usd import StageReader
-from warpsky.techniques.dome import DomeLight, dome_radiance, dome_struct, mean_radiance, upper_hemisphere
 
 
 @wp.kernel

@@ -118,8 +118,8 @@ def test_small_gpu_frames_run_one_thread_per_path():
 
 
 def test_sky_pass_second_frame_allocates_nothing(device):
+    from warpsky.passes.sky.sky import SkyPass
     from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
-    from warpsky.techniques.sky.technique import SkyPass
 
     cam = Camera("c", np.array([0.0, 2.0, 0.0]), look_rotation((0.0, 0.3, -1.0)), 20.0, 36.0, 24.0, far=1e5)
     scene = Scene(cam, Sun((0.3, 0.8, 0.2), (1.0, 1.0, 1.0)), ground=Ground(0.0), atmosphere=Atmosphere())
@@ -136,9 +136,9 @@ def test_sky_pass_second_frame_allocates_nothing(device):
 
 
 def stratiform_frame(device, radiosity=True):
+    from warpsky.passes.stratiform.stratiform import Stratiform, StratiformSettings
     from warpsky.scene.layers import StratiformLayer
     from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
-    from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
 
     cam = Camera("c", np.array([0.0, 2.0, 0.0]), look_rotation((0.0, 1.0, -0.2)), 20.0, 36.0, 24.0, far=1e5)
     scene = Scene(cam, Sun((0.3, 0.8, 0.2), (1.0, 1.0, 1.0)), ground=Ground(0.0, albedo=(0.6, 0.6, 0.6)),
@@ -194,7 +194,7 @@ def count_downloads(monkeypatch) -> list[str]:
 
 @pytest.mark.parametrize("check_every", [3, 8])
 def test_radiosity_reads_back_every_few_iterations_and_converges_alike(device, monkeypatch, check_every):
-    from warpsky.techniques.radiosity.solver import Radiosity
+    from warpsky.passes.stratiform.radiosity import Radiosity
 
     tolerance = 1e-5
     every = Radiosity(tolerance=tolerance, device=device, check_every=1).solve(**radiosity_problem())
@@ -212,7 +212,7 @@ def test_radiosity_reads_back_every_few_iterations_and_converges_alike(device, m
 
 
 def test_radiosity_default_on_the_cpu_reads_every_iteration():
-    from warpsky.techniques.radiosity.solver import Radiosity
+    from warpsky.passes.stratiform.radiosity import Radiosity
 
     assert Radiosity(device="cpu").check_every == 1
     assert Radiosity(device="cuda:0").check_every == 8

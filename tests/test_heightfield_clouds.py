@@ -13,9 +13,9 @@ from tests.conftest import look_rotation
 from warpsky.errors import SceneError
 from warpsky.media.heightfield import probe, ray_intervals, voxelize
 from warpsky.optics.phase import phase_numpy
+from warpsky.passes.heightfield.heightfield import HeightFieldPass, heightfield_sun_transmittance
 from warpsky.scene.heightfield_clouds import HazeSpec, HeightFieldClouds, read_heightfield_clouds, surface_heights
 from warpsky.scene.model import Camera, Dome, Ground, PhaseKind, Projection, Scene, Sun
-from warpsky.techniques.heightfield.technique import HeightFieldPass, heightfield_sun_transmittance
 from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
 
 

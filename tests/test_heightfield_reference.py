@@ -80,7 +80,7 @@ def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
     the mean radiance within noise (z < 4, 0.3 % for the voxels in quadrature; measured on the CPU with 4096 spp:
     -0.09 % +- 0.27 %), and the noise is small enough (< 1 %) for a 5 % error to fail. All orders of scattering
     add about 15 % here."""
-    from warpsky.techniques.heightfield.technique import HeightFieldPass
+    from warpsky.passes.heightfield.heightfield import HeightFieldPass
     from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
 
     k = np.array([[2.0 * math.pi / 700.0, 0.0], [0.0035, 0.0060]])

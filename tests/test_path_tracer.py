@@ -184,7 +184,7 @@ def test_ground_at_sea_level_is_drawn_with_air(tmp_path, homogeneous_npy, device
     atmosphere (Riley Eq. 12), times > 0.99 of air up to the camera; the ratio-tracked T_sun is noisy per pixel."""
     from conftest import add_atmosphere
 
-    from warpsky.techniques.sky.analytic import sun_transmittance
+    from warpsky.media.air_analytic import sun_transmittance
 
     spec = StageSpec(volume_file=homogeneous_npy, volume_translate=(500.0, 40.0, 0.0), extinction_scale=0.1,
                      camera_position=(0.0, 50.0, 0.0), camera_rotation=look_rotation((0.0, -1.0, 0.0001)),

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from warpsky.techniques.radiosity.solver import Radiosity, RadiosityWarning, ground_direct, pyramid_shape
+from warpsky.passes.stratiform.radiosity import Radiosity, RadiosityWarning, ground_direct, pyramid_shape
 
 
 @pytest.mark.parametrize("rho_g,rho_c", [(0.15, 0.7), (0.9, 0.8), (0.5, 0.95)])

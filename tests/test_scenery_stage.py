@@ -9,7 +9,7 @@ import pytest
 from conftest import run_cli
 
 from warpsky.output.exr import read_exr
-from warpsky.passes import scenery_layers
+from warpsky.passes.frame import scenery_layers
 from warpsky.plan import make_plan
 from warpsky.scene.usd import StageReader
 
@@ -125,7 +125,7 @@ def test_wind_moves_the_rendered_fog_as_a_camera_moved_against_it(tmp_path, time
     by -wind t, fog only (the terrain does not move with the wind)."""
     import dataclasses
 
-    from warpsky.techniques.fog.technique import FogPass
+    from warpsky.passes.fog.fog import FogPass
 
     reader = StageReader(write_stage(tmp_path, FOG))
     later = reader.scene_at(time)
@@ -212,10 +212,10 @@ def test_the_analytic_sky_lights_surfaces_in_shadow_and_the_fog():
 
     from conftest import look_rotation
 
+    from warpsky.light.dome import isotropic_ambient
+    from warpsky.light.sky import sky_hemisphere, sky_light
     from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
     from warpsky.scene.terrain import TerrainMesh
-    from warpsky.techniques.dome import isotropic_ambient
-    from warpsky.techniques.sky.light import sky_hemisphere, sky_light
 
     floor = TerrainMesh("floor", np.array([[-500.0, 0, -500], [-500, 0, 500], [500, 0, 500], [500, 0, -500]]),
                         np.array([[0, 1, 2], [0, 2, 3]]), np.full(3, 0.5))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from warpsky.evaluation.sky_quadrature import BETA, GAMMA, cases, quadrature
-from warpsky.techniques.sky import analytic as sky
+from warpsky.media import air_analytic as sky
 
 
 @pytest.mark.slow

@@ -64,7 +64,7 @@ def test_sky_scales_with_irradiance_and_night_is_black(tmp_path, device):
 
 
 def test_sun_disk_is_seen_through_the_air(tmp_path, device):
-    from warpsky.techniques.sky.analytic import transmittance
+    from warpsky.media.air_analytic import transmittance
 
     sun = np.array([0.0, 0.5, -1.0]) / np.linalg.norm([0.0, 0.5, -1.0])
     spec = StageSpec(camera_position=(0.0, 0.0, 0.0), camera_rotation=look_rotation(sun), focal_length=2000.0,
@@ -79,8 +79,8 @@ def test_sun_disk_is_seen_through_the_air(tmp_path, device):
 
 
 def test_horizon_column_has_no_banding(device):
+    from warpsky.passes.sky.sky import SkyPass
     from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
-    from warpsky.techniques.sky.technique import SkyPass
 
     camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.0, 0.0, -1.0)), 50.0, 36.0, 36.0)
     scene = Scene(camera, Sun(np.array([0.3, 0.2, -1.0]) / np.linalg.norm([0.3, 0.2, -1.0]), np.ones(3)),
@@ -99,9 +99,9 @@ def test_horizon_column_has_no_banding(device):
 def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
     """The path tracer with the air as a medium, one bounce: Riley's analytic single-scattering sky within noise,
     and the analytic transmittance of the air to space."""
+    from warpsky.passes.sky.sky import SkyPass
     from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
     from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
-    from warpsky.techniques.sky.technique import SkyPass
 
     camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.3, 0.9, -1.0)), 24.0, 36.0, 36.0)
     sun = Sun(np.array([-0.4, 0.25, -1.0]) / np.linalg.norm([-0.4, 0.25, -1.0]), np.ones(3))

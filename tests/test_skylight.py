@@ -1,4 +1,4 @@
-"""Skylight on the media (warpsky.techniques.skylight): the two-band projection of the environment against closed
+"""Skylight on the media (warpsky.light.skylight): the two-band projection of the environment against closed
 forms and the sky pass's own hemisphere average, the dipole's sign in the kernels, single_scatter and slicing under
 a uniform dome against the path tracer's single scattering, the dipole's direction in a rendered cloud, and
 frames without sky or dome rendering bit for bit as before skylight existed."""
@@ -16,15 +16,9 @@ from conftest import StageSpec, add_atmosphere, look_rotation, write_stage
 from scipy.integrate import quad
 from test_dome_light import add_dome
 
-from warpsky.plan import make_plan
-from warpsky.render import render_layers
-from warpsky.scene.usd import StageReader
-from warpsky.techniques.dome import hemisphere_directions
-from warpsky.techniques.hybrid.technique import HybridSettings
-from warpsky.techniques.sky.analytic import inscatter, rayleigh
-from warpsky.techniques.sky.light import sky_hemisphere
-from warpsky.techniques.sky.technique import attenuated_sun
-from warpsky.techniques.skylight import (
+from warpsky.light.dome import hemisphere_directions
+from warpsky.light.sky import sky_hemisphere
+from warpsky.light.skylight import (
     Environment,
     SkyEnvironment,
     ambient_inscatter,
@@ -33,8 +27,14 @@ from warpsky.techniques.skylight import (
     media_environment,
     projection,
 )
+from warpsky.light.sun import sunlight
+from warpsky.media.air_analytic import inscatter, rayleigh
+from warpsky.passes.sky.sky import attenuated_sun
+from warpsky.plan import make_plan
+from warpsky.render import render_layers
+from warpsky.scene.usd import StageReader
+from warpsky.techniques.hybrid.technique import HybridSettings
 from warpsky.techniques.slicing.occlusion import SkyShadow, sky_transmittances
-from warpsky.techniques.sunlight import sunlight
 
 
 def scene_of(stage):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warpsky.techniques.stratiform import model1d
+from warpsky.passes.stratiform import model1d
 
 THICKNESSES = np.array([0.0, 1e-3, 1.0, 5.0, 20.0, 100.0, 500.0, 2000.0, 1.0e4])
 ANGLES = np.array([0.0, 5.0, 30.0, 45.0, 70.0, 80.0, 85.0, 89.9, 90.0])
@@ -120,7 +120,7 @@ def test_grazing_and_extreme_thickness_stay_finite(device):
 
 @pytest.fixture(scope="module")
 def slab_optics():
-    from warpsky.techniques.stratiform.optics import stratiform_optics
+    from warpsky.passes.stratiform.optics import stratiform_optics
 
     return stratiform_optics()
 

@@ -8,9 +8,9 @@ import pytest
 from conftest import look_rotation
 
 from warpsky.media.stratiform import procedural_thickness
+from warpsky.passes.stratiform.stratiform import Stratiform, StratiformSettings
 from warpsky.scene.layers import GroundTexture, StratiformLayer
 from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
-from warpsky.techniques.stratiform.technique import Stratiform, StratiformSettings
 
 EXTENT = ((-10000.0, -10000.0), (20000.0, 20000.0))
 
@@ -62,7 +62,7 @@ def _overcast_from_below(thickness, device, *, camera_xz=(0.0, 0.0), size=128):
     """Render an overcast of 100 m texels at 1.5 km (``thickness`` [m] per texel, centred above the origin) from a
     camera on the ground at ``camera_xz`` looking straight up. Returns (scene, layer, the uniform sky [blue] the
     layer is lit by, each pixel's (x, z) offset from the camera on the cloud base in texels)."""
-    from warpsky.techniques.stratiform.technique import sky_radiance
+    from warpsky.passes.stratiform.stratiform import sky_radiance
 
     texels, texel, base = thickness.shape[0], 100.0, 1500.0
     layer = StratiformLayer(thickness.astype(np.float32), base, (-texels * texel / 2,) * 2, (texels * texel,) * 2)

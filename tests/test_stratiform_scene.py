@@ -10,11 +10,11 @@ from conftest import look_rotation
 from warpsky.cli import main
 from warpsky.composite import merge_by_depth
 from warpsky.errors import SceneError
+from warpsky.layer import Layer
 from warpsky.media import stratiform
 from warpsky.media.stratiform import thickness_at_time
 from warpsky.output.exr import read_exr
 from warpsky.scene.usd import StageReader
-from warpsky.techniques.base import Layer
 
 SIZE = 20000.0  # [m] of the layer and the ground texture
 MAP = 32  # texels per side of the test thickness map

@@ -140,7 +140,7 @@ def test_sunset_is_smooth_in_the_stratiform_pass(air):
 
 
 def test_visible_fraction_is_the_segment_above_the_horizon():
-    from warpsky.techniques.sunlight import visible_elevation, visible_fraction
+    from warpsky.light.sun import visible_elevation, visible_fraction
 
     radius = math.radians(0.265)
     # area and centroid of the part of the disk above the horizon, by brute-force sampling of the disk
@@ -160,7 +160,7 @@ def test_visible_fraction_is_the_segment_above_the_horizon():
 
 
 def test_air_mass_is_finite_and_continuous_through_the_horizon():
-    from warpsky.techniques.sunlight import air_sine, horizon_air_mass
+    from warpsky.light.sun import air_sine, horizon_air_mass
 
     gamma = 1.0 / 8000.0
     sines = np.linspace(-0.2, 0.3, 50001)
@@ -176,7 +176,7 @@ def test_air_mass_is_finite_and_continuous_through_the_horizon():
 
 
 def test_sunlight_fades_with_the_disk_and_keeps_its_direction_above():
-    from warpsky.techniques.sunlight import sun_sunlight
+    from warpsky.light.sun import sun_sunlight
 
     for elevation_deg, visible in [(-0.3, 0.0), (0.0, 0.5), (0.3, 1.0), (20.0, 1.0)]:
         sun = Sun(sun_towards(elevation_deg), np.array([1.0, 0.5, 0.25]), math.radians(SUN_ANGLE_DEG))

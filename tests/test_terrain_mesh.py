@@ -15,10 +15,10 @@ import pytest
 from conftest import look_rotation
 
 from warpsky.errors import SceneError
+from warpsky.passes.surfaces.surfaces import SurfacesPass, SurfaceWarning
 from warpsky.scene.layers import GroundTexture
 from warpsky.scene.model import Camera, Dome, Ground, Scene, Sun, VoxelMedium
 from warpsky.scene.terrain import TerrainMesh, read_mesh, read_meshes, triangulate
-from warpsky.techniques.surfaces.technique import SurfacesPass, SurfaceWarning
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import make_terrain  # noqa: E402

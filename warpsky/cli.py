@@ -35,11 +35,12 @@ from warpsky.optics.cli import run as run_optics
 from warpsky.output.color import COLORSPACES
 from warpsky.output.preview import contact_sheet, stage_preview
 from warpsky.output.products import FULL_WINDOW
+from warpsky.passes.stratiform.stratiform import StratiformSettings
 from warpsky.render import plan_frame
 from warpsky.resources import parse_size, resource_lines
 from warpsky.scene.usd import StageReader
-from warpsky.techniques.base import DEFAULT_TECHNIQUE, settings_table, technique_class, technique_names
-from warpsky.techniques.stratiform.technique import StratiformSettings
+from warpsky.settings import settings_table
+from warpsky.techniques.base import DEFAULT_TECHNIQUE, technique_class, technique_names
 
 EPILOG_RENDER = """\
 frames:
@@ -470,8 +471,8 @@ def _light_lines(scene) -> list[str]:
     dome's mean radiance and its irradiance on a horizontal surface."""
     import numpy as np
 
-    from warpsky.techniques.dome import mean_radiance, upper_hemisphere
-    from warpsky.techniques.sunlight import has_horizon, sun_sunlight
+    from warpsky.light.dome import mean_radiance, upper_hemisphere
+    from warpsky.light.sun import has_horizon, sun_sunlight
 
     lines = []
     for sun in [s for s in [scene.sun, *scene.extra_suns] if s is not None]:

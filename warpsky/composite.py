@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from warpsky.layer import Layer
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Projection
-from warpsky.techniques.base import Layer
 
 
 @dataclass
@@ -113,7 +113,7 @@ def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.
     The dome lights from beyond the air: it replaces the black space an atmosphere would otherwise show. With
     ``through_air`` (a sky pass drew the air, whose back layer is opaque) it is seen through the air's
     transmittance to space along each pixel's ray, the flat-earth column over the finite-air-mass sine
-    (:func:`~warpsky.techniques.sunlight.air_sine`), and not at all below the horizon (ground or sea level);
+    (:func:`~warpsky.light.sun.air_sine`), and not at all below the horizon (ground or sea level);
     otherwise the layers' own transmittance (zero on the ground, with the air where a technique traced it)
     is all that hides it."""
     if scene.dome is None:
@@ -122,7 +122,7 @@ def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.
     radiance = scene.dome.radiance(directions)
     atmosphere = scene.atmosphere
     if through_air and atmosphere is not None:
-        from warpsky.techniques.sunlight import air_sine
+        from warpsky.light.sun import air_sine
 
         altitude = float(scene.camera.position[1]) + atmosphere.altitude
         column = atmosphere.beta_sea_level * np.exp(-atmosphere.gamma * altitude) / atmosphere.gamma

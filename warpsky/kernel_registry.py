@@ -18,16 +18,16 @@ import warpsky.media.heightfield as heightfield_media
 import warpsky.optics.ice_kernels as ice_kernels
 import warpsky.optics.kernels as optics
 import warpsky.optics.oriented_ice_kernels as oriented_ice_kernels
-import warpsky.techniques.fog.kernels as fog_kernels
-import warpsky.techniques.heightfield.kernels as heightfield_kernels
+import warpsky.passes.fog.kernels as fog_kernels
+import warpsky.passes.heightfield.kernels as heightfield_kernels
+import warpsky.passes.sky.kernels as sky
+import warpsky.passes.stratiform.kernels as stratiform_kernels
+import warpsky.passes.stratiform.radiosity_kernels as radiosity
+import warpsky.passes.surfaces.kernels as surfaces_kernels
 import warpsky.techniques.path_tracer.kernels  # noqa: F401  (registers its kernel factory)
-import warpsky.techniques.radiosity.kernels as radiosity
 import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its kernel factories)
-import warpsky.techniques.sky.kernels as sky
 import warpsky.techniques.slicing.ground  # noqa: F401  (registers its kernel factory)
 import warpsky.techniques.slicing.kernels as slicing  # (also registers its kernel factories)
-import warpsky.techniques.stratiform.kernels as stratiform_kernels
-import warpsky.techniques.surfaces.kernels as surfaces_kernels
 from warpsky.kernel_variants import variant_modules
 
 #: Modules holding plain (not factory-made) kernels.

@@ -14,13 +14,14 @@ import numpy as np
 
 from warpsky.errors import UsageError
 from warpsky.optics.tables import is_cached
-from warpsky.passes import SCENERY_SETTINGS, parse_scenery_settings
+from warpsky.passes.frame import SCENERY_SETTINGS, parse_scenery_settings
+from warpsky.passes.stratiform.stratiform import StratiformSettings, radiosity_grid
 from warpsky.resources import MemoryEstimate, WorkEstimate, frame_memory, frame_work
 from warpsky.scene.model import Scene
-from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique, parse_settings, technique_class
+from warpsky.settings import parse_settings
+from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique, technique_class
 from warpsky.techniques.path_tracer.deck_media import deck_voxel_features, traces_decks
 from warpsky.techniques.path_tracer.layer_media import layer_voxel_features, traces_layers
-from warpsky.techniques.stratiform.technique import StratiformSettings, radiosity_grid
 
 DEFAULT_WIDTH = 512
 #: ``--set`` names with this prefix go to the stratiform pass (``StratiformSettings``), not the voxel technique.
@@ -49,7 +50,7 @@ class RenderPlan:
         memory: Bytes the frame will allocate, by part (:func:`warpsky.resources.frame_memory`).
         work: Worst-case kernel iterations of the frame (:func:`warpsky.resources.frame_work`).
         scenery_settings: ``--set heightfield.*`` / ``fog.*`` values by pass
-            (:func:`warpsky.passes.parse_scenery_settings`).
+            (:func:`warpsky.passes.frame.parse_scenery_settings`).
     """
 
     technique: str
@@ -270,7 +271,7 @@ def _scenery_features(scene: Scene) -> dict[str, str]:
 
 def _dome_feature(scene: Scene, technique: str) -> str:
     """How the dome lights this technique, and what it is."""
-    from warpsky.techniques.dome import mean_radiance
+    from warpsky.light.dome import mean_radiance
 
     dome = scene.dome
     kind = f"lat-long texture {dome.source}" if dome.texture is not None else "uniform"

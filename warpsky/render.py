@@ -17,18 +17,19 @@ import numpy as np
 
 import warpsky
 from warpsky.composite import Frame, add_light, composite, dome_background, merge_by_depth, with_background
+from warpsky.layer import Layer
+from warpsky.light.sky import sky_light
 from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_frame
 from warpsky.output.exr import write_channels
 from warpsky.output.png import write_png
 from warpsky.output.products import FULL_WINDOW, default_outputs, frame_channels, required_channels, window_pixels
-from warpsky.passes import SCENERY_PASSES, StratiformPass, media_scene, scenery_layers
+from warpsky.passes.frame import SCENERY_PASSES, StratiformPass, media_scene, scenery_layers
+from warpsky.passes.sky.sky import SkyPass, attenuated_sun
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.resources import check_resources
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene, as_imath_rows
 from warpsky.scene.usd_render import OutputVar, check_outputs
-from warpsky.techniques.base import DEFAULT_TECHNIQUE, Layer, Technique
-from warpsky.techniques.sky.light import sky_light
-from warpsky.techniques.sky.technique import SkyPass, attenuated_sun
+from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique
 
 #: Figures of a Monte Carlo render that go into the EXR header (camelCase) and the batch log, where present.
 QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths", "paths")

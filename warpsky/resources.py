@@ -281,8 +281,8 @@ def frame_memory(scene, plan) -> MemoryEstimate:
 
 def radiosity_bytes(scene, settings) -> int:
     """Bytes of the radiosity buffers of every stratiform layer above the ground."""
+    from warpsky.passes.stratiform.stratiform import radiosity_grid
     from warpsky.plan import RADIOSITY_BUFFERS
-    from warpsky.techniques.stratiform.technique import radiosity_grid
 
     ground = scene.ground
     total = 0

@@ -204,7 +204,7 @@ def heightfield_rows(scene, name: str, so_far: list) -> list[tuple[str, str, lis
     first = HEIGHTFIELD_ROW.format(mode=HEIGHTFIELD_MODES[0])
     if first in (row for row, _, _ in so_far):
         return []
-    from warpsky.techniques.heightfield.technique import automatic_steps, the_deck
+    from warpsky.passes.heightfield.heightfield import automatic_steps, the_deck
 
     step = automatic_steps(the_deck(scene))[0]
     return [(HEIGHTFIELD_ROW.format(mode=mode), name,

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpsky.techniques.sky import analytic as sky
+from warpsky.media import air_analytic as sky
 
 BETA = np.array(sky.RILEY_BETA_SEA_LEVEL)
 GAMMA = 1.0 / sky.RILEY_SCALE_HEIGHT

@@ -219,7 +219,7 @@ class CompileLog:
 
 def _frame(scene, spec: RowSpec):
     """(a function rendering one frame and returning its main layer or None, the plan)."""
-    from warpsky.passes import StratiformPass
+    from warpsky.passes.frame import StratiformPass
     from warpsky.plan import make_plan
     from warpsky.render import render_layers
     from warpsky.techniques.base import DEFAULT_TECHNIQUE

@@ -12,8 +12,8 @@ import warp as wp
 
 from warpsky.evaluation.stratiform_reference import SlabTally, slab_monte_carlo
 from warpsky.evaluation.stratiform_slab import slab_radiance_kernel
-from warpsky.techniques.stratiform.model1d import order_energies, reference_thickness
-from warpsky.techniques.stratiform.optics import StratiformOptics
+from warpsky.passes.stratiform.model1d import order_energies, reference_thickness
+from warpsky.passes.stratiform.optics import StratiformOptics
 
 ORDER_NAMES = ("0", "1", "2", "3+")
 

@@ -1,4 +1,4 @@
-"""Device kernels that evaluate the slab model of :mod:`warpsky.techniques.stratiform.slab` on batches of inputs,
+"""Device kernels that evaluate the slab model of :mod:`warpsky.passes.stratiform.slab` on batches of inputs,
 for the tests, the comparison with the Monte Carlo slab (:mod:`warpsky.evaluation.stratiform_compare`) and the
 benchmarks: per-order radiance, Appendix A energies, and the order-1/2 geometry factors.
 """
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.techniques.stratiform.slab import (
+from warpsky.passes.stratiform.slab import (
     MU_MIN,
     SlabOptics,
     double_reflect,

@@ -41,7 +41,7 @@ class TableNeed:
 
 def tables_needed(scene, plan) -> list[TableNeed]:
     """The tables rendering ``scene`` with ``plan`` (:class:`~warpsky.plan.RenderPlan`) loads, in build order."""
-    from warpsky.techniques.stratiform.optics import FORWARD_CUT_DEG
+    from warpsky.passes.stratiform.optics import FORWARD_CUT_DEG
 
     needs = []
     if "media" in plan.passes:

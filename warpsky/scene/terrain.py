@@ -1,6 +1,6 @@
 """Opaque Lambertian surfaces given as triangle meshes (``UsdGeomMesh``), e.g. terrain, as plain data.
 
-The surfaces pass (:mod:`warpsky.techniques.surfaces`) ray casts them through one Warp BVH
+The surfaces pass (:mod:`warpsky.passes.surfaces`) ray casts them through one Warp BVH
 (:mod:`warpsky.surfaces.mesh`). Every visible ``UsdGeomMesh`` of a rendered purpose is read:
 
 =========================================== ========== ============ ===============================================

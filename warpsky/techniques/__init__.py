@@ -1,1 +1,1 @@
-"""Rendering techniques: each a host class plus its kernels, returning a :class:`~warpsky.techniques.base.Layer`."""
+"""Rendering techniques: each a host class plus its kernels, returning a :class:`~warpsky.layer.Layer`."""

@@ -1,44 +1,14 @@
-"""What every technique is and returns: the :class:`Technique` protocol, typed settings documented field by field,
-the :class:`Layer` a render produces, and the registry the CLI and the plan look techniques up in."""
+"""What every technique is: the :class:`Technique` protocol, and the registry the CLI and the plan look techniques
+up in."""
 
 from __future__ import annotations
 
-import dataclasses
-import enum
-import functools
-import math
-import textwrap
-import types
-import typing
-from dataclasses import dataclass, field
 from typing import ClassVar, Protocol
 
-import numpy as np
-
 from warpsky.errors import UsageError
+from warpsky.layer import Layer
 from warpsky.resources import MemoryEstimate, WorkItem
 from warpsky.scene.model import Scene
-
-
-@dataclass
-class Layer:
-    """One technique's image of what it renders, ready to composite front to back.
-
-    Attributes:
-        radiance: (H, W, 3) float32 radiance reaching the eye [sun irradiance units / sr].
-        transmittance: (H, W, 3) float32 fraction of the light from behind the layer that passes through it
-            (0 where an opaque surface such as the ground is hit).
-        depth: (H, W) float32 representative camera-space depth along the view axis [m]: the opacity-weighted
-            mean depth of what the layer shows; the camera's far clipping distance where it shows nothing.
-        stats: Figures about the render (lookups, seconds, settings) for metadata and benchmarks.
-        aovs: Extra per-pixel outputs by name, e.g. ``variance`` (H, W, 3) of a Monte Carlo pixel mean.
-    """
-
-    radiance: np.ndarray
-    transmittance: np.ndarray
-    depth: np.ndarray
-    stats: dict = field(default_factory=dict)
-    aovs: dict = field(default_factory=dict)
 
 
 class Technique(Protocol):
@@ -79,7 +49,6 @@ class Technique(Protocol):
         """Worst-case kernel iterations of that render, by kind, with the settings that set them."""
         ...
 
-
 #: The technique ``warpsky render`` uses unless told otherwise: exact single scattering plus denoised, path-traced
 #: multiple scattering, rendered to a target error (``hybrid``). ``slicing`` is the interactive technique (Riley
 #: 2004's half-angle slicing), ``single_scatter`` and ``path_tracer`` the references.
@@ -92,10 +61,8 @@ _REGISTRY: dict[str, str] = {
     "hybrid": "warpsky.techniques.hybrid.technique:Hybrid",
 }
 
-
 def technique_names() -> list[str]:
     return sorted(_REGISTRY)
-
 
 def technique_class(name: str) -> type[Technique]:
     """Import and return the technique class registered under ``name``."""
@@ -107,221 +74,3 @@ def technique_class(name: str) -> type[Technique]:
         raise UsageError(f"unknown technique {name!r}; available: {', '.join(technique_names())}") from None
     module_name, class_name = target.split(":")
     return getattr(importlib.import_module(module_name), class_name)
-
-
-
-
-# ------------------------------------------------------------------------------------------------------ settings
-def setting(default, *, unit: str = "--", range: str = "", help: str, auto: str | None = None):  # noqa: A002
-    """A settings dataclass field carrying its own documentation (read by ``warpsky render --help``, the generated
-    docstring table and the parse errors).
-
-    Args:
-        default: The default value (None: ``auto``, worked out per scene by the technique's ``resolved_settings``).
-        unit: Unit of the value (``m``, ``1/sr``, ``texel``), ``--`` for pure numbers.
-        range: Accepted values as they read after "must be a whole number" (``>= 1``, ``> 0``, ``0..4``).
-        help: What the setting does.
-        auto: What ``auto`` (None) means, for settings that have it.
-    """
-    return field(default=default, metadata={"unit": unit, "range": range, "help": help, "auto": auto})
-
-
-class TechniqueSettings:
-    """Base of every settings dataclass (frozen, fields made by :func:`setting`).
-
-    ``technique`` names the pass the settings belong to; ``prefix`` is what a ``--set`` name carries to reach them
-    (``stratiform.`` for the stratiform pass). ``__post_init__`` calls :meth:`normalise` first, so values given in
-    Python (``spp=64.0``, ``low_albedo=1``) hold their declared types like those parsed from ``--set``.
-    """
-
-    technique: ClassVar[str]
-    prefix: ClassVar[str] = ""
-
-    def normalise(self) -> None:
-        """Convert every field to its declared type; a value that has none is a UsageError naming the setting."""
-        for name, kind in field_kinds(type(self)).items():
-            value = getattr(self, name)
-            try:
-                converted = kind.convert(value)
-            except (TypeError, ValueError):
-                raise UsageError(f"setting {self.prefix}{name} must be {kind.expected()}, got {value}") from None
-            if converted is not value:
-                object.__setattr__(self, name, converted)
-
-
-@dataclass(frozen=True)
-class FieldKind:
-    """The declared type of one settings field: ``base`` is int, float, bool, an Enum class or a Literal's values,
-    ``optional`` whether None (``auto``) is allowed."""
-
-    base: object
-    optional: bool
-    range: str = ""
-
-    def convert(self, value):
-        """``value`` as the declared type; ValueError when it cannot be."""
-        if value is None:
-            if self.optional:
-                return None
-            raise ValueError(value)
-        if isinstance(self.base, tuple):  # Literal
-            if value in self.base:
-                return self.base[self.base.index(value)]
-            raise ValueError(value)
-        if isinstance(self.base, type) and issubclass(self.base, enum.Enum):
-            return self.base(value)
-        if not isinstance(value, (int, float, np.integer, np.floating)):
-            raise TypeError(value)
-        if self.base is bool:
-            if value in (0, 1):
-                return bool(value)
-            raise ValueError(value)
-        if self.base is int:
-            if math.isfinite(value) and float(value).is_integer():
-                return value if type(value) is int else int(value)
-            raise ValueError(value)
-        return value if type(value) is float else float(value)
-
-    def expected(self) -> str:
-        """What a valid value is, for error messages: ``a whole number >= 1``, ``0 or 1``, ``0, 24 or 25``."""
-        if self.base is bool:
-            return "0, 1 or auto" if self.optional else "0 or 1"
-        if isinstance(self.base, tuple) or (isinstance(self.base, type) and issubclass(self.base, enum.Enum)):
-            values = [str(v.value if isinstance(v, enum.Enum) else v) for v in self.choices()]
-            text = ", ".join(values[:-1]) + " or " + values[-1] if len(values) > 1 else values[0]
-            if isinstance(self.base, type):
-                text += " (" + ", ".join(member.name.lower() for member in self.base) + ")"
-            return text
-        rng = self.range
-        if rng and (rng[0].isdigit() or rng[0] in "[("):
-            rng = "in " + rng
-        noun = "a whole number" if self.base is int else "a number"
-        return f"{noun} {rng}".strip()
-
-    def choices(self) -> tuple:
-        return tuple(self.base) if isinstance(self.base, (tuple, enum.EnumMeta)) else ()
-
-
-@functools.cache
-def field_kinds(cls) -> dict[str, FieldKind]:
-    """Every field of the settings dataclass ``cls`` with its declared type."""
-    hints = typing.get_type_hints(cls)
-    kinds = {}
-    for f in dataclasses.fields(cls):
-        hint, optional = hints[f.name], False
-        if typing.get_origin(hint) in (typing.Union, types.UnionType):
-            rest = [a for a in typing.get_args(hint) if a is not type(None)]
-            optional = len(rest) < len(typing.get_args(hint))
-            if len(rest) != 1:
-                raise TypeError(f"{cls.__name__}.{f.name}: one type (optionally | None) per setting, got {hint}")
-            hint = rest[0]
-        if typing.get_origin(hint) is typing.Literal:
-            hint = typing.get_args(hint)
-        elif hint not in (int, float, bool) and not (isinstance(hint, type) and issubclass(hint, enum.Enum)):
-            raise TypeError(f"{cls.__name__}.{f.name}: settings are int, float, bool, an Enum or a Literal, got {hint}")
-        kinds[f.name] = FieldKind(hint, optional, f.metadata.get("range", ""))
-    return kinds
-
-
-_AUTO = ("", "auto", "none")
-_TRUE = ("1", "true", "yes", "on")
-_FALSE = ("0", "false", "no", "off")
-_DEFAULT = object()
-
-
-def _number(text: str):
-    try:
-        return int(text)
-    except ValueError:
-        return float(text)
-
-
-def parse_value(cls, name: str, text):
-    """``--set`` text for the field ``name`` of ``cls`` converted by its declared type; ``_DEFAULT`` for ``auto``
-    on a setting without an automatic value (the default is kept). Range checks are the dataclass's."""
-    if not isinstance(text, str):
-        return text
-    kind = field_kinds(cls)[name]
-    word = text.strip().lower()
-    if word in _AUTO:
-        return None if kind.optional else _DEFAULT
-    if kind.base is bool and word in _TRUE + _FALSE:
-        return word in _TRUE
-    for choice in kind.choices():
-        if isinstance(choice, enum.Enum) and word == choice.name.lower():
-            return choice
-    try:
-        return _number(word)
-    except ValueError:
-        pass
-    if kind.base is bool:
-        raise UsageError(f"setting {cls.prefix}{name} must be 0 or 1 (or true/false), got {text!r}")
-    if kind.choices():
-        raise UsageError(f"setting {cls.prefix}{name} must be {kind.expected()}, got {text!r}")
-    noun = "a whole number" if kind.base is int else "a number"
-    raise UsageError(f"setting {cls.prefix}{name}: expected {noun}, got {text!r}")
-
-
-def parse_settings(cls, values: dict[str, str] | None):
-    """Build the settings dataclass ``cls`` from ``{name: text}`` pairs, converting each by its field's declared
-    type: whole numbers for ``int``, 0/1/true/false for ``bool``, a value or a member's name for an Enum, ``auto``
-    (or ``none``) for None on settings that have an automatic value, else the default again."""
-    kinds = field_kinds(cls)
-    kwargs = {}
-    for key, text in (values or {}).items():
-        if key not in kinds:
-            raise UsageError(f"unknown setting {key!r} for {cls.technique}; known: {', '.join(sorted(kinds))}")
-        value = parse_value(cls, key, text)
-        if value is not _DEFAULT:
-            kwargs[key] = value
-    return cls(**kwargs)
-
-
-def _text(value) -> str:
-    if isinstance(value, bool):
-        return str(int(value))
-    if isinstance(value, enum.Enum):
-        return str(value.value)
-    return f"{value:g}" if isinstance(value, float) else str(value)
-
-
-def settings_rows(cls) -> list[tuple[str, str, str, str]]:
-    """(name with prefix, default with unit, range, meaning) per field of the settings dataclass ``cls``."""
-    rows = []
-    for f in dataclasses.fields(cls):
-        meta, kind = f.metadata, field_kinds(cls)[f.name]
-        unit = "" if meta.get("unit", "--") == "--" else " " + meta["unit"]
-        default = "auto" if f.default is None else _text(f.default) + unit
-        meaning = meta.get("help", "")
-        if kind.choices() and isinstance(kind.base, enum.EnumMeta):
-            meaning += "; by name: " + ", ".join(f"{m.name.lower()} = {m.value}" for m in kind.base)
-        if meta.get("auto"):
-            meaning += f"; auto: {meta['auto']}"
-        rng = meta.get("range", "") or (" | ".join(_text(c) for c in kind.choices()) if kind.choices() else "")
-        if kind.base is bool and not rng:
-            rng = "0 | 1"
-        rows.append((cls.prefix + f.name, default, rng, meaning))
-    return rows
-
-
-def settings_table(cls, indent: int = 2, width: int = 118) -> str:
-    """The settings of ``cls`` as a plain-text table: name, default [unit], range, meaning (wrapped)."""
-    rows = settings_rows(cls)
-    widths = [max(len(row[i]) for row in rows + [("name", "default", "range", "")]) for i in range(3)]
-    lead = " " * indent
-    prefix_width = indent + sum(widths) + 3
-    lines = [lead + "  ".join(h.ljust(w) for h, w in zip(("name", "default", "range"), widths, strict=True))
-             + "  meaning"]
-    for row in rows:
-        head = lead + "  ".join(cell.ljust(w) for cell, w in zip(row[:3], widths, strict=True)) + "  "
-        wrapped = textwrap.wrap(row[3], max(30, width - prefix_width - 3)) or [""]
-        lines.append(head + wrapped[0])
-        lines += [" " * (prefix_width + 3) + more for more in wrapped[1:]]
-    return "\n".join(line.rstrip() for line in lines)
-
-
-def documented(cls):
-    """Class decorator for settings dataclasses: append the settings table made from the field metadata to the
-    class docstring, so ``help()`` and the docs show one table, the one ``--help`` shows."""
-    cls.__doc__ = (cls.__doc__ or "").rstrip() + "\n\n    Settings:\n\n" + settings_table(cls, indent=4) + "\n"
-    return cls

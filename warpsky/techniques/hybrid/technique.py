@@ -29,9 +29,11 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.errors import UsageError
+from warpsky.layer import Layer
+from warpsky.passes.sky.sky import SkyPass, unattenuated_sun
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, march_work
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
-from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
+from warpsky.settings import TechniqueSettings, documented, setting
 from warpsky.techniques.hybrid.denoise import (
     bilinear_upsample,
     block_mean,
@@ -48,7 +50,6 @@ from warpsky.techniques.path_tracer.technique import (
     sums_layer,
 )
 from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
-from warpsky.techniques.sky.technique import SkyPass, unattenuated_sun
 
 #: Name under which the multiple-scattering paths keep their device buffers (:mod:`warpsky.device_buffers`).
 BUFFER_NAME = "path_tracer:hybrid"

@@ -1,7 +1,7 @@
 """What happens where a path's free flight ends: scattering in a medium, a bounce on the ground, or the end.
 
 At a scattering point the path takes next-event estimation toward the sunlight (the light of the disk's visible
-part, :mod:`warpsky.techniques.sunlight`; ratio-tracked transmittance times the media's mixed phase) and samples a
+part, :mod:`warpsky.light.sun`; ratio-tracked transmittance times the media's mixed phase) and samples a
 new direction from that mixture. On the Lambertian ground it takes the sun through the media, then a
 cosine-weighted bounce. A path that leaves every medium gains the uniform environment and the dome (after a
 bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black sea level.
@@ -13,13 +13,14 @@ import functools
 
 import warp as wp
 
+from warpsky.light.dome import DomeLight, dome_radiance
+from warpsky.light.sun import Sun
 from warpsky.media.air import Air, air_coefficient, air_scattering, sea_level_distance
 from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.oriented_phase import oriented_correction_function
 from warpsky.optics.phase_sampling import PhaseTables, mixture_functions
-from warpsky.techniques.common import Ground, Sun
-from warpsky.techniques.dome import DomeLight, dome_radiance
+from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.tracking import Transmittance, tracking_functions
 
@@ -182,7 +183,7 @@ def surface_functions(has_ground: bool):
     @wp.func
     def sun_reaches(sun: Sun, air: Air) -> bool:
         """Whether the sun lights the scene: ``lit``, which the host sets from the part of the disk above the
-        horizon where a ground or the air is there to hide it (:mod:`warpsky.techniques.sunlight`)."""
+        horizon where a ground or the air is there to hide it (:mod:`warpsky.light.sun`)."""
         return sun.lit != 0
 
     return primary_end, flight_end, sun_reaches

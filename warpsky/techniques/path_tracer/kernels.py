@@ -21,20 +21,14 @@ import functools
 
 import warp as wp
 
+from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_at, camera_ray_origin
 from warpsky.kernel_variants import kernel_variants
+from warpsky.light.dome import DomeLight
+from warpsky.light.sun import Sun
 from warpsky.media.air import Air
 from warpsky.media.voxel import VoxelMedia
 from warpsky.optics.phase_sampling import PhaseTables
-from warpsky.techniques.common import (
-    Ground,
-    PinholeCamera,
-    Sun,
-    camera_forward,
-    camera_ray,
-    camera_ray_at,
-    camera_ray_origin,
-)
-from warpsky.techniques.dome import DomeLight
+from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.events import (
     SURFACE_GROUND,
     SURFACE_NONE,

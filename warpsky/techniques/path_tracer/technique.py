@@ -11,8 +11,12 @@ import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
+from warpsky.camera_rays import pinhole_camera
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
+from warpsky.layer import Layer
+from warpsky.light.dome import dome_struct
+from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.air import air_struct
 from warpsky.media.voxel import VoxelMediaBuffers
 from warpsky.optics.kernels import DevicePhaseTables
@@ -22,9 +26,8 @@ from warpsky.optics.phase_sampling import phase_tables_struct
 from warpsky.optics.tables import build_tables
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import Scene
-from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
-from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
-from warpsky.techniques.dome import dome_struct
+from warpsky.settings import TechniqueSettings, documented, setting
+from warpsky.surfaces.plane import ground_struct
 from warpsky.techniques.path_tracer.deck_media import deck_voxel_memory, with_deck_as_media
 from warpsky.techniques.path_tracer.kernels import (
     PathSettings,
@@ -36,7 +39,6 @@ from warpsky.techniques.path_tracer.kernels import (
 from warpsky.techniques.path_tracer.layer_media import layer_voxel_memory, with_layers_as_media
 from warpsky.techniques.path_tracer.majorants import upload_majorants
 from warpsky.techniques.single_scatter.technique import MEDIA_CACHE
-from warpsky.techniques.sunlight import sunlight
 
 
 @documented

@@ -7,7 +7,7 @@ step's contribution is then integrated exactly (:func:`exp_lerp_mean`), which ke
 and any optical depth per step from 1e-9 to 1e5 finite and non-negative.
 
 The sky lights the media as an environment on two spherical-harmonic bands per hemisphere
-(:mod:`warpsky.techniques.skylight`: the dome, the analytic sky when the frame has a sky pass, the ground they light):
+(:mod:`warpsky.light.skylight`: the dome, the analytic sky when the frame has a sky pass, the ground they light):
 sigma_s S(v) per metre, S(v) = T_up max(0, m_up + 3 g M_up . v) + T_down max(0, m_down + 3 g M_down . v) with g
 mixed over the media at the step's midpoint by scattering weight. T_up is the transmittance towards the zenith,
 which a second shadow march per step takes at the step's midpoint; T_down, towards the nadir, a third, only when
@@ -21,25 +21,18 @@ import functools
 
 import warp as wp
 
+from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
 from warpsky.kernel_variants import kernel_variants
+from warpsky.light.dome import ambient_ground
+from warpsky.light.skylight import SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
+from warpsky.light.sun import Sun
 from warpsky.media.detail import detailed_value
 from warpsky.media.voxel import VoxelMedia, grid_interval, grid_value, media_functions
+from warpsky.numerics import exp3, exp_lerp_mean3, luminance
 from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_correction_function
 from warpsky.optics.phase_sampling import phase_sum_function
-from warpsky.techniques.common import (
-    Ground,
-    PinholeCamera,
-    Sun,
-    camera_forward,
-    camera_ray,
-    camera_ray_origin,
-    exp3,
-    exp_lerp_mean3,
-    luminance,
-)
-from warpsky.techniques.dome import ambient_ground
-from warpsky.techniques.skylight import SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
+from warpsky.surfaces.plane import Ground
 
 oriented_correction = oriented_correction_function(medium_phase)[0]
 

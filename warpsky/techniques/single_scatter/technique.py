@@ -10,19 +10,21 @@ from dataclasses import dataclass
 import warp as wp
 
 from warpsky import device_buffers
+from warpsky.camera_rays import pinhole_camera
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
+from warpsky.layer import Layer
+from warpsky.light.skylight import ambient_settings
+from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.oriented_phase import oriented_phases
 from warpsky.optics.tables import build_tables
 from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes, march_work
 from warpsky.scene.model import Scene
-from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
-from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
+from warpsky.settings import TechniqueSettings, documented, setting
+from warpsky.surfaces.plane import ground_struct
 from warpsky.techniques.single_scatter.kernels import MarchSettings, single_scatter_kernel
-from warpsky.techniques.skylight import ambient_settings
-from warpsky.techniques.sunlight import sunlight
 
 
 @documented
@@ -77,7 +79,7 @@ class SingleScatter:
     the media, and no multiple scattering: clouds come out darker than in reality, which is the point of this
     mode as a reference for the faster multiple-scattering techniques. The sky (dome, analytic sky, the ground
     they light) scatters once too, from its first two spherical-harmonic bands per hemisphere, occluded towards
-    the zenith and nadir (:mod:`~warpsky.techniques.skylight`; setting ``skylight``).
+    the zenith and nadir (:mod:`~warpsky.light.skylight`; setting ``skylight``).
     """
 
     name = "single_scatter"

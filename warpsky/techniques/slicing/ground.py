@@ -8,10 +8,13 @@ import functools
 
 import warp as wp
 
+from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray
 from warpsky.kernel_variants import kernel_variants
+from warpsky.light.dome import ambient_ground
+from warpsky.light.sun import Sun
 from warpsky.media.voxel import VoxelMedia
-from warpsky.techniques.common import Ground, PinholeCamera, Sun, camera_forward, camera_ray, exp3
-from warpsky.techniques.dome import ambient_ground
+from warpsky.numerics import exp3
+from warpsky.surfaces.plane import Ground
 from warpsky.techniques.single_scatter.kernels import sun_depth_function
 
 

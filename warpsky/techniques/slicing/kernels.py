@@ -37,20 +37,15 @@ import functools
 
 import warp as wp
 
+from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray
 from warpsky.kernel_variants import kernel_variants
+from warpsky.light.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
+from warpsky.light.sun import Sun
 from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
+from warpsky.numerics import exp3, one_minus_exp
 from warpsky.optics.kernels import GRID_SIZE, grid_node, scattering_angle
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
-from warpsky.techniques.common import (
-    PinholeCamera,
-    Sun,
-    camera_forward,
-    camera_ray,
-    exp3,
-    one_minus_exp,
-)
 from warpsky.techniques.single_scatter.kernels import media_span
-from warpsky.techniques.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.techniques.slicing.occlusion import SkyShadow, sky_transmittances
 
 

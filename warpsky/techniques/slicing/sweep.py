@@ -34,12 +34,13 @@ import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
+from warpsky.camera_rays import PinholeCamera
 from warpsky.device import launch_rows
 from warpsky.interrupt import check_stop
+from warpsky.light.skylight import SkyEnvironment
+from warpsky.light.sun import Sun
 from warpsky.media.voxel import VoxelMedia
 from warpsky.optics.oriented_phase import OrientedPhases
-from warpsky.techniques.common import PinholeCamera, Sun
-from warpsky.techniques.skylight import SkyEnvironment
 from warpsky.techniques.slicing.kernels import (
     AmsTables,
     EyeBuffers,
@@ -149,7 +150,7 @@ class SliceSweep:
     cam: PinholeCamera
     frame: SliceFrame
     sun: Sun
-    ambient: SkyEnvironment  # the sky around the media (:mod:`warpsky.techniques.skylight`)
+    ambient: SkyEnvironment  # the sky around the media (:mod:`warpsky.light.skylight`)
     sample_length: float  # longest eye sample [m]
     planes: np.ndarray  # slice positions along the slice axis [m], in sweep order
     start: tuple[float, float, float]  # irradiance the light buffer starts with, RGB

@@ -13,8 +13,12 @@ import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
+from warpsky.camera_rays import pinhole_camera
 from warpsky.device import launch_rows
 from warpsky.errors import UsageError
+from warpsky.layer import Layer
+from warpsky.light.skylight import ambient_settings
+from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
 from warpsky.optics.oriented_phase import oriented_phases
@@ -22,14 +26,12 @@ from warpsky.optics.phase import phase_numpy
 from warpsky.optics.tables import ams_table
 from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
 from warpsky.scene.model import PhaseKind, Projection, Scene
-from warpsky.techniques.base import Layer, TechniqueSettings, documented, setting
-from warpsky.techniques.common import ground_struct, pinhole_camera, sun_struct
-from warpsky.techniques.skylight import ambient_settings
+from warpsky.settings import TechniqueSettings, documented, setting
+from warpsky.surfaces.plane import ground_struct
 from warpsky.techniques.slicing.ground import ground_kernel
 from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, slicing_kernels
 from warpsky.techniques.slicing.occlusion import sky_shadow
 from warpsky.techniques.slicing.sweep import SliceSweep, SweepBuffers, chunk_planes, run_sweep, sweep_lock
-from warpsky.techniques.sunlight import sunlight
 
 #: Bytes per pixel of the ground pass's device copy of the layer.
 LAYER_DEVICE_BYTES = 28

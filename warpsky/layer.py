@@ -1,0 +1,28 @@
+"""The :class:`Layer`: what every technique and pass renders, ready to composite front to back."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Layer:
+    """One technique's image of what it renders, ready to composite front to back.
+
+    Attributes:
+        radiance: (H, W, 3) float32 radiance reaching the eye [sun irradiance units / sr].
+        transmittance: (H, W, 3) float32 fraction of the light from behind the layer that passes through it
+            (0 where an opaque surface such as the ground is hit).
+        depth: (H, W) float32 representative camera-space depth along the view axis [m]: the opacity-weighted
+            mean depth of what the layer shows; the camera's far clipping distance where it shows nothing.
+        stats: Figures about the render (lookups, seconds, settings) for metadata and benchmarks.
+        aovs: Extra per-pixel outputs by name, e.g. ``variance`` (H, W, 3) of a Monte Carlo pixel mean.
+    """
+
+    radiance: np.ndarray
+    transmittance: np.ndarray
+    depth: np.ndarray
+    stats: dict = field(default_factory=dict)
+    aovs: dict = field(default_factory=dict)

@@ -1,0 +1,44 @@
+"""The analytic sky as a light: its radiance over the upper hemisphere, for the passes that light surfaces and media
+with a uniform-equivalent sky (the surfaces, fog and height-field passes).
+
+The sky's radiance along a direction of elevation sine v above the horizon is Riley's single-scattering air to
+infinity, L(v) = E_sun P_R(theta) inscatter(v) (:func:`~warpsky.media.air_analytic.inscatter`, the same
+closed form the sky pass draws), with the unreddened sun E_sun. Averaged on an equal-area grid of the upper
+hemisphere it gives the mean radiance and E / pi, the uniform radiance that gives a horizontal surface the sky's
+irradiance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from warpsky.light.dome import hemisphere_directions, upper_hemisphere
+from warpsky.light.sun import sunlight
+from warpsky.media.air_analytic import inscatter, rayleigh
+
+
+def sky_hemisphere(scene, samples: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """(mean radiance, E / pi) [RGB] of the analytic sky's upper hemisphere seen at the camera's altitude; zeros
+    without an atmosphere or with the sun set (the night sky is black, as the sky pass draws it)."""
+    light = sunlight(scene)
+    atmosphere = scene.atmosphere
+    if atmosphere is None or light is None or not light.lit or light.air_sine <= 0.0:
+        return np.zeros(3), np.zeros(3)
+    directions = hemisphere_directions(samples, upper=True).reshape(-1, 3)
+    altitude = float(scene.camera.position[1]) + atmosphere.altitude
+    depth = inscatter(atmosphere.beta_sea_level[None, :], atmosphere.gamma, altitude, directions[:, 1:2],
+                      light.air_sine, np.inf)
+    radiance = light.irradiance[None, :] * depth * rayleigh(directions @ light.direction)[:, None]
+    return radiance.mean(axis=0), 2.0 * (radiance * directions[:, 1:2]).mean(axis=0)
+
+
+def sky_light(scene, *, analytic: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(mean radiance, E / pi) [RGB] of everything above the horizon that lights the scene diffusely: the dome's
+    upper hemisphere, plus the analytic sky's with ``analytic`` (a frame with a sky pass)."""
+    mean, cosine = np.zeros(3), np.zeros(3)
+    if scene.dome is not None:
+        mean, cosine = upper_hemisphere(scene.dome)
+    if analytic:
+        sky_mean, sky_cosine = sky_hemisphere(scene)
+        mean, cosine = mean + sky_mean, cosine + sky_cosine
+    return mean, cosine

@@ -1,1 +1,0 @@
-"""Opaque Lambertian surfaces: triangle meshes (terrain) through a BVH, and the ground plane."""
