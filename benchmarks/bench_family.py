@@ -38,7 +38,7 @@ def main(argv=None) -> int:
 
     from warpsky.device import init_warp
     from warpsky.evaluation.family import format_family_table, make_family, run_family, write_family_outputs
-    from warpsky.techniques.base import technique_names
+    from warpsky.registry import technique_names
 
     init_warp()
     if not (args.family / "family.json").is_file():

@@ -58,7 +58,8 @@ def breakdown(stage: Path, frame: float, options) -> dict:
     from warpsky.media.voxel import VoxelMediaBuffers
     from warpsky.optics.tables import ams_table
     from warpsky.output.exr import write_exr
-    from warpsky.render import plan_frame, render_frame, render_layers
+    from warpsky.passes.frame import render_layers
+    from warpsky.render import plan_frame, render_frame
     from warpsky.scene.usd import StageReader
 
     reader = StageReader(stage)
@@ -84,7 +85,7 @@ def breakdown(stage: Path, frame: float, options) -> dict:
             sweeps.append(time.perf_counter() - t0)
         times["slicing sweep (best of 2; its own table load + upload)"] = min(sweeps)
         t0 = time.perf_counter()
-        _, layers = render_layers(technique, scene, plan)
+        _, layers = render_layers(plan, scene, technique)
         image = composite(layers, far=scene.camera.far)
         times["sky pass + slicing + composite"] = time.perf_counter() - t0
         t0 = time.perf_counter()

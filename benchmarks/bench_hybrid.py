@@ -37,8 +37,8 @@ def main(argv=None) -> int:
     import warp as wp
 
     from warpsky.device import cpu_thread_count, init_warp
+    from warpsky.passes.frame import render_layers
     from warpsky.plan import make_plan
-    from warpsky.render import render_layers
     from warpsky.scene.usd import StageReader
 
     init_warp()
@@ -54,7 +54,7 @@ def main(argv=None) -> int:
         width = args.size if device.startswith("cpu") else args.gpu_size
         warm = make_plan(scene, technique="hybrid", settings={"spp": "2", "target_error": "0"},
                          resolution=(width, None), device=device)
-        render_layers(warm.renderer, scene, warm)  # compile / load and the denoiser's first call: not timed
+        render_layers(warm, scene)  # compile / load and the denoiser's first call: not timed
         for target in (float(t) for t in args.targets.split(",")):
             plan = make_plan(scene, technique="hybrid", settings={"target_error": repr(target), "spp": "4096"},
                              resolution=(width, None), device=device)
@@ -62,7 +62,7 @@ def main(argv=None) -> int:
             for frame in range(args.frames):
                 plan.renderer.settings = dataclasses.replace(plan.settings, seed=frame)
                 started = time.perf_counter()
-                layer, _ = render_layers(plan.renderer, scene, plan)
+                layer, _ = render_layers(plan, scene)
                 times.append(time.perf_counter() - started)
                 layers.append(layer)
             seconds = statistics.median(times)

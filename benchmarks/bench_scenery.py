@@ -32,8 +32,9 @@ def _best(call, repeats: int) -> tuple[float, object]:
 
 
 def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -> list[dict]:
-    from warpsky.passes.frame import scenery_layers
-    from warpsky.plan import make_plan, surfaces_draw_ground
+    from warpsky.passes.frame import depth_layers, ground_pass
+    from warpsky.passes.surfaces.surfaces import SurfacesPass, kept_renderer
+    from warpsky.plan import make_plan
     from warpsky.render import RenderOptions, render_image
     from warpsky.scene.usd import StageReader
 
@@ -47,29 +48,27 @@ def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -
         rows.append({"stage": stage, "device": device, "what": what, "width": width, "height": height,
                      "ms": 1e3 * seconds, **extra})
 
-    from warpsky.passes.frame import _surfaces_pass
-
-    surfaces = _surfaces_pass(device)
-    seconds, layer = _best(lambda: surfaces.render(scene, width, height, draw_ground=surfaces_draw_ground(scene)),
-                           repeats)
+    surfaces = kept_renderer(device)
+    draw_ground = ground_pass(plan.pass_runners, scene) == SurfacesPass.name
+    seconds, layer = _best(lambda: surfaces.render(scene, width, height, draw_ground=draw_ground), repeats)
     row("surfaces pass", seconds, triangles=int(layer.stats.get("triangles", 0)))
     limit = layer.depth
     if scene.fogs:
-        from warpsky.passes.fog.fog import FogPass
+        from warpsky.passes.fog.fog import Fog
 
-        fog = FogPass(device=device)
+        fog = Fog(device=device)
         occluders = surfaces.occluders if scene.meshes else None
         row("fog pass (terrain shadows)",
             _best(lambda: fog.render(scene, width, height, limit=limit, occluders=occluders), repeats)[0])
         row("fog pass (no shadows)", _best(lambda: fog.render(scene, width, height, limit=limit), repeats)[0])
     if scene.heightfield_clouds:
-        from warpsky.passes.heightfield.heightfield import HeightFieldPass
+        from warpsky.passes.heightfield.heightfield import HeightField
 
         for mode in ("exact", "max", "sexp"):
-            clouds = HeightFieldPass(device=device, mode=mode)
+            clouds = HeightField(device=device, mode=mode)
             row(f"height-field pass ({mode})",
                 _best(lambda c=clouds: c.render(scene, width, height, limit=limit), repeats)[0])
-    seconds, _ = _best(lambda: scenery_layers(scene, plan.passes, width, height, device=device), repeats)
+    seconds, _ = _best(lambda: depth_layers(plan, scene), repeats)
     row("all scenery passes", seconds)
     options = RenderOptions(device=device, resolution=(width, height))
     seconds, _ = _best(lambda: render_image(scene, plan, options, stage=str(reader.path), time_code=start), repeats)

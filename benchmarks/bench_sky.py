@@ -29,7 +29,7 @@ def main(argv=None) -> int:
 
     from warpsky.device import init_warp
     from warpsky.media import air_analytic as sky
-    from warpsky.passes.sky.sky import SkyPass
+    from warpsky.passes.sky.sky import Sky
     from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
 
     init_warp()
@@ -40,7 +40,7 @@ def main(argv=None) -> int:
                   atmosphere=Atmosphere())
     rows = []
     for device in devices:
-        sky_pass = SkyPass(device=device)
+        sky_pass = Sky(device=device)
         sky_pass.render(scene, 8, 8)  # compile / load, not timed
         for width, height in ((512, 512), (1920, 1080)):
             times = []

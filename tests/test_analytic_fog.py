@@ -12,7 +12,7 @@ from scipy.integrate import quad
 
 from warpsky.errors import SceneError
 from warpsky.media.analytic_fog import FogSet, fog_density, fog_optical_depth, fog_struct
-from warpsky.passes.fog.fog import FogPass, fog_sun_transmittance
+from warpsky.passes.fog.fog import Fog, fog_sun_transmittance
 from warpsky.passes.fog.kernels import FogMarch, fog_ray
 from warpsky.scene.analytic_fog import (
     AnalyticFog,
@@ -63,7 +63,7 @@ EXACT = {"nodes": 8, "min_pieces": 16, "max_pieces": 256}
 
 def device_ray(fogs, scene, origin, direction, t0, t1, device, ambient=None, **pass_kwargs):
     """(radiance, transmittance, mean distance) of one eye-relative ray through ``fog_ray``, float64."""
-    march = FogPass(device=device, **{**EXACT, **pass_kwargs}).march(scene)
+    march = Fog(device=device, **{**EXACT, **pass_kwargs}).march(scene)
     if ambient is not None:
         march.ambient = wp.vec3d(*np.asarray(ambient, np.float64).tolist())
     fog_set = fog_struct(fogs, scene.camera.position, scene.time_s, device)
@@ -303,8 +303,8 @@ def test_wind_translates_the_fog(device):
     sun = Sun(np.array([0.3, 0.8, 0.1]) / np.linalg.norm([0.3, 0.8, 0.1]), np.ones(3))
     camera = Camera("cam", np.array([0.0, 30.0, 80.0]), np.eye(3), 20.0, 36.0, 36.0)
     moved = Camera("cam", camera.position - wind * t, np.eye(3), 20.0, 36.0, 36.0)
-    later = FogPass(device=device, **EXACT).render(Scene(camera, sun, fogs=(fog,), time_code=t * 24.0), 12, 12)
-    still = FogPass(device=device, **EXACT).render(Scene(moved, sun, fogs=(fog,)), 12, 12)
+    later = Fog(device=device, **EXACT).render(Scene(camera, sun, fogs=(fog,), time_code=t * 24.0), 12, 12)
+    still = Fog(device=device, **EXACT).render(Scene(moved, sun, fogs=(fog,)), 12, 12)
     np.testing.assert_allclose(later.radiance, still.radiance, rtol=1e-5)
     np.testing.assert_allclose(later.transmittance, still.transmittance, rtol=1e-5)
 
@@ -354,7 +354,7 @@ def test_homogeneous_fog_matches_closed_form(sigma, albedo, device):
     ambient = np.array([0.1, 0.15, 0.3])
     camera = fog_camera()
     scene = Scene(camera, sun, fogs=(fog,), dome=Dome(ambient))
-    layer = FogPass(device=device, **EXACT).render(scene, 16, 16)
+    layer = Fog(device=device, **EXACT).render(scene, 16, 16)
     w = pixel_directions(camera, 16, 16)
     cos_axis = w @ camera.forward
     radiance, transmittance = homogeneous_radiance(sigma, fog, sun, ambient, camera.position, w,
@@ -378,7 +378,7 @@ def test_limit_cuts_the_fog_at_the_surface_depth(device):
     sun = Sun(np.array([0.2, 0.7, -0.6]) / np.linalg.norm([0.2, 0.7, -0.6]), np.ones(3))
     camera = fog_camera()
     limit = np.random.default_rng(5).uniform(5.0, 80.0, (12, 12)).astype(np.float32)
-    layer = FogPass(device=device, **EXACT).render(Scene(camera, sun, fogs=(fog,)), 12, 12, limit=limit)
+    layer = Fog(device=device, **EXACT).render(Scene(camera, sun, fogs=(fog,)), 12, 12, limit=limit)
     w = pixel_directions(camera, 12, 12)
     cos_axis = (w @ camera.forward).reshape(-1)
     radiance, transmittance = homogeneous_radiance(0.03, fog, sun, np.zeros(3), camera.position, w,
@@ -401,7 +401,7 @@ def test_empty_and_zero_fog(device):
     sun = Sun(np.array([0.0, 1.0, 0.0]), np.ones(3))
     camera = fog_camera(far=5000.0)
     for fogs in [(AnalyticFog("zero", [ConstantTerm(0.0)], floor=-100.0, top=100.0),), ()]:
-        layer = FogPass(device=device, **EXACT).render(Scene(camera, sun, fogs=fogs, dome=Dome(np.ones(3))), 8, 8)
+        layer = Fog(device=device, **EXACT).render(Scene(camera, sun, fogs=fogs, dome=Dome(np.ones(3))), 8, 8)
         assert np.all(layer.transmittance == 1.0) and np.all(layer.radiance == 0.0)
         assert np.all(layer.depth == np.float32(5000.0))
 
@@ -415,7 +415,7 @@ def test_sun_at_or_below_horizon_gives_sky_light_only(elevation, device):
                       albedo=[0.9, 0.8, 0.7])
     direction = np.array([math.cos(elevation), math.sin(elevation), 0.0])
     ambient = np.array([0.3, 0.2, 0.1])
-    layer = FogPass(device=device, **EXACT).render(Scene(fog_camera(), Sun(direction, np.ones(3)), fogs=(fog,),
+    layer = Fog(device=device, **EXACT).render(Scene(fog_camera(), Sun(direction, np.ones(3)), fogs=(fog,),
                                                 dome=Dome(ambient)), 8, 8)
     expected = fog.albedo * ambient * (1.0 - layer.transmittance.astype(np.float64))
     np.testing.assert_allclose(layer.radiance, expected, rtol=1e-5, atol=1e-9)
@@ -448,8 +448,8 @@ def test_far_from_the_origin_renders_the_same(device):
     camera = fog_camera((0.0, 30.0, 90.0))
     offset = np.array([1.0e5, 250.0, -1.0e5])
     far_camera = Camera("cam", camera.position + offset, camera.rotation, 18.0, 36.0, 36.0)
-    near = FogPass(device=device, **EXACT).render(Scene(camera, sun, fogs=(fog,)), 12, 12)
-    away = FogPass(device=device, **EXACT).render(Scene(far_camera, sun, fogs=(translated(fog, offset),)), 12, 12)
+    near = Fog(device=device, **EXACT).render(Scene(camera, sun, fogs=(fog,)), 12, 12)
+    away = Fog(device=device, **EXACT).render(Scene(far_camera, sun, fogs=(translated(fog, offset),)), 12, 12)
     np.testing.assert_allclose(away.transmittance, near.transmittance, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(away.radiance, near.radiance, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(away.depth, near.depth, rtol=1e-5)
@@ -559,6 +559,8 @@ def test_usd_round_trip(tmp_path, up, mpu):
     ({"albedo": ("Color3f", (1.2, 0.5, 0.5))}, "warpsky:fog:albedo"),
     ({"colour": ("Float", 1.0)}, "warpsky:fog:colour"),
 ])
+
+
 def test_usd_bad_attributes_name_prim_and_attribute(tmp_path, overrides, attribute):
     """Mismatched array lengths, a fog that can go negative and out-of-range values raise a SceneError naming
     the prim and the attribute."""

@@ -183,7 +183,7 @@ def test_slicing_refuses_an_orthographic_camera(tmp_path, homogeneous_npy):
 def test_orthographic_sky_transmittance_follows_each_rows_altitude(device):
     """Parallel rays climbing at 30 degrees from a view window 4 km wide and 8 km tall: each row's air to space is
     the column above its own start, beta H exp(-h / H) / sin(30 deg), with h the row's altitude."""
-    from warpsky.passes.sky.sky import SkyPass
+    from warpsky.passes.sky.sky import Sky
     from warpsky.scene.model import Atmosphere, Scene
 
     elevation = math.radians(30.0)
@@ -191,7 +191,7 @@ def test_orthographic_sky_transmittance_follows_each_rows_altitude(device):
     camera = Camera("ortho", (0.0, 5000.0, 0.0), look_rotation(forward), 0.05, 4000.0, 8000.0,
                     projection=Projection.ORTHOGRAPHIC)
     atmosphere = Atmosphere()
-    front, _ = SkyPass(device=device).render(Scene(camera, None, atmosphere=atmosphere), 4, 8)
+    front, _ = Sky(device=device).render(Scene(camera, None, atmosphere=atmosphere), 4, 8)
     window_y = (0.5 - (np.arange(8) + 0.5) / 8) * 8000.0  # each row's centre up the view window
     altitude = 5000.0 + window_y * math.cos(elevation)  # the window's up axis climbs at cos(30 deg)
     depth = np.outer(np.exp(-altitude / atmosphere.scale_height), atmosphere.beta_sea_level)

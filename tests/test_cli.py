@@ -226,12 +226,12 @@ def test_failed_frame_keeps_finished_frames(tmp_path, capsys):
 def test_every_technique_declares_the_protocol():
     import dataclasses
 
+    from warpsky.registry import technique_class, technique_names
     from warpsky.settings import field_kinds
-    from warpsky.techniques.base import technique_class, technique_names
 
     for name in technique_names():
         cls = technique_class(name)
-        assert cls.name == name == cls.Settings.technique
+        assert cls.name == name == cls.Settings.owner
         assert isinstance(cls.traces_air, bool) and isinstance(cls.renders_layers, bool)
         assert set(field_kinds(cls.Settings)) == {f.name for f in dataclasses.fields(cls.Settings)}
         assert all(f.metadata["help"] for f in dataclasses.fields(cls.Settings)), name
@@ -253,7 +253,9 @@ def test_settings_are_parsed_by_their_declared_types(tmp_path, good_stage, capsy
         ("path_tracer", "seed=x", "setting seed: expected a whole number, got 'x'"),
         ("slicing", "low_albedo=2", "setting low_albedo must be 0 or 1, got 2"),
         ("slicing", "light_equation=23", "setting light_equation must be 0, 24 or 25"),
-        ("slicing", "stratiform.radiosity_detail=5", None),  # no layers: unused, reported by info
+        ("slicing", "stratiform.radiosity_detail=5", "setting stratiform.radiosity_detail must be a whole number "
+         "in 0..4, got 5"),
+        ("slicing", "stratiform.radiosity_detail=2", None),  # no layers: unused, reported by info
     ):
         code, _, err = run(["render", good_stage, tmp_path / "a.exr", "--res", "4", "--device", "cpu", "--technique",
                             technique, "--set", text], capsys)
@@ -267,7 +269,7 @@ def test_render_help_lists_every_setting_with_its_metadata(capsys):
     import dataclasses
 
     from warpsky.passes.stratiform.stratiform import StratiformSettings
-    from warpsky.techniques.base import technique_class, technique_names
+    from warpsky.registry import technique_class, technique_names
 
     with pytest.raises(SystemExit):
         main(["render", "--help"])
@@ -284,6 +286,8 @@ def test_render_help_lists_every_setting_with_its_metadata(capsys):
     (["--time-budget", "0"], "--time-budget"), (["--time-budget", "-3"], "--time-budget"),
     (["--technique", "slicing", "--target-error", "0.1"], "--target-error applies to technique hybrid only"),
 ])
+
+
 def test_bad_target_flags_exit_2_naming_the_flag(tmp_path, good_stage, capsys, flags, message):
     out = tmp_path / "out" / "f.exr"
     try:

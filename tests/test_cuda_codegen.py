@@ -41,23 +41,22 @@ def test_module_compiles_to_sm90_ptx(module, ptx_builds):
     assert ".target sm_90" in text and ".entry" in text
 
 
-def test_registry_lists_every_kernel_module():
-    """Any module-level @wp.kernel in the package must belong to a module the registry compiles."""
-    import importlib
-    import pkgutil
-
+def test_registry_finds_every_module_with_kernels():
+    """Every source file with a module-level ``@wp.kernel`` (read from its syntax tree, not imported) is one of the
+    modules the registry compiles: a new technique or pass needs no entry anywhere for its kernels to be tested."""
     import warpsky
+    from warpsky.kernel_registry import plain_kernel_modules
 
-    registered = {m.name for m in kernel_modules()}
-    missing = []
-    for info in pkgutil.walk_packages(warpsky.__path__, "warpsky."):
-        if info.name.endswith("cli") or info.name.endswith("__main__"):
-            continue
-        module = importlib.import_module(info.name)
-        for value in vars(module).values():
-            if isinstance(value, wp.Kernel) and value.module.name not in registered:
-                missing.append(f"{info.name}.{value.key}")
-    assert not missing, f"kernels not in warpsky.kernel_registry: {missing}"
+    package = Path(warpsky.__file__).parent
+    expected = set()
+    for path in sorted(package.rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        if any(isinstance(node, ast.FunctionDef) and "kernel" in _decorator_names(node) for node in tree.body):
+            parts = path.relative_to(package.parent).with_suffix("").parts
+            expected.add(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+    found = set(plain_kernel_modules())
+    assert expected <= found, f"kernel modules the registry misses: {sorted(expected - found)}"
+    assert {"warpsky.passes.sky.kernels", "warpsky.passes.fog.kernels", "warpsky.media.fields"} <= found
 
 
 def _decorator_names(node) -> set[str]:

@@ -14,8 +14,8 @@ from conftest import StageSpec, look_rotation, write_stage
 from warpsky.composite import composite
 from warpsky.errors import SceneError
 from warpsky.light.dome import DomeLight, dome_radiance, dome_struct, mean_radiance, upper_hemisphere
+from warpsky.passes.frame import render_layers
 from warpsky.plan import make_plan
-from warpsky.render import render_layers
 from warpsky.scene.model import Dome
 from warpsky.scene.usd import StageReader
 
@@ -77,7 +77,7 @@ def render_frame(stage, device, size, technique, **settings):
     scene = StageReader(stage).scene_at(None)
     plan = make_plan(scene, technique=technique, settings={k: str(v) for k, v in settings.items()},
                      resolution=(size, size), device=device)
-    main, layers = render_layers(plan.renderer, scene, plan)
+    main, layers = render_layers(plan, scene)
     return main, composite(layers, far=scene.camera.far)
 
 
@@ -210,6 +210,8 @@ def test_black_dome_renders_exactly_as_no_dome(box, device, technique):
     ("path_tracer", {"spp": 256}),
     ("hybrid", {"spp": 256, "denoise": 0, "target_error": 0}),
 ])
+
+
 def test_white_furnace_under_a_uniform_dome(box, device, technique, settings):
     """Albedo 1, no sun, no ground or air, a uniform dome of radiance 1.5: every pixel sees exactly the dome."""
     stage = add_dome(box(sun_direction=None, extinction_scale=0.2, phase="hg", g=0.6), intensity=1.5)

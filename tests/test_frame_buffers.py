@@ -54,6 +54,8 @@ def assert_layers_equal(a, b):
     ("hybrid", {"spp": 4, "target_error": 0, "denoise": 0, "max_bounces": 8}),
     ("single_scatter", {}),
 ])
+
+
 def test_second_frame_allocates_nothing_and_matches_a_fresh_render(stage, device, technique, settings):
     device_buffers.clear()
     fresh = render_frame(stage, device, technique, **settings)
@@ -67,6 +69,8 @@ def test_second_frame_allocates_nothing_and_matches_a_fresh_render(stage, device
     ("path_tracer", {"spp": 16, "samples_per_pass": 1, "max_bounces": 8}),
     ("hybrid", {"spp": 8, "samples_per_pass": 1, "target_error": 0, "denoise": 0, "max_bounces": 8}),
 ])
+
+
 def test_frames_rendered_at_once_by_threads_do_not_share_kept_buffers(stage, technique, settings):
     """Two threads of one process rendering frames at once (a multi-threaded Dask worker) take turns on the kept
     arrays: each frame equals the one rendered alone (without the lock, one frame's passes zero or add into the
@@ -118,17 +122,17 @@ def test_small_gpu_frames_run_one_thread_per_path():
 
 
 def test_sky_pass_second_frame_allocates_nothing(device):
-    from warpsky.passes.sky.sky import SkyPass
+    from warpsky.passes.sky.sky import Sky
     from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
 
     cam = Camera("c", np.array([0.0, 2.0, 0.0]), look_rotation((0.0, 0.3, -1.0)), 20.0, 36.0, 24.0, far=1e5)
     scene = Scene(cam, Sun((0.3, 0.8, 0.2), (1.0, 1.0, 1.0)), ground=Ground(0.0), atmosphere=Atmosphere())
     device_buffers.clear()
-    first = SkyPass(device=device).render(scene, SIZE, SIZE)
+    first = Sky(device=device).render(scene, SIZE, SIZE)
     allocated = device_buffers.allocation_count()
     depth = np.full((SIZE, SIZE), 500.0, np.float32)
-    SkyPass(device=device).render(scene, SIZE, SIZE, media_depth=depth)
-    second = SkyPass(device=device).render(dataclasses.replace(scene), SIZE, SIZE)
+    Sky(device=device).render(scene, SIZE, SIZE, media_depth=depth)
+    second = Sky(device=device).render(dataclasses.replace(scene), SIZE, SIZE)
     assert device_buffers.allocation_count() == allocated
     for a, b in zip(first, second, strict=True):
         np.testing.assert_array_equal(a.radiance, b.radiance)

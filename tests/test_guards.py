@@ -118,8 +118,8 @@ def test_info_prints_the_estimates_and_the_limits(box_stage, capsys):
 
 def test_every_technique_estimates_memory_that_grows_with_the_frame(box_stage):
     from warpsky.plan import make_plan
+    from warpsky.registry import technique_names
     from warpsky.scene.usd import StageReader
-    from warpsky.techniques.base import technique_names
 
     scene = StageReader(box_stage).scene_at(None)
     for name in technique_names():

@@ -13,7 +13,7 @@ from tests.conftest import look_rotation
 from warpsky.errors import SceneError
 from warpsky.media.heightfield import probe, ray_intervals, voxelize
 from warpsky.optics.phase import phase_numpy
-from warpsky.passes.heightfield.heightfield import HeightFieldPass, heightfield_sun_transmittance
+from warpsky.passes.heightfield.heightfield import HeightField, heightfield_sun_transmittance
 from warpsky.scene.heightfield_clouds import HazeSpec, HeightFieldClouds, read_heightfield_clouds, surface_heights
 from warpsky.scene.model import Camera, Dome, Ground, PhaseKind, Projection, Scene, Sun
 from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
@@ -132,7 +132,7 @@ def test_exact_mode_matches_voxelized_single_scatter(device, sun_direction):
     dome = Dome(np.array([0.05, 0.07, 0.1]))
     for position, forward, aperture in PATCH_VIEWS:
         camera = Camera("cam", np.array(position), look_rotation(forward), 50.0, aperture, aperture, far=2e4)
-        ours = HeightFieldPass(device=device, mode="exact").render(
+        ours = HeightField(device=device, mode="exact").render(
             Scene(camera=camera, sun=sun, dome=dome, heightfield_clouds=(clouds,)), 48, 48)
         # the deck's ambient is the isotropic dome light occluded towards the zenith: the march's skylight off
         reference = SingleScatter(SingleScatterSettings(skylight=False), device=device).render(
@@ -154,8 +154,8 @@ def test_sexp_error_against_exact(device):
         for position, forward, aperture in PATCH_VIEWS:
             camera = Camera("cam", np.array(position), look_rotation(forward), 50.0, aperture, aperture, far=2e4)
             scene = Scene(camera=camera, sun=sun, heightfield_clouds=(clouds,))
-            exact = HeightFieldPass(device=device, mode="exact").render(scene, 32, 32).radiance
-            sexp = HeightFieldPass(device=device, mode="sexp").render(scene, 32, 32).radiance
+            exact = HeightField(device=device, mode="exact").render(scene, 32, 32).radiance
+            sexp = HeightField(device=device, mode="sexp").render(scene, 32, 32).radiance
             assert np.all(np.isfinite(sexp)) and sexp.min() >= 0.0
             errors.append(np.sqrt(np.mean((sexp - exact) ** 2)) / np.sqrt(np.mean(exact**2)))
             if sun.direction[1] == 1.0:
@@ -176,8 +176,8 @@ def test_max_thickness_rule_against_exact(device):
         for position, forward, aperture in PATCH_VIEWS:
             camera = Camera("cam", np.array(position), look_rotation(forward), 50.0, aperture, aperture, far=2e4)
             scene = Scene(camera=camera, sun=sun, heightfield_clouds=(clouds,))
-            exact = HeightFieldPass(device=device, mode="exact").render(scene, 32, 32)
-            fast = HeightFieldPass(device=device, mode="max").render(scene, 32, 32)
+            exact = HeightField(device=device, mode="exact").render(scene, 32, 32)
+            fast = HeightField(device=device, mode="max").render(scene, 32, 32)
             np.testing.assert_array_equal(fast.transmittance, exact.transmittance)
             error = np.sqrt(np.mean((fast.radiance - exact.radiance) ** 2)) / np.sqrt(np.mean(exact.radiance**2))
             errors.setdefault(name, []).append(float(error))
@@ -209,7 +209,7 @@ def test_haze_shaft_closed_form_sun_overhead(device):
     near = 1.0e-3
     for x, lit in ((0.0, True), (250.0, False)):
         scene = Scene(camera=vertical_camera(x, 0.0, 0.0, near=near), sun=sun, dome=dome, heightfield_clouds=(clouds,))
-        layer = HeightFieldPass(device=device, mode="exact").render(scene, 3, 3)
+        layer = HeightField(device=device, mode="exact").render(scene, 3, 3)
         path = DECK - near
         # single scattering in the slab; sun and sky attenuated by the haze above the point only
         expected = sigma_s * path * np.exp(-SIGMA_HAZE * DECK) * (forward * 2.0 + 0.1) if lit else np.zeros(3)
@@ -227,7 +227,7 @@ def test_haze_shaft_tilted_sun_lights_upper_column(device):
     dome = Dome(np.array([0.1, 0.1, 0.1]))
     near = 1.0e-3
     scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0, near=near), sun=sun, dome=dome, heightfield_clouds=(clouds,))
-    layer = HeightFieldPass(device=device, mode="exact").render(scene, 3, 3)
+    layer = HeightField(device=device, mode="exact").render(scene, 3, 3)
     sigma_s = 0.9 * SIGMA_HAZE
     mu = math.cos(zenith)
     lit_length = HOLE_RADIUS / math.tan(zenith)  # u = DECK - z in [0, lit_length] is sunlit
@@ -242,7 +242,7 @@ def shaft_centroid(clouds, sun, device, height) -> float:
     """Radiance-weighted mean x [m] of a row of horizontal rays along -z at ``height``, 600 m wide."""
     camera = Camera("row", np.array([0.0, height, 400.0]), np.eye(3), 50.0, 600.0, 600.0 / 32, far=2000.0,
                     projection=Projection.ORTHOGRAPHIC)
-    layer = HeightFieldPass(device=device, mode="exact", haze_step_length=2.0).render(
+    layer = HeightField(device=device, mode="exact", haze_step_length=2.0).render(
         Scene(camera=camera, sun=sun, heightfield_clouds=(clouds,)), 64, 2)
     profile = layer.radiance[:, :, 1].mean(axis=0)
     x = (np.arange(64) + 0.5) / 64 * 600.0 - 300.0
@@ -267,13 +267,13 @@ def test_no_clouds_leaves_only_haze(device):
     haze = HazeSpec(SIGMA_HAZE, albedo=[1.0, 1.0, 1.0], g=0.3, floor=-50.0, top=800.0)
     clouds = HeightFieldClouds("clear", DECK, [-10.0], haze=haze)  # f < 0 everywhere
     scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0), sun=sun_towards(0, 1, 0), heightfield_clouds=(clouds,))
-    layer = HeightFieldPass(device=device, mode="exact").render(scene, 3, 3)
+    layer = HeightField(device=device, mode="exact").render(scene, 3, 3)
     path = 800.0 - 1.0e-3
     expected = SIGMA_HAZE * phase_numpy(PhaseKind.HG, 0.3, 1.0) * path * np.exp(-SIGMA_HAZE * 800.0)
     np.testing.assert_allclose(layer.radiance[1, 1], expected, rtol=2e-3)
     np.testing.assert_allclose(layer.transmittance[1, 1], np.exp(-SIGMA_HAZE * path), rtol=1e-4)
     above = Scene(camera=vertical_camera(0.0, 900.0, 0.0), sun=sun_towards(0, 1, 0), heightfield_clouds=(clouds,))
-    layer = HeightFieldPass(device=device, mode="exact").render(above, 3, 3)
+    layer = HeightField(device=device, mode="exact").render(above, 3, 3)
     np.testing.assert_array_equal(layer.transmittance, 1.0)
     np.testing.assert_array_equal(layer.radiance, 0.0)
 
@@ -287,7 +287,7 @@ def test_overcast_slab_closed_form(device, camera_y):
     near = 1.0e-3
     scene = Scene(camera=vertical_camera(0.0, camera_y, 0.0, near=near), sun=sun_towards(0, 1, 0),
                   heightfield_clouds=(clouds,))
-    layer = HeightFieldPass(device=device, mode="exact").render(scene, 3, 3)
+    layer = HeightField(device=device, mode="exact").render(scene, 3, 3)
     start = max(low, camera_y + near)
     length = high - start
     expected = 0.01 * phase_numpy(PhaseKind.HG, 0.7, 1.0) * length * math.exp(-0.01 * length)
@@ -302,13 +302,13 @@ def test_sun_at_and_below_the_horizon_and_grazing_rays(device):
     camera = Camera("cam", np.array([0.0, DECK, 0.0]), look_rotation([0.0, 0.0, -1.0]), 50.0, 36.0, 36.0, far=3e4)
     ground = Ground(0.0)
     for sun, lit in ((sun_towards(1, 0, 0), True), (sun_towards(1, -0.2, 0), False)):
-        layer = HeightFieldPass(device=device, mode="exact").render(
+        layer = HeightField(device=device, mode="exact").render(
             Scene(camera=camera, sun=sun, ground=ground, heightfield_clouds=(clouds,)), 16, 16)
         assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
         assert np.all((layer.transmittance >= 0.0) & (layer.transmittance <= 1.0))
         assert (layer.radiance.max() > 0.0) == lit
     # without a horizon a sun below it lights the deck from beneath
-    layer = HeightFieldPass(device=device, mode="exact").render(
+    layer = HeightField(device=device, mode="exact").render(
         Scene(camera=camera, sun=sun_towards(1, -0.2, 0), heightfield_clouds=(clouds,)), 16, 16)
     assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0 and layer.radiance.max() > 0.0
 
@@ -321,7 +321,7 @@ def test_far_from_the_origin_equals_at_the_origin(device):
     for deck, shift in ((clouds, np.zeros(3)), (moved, offset)):
         camera = Camera("cam", np.array([30.0, 400.0, 500.0]) + shift, look_rotation([0.2, 0.4, -1.0]), 50.0, 36.0,
                         36.0, far=2e4)
-        views.append(HeightFieldPass(device=device, mode="exact").render(
+        views.append(HeightField(device=device, mode="exact").render(
             Scene(camera=camera, sun=sun_towards(0.3, 1, 0.2), heightfield_clouds=(deck,)), 24, 24))
     assert views[0].radiance.max() > 0
     np.testing.assert_allclose(views[1].radiance, views[0].radiance, rtol=1e-3, atol=1e-3 * views[0].radiance.max())
@@ -332,7 +332,7 @@ def test_limit_stops_rays_and_sun_transmittance(device):
     clouds = holed_deck(density=0.01)
     scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0), sun=sun_towards(0, 1, 0), heightfield_clouds=(clouds,))
     limit = np.full((3, 3), 400.0, np.float32)
-    layer = HeightFieldPass(device=device, mode="exact").render(scene, 3, 3, limit=limit)
+    layer = HeightField(device=device, mode="exact").render(scene, 3, 3, limit=limit)
     np.testing.assert_allclose(layer.transmittance[1, 1], np.exp(-SIGMA_HAZE * (400.0 - 1e-3)), rtol=1e-4)
     points = np.array([[0.0, 500.0, 0.0], [300.0, 500.0, 0.0], [300.0, 1100.0, 0.0]])
     got = heightfield_sun_transmittance(scene, points, device)
@@ -418,6 +418,8 @@ def test_usd_round_trip(tmp_path):
     ("warpsky:haze:top", ("Float", 5.0), "warpsky:haze:top"),
     ("warpsky:hf:bottomDepth", ("String", "deep"), "warpsky:hf:bottomDepth"),
 ])
+
+
 def test_usd_bad_attribute_names_prim_and_attribute(tmp_path, attribute, value, message):
     from pxr import Sdf, Vt
 

@@ -80,7 +80,7 @@ def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
     the mean radiance within noise (z < 4, 0.3 % for the voxels in quadrature; measured on the CPU with 4096 spp:
     -0.09 % +- 0.27 %), and the noise is small enough (< 1 %) for a 5 % error to fail. All orders of scattering
     add about 15 % here."""
-    from warpsky.passes.heightfield.heightfield import HeightFieldPass
+    from warpsky.passes.heightfield.heightfield import HeightField
     from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
 
     k = np.array([[2.0 * math.pi / 700.0, 0.0], [0.0035, 0.0060]])
@@ -90,7 +90,7 @@ def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
     camera = Camera("cam", np.array([40.0, 300.0, -20.0]), look_rotation(look), 24.0, 36.0, 24.0, near=1.0,
                     far=1.0e5)
     scene = Scene(camera, Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), heightfield_clouds=(clouds,))
-    expected = float(HeightFieldPass(device=device).render(scene, 24, 16).radiance[..., 1].mean())
+    expected = float(HeightField(device=device).render(scene, 24, 16).radiance[..., 1].mean())
     settings = PathTracerSettings(spp=2048, seed=5, max_bounces=1, deck_extent=2500.0)
     out = PathTracer(settings, device=device).render(scene, 24, 16)
     measured = float(out.radiance[..., 1].mean())
@@ -121,7 +121,7 @@ def test_render_and_info_trace_the_deck(tmp_path, capsys):
     rgba = read_exr(exr).rgba()
     assert np.all(np.isfinite(rgba)) and rgba[..., :3].min() >= 0.0 and rgba[..., :3].max() > 0.0
     code, _, err = run_cli(["render", stage, exr, "--technique", "path_tracer", "--set", "deck_voxel=-1"], capsys)
-    assert code == 2 and "setting deck_voxel must be a positive length [m] or auto, got -1" in err
+    assert code == 2 and "setting deck_voxel must be a number > 0 [m] or auto, got -1" in err
     mesh = """    def Mesh "Hill"
     {
         int[] faceVertexCounts = [3]

@@ -215,7 +215,7 @@ def test_render_and_info_trace_the_layer(tmp_path, capsys):
     assert np.all(np.isfinite(rgba)) and rgba[..., :3].min() >= 0.0
     assert rgba[..., :3].max() > 0.0 and rgba[..., 3].max() > 0.9  # the cloud covers some pixels
     code, _, err = run(["render", stage, exr, "--technique", "path_tracer", "--set", "layer_voxel=-1"], capsys)
-    assert code == 2 and "setting layer_voxel must be a positive length [m] or auto, got -1" in err
+    assert code == 2 and "setting layer_voxel must be a number > 0 [m] or auto, got -1" in err
 
 
 def test_error_vs_time_judges_the_stratiform_pass(tmp_path, monkeypatch):

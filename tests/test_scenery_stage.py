@@ -9,7 +9,7 @@ import pytest
 from conftest import run_cli
 
 from warpsky.output.exr import read_exr
-from warpsky.passes.frame import scenery_layers
+from warpsky.passes.frame import depth_layers
 from warpsky.plan import make_plan
 from warpsky.scene.usd import StageReader
 
@@ -88,7 +88,7 @@ def test_fog_is_composited_in_front_of_the_terrain_that_cuts_it(tmp_path, capsys
     reader = StageReader(path)
     scene = reader.scene_at(None)
     plan = make_plan(scene, resolution=(32, None))
-    (surfaces, fog), _ = scenery_layers(scene, plan.passes, plan.width, plan.height, device="cpu")
+    surfaces, fog = depth_layers(plan, scene)
     expected = fog.radiance + fog.transmittance * surfaces.radiance
     np.testing.assert_allclose(rgb, expected, rtol=1e-4, atol=1e-7)
     assert np.all(surfaces.transmittance[-1] == 0.0)  # the bottom row sees the ground
@@ -101,8 +101,8 @@ def test_path_tracer_refuses_scenery_with_a_clear_error(tmp_path, capsys):
     code, _, err = run_cli(["render", write_stage(tmp_path, FOG), tmp_path / "x.exr", "--technique",
                             "path_tracer"], capsys)
     assert code == 2
-    assert ("technique path_tracer does not render analytic fog (/World/Fog); use hybrid, slicing or "
-            "single_scatter") in err
+    assert ("technique path_tracer does not render analytic fog (/World/Fog); use hybrid, single_scatter or "
+            "slicing") in err
     assert not (tmp_path / "x.exr").exists()
 
 
@@ -125,7 +125,7 @@ def test_wind_moves_the_rendered_fog_as_a_camera_moved_against_it(tmp_path, time
     by -wind t, fog only (the terrain does not move with the wind)."""
     import dataclasses
 
-    from warpsky.passes.fog.fog import FogPass
+    from warpsky.passes.fog.fog import Fog
 
     reader = StageReader(write_stage(tmp_path, FOG))
     later = reader.scene_at(time)
@@ -133,8 +133,8 @@ def test_wind_moves_the_rendered_fog_as_a_camera_moved_against_it(tmp_path, time
     shift = np.array([2.0, 0.0, 0.0]) * later.time_s
     moved = dataclasses.replace(still, camera=dataclasses.replace(still.camera,
                                                                   position=still.camera.position - shift))
-    a = FogPass().render(later, 16, 12)
-    b = FogPass().render(moved, 16, 12)
+    a = Fog().render(later, 16, 12)
+    b = Fog().render(moved, 16, 12)
     np.testing.assert_allclose(a.radiance, b.radiance, rtol=1e-4, atol=1e-9)
     np.testing.assert_allclose(a.transmittance, b.transmittance, rtol=1e-5)
 
@@ -158,11 +158,13 @@ def test_stratiform_layer_shadows_points_below_it_along_the_slant_path():
 def test_scenery_pass_settings_come_from_set_and_bad_ones_are_named(tmp_path, capsys):
     path = write_stage(tmp_path, TERRAIN, FOG)
     code, out, _ = run_cli(["info", path, "--set", "fog.nodes=2", "--set", "fog.cut_depth=20"], capsys)
-    assert code == 0 and "fog.nodes=2, fog.cut_depth=20" in out
+    assert code == 0 and "fog.nodes=2, fog.min_pieces=4, fog.max_pieces=64, fog.cut_depth=20" in out
     code, _, err = run_cli(["info", path, "--set", "fog.node=2"], capsys)
-    assert code == 2 and "unknown setting fog.node; fog settings: fog.nodes, fog.min_pieces" in err
+    assert code == 2 and "unknown setting fog.node for fog; known: fog.nodes, fog.min_pieces" in err
     code, _, err = run_cli(["info", path, "--set", "fog.nodes=two"], capsys)
-    assert code == 2 and "setting fog.nodes must be a whole number, got 'two'" in err
+    assert code == 2 and "setting fog.nodes: expected a whole number, got 'two'" in err
+    code, _, err = run_cli(["info", path, "--set", "fog.max_pieces=2"], capsys)
+    assert code == 2 and "setting fog.max_pieces must be a whole number >= fog.min_pieces (4), got 2" in err
     code, _, err = run_cli(["info", path, "--set", "heightfield.mode=fast"], capsys)
     assert code == 2 and "mode" in err and "fast" in err
     reader = StageReader(path)
@@ -170,8 +172,8 @@ def test_scenery_pass_settings_come_from_set_and_bad_ones_are_named(tmp_path, ca
     coarse = make_plan(scene, resolution=(16, None), settings={"fog.nodes": "1", "fog.max_pieces": "4"})
     fine = make_plan(scene, resolution=(16, None))
     assert coarse.settings_json() != fine.settings_json()
-    (_, a), _ = scenery_layers(scene, coarse.passes, 16, 11, device="cpu", settings=coarse.scenery_settings)
-    (_, b), _ = scenery_layers(scene, fine.passes, 16, 11, device="cpu", settings=fine.scenery_settings)
+    _, a = depth_layers(coarse, scene)
+    _, b = depth_layers(fine, scene)
     assert a.stats["nodes"] == 1 and b.stats["nodes"] == 4
 
 
@@ -228,10 +230,10 @@ def test_the_analytic_sky_lights_surfaces_in_shadow_and_the_fog():
     sky = sky_light(scene, analytic=True)
     mean, e_over_pi = sky_hemisphere(scene)
     assert np.all(e_over_pi > 0.0) and e_over_pi[2] > e_over_pi[0]  # a blue sky
-    (surfaces,), _ = scenery_layers(scene, ("surfaces",), 8, 8, device="cpu", sky=sky)
+    (surfaces,) = depth_layers(make_plan(scene, resolution=(8, 8)), scene)
     np.testing.assert_allclose(surfaces.radiance, np.broadcast_to(0.5 * e_over_pi, (8, 8, 3)), rtol=1e-5)
     dark = Scene(camera=camera, sun=sun, meshes=(floor, wall))
-    (unlit,), _ = scenery_layers(dark, ("surfaces",), 8, 8, device="cpu", sky=sky_light(dark, analytic=False))
+    (unlit,) = depth_layers(make_plan(dark, resolution=(8, 8)), dark)
     assert np.all(unlit.radiance == 0.0)
     np.testing.assert_allclose(isotropic_ambient(scene, sky), 0.5 * (mean + 0.5 * e_over_pi))
 
@@ -257,8 +259,9 @@ def test_terrain_shadows_the_sunlit_fog():
                         near=0.5, far=1e4, projection="orthographic")
         for meshes in ((wall,), ()):
             scene = Scene(camera=camera, sun=sun, meshes=meshes, fogs=(fog,))
-            passes = ("surfaces", "fog") if meshes else ("fog",)
-            parts, _ = scenery_layers(scene, passes, 4, 4, device="cpu")
+            plan = make_plan(scene, resolution=(4, 4))
+            assert plan.passes == (("surfaces", "fog") if meshes else ("fog",))
+            parts = depth_layers(plan, scene)
             results[x, bool(meshes)] = parts[-1].radiance
     assert np.all(results[-100.0, True] == 0.0) and np.all(results[-100.0, False] > 1e-4)
     np.testing.assert_array_equal(results[2000.0, True], results[2000.0, False])

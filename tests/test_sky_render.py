@@ -12,13 +12,13 @@ from warpsky.scene.usd import StageReader
 
 def frame(stage_path, device, width=16, height=16):
     from warpsky.composite import composite
+    from warpsky.passes.frame import render_layers
     from warpsky.plan import make_plan
-    from warpsky.render import render_layers
     from warpsky.techniques.single_scatter.technique import SingleScatter
 
     scene = StageReader(stage_path).scene_at(None)
     plan = make_plan(scene, technique="single_scatter", resolution=(width, height), device=device)
-    _, layers = render_layers(SingleScatter(plan.settings, device=device), scene, plan)
+    _, layers = render_layers(plan, scene, SingleScatter(plan.settings, device=device))
     return scene, composite(layers, far=scene.camera.far)
 
 
@@ -79,13 +79,13 @@ def test_sun_disk_is_seen_through_the_air(tmp_path, device):
 
 
 def test_horizon_column_has_no_banding(device):
-    from warpsky.passes.sky.sky import SkyPass
+    from warpsky.passes.sky.sky import Sky
     from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
 
     camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.0, 0.0, -1.0)), 50.0, 36.0, 36.0)
     scene = Scene(camera, Sun(np.array([0.3, 0.2, -1.0]) / np.linalg.norm([0.3, 0.2, -1.0]), np.ones(3)),
                   atmosphere=Atmosphere())
-    front, _ = SkyPass(device=device).render(scene, 1, 4096)
+    front, _ = Sky(device=device).render(scene, 1, 4096)
     column = front.radiance[:, 0, :].astype(np.float64)
     assert np.all(np.isfinite(column)) and column.min() >= 0.0
     # a flat earth's horizon is a steep but continuous cusp (optical depth ~ 1/elevation): away from its 16
@@ -99,14 +99,14 @@ def test_horizon_column_has_no_banding(device):
 def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
     """The path tracer with the air as a medium, one bounce: Riley's analytic single-scattering sky within noise,
     and the analytic transmittance of the air to space."""
-    from warpsky.passes.sky.sky import SkyPass
+    from warpsky.passes.sky.sky import Sky
     from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
     from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
 
     camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.3, 0.9, -1.0)), 24.0, 36.0, 36.0)
     sun = Sun(np.array([-0.4, 0.25, -1.0]) / np.linalg.norm([-0.4, 0.25, -1.0]), np.ones(3))
     scene = Scene(camera, sun, atmosphere=Atmosphere())
-    front, _ = SkyPass(device=device).render(scene, 8, 8)
+    front, _ = Sky(device=device).render(scene, 8, 8)
     layer = PathTracer(PathTracerSettings(spp=4096, max_bounces=1, seed=9), device=device).render(scene, 8, 8)
     variance = layer.aovs["variance"]
     z = (layer.radiance - front.radiance) / np.sqrt(variance + 1e-30)

@@ -17,6 +17,7 @@ from scipy.integrate import quad
 from test_dome_light import add_dome
 
 from warpsky.light.dome import hemisphere_directions
+from warpsky.light.frame import FrameLight
 from warpsky.light.sky import sky_hemisphere
 from warpsky.light.skylight import (
     Environment,
@@ -29,9 +30,8 @@ from warpsky.light.skylight import (
 )
 from warpsky.light.sun import sunlight
 from warpsky.media.air_analytic import inscatter, rayleigh
-from warpsky.passes.sky.sky import attenuated_sun
+from warpsky.passes.frame import render_layers
 from warpsky.plan import make_plan
-from warpsky.render import render_layers
 from warpsky.scene.usd import StageReader
 from warpsky.techniques.hybrid.technique import HybridSettings
 from warpsky.techniques.slicing.occlusion import SkyShadow, sky_transmittances
@@ -44,7 +44,7 @@ def scene_of(stage):
 def render(scene, device, size, technique, **settings):
     plan = make_plan(scene, technique=technique, settings={k: str(v) for k, v in settings.items()},
                      resolution=(size, size), device=device)
-    return render_layers(plan.renderer, scene, plan)[0]
+    return render_layers(plan, scene)[0]
 
 
 @pytest.fixture
@@ -85,7 +85,7 @@ def test_analytic_sky_projection_matches_the_sky_hemisphere(cube):
     before the air above the media reddens it; the sky is symmetric about the sun's vertical plane."""
     stage = add_atmosphere(cube("air", sun_direction=(0.6, 0.5, 0.2)), scaleHeight=8000.0, altitude=1000.0)
     scene = scene_of(stage)
-    env = media_environment(attenuated_sun(scene))  # as the technique receives it
+    env = media_environment(FrameLight(scene, through_air=True).lit_at_media())  # as the technique receives it
     mean, cosine = sky_hemisphere(scene)
     np.testing.assert_allclose(env.upper_mean, 0.5 * mean, rtol=1e-6)
     np.testing.assert_allclose(env.upper_moment[:, 1], 0.25 * cosine, rtol=1e-6)
@@ -101,7 +101,7 @@ def test_zenith_sun_sky_projection_matches_one_dimensional_quadrature(cube):
     M_up = (0, (1/2) int_0^1 E P_R(mu) I(mu) mu dmu, 0), I Riley's in-scatter integral to infinity."""
     stage = add_atmosphere(cube("zenith", sun_direction=(0.0, 1.0, 0.0)), scaleHeight=8000.0)
     scene = scene_of(stage)
-    env = media_environment(attenuated_sun(scene))
+    env = media_environment(FrameLight(scene, through_air=True).lit_at_media())
     atm, light = scene.atmosphere, sunlight(scene)
     for c in range(3):
         def radiance(mu, c=c):

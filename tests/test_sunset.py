@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from warpsky.composite import composite
+from warpsky.passes.frame import render_layers
 from warpsky.plan import make_plan
-from warpsky.render import render_layers
 from warpsky.scene.model import Atmosphere, Camera, Ground, PhaseKind, PhaseModel, Scene, Sun, VoxelMedium
 
 #: Sun elevations of the sequence [deg]: 1/24 deg apart, one frame exactly on the horizon.
@@ -83,7 +83,7 @@ def frame_means(technique: str, settings: dict[str, str], *, air: bool, layer: b
     for elevation in ELEVATIONS_DEG:
         scene = sunset_scene(float(elevation), air=air, layer=layer)
         plan = make_plan(scene, technique=technique, settings=dict(settings), resolution=(SIZE, SIZE), device="cpu")
-        _, layers = render_layers(plan.renderer, scene, plan)
+        _, layers = render_layers(plan, scene)
         rgb = composite(layers, far=scene.camera.far).rgba[..., :3]
         assert np.all(np.isfinite(rgb)), f"{technique}: non-finite pixels at {elevation:+.4f} deg"
         assert rgb.min() >= 0.0, f"{technique}: negative radiance {rgb.min()} at {elevation:+.4f} deg"
@@ -160,7 +160,7 @@ def test_visible_fraction_is_the_segment_above_the_horizon():
 
 
 def test_air_mass_is_finite_and_continuous_through_the_horizon():
-    from warpsky.light.sun import air_sine, horizon_air_mass
+    from warpsky.media.air_analytic import air_sine, horizon_air_mass
 
     gamma = 1.0 / 8000.0
     sines = np.linspace(-0.2, 0.3, 50001)

@@ -13,10 +13,10 @@ from __future__ import annotations
 import warp as _wp
 
 from warpsky.errors import SceneError, UsageError, WarpskyError
+from warpsky.version import __version__
 
 _wp.config.enable_backward = False
 
-__version__ = "0.1.0"
 
 __all__ = ["SceneError", "UsageError", "WarpskyError", "__version__", "render_stage", "render_to_exr"]
 

@@ -21,9 +21,9 @@ from pathlib import Path
 from warpsky.errors import SceneError, UsageError
 from warpsky.output.color import DEFAULT_COLORSPACE, check_colorspace
 from warpsky.output.products import FULL_WINDOW
+from warpsky.registry import DEFAULT_TECHNIQUE, aov_components
 from warpsky.render import RenderedImage, RenderOptions, plan_frame, render_image, write_frame
 from warpsky.scene.usd_render import ProductSpec, RenderSpec, read_render_spec
-from warpsky.techniques.base import DEFAULT_TECHNIQUE
 
 #: renderingColorSpace tokens (USD's colour space names and OCIO's) and the output colour space they select.
 RENDERING_COLORSPACES = {"lin_rec709": "lin_rec709", "lin_rec709_scene": "lin_rec709",
@@ -44,7 +44,7 @@ def render_options(*, technique: str = DEFAULT_TECHNIQUE, resolution=None, camer
         resolution = (resolution, None)
     variants = tuple(parse_variant(v) if isinstance(v, str) else tuple(v) for v in variants)
     stage = StageOptions(load=load, variants=variants, **({} if purposes is None else {"purposes": tuple(purposes)}))
-    return RenderOptions(technique=technique, settings={k: str(v) for k, v in (settings or {}).items()},
+    return RenderOptions(technique=technique, settings=dict(settings or {}),
                          resolution=None if resolution is None else tuple(resolution), device=resolve_device(device),
                          camera=camera, colorspace=check_colorspace(colorspace or DEFAULT_COLORSPACE), stage=stage,
                          **more)
@@ -90,7 +90,7 @@ def open_stage(stage, options: RenderOptions, settings_prim: str | None, *, expl
     from warpsky.scene.usd import StageReader
 
     reader = StageReader(stage, options.stage)
-    spec = read_render_spec(reader.stage, settings_prim, reader.meters_per_unit)
+    spec = read_render_spec(reader.stage, settings_prim, reader.meters_per_unit, aovs=aov_components())
     options = with_render_settings(options, spec, explicit=explicit)
     if options.stage != reader.options:  # the settings' includedPurposes
         reader = StageReader(stage, options.stage)

@@ -12,8 +12,7 @@ import textwrap
 from dataclasses import replace
 from pathlib import Path
 
-import warpsky
-from warpsky.api import open_stage, render_options, with_product
+from warpsky.api import open_stage, with_product
 from warpsky.batch.frames import FramePattern, parse_frame_spec
 from warpsky.batch.run import (
     DaskExecutor,
@@ -25,6 +24,8 @@ from warpsky.batch.run import (
     plan_first_frame,
     run_batch,
 )
+from warpsky.cli_info import cmd_info
+from warpsky.cli_options import add_render_options, explicit_options, options_from_args, resolution_arg
 from warpsky.device import init_warp
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.evaluation.cli import add_parser as add_bench
@@ -32,15 +33,12 @@ from warpsky.evaluation.cli import run as run_bench
 from warpsky.interrupt import Interrupted, report_interrupt, sigint_stops_renders
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
-from warpsky.output.color import COLORSPACES
 from warpsky.output.preview import contact_sheet, stage_preview
 from warpsky.output.products import FULL_WINDOW
-from warpsky.passes.stratiform.stratiform import StratiformSettings
-from warpsky.render import plan_frame
-from warpsky.resources import parse_size, resource_lines
+from warpsky.registry import DEFAULT_TECHNIQUE, pass_classes, technique_classes
 from warpsky.scene.usd import StageReader
 from warpsky.settings import settings_table
-from warpsky.techniques.base import DEFAULT_TECHNIQUE, technique_class, technique_names
+from warpsky.version import __version__
 
 EPILOG_RENDER = """\
 frames:
@@ -88,132 +86,21 @@ examples:
 """
 
 
-#: What the settings tables leave out: the shorthands of the command line and what a technique adds to the EXR.
-SETTINGS_NOTES = {
-    "hybrid": "--target-error E, --time-budget S, --spp N and --seed S are shorthands for --set target_error=E / "
-              "time_budget=S / spp=N / seed=S. Writes single_scatter.RGB, multiple_scatter.RGB and variance.RGB AOVs; "
-              "the header holds errorEstimate, spp, passes, stoppedBy, targetError, paths and cappedPaths (a warning "
-              "above 0.1%).",
-    "path_tracer": "--spp N and --seed S are shorthands for --set spp=N / seed=S. Writes a variance.RGB AOV "
-                   "(variance of each pixel's mean); the header holds spp, paths and cappedPaths (a warning above "
-                   "0.1%).",
-}
-
-
 def settings_help() -> str:
-    """Every technique's settings (the default technique first, then the stratiform pass's, then the others) as
-    tables generated from the settings classes' field metadata."""
-    names = [DEFAULT_TECHNIQUE] + [n for n in technique_names() if n != DEFAULT_TECHNIQUE]
+    """Every technique's settings (the default technique first) and then every pass's, as tables generated from
+    the settings classes' field metadata, each followed by its notes."""
     sections = []
-    for name in names:
-        cls = technique_class(name)
-        title = f"{name} (default)" if name == DEFAULT_TECHNIQUE else name
+    for cls in technique_classes():
+        title = f"{cls.name} (default)" if cls.name == DEFAULT_TECHNIQUE else cls.name
         sections.append(f"  {title}:\n" + settings_table(cls.Settings, indent=4))
-        if name in SETTINGS_NOTES:
-            sections.append(textwrap.fill(SETTINGS_NOTES[name], 114, initial_indent="    ", subsequent_indent="    "))
-        if name == DEFAULT_TECHNIQUE:
-            sections.append("  stratiform layers (prefix stratiform., also with slicing and single_scatter):\n"
-                            + settings_table(StratiformSettings, indent=4))
-    sections.append("  terrain scenery passes (any technique but path_tracer):\n"
-                    "    heightfield.mode            exact | max | sexp (default exact): the sunlight reaching a point "
-                    "of the deck or the haze\n"
-                    "                                by the exact sun-ray optical depth, Max's thickness rule, or "
-                    "Max's sexp\n"
-                    "    heightfield.step_length, heightfield.haze_step_length [m], heightfield.max_steps, "
-                    "heightfield.min_transmittance\n"
-                    "    fog.nodes (4), fog.min_pieces (4), fog.max_pieces (64): Gauss-Legendre nodes and pieces of "
-                    "the fog's sunlight integral\n"
-                    "    fog.cut_depth (40): optical depth after which the rest of a ray is dropped")
-    return ("technique settings (--set NAME=VALUE, repeatable; 'auto' restores a default; whole numbers for\n"
-            "counts, 0/1 or true/false for switches):\n" + "\n".join(sections) + "\n")
-
-
-def _resolution(text: str) -> tuple[int, int | None]:
-    try:
-        if "x" in text.lower():
-            w, h = text.lower().split("x", 1)
-            width, height = int(w), int(h)
-        else:
-            width, height = int(text), None
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT or WIDTH, got {text!r}") from None
-    if width <= 0 or (height is not None and height <= 0):
-        raise argparse.ArgumentTypeError(f"resolution must be positive, got {text!r}")
-    return width, height
-
-
-def _fraction(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0.0 < value < 1.0:  # NaN fails too
-        raise argparse.ArgumentTypeError(f"expected a relative error between 0 and 1 (0.05 = 5%), got {text!r}")
-    return value
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0.0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return value
-
-
-def _size(text: str) -> int:
-    try:
-        return parse_size(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _setting(text: str) -> tuple[str, str]:
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
-    key, value = text.split("=", 1)
-    return key.strip(), value.strip()
-
-
-def _add_render_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--camera", metavar="PATH", help="camera prim path (default: render settings' camera, "
-                        "else the first camera)")
-    parser.add_argument("--res", type=_resolution, metavar="WxH",
-                        help="image size; WIDTH alone keeps the camera's aspect (default: the stage's "
-                        "RenderSettings resolution, else 512 wide)")
-    parser.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
-    parser.add_argument("--technique", default=DEFAULT_TECHNIQUE, choices=technique_names(),
-                        help=f"rendering technique (default: {DEFAULT_TECHNIQUE})")
-    parser.add_argument("--set", dest="settings", type=_setting, action="append", default=[], metavar="NAME=VALUE",
-                        help="technique setting, repeatable (see below)")
-    parser.add_argument("--spp", type=int, metavar="N", help="path_tracer: samples per pixel; hybrid: most "
-                        "multiple-scattering paths per pixel (= --set spp=N)")
-    parser.add_argument("--seed", type=int, metavar="S", help="path_tracer, hybrid: random seed (= --set seed=S)")
-    parser.add_argument("--target-error", type=_fraction, metavar="E",
-                        help="hybrid: add paths until the frame's estimated relative RMSE is below E, in (0, 1) "
-                        "(= --set target_error=E; default 0.05)")
-    parser.add_argument("--time-budget", type=_seconds, metavar="S",
-                        help="hybrid: stop adding paths after S seconds per frame (= --set time_budget=S)")
-    parser.add_argument("--max-memory", type=_size, metavar="SIZE", help="most memory a frame may use on the "
-                        "host and on a GPU each, e.g. 8G or 512M (default: what is free)")
-    parser.add_argument("--no-work-limit", dest="work_limit", action="store_false", help="render frames whose "
-                        "worst-case work exceeds 1e8 kernel iterations per pixel or 1e13 per frame")
-    usd = parser.add_argument_group("USD pipeline")
-    usd.add_argument("--settings", dest="settings_prim", metavar="PATH", help="UsdRenderSettings prim (default: "
-                     "the stage's renderSettingsPrimPath, else the first RenderSettings prim)")
-    usd.add_argument("--product", dest="products", action="append", metavar="PATH", help="render only this "
-                     "RenderProduct of the settings (repeatable; default: all of them)")
-    usd.add_argument("--load", choices=("all", "none"), default="all", help="load payloads (all, the default) or "
-                     "leave them unloaded (none), as usdview's --unloaded")
-    usd.add_argument("--variant", dest="variants", action="append", default=[], metavar="SET=SELECTION",
-                     help="variant selection applied on the session layer (repeatable)")
-    usd.add_argument("--purpose", dest="purposes", action="append", metavar="PURPOSE", help="render prims of "
-                     "this purpose (repeatable: render, proxy, guide; prims of purpose default always render; "
-                     "default: the settings' includedPurposes, else default and render)")
-    usd.add_argument("--colorspace", choices=tuple(COLORSPACES), default=None, help="primaries of the EXR's "
-                     "colours: lin_rec709 (default; sRGB primaries, D65) or ACEScg (AP1); written into the "
-                     "header's chromaticities (default: the settings' renderingColorSpace, else lin_rec709)")
+        if cls.settings_notes:
+            sections.append(textwrap.fill(cls.settings_notes, 114, initial_indent="    ", subsequent_indent="    "))
+    for cls in pass_classes():
+        if cls.Settings is not None:
+            sections.append(f"  {cls.name} pass (prefix {cls.Settings.prefix}; it runs where the stage has what it "
+                            f"draws):\n" + settings_table(cls.Settings, indent=4))
+    return ("settings (--set NAME=VALUE, repeatable; 'auto' restores a default; whole numbers for counts, 0/1 or\n"
+            "true/false for switches; a pass's settings carry its prefix):\n" + "\n".join(sections) + "\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -222,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Render clouds, rain, ice, sky and fog from USD stages to EXR frames with NVIDIA Warp, "
         "on a CUDA GPU or the CPU.",
     )
-    parser.add_argument("--version", action="version", version=f"warpsky {warpsky.__version__}")
+    parser.add_argument("--version", action="version", version=f"warpsky {__version__}")
     parser.add_argument("--verbose", action="store_true", help="show Warp's own log (compiles, devices)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
@@ -237,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("output", nargs="?", help="output EXR path, with a #### placeholder for several frames "
                         "(default: each RenderProduct's productName)")
     render.add_argument("--frames", metavar="SPEC", help="frames to render (usdrecord grammar, see below)")
-    _add_render_options(render)
+    add_render_options(render)
     render.add_argument("--png", action="store_true", help="also write a tone-mapped PNG preview per frame")
     render.add_argument("--exposure", type=float, default=0.0, metavar="EV",
                         help="preview exposure in stops (default 0: a white surface facing the sun maps to ~0.63)")
@@ -258,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "and the render plan (technique, settings, device, resolution, features).")
     info.add_argument("stage", type=Path, help="USD stage")
     info.add_argument("--time", type=float, default=None, help="time code to inspect (default: earliest)")
-    _add_render_options(info)
+    add_render_options(info)
 
     preview = sub.add_parser(
         "preview", help="draw a stage in 3-D (volumes, camera frustum, sun, ground, layers) to a PNG",
@@ -269,7 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     preview.add_argument("-o", "--output", type=Path, default=Path("preview.png"), help="PNG to write")
     preview.add_argument("--frame", type=float, default=None, help="time code (default: earliest)")
     preview.add_argument("--camera", metavar="PATH", help="camera prim path")
-    preview.add_argument("--size", type=_resolution, default=(1024, 768), metavar="WxH", help="image size")
+    preview.add_argument("--size", type=resolution_arg, default=(1024, 768), metavar="WxH", help="image size")
     preview.add_argument("--level", type=float, default=0.2,
                          help="isosurface at this fraction of each field's maximum (default 0.2)")
 
@@ -286,55 +173,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_optics(sub)
 
-    add_bench(sub, _resolution)
+    add_bench(sub, resolution_arg)
     return parser
-
-
-def _settings(args) -> dict[str, str]:
-    """--set pairs plus the --spp / --seed / --target-error / --time-budget shorthands."""
-    settings = dict(args.settings)
-    for name in ("spp", "seed", "target_error", "time_budget"):
-        value = getattr(args, name, None)
-        if value is None:
-            continue
-        if name in ("target_error", "time_budget") and args.technique != "hybrid":
-            flag = "--" + name.replace("_", "-")
-            raise UsageError(f"{flag} applies to technique hybrid only (this render uses {args.technique})")
-        settings[name] = repr(value) if isinstance(value, float) else str(value)
-    return settings
-
-
-def _render_options(args) -> object:
-    """The render's options as the Python API builds them (:func:`warpsky.api.render_options`)."""
-    return render_options(
-        technique=args.technique,
-        settings=_settings(args),
-        resolution=args.res,
-        device=args.device,
-        camera=args.camera,
-        colorspace=args.colorspace,
-        load=args.load,
-        variants=tuple(args.variants),
-        purposes=("default", *args.purposes) if args.purposes else None,
-        half=not getattr(args, "full_float", False),
-        png=getattr(args, "png", False),
-        exposure=getattr(args, "exposure", 0.0),
-        max_memory=args.max_memory,
-        work_limit=args.work_limit,
-    )
-
-
-def _explicit(args) -> set[str]:
-    """Options given on the command line, which win over the stage's render settings and products."""
-    given = {"camera": args.camera, "resolution": args.res, "purposes": args.purposes, "colorspace": args.colorspace}
-    return {name for name, value in given.items() if value}
 
 
 def shots(args) -> tuple[object, list[tuple[str, object]]]:
     """(the reader, [(output pattern, options)]): one shot per RenderProduct of the stage's render settings, or
     the command line's OUT with the settings' camera and resolution when there are no products."""
-    reader, spec, options = open_stage(args.stage, _render_options(args), args.settings_prim,
-                                       explicit=_explicit(args))
+    reader, spec, options = open_stage(args.stage, options_from_args(args), args.settings_prim,
+                                       explicit=explicit_options(args))
     for note in spec.notes if spec else ():
         print(f"warpsky: note: {note}", file=sys.stderr)
     products = list(spec.products) if spec else []
@@ -355,7 +202,7 @@ def shots(args) -> tuple[object, list[tuple[str, object]]]:
         raise UsageError(f"OUT {args.output!r} names one file but {len(products)} products are rendered "
                          f"({', '.join(p.path for p in products)}); leave OUT out to write each product's "
                          "productName, or pick one with --product")
-    return reader, [(args.output or product.name, with_product(options, product, explicit=_explicit(args)))
+    return reader, [(args.output or product.name, with_product(options, product, explicit=explicit_options(args)))
                     for product in products]
 
 
@@ -444,14 +291,6 @@ def cmd_render(args) -> int:
     return 0
 
 
-def _fmt3(values) -> str:
-    """RGB triples as short numbers; one number when all three agree."""
-    values = [float(v) for v in values]
-    if max(values) == min(values):
-        return f"{values[0]:.6g}"
-    return "(" + ", ".join(f"{v:.6g}" for v in values) + ")"
-
-
 def cmd_preview(args) -> int:
     scene = StageReader(args.stage).scene_at(args.frame, camera_path=args.camera)
     print(stage_preview(scene, args.output, size=(args.size[0], args.size[1] or round(args.size[0] * 0.75)),
@@ -462,108 +301,6 @@ def cmd_preview(args) -> int:
 def cmd_contact_sheet(args) -> int:
     print(contact_sheet(args.pattern, args.output, columns=args.columns, tile_width=args.tile_width,
                         exposure=args.exposure))
-    return 0
-
-
-def _light_lines(scene) -> list[str]:
-    """``warpsky info``'s lines on the lights: each DistantLight's irradiance (intensity x 2^exposure x colour) and
-    what reaches a horizontal surface above the horizon (the visible part of the disk, at its elevation); the
-    dome's mean radiance and its irradiance on a horizontal surface."""
-    import numpy as np
-
-    from warpsky.light.dome import mean_radiance, upper_hemisphere
-    from warpsky.light.sun import has_horizon, sun_sunlight
-
-    lines = []
-    for sun in [s for s in [scene.sun, *scene.extra_suns] if s is not None]:
-        light = sun_sunlight(sun, horizon=has_horizon(scene))
-        flat = light.irradiance * max(float(light.direction[1]), 0.0)
-        lines.append(f"light       {sun.name}: distant, elevation {np.degrees(sun.elevation):.2f} deg, irradiance "
-                     f"{_fmt3(sun.irradiance)} at normal incidence; visible disk {light.visible:.0%}, "
-                     f"{_fmt3(flat)} on a horizontal surface (before the air)")
-    if scene.dome is not None:
-        dome = scene.dome
-        kind = f"lat-long {dome.source}" if dome.texture is not None else "uniform"
-        _, cosine_mean = upper_hemisphere(dome)
-        lines.append(f"light       {dome.name}: dome, {kind}, mean radiance {_fmt3(mean_radiance(dome))}, "
-                     f"{_fmt3(np.pi * cosine_mean)} on a horizontal surface")
-    return lines or ["light       none: no visible DistantLight or DomeLight"]
-
-
-def _render_spec_lines(spec, products) -> list[str]:
-    """``warpsky info``'s lines on the render settings, their products and each product's vars."""
-    if spec is None:
-        return ["render      no RenderSettings prim: OUT, --camera and --res decide"]
-    res = "x".join(map(str, spec.resolution)) if spec.resolution else "not authored"
-    lines = [f"render      {spec.path}: camera {spec.camera or 'not set'}, resolution {res}, pixel aspect "
-             f"{spec.pixel_aspect:g}, dataWindowNDC {list(spec.data_window)}"
-             + (f", purposes {', '.join(spec.purposes)}" if spec.purposes is not None else "")
-             + (f", renderingColorSpace {spec.colorspace}" if spec.colorspace else "")]
-    lines += [f"            note: {note}" for note in spec.notes]
-    for product in products:
-        res = "x".join(map(str, product.resolution)) if product.resolution else "default"
-        lines.append(f"product     {product.path} -> {product.name}: camera {product.camera or 'default'}, "
-                     f"resolution {res}")
-        for var in product.outputs:
-            precision = "half" if var.half else "float"
-            lines.append(f"  var       {var.prim}: {var.source} -> {', '.join(var.channels)} ({precision})")
-    return lines
-
-
-def cmd_info(args) -> int:
-    import numpy as np
-
-    options = _render_options(args)
-    reader, spec, options = open_stage(args.stage, options, args.settings_prim, explicit=_explicit(args))
-    products = list(spec.products) if spec else []
-    if args.products:
-        products = [p for p in products if p.path in args.products]
-    if products:  # the plan of the first product
-        options = with_product(options, products[0], explicit=_explicit(args))
-    span = reader.time_range()
-    scene, plan = plan_frame(reader, args.time, options, check=False)
-    out = [
-        f"stage       {reader.path}",
-        f"units       upAxis {reader.up_axis}, metersPerUnit {reader.meters_per_unit:g}",
-        f"time        {span.start:g} .. {span.end:g} at {span.time_codes_per_second:g} codes/s"
-        + ("" if span.authored else " (not authored)"),
-        f"cameras     {', '.join(reader.camera_paths()) or 'none'}",
-    ]
-    cam = scene.camera
-    out.append(
-        f"camera      {cam.name} ({cam.projection.value}) at {np.round(cam.position, 3).tolist()} m looking "
-        f"{np.round(cam.forward, 4).tolist()}, clip {cam.near:g}..{cam.far:g} m"
-    )
-    for medium in scene.media:
-        lo, hi = medium.world_corners().min(axis=0), medium.world_corners().max(axis=0)
-        out.append(f"volume      {medium.name}: {medium.source}")
-        out.append(
-            f"            {medium.shape[0]}x{medium.shape[1]}x{medium.shape[2]} voxels of "
-            f"{np.round(medium.voxel_size, 4).tolist()} m, bounds {np.round(lo, 2).tolist()} .. "
-            f"{np.round(hi, 2).tolist()} m"
-        )
-        out.append(
-            f"            extinction {_fmt3(medium.extinction_scale)} 1/m per unit, max field "
-            f"{float(medium.density.max()):g}, albedo {_fmt3(medium.albedo)}, "
-            + (f"{medium.species} phase table" if medium.species else repr(medium.phase))
-        )
-        if medium.ice is not None and medium.ice.orientation != "random":
-            ice = medium.ice
-            out.append(f"            oriented ice: {ice.fraction:.3g} of the crystals {ice.habit}s falling as "
-                       f"{ice.orientation}s (tilt {ice.tilt_deg:g}°), the rest random columns; a phase table per "
-                       "frame at the sun's elevation")
-        if medium.detail is not None and medium.detail.amplitude > 0.0:
-            d = medium.detail
-            out.append(f"            advected detail: amplitude {d.amplitude:g}, scale {d.scale:g} m, wind "
-                       f"{np.round(np.asarray(d.wind), 3).tolist()} m/s, curl {d.curl_speed:g} m/s, "
-                       f"period {d.period:g} s")
-    out += _light_lines(scene)
-    out += _render_spec_lines(spec, products)
-    out += [f"composition {line}" for line in reader.composition_summary()]
-    out.append("plan:" + (f" (of product {products[0].path})" if products else ""))
-    out += ["  " + line for line in plan.describe().splitlines()]
-    out += ["  " + line for line in resource_lines(plan, options.max_memory)]
-    print("\n".join(out))
     return 0
 
 

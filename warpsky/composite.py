@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from warpsky.layer import Layer
+from warpsky.layer import Layer, gathered_warnings
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Projection
 
 
@@ -91,7 +91,7 @@ def merge_by_depth(layers: list[Layer], far: float) -> Layer:
         "lookups": int(sum(layer.stats.get("lookups", 0) for layer in layers)),
         "parts": [layer.stats for layer in layers],
     }
-    return Layer(out_radiance, out_trans, out_depth, stats, out_aovs)
+    return Layer(out_radiance, out_trans, out_depth, stats, out_aovs, warnings=gathered_warnings(layers))
 
 
 def pixel_directions(camera, width: int, height: int) -> np.ndarray:
@@ -113,7 +113,7 @@ def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.
     The dome lights from beyond the air: it replaces the black space an atmosphere would otherwise show. With
     ``through_air`` (a sky pass drew the air, whose back layer is opaque) it is seen through the air's
     transmittance to space along each pixel's ray, the flat-earth column over the finite-air-mass sine
-    (:func:`~warpsky.light.sun.air_sine`), and not at all below the horizon (ground or sea level);
+    (:func:`~warpsky.media.air_analytic.air_sine`), and not at all below the horizon (ground or sea level);
     otherwise the layers' own transmittance (zero on the ground, with the air where a technique traced it)
     is all that hides it."""
     if scene.dome is None:
@@ -122,7 +122,7 @@ def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.
     radiance = scene.dome.radiance(directions)
     atmosphere = scene.atmosphere
     if through_air and atmosphere is not None:
-        from warpsky.light.sun import air_sine
+        from warpsky.media.air_analytic import air_sine
 
         altitude = float(scene.camera.position[1]) + atmosphere.altitude
         column = atmosphere.beta_sea_level * np.exp(-atmosphere.gamma * altitude) / atmosphere.gamma
@@ -141,7 +141,7 @@ def with_background(layers: list[Layer], background: np.ndarray, far: float, *,
     if front_air is not None:
         beyond = np.divide(background, front_air, out=np.zeros_like(background), where=front_air > 0.0)
         return [*layers[:-1], Layer(last.radiance + beyond.astype(np.float32), last.transmittance, last.depth,
-                                    last.stats, last.aovs)]
+                                    last.stats, last.aovs, warnings=last.warnings)]
     height, width = background.shape[:2]
     return [*layers, Layer(background, np.zeros_like(background), np.full((height, width), far, np.float32))]
 
@@ -156,5 +156,6 @@ def add_light(layers: list[Layer], more: list[Layer]) -> list[Layer]:
         stats = dict(layer.stats)
         if "seconds" in extra.stats:
             stats["seconds"] = float(stats.get("seconds", 0.0)) + float(extra.stats["seconds"])
-        out.append(Layer(layer.radiance + extra.radiance, layer.transmittance, layer.depth, stats, aovs))
+        out.append(Layer(layer.radiance + extra.radiance, layer.transmittance, layer.depth, stats, aovs,
+                         warnings=gathered_warnings([layer, extra])))
     return out

@@ -20,6 +20,11 @@ import warp as wp
 from warpsky.errors import UsageError
 from warpsky.interrupt import check_stop, current_scope, stop_requested
 
+
+def is_cpu(device) -> bool:
+    """Whether ``device`` (a name such as ``cpu`` or ``cuda:0``, or a Warp device) is the CPU."""
+    return str(device).startswith("cpu")
+
 DEVICE_CHOICES = ("auto", "cpu", "cuda")
 
 
@@ -102,7 +107,7 @@ def launch_rows(kernel, height: int, width: int, inputs: list, device: str) -> N
     check_stop()
     if height <= 0 or width <= 0:
         return
-    if not str(device).startswith("cpu"):
+    if not is_cpu(device):
         wp.launch(kernel, dim=(height, width), inputs=[*inputs, 0], device=device)
         return
     # Compile or load the module once, here, not by racing threads, and outside the timed bands.

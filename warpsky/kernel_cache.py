@@ -12,13 +12,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-#: The modules whose kernel factories (:mod:`warpsky.kernel_variants`) each technique's media pass launches.
-TECHNIQUE_KERNELS = {
-    "slicing": ("warpsky.techniques.slicing.kernels",),
-    "single_scatter": ("warpsky.techniques.single_scatter.kernels",),
-    "path_tracer": ("warpsky.techniques.path_tracer.kernels",),
-    "hybrid": ("warpsky.techniques.single_scatter.kernels", "warpsky.techniques.path_tracer.kernels"),
-}
+
+def technique_kernel_modules(technique: str) -> tuple[str, ...]:
+    """The modules whose kernel factories (:mod:`warpsky.kernel_variants`) the technique registered as
+    ``technique`` launches (its ``kernel_modules``); none for a name that is not registered."""
+    from warpsky.registry import TECHNIQUES, technique_class
+
+    return tuple(technique_class(technique).kernel_modules) if technique in TECHNIQUES else ()
 
 
 def variant_module_names(technique: str) -> list[str]:
@@ -28,7 +28,7 @@ def variant_module_names(technique: str) -> list[str]:
 
     from warpsky.kernel_variants import registered_factories, variants
 
-    modules = TECHNIQUE_KERNELS.get(technique, ())
+    modules = technique_kernel_modules(technique)
     for module in modules:
         importlib.import_module(module)  # registers its factories
     names = []

@@ -1,43 +1,56 @@
-"""Every Warp module warpsky launches, including each specialisation of factory-made kernels.
+"""Every Warp module warpsky launches, including each specialisation of factory-made kernels, found by walking the
+package: a new technique or pass needs no entry here.
 
 The CUDA code-generation test compiles all of them to sm_90 PTX (Warp's bundled NVRTC works without a GPU), so
-CPU-only CI catches CUDA-only compile errors. Modules with plain ``@wp.kernel`` definitions are listed below (the
-test fails when one is missing); kernel factories declare their flags with
-:func:`~warpsky.kernel_variants.kernel_variants` where they are defined, and every combination is compiled.
+CPU-only CI catches CUDA-only compile errors. Plain ``@wp.kernel`` definitions are found in every module of the
+package; kernel factories declare their flags with :func:`~warpsky.kernel_variants.kernel_variants` where they are
+defined, and every combination is compiled.
 """
 
 from __future__ import annotations
 
+import functools
+import importlib
+import pkgutil
+
 import warp as wp
 
-import warpsky.evaluation.stratiform_reference as stratiform_reference
-import warpsky.evaluation.stratiform_slab as evaluation_slab
-import warpsky.media.advection_kernels as advection_kernels
-import warpsky.media.fields as fields
-import warpsky.media.heightfield as heightfield_media
-import warpsky.optics.ice_kernels as ice_kernels
-import warpsky.optics.kernels as optics
-import warpsky.optics.oriented_ice_kernels as oriented_ice_kernels
-import warpsky.passes.fog.kernels as fog_kernels
-import warpsky.passes.heightfield.kernels as heightfield_kernels
-import warpsky.passes.sky.kernels as sky
-import warpsky.passes.stratiform.kernels as stratiform_kernels
-import warpsky.passes.stratiform.radiosity_kernels as radiosity
-import warpsky.passes.surfaces.kernels as surfaces_kernels
-import warpsky.techniques.path_tracer.kernels  # noqa: F401  (registers its kernel factory)
-import warpsky.techniques.single_scatter.kernels  # noqa: F401  (registers its kernel factories)
-import warpsky.techniques.slicing.ground  # noqa: F401  (registers its kernel factory)
-import warpsky.techniques.slicing.kernels as slicing  # (also registers its kernel factories)
-from warpsky.kernel_variants import variant_modules
+#: Modules not walked: entry points that run on import.
+SKIPPED = ("warpsky.__main__",)
 
-#: Modules holding plain (not factory-made) kernels.
-PLAIN_MODULES = (fields, optics, ice_kernels, sky, evaluation_slab, stratiform_reference, radiosity, stratiform_kernels,
-                 advection_kernels, slicing, surfaces_kernels, fog_kernels, heightfield_media, heightfield_kernels,
-                 oriented_ice_kernels)
+
+@functools.cache
+def package_modules() -> tuple[str, ...]:
+    """The name of every module of the warpsky package, imported (so their kernels and factories register)."""
+    import warpsky
+
+    names = []
+    for info in pkgutil.walk_packages(warpsky.__path__, "warpsky."):
+        if info.name in SKIPPED:
+            continue
+        importlib.import_module(info.name)
+        names.append(info.name)
+    return tuple(names)
+
+
+def plain_kernel_modules() -> list[str]:
+    """Names of the modules that define plain (not factory-made) ``@wp.kernel`` functions."""
+    import sys
+
+    found = []
+    for name in package_modules():
+        module = sys.modules[name]
+        if any(isinstance(value, wp.Kernel) and value.module.name == name for value in vars(module).values()):
+            found.append(name)
+    return found
+
 
 def kernel_modules() -> list:
     """Warp ``Module`` objects for every kernel warpsky can launch."""
-    return [wp.get_module(m.__name__) for m in PLAIN_MODULES] + variant_modules()
+    from warpsky.kernel_variants import variant_modules
+
+    plain = [wp.get_module(name) for name in plain_kernel_modules()]
+    return plain + variant_modules()
 
 
 def compile_ptx(index: int, folder: str, arch: int = 90) -> list[str]:

@@ -1,4 +1,5 @@
-"""The :class:`Layer`: what every technique and pass renders, ready to composite front to back."""
+"""The :class:`Layer`: what every technique and pass renders, ready to composite front to back, and the frame's
+one channel for warnings (a layer's ``warnings`` reach the command line, the batch log and the EXR header)."""
 
 from __future__ import annotations
 
@@ -19,6 +20,8 @@ class Layer:
             mean depth of what the layer shows; the camera's far clipping distance where it shows nothing.
         stats: Figures about the render (lookups, seconds, settings) for metadata and benchmarks.
         aovs: Extra per-pixel outputs by name, e.g. ``variance`` (H, W, 3) of a Monte Carlo pixel mean.
+        warnings: One line each about what the render could not do as asked (a target error not reached, a camera
+            under the terrain); the frame gathers them from every layer.
     """
 
     radiance: np.ndarray
@@ -26,3 +29,14 @@ class Layer:
     depth: np.ndarray
     stats: dict = field(default_factory=dict)
     aovs: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+
+def gathered_warnings(layers) -> list[str]:
+    """Every warning of ``layers`` (and of the parts a merged layer was made of), once each, in order."""
+    out: list[str] = []
+    for layer in layers:
+        for line in layer.warnings:
+            if line not in out:
+                out.append(line)
+    return out

@@ -15,21 +15,27 @@ from pathlib import Path
 
 import numpy as np
 
-import warpsky
-from warpsky.composite import Frame, add_light, composite, dome_background, merge_by_depth, with_background
-from warpsky.layer import Layer
-from warpsky.light.sky import sky_light
+from warpsky.composite import Frame, composite
+from warpsky.errors import SceneError
+from warpsky.layer import Layer, gathered_warnings
 from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_frame
 from warpsky.output.exr import write_channels
 from warpsky.output.png import write_png
-from warpsky.output.products import FULL_WINDOW, default_outputs, frame_channels, required_channels, window_pixels
-from warpsky.passes.frame import SCENERY_PASSES, StratiformPass, media_scene, scenery_layers
-from warpsky.passes.sky.sky import SkyPass, attenuated_sun
+from warpsky.output.products import (
+    FULL_WINDOW,
+    OutputVar,
+    default_outputs,
+    frame_channels,
+    required_channels,
+    window_pixels,
+)
+from warpsky.passes.frame import render_layers
 from warpsky.plan import RenderPlan, make_plan
+from warpsky.registry import DEFAULT_TECHNIQUE, aov_producers
 from warpsky.resources import check_resources
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene, as_imath_rows
-from warpsky.scene.usd_render import OutputVar, check_outputs
-from warpsky.techniques.base import DEFAULT_TECHNIQUE, Technique
+from warpsky.scene.usd_render import SOURCES
+from warpsky.version import __version__
 
 #: Figures of a Monte Carlo render that go into the EXR header (camelCase) and the batch log, where present.
 QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths", "paths")
@@ -48,7 +54,8 @@ class RenderOptions:
 
     Attributes:
         technique: Registered technique name.
-        settings: Technique settings as ``{name: text}``; unknown names are an error.
+        settings: Settings as ``{name: text or value}`` (``PREFIX.NAME`` for a pass's); unknown names are an
+            error.
         resolution: (width, height or None) or None for the stage's render settings / default.
         device: Warp device name, already resolved (``cpu``, ``cuda:0``).
         camera: Camera prim path, or None for the default camera.
@@ -65,7 +72,7 @@ class RenderOptions:
     """
 
     technique: str = DEFAULT_TECHNIQUE
-    settings: dict[str, str] = field(default_factory=dict)
+    settings: dict = field(default_factory=dict)
     resolution: tuple[int, int | None] | None = None
     device: str = "cpu"
     camera: str | None = None
@@ -97,6 +104,9 @@ class RenderedImage:
         attributes: OpenEXR's standard attributes (chromaticities, whiteLuminance, camera matrices, ...).
         window: Pixel bounds (x0, y0, x1, y1) of the data window in the full image, or None for all of it.
         preview: (H, W, 3) linear Rec.709 radiance of the whole frame, for the sRGB PNG preview.
+        warnings: One line each from every pass and the technique (a target error not reached, a camera under
+            the terrain, paths stopped at the bounce cap): printed by the command line, kept in the batch log and
+            written into the EXR header.
     """
 
     frame: Frame
@@ -109,6 +119,7 @@ class RenderedImage:
     plan: RenderPlan
     layer: Layer
     timings: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def width(self) -> int:
@@ -172,11 +183,22 @@ def plan_frame(reader, time_code, options: RenderOptions, *, check: bool = True)
         device=options.device,
     )
     plan.settings_hash = settings_hash(plan, options, scene)
-    check_outputs(options.outputs or (), plan.technique)
+    check_outputs(options.outputs or (), plan)
     window_pixels(options.data_window, plan.width, plan.height)
     if check:
         check_resources(plan, max_memory=options.max_memory, work_limit=options.work_limit)
     return scene, plan
+
+
+def check_outputs(outputs, plan: RenderPlan) -> None:
+    """Each output is one every frame writes or an AOV of the plan's technique; else a SceneError naming the
+    RenderVar and the techniques that write it."""
+    for output in outputs:
+        if output.source in SOURCES or output.source in plan.renderer.aovs:
+            continue
+        producers = aov_producers(output.source)
+        raise SceneError(f"RenderVar {output.prim or output.source}: source {output.source} is written by "
+                         f"technique {' or '.join(producers)}, not {plan.technique}")
 
 
 def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None = None) -> str:
@@ -202,55 +224,6 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
     return hashlib.sha256(key.encode()).hexdigest()[:16]
 
 
-def render_layers(technique: Technique, scene: Scene, plan: RenderPlan) -> tuple[Layer, list[Layer]]:
-    """Run the plan's passes: (the media's layer, merged by depth with the stratiform layers when the scene has
-    any; all layers front to back for :func:`~warpsky.composite.composite`). ``technique`` is the plan's
-    ``renderer`` or another technique with the same capabilities.
-
-    Light transport is linear in the lights: each of the scene's ``extra_suns`` runs every pass again with that
-    light as the sun (one more run of every pass per light) and the radiance adds up; transmittance and depth are
-    the first run's. The dome lights the first run only, and shows behind everything
-    (:func:`~warpsky.composite.dome_background`)."""
-    width, height = plan.width, plan.height
-
-    def lit_by(lit: Scene, run: Technique) -> tuple[Layer, list[Layer]]:
-        parts = []
-        if "media" in plan.passes:
-            parts.append(run.render(media_scene(lit, plan.passes), width, height))
-        if "stratiform" in plan.passes:
-            parts += StratiformPass(plan.layer_settings, device=plan.device).render(lit, width, height)
-        opaque = None
-        if SCENERY_PASSES & set(plan.passes):
-            seen = attenuated_sun(lit) if "sky" in plan.passes else lit
-            sky = sky_light(lit, analytic="sky" in plan.passes)  # from the sun before the air reddens it
-            parts, opaque = scenery_layers(seen, plan.passes, width, height, device=plan.device, before=parts,
-                                           settings=plan.scenery_settings, sky=sky)
-        main = merge_by_depth(parts, far=lit.camera.far) if len(parts) > 1 else parts[0]
-        if "sky" not in plan.passes:
-            return main, [main]
-        # The air in front runs to a surface where one is hit (the haze and fog in front of it are thin enough
-        # that the order of air and fog along the ray matters little), else to the merged layer's depth.
-        air_depth = main.depth if opaque is None else np.where(opaque < lit.camera.far, opaque, main.depth)
-        front, back = SkyPass(device=plan.device).render(lit, width, height, media_depth=air_depth)
-        return main, [front, main, back]
-
-    main, layers = lit_by(scene, technique)
-    if scene.extra_suns:
-        settings = getattr(technique, "settings", None)
-        if getattr(settings, "environment", 0.0):  # the uniform environment lights the first run only
-            technique = type(technique)(replace(settings, environment=0.0), device=plan.device)
-        for sun in scene.extra_suns:
-            extra_main, extra_layers = lit_by(replace(scene, sun=sun, extra_suns=(), dome=None), technique)
-            main = add_light([main], [extra_main])[0]
-            layers = add_light(layers, extra_layers)
-    if scene.dome is not None:
-        sky = "sky" in plan.passes
-        background = dome_background(scene, width, height, through_air=sky)
-        layers = with_background(layers, background, scene.camera.far,
-                                 front_air=layers[0].transmittance if sky else None)
-    return main, layers
-
-
 def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> FrameResult:
     """Render the stage at ``time_code`` (None: earliest) and write ``out_path`` atomically."""
     started = _time.perf_counter()
@@ -265,12 +238,16 @@ def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stag
     memory: composited, converted to the output colour space, its channels cropped to the data window."""
     timings = dict(timings or {})
     started = _time.perf_counter()
-    layer, layers = render_layers(plan.renderer, scene, plan)
+    layer, layers = render_layers(plan, scene)
     timings["passes"] = _time.perf_counter() - started
     linear = composite(layers, far=scene.camera.far)
     frame = convert_frame(linear, options.colorspace)
     timings["composite"] = _time.perf_counter() - started - timings["passes"]
-    image = RenderedImage(frame, {}, {}, {}, None, linear.rgba[..., :3], scene, plan, layer, timings)
+    image = RenderedImage(frame, {}, {}, {}, None, linear.rgba[..., :3], scene, plan, layer, timings,
+                          warnings=gathered_warnings(layers))
+    capped = capped_paths_warning(quality_stats(layer), plan)
+    if capped:
+        image.warnings.append(capped)
     return output_image(image, options, stage=stage, time_code=time_code)
 
 
@@ -284,6 +261,8 @@ def output_image(image: RenderedImage, options: RenderOptions, *, stage, time_co
     channels = frame_channels(image.frame, outputs, window)
     metadata = _metadata(scene, plan, options, image.layer, stage=stage, time_code=time_code)
     metadata["orderedChannels"] = ",".join(channels)
+    if image.warnings:
+        metadata["warnings"] = json.dumps(image.warnings)
     attributes = {**colour_attributes(options.colorspace), "pixelAspectRatio": float(options.pixel_aspect)}
     attributes.update(camera_attributes(scene.camera, plan.width, plan.height))
     return replace(image, channels=channels, metadata=metadata, attributes=attributes, window=window)
@@ -315,7 +294,7 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
                         exposure=preview_exposure(scene, options.exposure))
     timings["write"] = _time.perf_counter() - started
     quality = quality_stats(layer)
-    warnings = [w for w in [capped_paths_warning(quality, plan)] if w]
+    warnings = image.warnings
     seconds = sum(timings.get(k, 0.0) for k in ("plan", "passes", "composite", "write"))
     return FrameResult(Path(exr), png, seconds, float(layer.stats.get("seconds", 0.0)), time_code, plan, timings,
                        quality, warnings)
@@ -358,7 +337,7 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
         "settings": plan.settings_json(),
         "settingsHash": plan.settings_hash or settings_hash(plan, options, scene),
         "device": plan.device,
-        "version": warpsky.__version__,
+        "version": __version__,
         "renderSeconds": float(layer.stats.get("seconds", 0.0)),
         "lookups": int(layer.stats.get("lookups", 0)),
         "colorspace": options.colorspace,
@@ -368,8 +347,7 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
     if scene.sun is not None:
         metadata["sun"] = scene.sun.name
     metadata["previewExposure"] = float(preview_exposure(scene, options.exposure))  # contact sheets reuse it
-    if scene.layers:
-        keys = ("layer", "radiosity", "radiosity_iterations", "radiosity_residual", "radiosity_converged", "seconds")
-        metadata["stratiform"] = json.dumps([{k: part[k] for k in keys if k in part}
-                                             for part in layer.stats.get("parts", [layer.stats]) if "layer" in part])
+    parts = layer.stats.get("parts", [layer.stats])
+    for runner in plan.pass_runners:
+        metadata.update(runner.header(parts))
     return metadata

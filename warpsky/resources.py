@@ -1,16 +1,17 @@
-"""What a frame will cost, estimated from its plan before anything is allocated or launched, and the guards that
-refuse a frame that cannot fit or would never finish.
+"""What a frame will cost, estimated from its plan before anything is allocated or launched, and the guards that refuse
+a frame that cannot fit or would never finish.
 
-Memory: every technique estimates its own buffers (:meth:`memory_estimate` on each technique: per-pixel images
-and accumulators, uploaded grids, light buffers, denoiser copies); :func:`frame_memory` adds the other passes (sky,
-stratiform), the composite and the EXR's copies. The estimate is an upper bound on what the frame allocates on top
-of what the process already holds (the stage and its grids are read before the plan). It is compared with what is
-free: on the host ``MemAvailable`` of ``/proc/meminfo`` (within the cgroup's limit, if any), on a CUDA device its
-free memory; ``--max-memory SIZE`` replaces both. On the CPU device, device arrays are host memory and count there.
+Memory: every technique and pass estimates its own buffers (``memory_estimate``: per-pixel images and accumulators,
+uploaded grids, light buffers, denoiser copies, the sky's and the layers' images); the plan
+(:func:`warpsky.plan.frame_memory`) adds them up with the composite and the EXR's copies. The estimate is an upper
+bound on what the frame allocates on top of what the process already holds (the stage and its grids are read before
+the plan). It is compared with what is free: on the host ``MemAvailable`` of ``/proc/meminfo`` (within the cgroup's
+limit, if any), on a CUDA device its free memory; ``--max-memory SIZE`` replaces both. On the CPU device, device
+arrays are host memory and count there.
 
-Work: every technique estimates the inner-loop iterations of its kernels (:meth:`work_estimate`: grid lookups of
-the single-scattering march, slices, paths x bounce cap), as worst cases from the settings and the media's extent.
-A frame is refused when one pixel would take more than :data:`MAX_WORK_PER_PIXEL` (a tiny ``step_length``) or the
+Work: every technique estimates the inner-loop iterations of its kernels (``work_estimate``: grid lookups of the
+single-scattering march, slices, paths x bounce cap), as worst cases from the settings and the media's extent. A
+frame is refused when one pixel would take more than :data:`MAX_WORK_PER_PIXEL` (a tiny ``step_length``) or the
 frame more than :data:`MAX_WORK_PER_FRAME` in all (a huge resolution or ``spp``); ``--no-work-limit`` renders it
 anyway. On two CPU cores about 2.5e7 lookups run per second and the worst case overstates the demo cumulus' real
 lookups about 140 times, so the frame bound is about an hour of CPU rendering.
@@ -18,15 +19,12 @@ lookups about 140 times, so the frame bound is about an hour of CPU rendering.
 
 from __future__ import annotations
 
-import math
 import os
 import re
 from dataclasses import dataclass, field
 
-import numpy as np
-
+from warpsky.device import is_cpu
 from warpsky.errors import WarpskyError
-from warpsky.scene.camera import Projection
 
 #: Most worst-case kernel iterations (grid lookups, path events) one pixel may take.
 MAX_WORK_PER_PIXEL = 1.0e8
@@ -98,7 +96,7 @@ def available_host_memory() -> int:
 
 def available_device_memory(device: str) -> int | None:
     """Free bytes on a CUDA device; None for the CPU (its arrays are host memory)."""
-    if str(device).startswith("cpu"):
+    if is_cpu(device):
         return None
     import warp as wp
 
@@ -133,7 +131,7 @@ class MemoryEstimate:
 
     def host_total(self, device: str) -> int:
         """Host bytes, with the device's when the device is the CPU."""
-        return self.host + (self.device if str(device).startswith("cpu") else 0)
+        return self.host + (self.device if is_cpu(device) else 0)
 
     def largest_parts(self, count: int = 4) -> str:
         """The ``count`` largest parts with their sizes (host and device together)."""
@@ -141,7 +139,7 @@ class MemoryEstimate:
         return ", ".join(f"{name} {format_size(h + d)}" for name, (h, d) in biggest)
 
     def describe(self, device: str) -> str:
-        if str(device).startswith("cpu"):
+        if is_cpu(device):
             return f"about {format_size(self.host_total(device))} ({self.largest_parts()})"
         return (f"about {format_size(self.host)} host + {format_size(self.device)} on {device} "
                 f"({self.largest_parts()})")
@@ -175,137 +173,11 @@ class WorkEstimate:
         return f"about {self.total:.3g} kernel iterations" + (f" ({', '.join(parts)})" if parts else "")
 
 
-def grid_bytes(scene) -> int:
-    """Bytes of every voxel field of ``scene`` as float32 (one upload of the media)."""
-    return sum(int(np.prod(m.shape)) * 4 for m in scene.media)
-
-
-def media_diagonal(media) -> float:
-    """Diagonal of the box around ``media`` [m]: the longest path any ray takes through them."""
-    if not media:
-        return 0.0
-    corners = np.concatenate([m.world_corners() for m in media])
-    return float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
-
-
-#: Camera rays per image axis whose path through each medium's box bounds the march (the corners included).
-CHORD_RAYS = 33
-
-
-def box_chords(medium, origin: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Length [m] of each ray ``origin + t d`` (t >= 0, (N, 3) unit world directions) inside ``medium``'s box."""
-    index_from_world = np.linalg.inv(medium.world_from_index)
-    o = (index_from_world @ np.append(origin, 1.0))[:3]
-    d = directions @ index_from_world[:3, :3].T  # index units per metre along each ray
-    lo, hi = -0.5, np.asarray(medium.shape, dtype=np.float64) - 0.5
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ta = (lo - o) / d
-        tb = (hi - o) / d
-    inside = (o >= lo) & (o <= hi)
-    near = np.where(d == 0.0, np.where(inside, -np.inf, np.inf), np.minimum(ta, tb))
-    far = np.where(d == 0.0, np.where(inside, np.inf, -np.inf), np.maximum(ta, tb))
-    enter = np.maximum(near.max(axis=1), 0.0)
-    leave = far.min(axis=1)
-    return np.where(leave > enter, leave - enter, 0.0)
-
-
-def longest_chord(medium, direction: np.ndarray) -> float:
-    """Longest segment [m] along ``direction`` that fits in ``medium``'s box: min over its axes of the box's edge
-    over the direction's component along that axis (in index units)."""
-    d = np.linalg.inv(medium.world_from_index)[:3, :3] @ np.asarray(direction, dtype=np.float64)
-    edges = np.asarray(medium.shape, dtype=np.float64)
-    with np.errstate(divide="ignore"):
-        return float(np.min(np.where(np.abs(d) > 0.0, edges / np.abs(d), np.inf)))
-
-
-def camera_chord(scene) -> float:
-    """The longest path [m] a camera ray takes through the media (summed over their boxes), over a
-    :data:`CHORD_RAYS` square grid of the frame's rays, corners included; the boxes' diagonal for an
-    orthographic camera (its rays do not share an origin)."""
-    camera = scene.camera
-    if camera.projection is not Projection.PERSPECTIVE:
-        return media_diagonal(scene.media)
-    steps = np.linspace(0.0, 1.0, CHORD_RAYS)
-    directions = np.array([camera.pixel_direction(x, y, 1, 1) for y in steps for x in steps])
-    chords = sum(box_chords(m, np.asarray(camera.position, dtype=np.float64), directions) for m in scene.media)
-    return float(np.max(chords))
-
-
-def march_work(scene, pixels: int, step: float, shadow_step: float) -> list[WorkItem]:
-    """Grid lookups of the single-scattering march: per eye step one lookup per medium and a shadow march through
-    every medium towards the sun (one lookup per shadow step). The eye's path is the longest of the frame's rays
-    through the media (:func:`camera_chord`, plus a tenth for rays between the sampled ones); the sun's, the
-    longest segment along the sun that fits in each box (the boxes' diagonal without a sun)."""
-    if not scene.media:
-        return []
-    eye_path = min(1.1 * camera_chord(scene), media_diagonal(scene.media))
-    eye_steps = math.ceil(eye_path / step)
-    sun = scene.sun.direction if scene.sun is not None else None
-    shadow_steps = sum(math.ceil(min(media_diagonal((m,)), longest_chord(m, sun) if sun is not None else math.inf)
-                                 / shadow_step) for m in scene.media)
-    per_pixel = eye_steps * (len(scene.media) + shadow_steps) + shadow_steps
-    return [WorkItem("march lookups", float(per_pixel), pixels,
-                     f"step_length={step:g} m and shadow_step_length={shadow_step:g} m over "
-                     f"{eye_path:.4g} m of media")]
-
-
-# ------------------------------------------------------------------------------------------------- passes
-def frame_memory(scene, plan) -> MemoryEstimate:
-    """Memory of the whole frame: the technique's (when the media pass runs), the stratiform and sky passes',
-    the composite's and the EXR's."""
-    pixels = plan.width * plan.height
-    cpu = str(plan.device).startswith("cpu")
-    estimate = MemoryEstimate()
-    if "media" in plan.passes:
-        estimate.merge(plan.renderer.memory_estimate(scene, plan.width, plan.height))
-    if "stratiform" in plan.passes:
-        layers = len(scene.layers)
-        for layer in scene.layers:
-            estimate.add("stratiform maps", device=4 * layer.thickness.size)
-        estimate.add("stratiform layers", host=pixels * (LAYER_BYTES * (0 if cpu else layers) + 40 * (layers + 1)),
-                     device=pixels * LAYER_BYTES * layers)
-        estimate.add("radiosity", device=radiosity_bytes(scene, plan.layer_settings))
-    if "surfaces" in plan.passes:
-        triangles = sum(len(m.triangles) for m in scene.meshes)
-        # points (12 B) and indices (12 B per triangle) plus Warp's BVH (about 64 B per triangle), per-pixel hits
-        estimate.add("meshes", host=40 * triangles, device=88 * triangles + pixels * LAYER_BYTES)
-    for name in ("heightfield", "fog"):
-        if name in plan.passes:
-            estimate.add(name, host=pixels * (0 if cpu else LAYER_BYTES), device=pixels * LAYER_BYTES)
-    if "sky" in plan.passes:
-        estimate.add("sky", host=pixels * (20 + (0 if cpu else 36)), device=pixels * 40)
-    estimate.add("composite and EXR", host=pixels * COMPOSITE_BYTES)
-    estimate.add("working memory", host=WORKING_MEMORY)
-    return estimate
-
-
-def radiosity_bytes(scene, settings) -> int:
-    """Bytes of the radiosity buffers of every stratiform layer above the ground."""
-    from warpsky.passes.stratiform.stratiform import radiosity_grid
-    from warpsky.plan import RADIOSITY_BUFFERS
-
-    ground = scene.ground
-    total = 0
-    for layer in scene.layers:
-        if ground is None or ground.height >= layer.base_altitude or not settings.radiosity_for(layer):
-            continue
-        _, _, (nu, nv) = radiosity_grid(layer, ground.height, int(settings.radiosity_detail))
-        total += int(nu * nv * 12 * RADIOSITY_BUFFERS)
-    return total
-
-
-def frame_work(scene, plan) -> WorkEstimate:
-    """Worst-case kernel work of the frame's media pass (the other passes are one lookup-light launch each)."""
-    if "media" not in plan.passes:
-        return WorkEstimate()
-    return WorkEstimate(list(plan.renderer.work_estimate(scene, plan.width, plan.height)))
-
-
 # -------------------------------------------------------------------------------------------------- guards
 def memory_limits(device: str, max_memory: int | None) -> tuple[int, int | None]:
     """(host limit, device limit or None on the CPU) [bytes]: ``max_memory`` for both, else what is free."""
     if max_memory is not None:
-        return int(max_memory), None if str(device).startswith("cpu") else int(max_memory)
+        return int(max_memory), None if is_cpu(device) else int(max_memory)
     return available_host_memory(), available_device_memory(device)
 
 

@@ -32,9 +32,8 @@ from warpsky.files import atomic_write
 from warpsky.interrupt import Interrupted, request_stop, sigint_ignored, stop_requested, stop_scope
 from warpsky.output.exr import validate_exr
 from warpsky.output.products import window_pixels
-from warpsky.render import plan_frame, settings_hash, write_frame
+from warpsky.render import check_outputs, plan_frame, settings_hash, write_frame
 from warpsky.scene.usd import StageReader
-from warpsky.scene.usd_render import check_outputs
 
 FAIL_FRAMES_ENV = "WARPSKY_FAIL_FRAMES"
 
@@ -91,7 +90,7 @@ def plan_first_frame(job: FrameJob, *, keep_reader: bool = True) -> None:
     and no log behind. ``keep_reader``: keep the stage read for frames rendered in this process."""
     _, plan = plan_frame(_reader(job.stage, job.options.stage), job.time_code, job.options)
     for _, options in job.siblings:
-        check_outputs(options.outputs or (), plan.technique)
+        check_outputs(options.outputs or (), plan)
         window_pixels(options.data_window, plan.width, plan.height)
     if not keep_reader:
         _READERS.clear()

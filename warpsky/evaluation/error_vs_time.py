@@ -49,14 +49,14 @@ from pathlib import Path
 
 import numpy as np
 
-import warpsky
 from warpsky.composite import composite
 from warpsky.errors import UsageError
 from warpsky.files import atomic_write, cache_dir
+from warpsky.passes.frame import render_layers
 from warpsky.plan import RenderPlan, make_plan
-from warpsky.render import render_layers
-from warpsky.techniques.base import technique_class
+from warpsky.registry import technique_class
 from warpsky.techniques.path_tracer.deck_media import traces_decks
+from warpsky.version import __version__
 
 #: Techniques the report knows how to walk, with their quality ladders.
 LADDERS = {
@@ -98,7 +98,7 @@ class Report:
 def _reference_key(scene, width, height, device, spp, seed) -> str:
     """Hash of everything the reference's pixels depend on: the scene as read (media, camera, sun, ground)."""
     digest = hashlib.sha256(pickle.dumps(scene, protocol=4))
-    digest.update(json.dumps([width, height, "cuda" in str(device), spp, seed, warpsky.__version__]).encode())
+    digest.update(json.dumps([width, height, "cuda" in str(device), spp, seed, __version__]).encode())
     return digest.hexdigest()[:20]
 
 
@@ -114,7 +114,7 @@ def render_frame_radiance(plan: RenderPlan, scene):
     """(frame radiance (H, W, 3), transmittance, frame aovs, technique layer): the plan's passes composited (the
     technique's layer with the sky pass when the scene has an atmosphere), so techniques compare on what a frame
     shows."""
-    layer, layers = render_layers(plan.renderer, scene, plan)
+    layer, layers = render_layers(plan, scene)
     frame = composite(layers, far=scene.camera.far)
     return frame.rgba[..., :3], frame.transmittance, frame.aovs, layer
 
@@ -204,7 +204,8 @@ def heightfield_rows(scene, name: str, so_far: list) -> list[tuple[str, str, lis
     first = HEIGHTFIELD_ROW.format(mode=HEIGHTFIELD_MODES[0])
     if first in (row for row, _, _ in so_far):
         return []
-    from warpsky.passes.heightfield.heightfield import automatic_steps, the_deck
+    from warpsky.media.heightfield import the_deck
+    from warpsky.passes.heightfield.heightfield import automatic_steps
 
     step = automatic_steps(the_deck(scene))[0]
     return [(HEIGHTFIELD_ROW.format(mode=mode), name,

@@ -40,7 +40,6 @@ from pathlib import Path
 
 import numpy as np
 
-import warpsky
 from warpsky.errors import UsageError
 from warpsky.evaluation.error_vs_time import (
     LADDERS,
@@ -54,9 +53,10 @@ from warpsky.evaluation.error_vs_time import (
 )
 from warpsky.evaluation.family_stages import HALVES, load_family, make_family
 from warpsky.files import atomic_write, cache_dir
-from warpsky.render import render_layers
+from warpsky.passes.frame import render_layers
+from warpsky.registry import technique_class
 from warpsky.scene.model import LUMINANCE_WEIGHTS
-from warpsky.techniques.base import technique_class
+from warpsky.version import __version__
 
 __all__ = ["FAMILY_HELP", "FamilyReport", "FamilyRow", "aggregate", "covered_pixels", "family_reference_key",
            "family_reference_path", "format_family_table", "make_family", "run_family", "write_family_outputs"]
@@ -130,7 +130,7 @@ def family_reference_key(scene, width: int, height: int, spp: int, seed: int) ->
     digest = hashlib.sha256()
     for path in [scene.source, *(m.source for m in scene.media)]:
         digest.update(hashlib.sha256(Path(path).read_bytes()).digest())
-    digest.update(json.dumps([width, height, spp, seed, warpsky.__version__]).encode())
+    digest.update(json.dumps([width, height, spp, seed, __version__]).encode())
     return digest.hexdigest()[:20]
 
 
@@ -144,7 +144,7 @@ def covered_pixels(scene, width: int, height: int, device: str) -> np.ndarray:
     ``single_scatter`` render of the media alone (no ground, no atmosphere): noise-free."""
     media_only = dataclasses.replace(scene, ground=None, atmosphere=None, layers=())
     plan = frame_plan(media_only, "single_scatter", {}, width, height, device)
-    layer, _ = render_layers(plan.renderer, media_only, plan)
+    layer, _ = render_layers(plan, media_only)
     return (layer.transmittance @ LUMINANCE_WEIGHTS.astype(np.float32)) < COVERED_TRANSMITTANCE
 
 

@@ -37,6 +37,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from warpsky.device import is_cpu
 from warpsky.errors import UsageError
 
 #: The stratiform pass, measured on stages with stratiform layers next to the voxel techniques.
@@ -92,7 +93,7 @@ def fixed_work(technique: str, spp: int) -> dict[str, str]:
 
 def check_techniques(techniques: list[str]) -> list[str]:
     """``techniques`` when each is registered or :data:`STRATIFORM`; a UsageError naming the first that is not."""
-    from warpsky.techniques.base import technique_names
+    from warpsky.registry import technique_names
 
     known = [*technique_names(), STRATIFORM]
     for name in techniques:
@@ -108,8 +109,8 @@ def plan_rows(stages: list[Path], techniques: list[str], devices: list[str], *, 
     """Every row to measure: each device (each thread count on the CPU) x stage x technique that applies to the
     stage (a voxel technique needs voxel media and, next to stratiform layers, the ability to render beside
     them; the stratiform pass needs layers). Skipped pairs are logged."""
+    from warpsky.registry import technique_class
     from warpsky.scene.usd import StageReader
-    from warpsky.techniques.base import technique_class
 
     applicable, skipped = [], {}
     for stage in stages:
@@ -132,7 +133,7 @@ def plan_rows(stages: list[Path], techniques: list[str], devices: list[str], *, 
             log(f"speed: skipping {', '.join(names)} on {name}: {why}")
     rows = []
     for device in devices:
-        cpu = device.startswith("cpu")
+        cpu = is_cpu(device)
         width, height = cpu_res if cpu else gpu_res
         for count in (threads if cpu else [None]):
             rows += [RowSpec(stage, technique, device, count, width, height, frames, fixed_work(technique, spp))
@@ -219,22 +220,16 @@ class CompileLog:
 
 def _frame(scene, spec: RowSpec):
     """(a function rendering one frame and returning its main layer or None, the plan)."""
-    from warpsky.passes.frame import StratiformPass
+    from warpsky.passes.frame import render_layers, render_pass
     from warpsky.plan import make_plan
-    from warpsky.render import render_layers
-    from warpsky.techniques.base import DEFAULT_TECHNIQUE
+    from warpsky.registry import DEFAULT_TECHNIQUE
 
     technique = DEFAULT_TECHNIQUE if spec.technique == STRATIFORM else spec.technique
     plan = make_plan(scene, technique=technique, settings=spec.settings, resolution=(spec.width, spec.height),
                      device=spec.device)
     if spec.technique == STRATIFORM:
-        stratiform = StratiformPass(plan.layer_settings, device=spec.device)
-
-        def render_stratiform():
-            stratiform.render(scene, plan.width, plan.height)
-
-        return render_stratiform, plan
-    return (lambda: render_layers(plan.renderer, scene, plan)[0]), plan
+        return (lambda: render_pass(plan, scene, STRATIFORM)), plan
+    return (lambda: render_layers(plan, scene)[0]), plan
 
 
 def _timed(render) -> tuple[float, object, float]:
@@ -319,7 +314,7 @@ def measure_row(spec: RowSpec) -> dict:
         **dataclasses.asdict(spec),
         "width": plan.width,
         "height": plan.height,
-        "threads": cpu_thread_count() if spec.device.startswith("cpu") else None,
+        "threads": cpu_thread_count() if is_cpu(spec.device) else None,
         "passes": [STRATIFORM] if spec.technique == STRATIFORM else list(plan.passes),
         "cold_ms": cold_ms,
         "plan_ms": plan_ms,
@@ -353,7 +348,7 @@ def table_cells(row: dict) -> list[str]:
     head = [row["device"], threads, Path(row["stage"]).stem, row["technique"], f"{row['width']}x{row['height']}"]
     if "error" in row:
         return head + ["failed"] + [""] * (len(COLUMNS) - len(head) - 2) + [row["error"]]
-    gpu_missing = "n/a" if row["device"].startswith("cpu") else "-"
+    gpu_missing = "n/a" if is_cpu(row["device"]) else "-"
     paths = row.get("paths_per_s")
     return head + [
         f"{row['cold_ms']:.0f}", row["cold_kernels"], f"{row['warm_ms']:.1f}", f"{row['fps']:.2f}",
@@ -463,7 +458,7 @@ def run_speed_command(args, *, log=None) -> int:
     import warp as wp
 
     from warpsky.device import cpu_thread_count, resolve_device
-    from warpsky.techniques.base import technique_names
+    from warpsky.registry import technique_names
 
     started, load = time.time(), list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     techniques = check_techniques(_names(args.techniques) or [*technique_names(), STRATIFORM])

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky.device import is_cpu
 from warpsky.optics.kernels import DevicePhaseTables, sample_table
 from warpsky.optics.phase_sampling import rotate_about
 
@@ -107,7 +108,7 @@ def slab_monte_carlo(
     """Trace ``photons`` through a slab of extinction ``kappa`` [1/m] and ``thickness`` [m] with the phase table
     ``phase`` (3, M) (channel ``channel``), sun at zenith angle ``theta_l_deg``."""
     theta_l = math.radians(theta_l_deg)
-    threads = 256 if str(device).startswith("cpu") else 16384
+    threads = 256 if is_cpu(device) else 16384
     per_thread = max(1, -(-int(photons) // threads))
     total = threads * per_thread
     started = time.perf_counter()

@@ -9,7 +9,7 @@ comes from, world axes, Y up):
   L_sky(w) = E_sun P_R(w . l) inscatter(h, w_y) (:func:`~warpsky.media.air_analytic.inscatter`, the closed
   form the sky pass draws and :func:`~warpsky.light.sky.sky_hemisphere` averages), from the sun as it
   arrives at the top of the air (the technique receives it reddened by the air above the media and
-  :func:`~warpsky.passes.sky.sky.unattenuated_sun` undoes that). With an atmosphere the dome lies
+  :func:`~warpsky.light.sun.above_air` leaves that out). With an atmosphere the dome lies
   beyond the air and is seen through its transmittance exp(-beta(h) / (gamma w_y)).
 * lower hemisphere (w_y < 0): without air, a Lambertian ground lit by the upper hemisphere (radiance a E / pi,
   a the ground plane's albedo, else the meshes' mean albedo), else the dome's lower half. With air, the air's
@@ -46,11 +46,11 @@ import numpy as np
 import warp as wp
 
 from warpsky.light.dome import ambient_radiance, hemisphere_directions, upper_hemisphere
-from warpsky.light.sun import sunlight
+from warpsky.light.frame import media_altitude
+from warpsky.light.sun import above_air, sunlight
 from warpsky.media.air_analytic import inscatter, rayleigh, transmittance
 from warpsky.media.voxel import MediaPoint, VoxelMedia
 from warpsky.optics.grid import angle_grid, sphere_integral
-from warpsky.passes.sky.sky import media_altitude, unattenuated_sun
 from warpsky.scene.model import PhaseKind
 
 #: Cells of the equal-area grid per hemisphere: SAMPLES x 2 SAMPLES.
@@ -83,7 +83,7 @@ def has_sky_light(scene, *, traces_air: bool = False) -> bool:
     a sun above the horizon."""
     if scene.atmosphere is None or traces_air:
         return False
-    light = sunlight(unattenuated_sun(scene))
+    light = sunlight(above_air(scene))
     return light is not None and light.lit and light.air_sine > 0.0
 
 
@@ -129,7 +129,7 @@ def media_environment(scene, *, traces_air: bool = False, samples: int = SAMPLES
     sky = has_sky_light(scene, traces_air=traces_air)
     if scene.dome is None and not sky:
         return None
-    light = sunlight(unattenuated_sun(scene)) if sky else None
+    light = sunlight(above_air(scene)) if sky else None
     atmosphere = None if traces_air else scene.atmosphere
     up = hemisphere_directions(samples, upper=True).reshape(-1, 3)
     down = hemisphere_directions(samples, upper=False).reshape(-1, 3)

@@ -28,8 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-#: Earth's mean radius [m], for the air mass at the horizon.
-EARTH_RADIUS = 6.371e6
+from warpsky.media.air_analytic import air_sine
 
 
 def visible_fraction(elevation: float, radius: float) -> float:
@@ -52,28 +51,6 @@ def visible_elevation(elevation: float, radius: float) -> float:
         return elevation
     moment = (2.0 / 3.0) * (radius * radius - elevation * elevation) ** 1.5
     return elevation + moment / (fraction * math.pi * radius * radius)
-
-
-def horizon_air_mass(gamma: float) -> float:
-    """Air mass at the horizon of an exponential atmosphere of scale height 1/``gamma`` [m] on a round earth:
-    sqrt(pi R gamma / 2), Chapman's grazing-incidence limit (35.4 for 8 km; Kasten and Young's standard
-    atmosphere gives 38)."""
-    return math.sqrt(0.5 * math.pi * EARTH_RADIUS * gamma)
-
-
-def air_sine(sun_y, gamma: float) -> np.ndarray:
-    """The sine of the sun's elevation the air's optical depth is divided by: the air mass towards the sun is
-    1 / air_sine, finite at every elevation.
-
-    Riley's flat earth gives air mass 1 / sin(e), which diverges at the horizon. Above the elevation whose sine is
-    mu_c = e_euler / M0 (M0 = :func:`horizon_air_mass`; 4.4 deg for an 8 km scale height) the flat-earth value is
-    kept exactly; below it the sine is continued as mu_c exp(sin(e) / mu_c - 1), which meets it with the same
-    slope at mu_c, gives air mass M0 at the horizon and falls smoothly towards 0 below it (a finite, continuous
-    transmittance: the disk's visible fraction takes the light to 0).
-    """
-    sun_y = np.asarray(sun_y, dtype=np.float64)
-    knee = math.e / horizon_air_mass(gamma)
-    return np.where(sun_y >= knee, sun_y, knee * np.exp(np.minimum(sun_y, knee) / knee - 1.0))
 
 
 @dataclass(frozen=True)
@@ -121,7 +98,7 @@ def sun_sunlight(sun, *, horizon: bool, gamma: float | None = None) -> Sunlight 
     if sun is None:
         return None
     direction = np.asarray(sun.direction, dtype=np.float64)
-    irradiance = np.asarray(sun.irradiance, dtype=np.float64)
+    irradiance = np.asarray(sun.irradiance, dtype=np.float64) * sun.transmittance
     visible, light = 1.0, direction
     if horizon:
         radius = 0.5 * float(sun.angular_diameter)
@@ -151,11 +128,22 @@ def light_elevation_sine(sun) -> float:
 
 def visible_sun(sun):
     """A :class:`~warpsky.scene.model.Sun` without a disk giving the sunlight of ``sun`` above a horizon, for a
-    scene that loses its horizon (the ground drawn by another pass); None when none of the disk is visible."""
+    scene that loses its horizon (the ground drawn by another pass); None when none of the disk is visible. Its
+    transmittance through the air is ``sun``'s."""
     light = sun_sunlight(sun, horizon=True)
     if light is None or light.visible <= 0.0:
         return None
-    return dataclasses.replace(sun, direction=light.direction, irradiance=light.irradiance, angular_diameter=0.0)
+    irradiance = np.asarray(sun.irradiance, dtype=np.float64) * light.visible
+    return dataclasses.replace(sun, direction=light.direction, irradiance=irradiance, angular_diameter=0.0)
+
+
+def above_air(scene):
+    """``scene`` with its sun as it arrives at the top of the atmosphere (transmittance ones), for a technique
+    that traces the air itself or a light model that needs the sun before the air (the sky's own light)."""
+    sun = scene.sun
+    if sun is None or np.all(sun.transmittance == 1.0):
+        return scene
+    return dataclasses.replace(scene, sun=dataclasses.replace(sun, transmittance=np.ones(3)))
 
 
 # ---- the sunlight as kernels see it ---------------------------------------------------------------------------
@@ -176,12 +164,14 @@ class Sun:
     cos_radius: float  # cosine of the disk's angular radius (2: no disk)
     lit: int
 
+
 def sun_disk(angular_diameter: float) -> tuple[float, float]:
     """(cos of the angular radius, solid angle [sr]) of a sun disk of ``angular_diameter`` [rad]; (2, 1) for none."""
     radius = 0.5 * angular_diameter
     if radius <= 0.0:
         return 2.0, 1.0
     return math.cos(radius), 2.0 * math.pi * (1.0 - math.cos(radius))
+
 
 def sun_struct(light: Sunlight | None, unlit_direction: tuple[float, float, float] = (0.0, 1.0, 0.0)) -> Sun:
     """Kernel view of a :class:`~warpsky.light.sun.Sunlight` (or None: unlit, pointing along

@@ -6,7 +6,7 @@ observer at altitude h0 looking along v (elevation sine v_y), with the sun along
 * optical depth to distance K (Eq. 11):  τ(K) = B K E(x),  B = β_sl e^{-γh0},  x = γ v_y K,
   E(x) = (1 - e^{-x}) / x  (E(0) = 1: a horizontal ray sees constant density);
 * sun transmittance at altitude h (Eq. 12):  exp(-β_sl e^{-γh} / (γ l_y)), with l_y replaced near the horizon by
-  :func:`~warpsky.light.sun.air_sine` (a finite air mass: Riley's 1 / l_y diverges there);
+  :func:`~warpsky.media.air_analytic.air_sine` (a finite air mass: Riley's 1 / l_y diverges there);
 * in-scattered radiance over [0, K] (Eq. 8 with Eqs. 10-12), integrated exactly:
 
       L = I P(θ) B K E(x) exp(-min(τ_s0, τ_s0 + Δ)) F(|Δ|),
@@ -34,7 +34,6 @@ import math
 import numpy as np
 import warp as wp
 
-from warpsky.light.sun import air_sine
 from warpsky.numerics import one_minus_exp_over_x
 
 #: Riley 2004 Table 3: sea-level scattering coefficients [1/m] at 680, 550, 440 nm (our R, G, B).
@@ -44,6 +43,32 @@ RILEY_SCALE_HEIGHT = 8000.0
 #: Downward rays stop where the dimensionless height change γ v_y K falls below -X_CUT.
 X_CUT = 40.0
 SERIES = 1.0e-4
+
+
+#: Earth's mean radius [m], for the air mass at the horizon.
+EARTH_RADIUS = 6.371e6
+
+
+def horizon_air_mass(gamma: float) -> float:
+    """Air mass at the horizon of an exponential atmosphere of scale height 1/``gamma`` [m] on a round earth:
+    sqrt(pi R gamma / 2), Chapman's grazing-incidence limit (35.4 for 8 km; Kasten and Young's standard
+    atmosphere gives 38)."""
+    return math.sqrt(0.5 * math.pi * EARTH_RADIUS * gamma)
+
+
+def air_sine(sun_y, gamma: float) -> np.ndarray:
+    """The sine of the sun's elevation the air's optical depth is divided by: the air mass towards the sun is
+    1 / air_sine, finite at every elevation.
+
+    Riley's flat earth gives air mass 1 / sin(e), which diverges at the horizon. Above the elevation whose sine is
+    mu_c = e_euler / M0 (M0 = :func:`horizon_air_mass`; 4.4 deg for an 8 km scale height) the flat-earth value is
+    kept exactly; below it the sine is continued as mu_c exp(sin(e) / mu_c - 1), which meets it with the same
+    slope at mu_c, gives air mass M0 at the horizon and falls smoothly towards 0 below it (a finite, continuous
+    transmittance: the disk's visible fraction takes the light to 0).
+    """
+    sun_y = np.asarray(sun_y, dtype=np.float64)
+    knee = math.e / horizon_air_mass(gamma)
+    return np.where(sun_y >= knee, sun_y, knee * np.exp(np.minimum(sun_y, knee) / knee - 1.0))
 
 
 def e_factor(x: np.ndarray) -> np.ndarray:
@@ -109,7 +134,7 @@ def transmittance(beta_sl, gamma, h0, view_y, distance) -> np.ndarray:
 
 def sun_transmittance(beta_sl, gamma, h, sun_y) -> np.ndarray:
     """Transmittance of sunlight from outside the atmosphere down to altitude h (Eq. 12) for sunlight from
-    elevation sine ``sun_y``: the vertical column over :func:`~warpsky.light.sun.air_sine`, finite and
+    elevation sine ``sun_y``: the vertical column over :func:`~warpsky.media.air_analytic.air_sine`, finite and
     positive at every elevation and continuous through the horizon (the disk's visible fraction, not this, makes
     the night black)."""
     b = np.asarray(beta_sl, dtype=np.float64) * np.exp(-gamma * np.asarray(h, dtype=np.float64))

@@ -26,9 +26,10 @@ import math
 import numpy as np
 import warp as wp
 
+from warpsky.errors import UsageError
 from warpsky.media.voxel import slab_interval
 from warpsky.scene.heightfield_clouds import HeightFieldClouds, surface_heights
-from warpsky.scene.model import PhaseKind, PhaseModel, VoxelMedium
+from warpsky.scene.model import PhaseKind, PhaseModel, Scene, VoxelMedium
 
 #: A stand-in for +infinity in float32 kernels (level() below -D, lengths of unbounded rays).
 HF_INFINITY = wp.constant(1.0e30)
@@ -426,3 +427,12 @@ def ray_intervals(clouds: HeightFieldClouds, origins, directions, t_max: float, 
                                                              dirs, float(t_max), pieces, counts, lengths],
               device=device)
     return pieces.numpy(), counts.numpy(), lengths.numpy()
+
+
+def the_deck(scene: Scene) -> HeightFieldClouds | None:
+    """The scene's one height-field deck (None without); more than one is refused."""
+    decks = scene.heightfield_clouds
+    if len(decks) > 1:
+        raise UsageError(f"one height-field deck per scene is rendered, got {len(decks)}: "
+                         f"{', '.join(d.name for d in decks)}")
+    return decks[0] if decks else None

@@ -5,20 +5,13 @@ rain, ice and snow tables take minutes on a 2-core machine, and four workers bui
 batch client calls :func:`prepare_tables` on the first frame's plan instead: it builds what is missing from the cache
 (``$WARPSKY_CACHE/optics``), printing a line per table, and the workers then load every table from the cache.
 
-Which tables a plan needs:
-
-============================== ============================================================================
-what the plan holds            tables
-============================== ============================================================================
-voxel media with species       ``phase`` per species (every technique); ``ams`` (Ams_0..orders, F_n) per
-                               species for ``slicing``, at its ``orders`` setting
-stratiform layers              ``phase`` and ``bouthors`` (modified Mie split at 5°) of ``stratus``
-============================== ============================================================================
+Which tables a plan needs is said by what runs: its technique (``Technique.tables``: a ``phase`` table per species,
+and slicing's ``ams`` tables at its ``orders`` setting) when the media pass runs, and each running pass
+(``Pass.tables``: the stratiform pass's ``phase`` and ``bouthors`` tables of ``stratus``).
 """
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -40,21 +33,13 @@ class TableNeed:
 
 
 def tables_needed(scene, plan) -> list[TableNeed]:
-    """The tables rendering ``scene`` with ``plan`` (:class:`~warpsky.plan.RenderPlan`) loads, in build order."""
-    from warpsky.passes.stratiform.optics import FORWARD_CUT_DEG
-
-    needs = []
-    if "media" in plan.passes:
-        for name in scene.species:
-            needs.append(TableNeed(name, "phase", functools.partial(tables.phase_table, name)))
-            if plan.technique == "slicing":
-                orders = int(plan.settings.orders)
-                needs.append(TableNeed(name, "ams", functools.partial(tables.ams_table, name, orders), f"{orders}"))
-    if "stratiform" in plan.passes and scene.layers:
-        needs.append(TableNeed("stratus", "phase", functools.partial(tables.phase_table, "stratus")))
-        needs.append(TableNeed("stratus", "bouthors", functools.partial(tables.modified_mie_table, "stratus",
-                                                                        FORWARD_CUT_DEG), f"{FORWARD_CUT_DEG:g}"))
-    return needs
+    """The tables rendering ``scene`` with ``plan`` (:class:`~warpsky.plan.RenderPlan`) loads, in build order, each
+    once: those of every pass that runs (the technique's through the media pass)."""
+    needs: dict[tuple, TableNeed] = {}
+    for runner in plan.pass_runners:
+        for need in runner.tables(scene):
+            needs.setdefault((need.species, need.kind, need.extra), need)
+    return list(needs.values())
 
 
 def prepare_tables(scene, plan) -> list[TableNeed]:

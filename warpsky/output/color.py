@@ -29,8 +29,8 @@ COLORSPACES = {
     "ACEScg": ((0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767), "ACEScg"),
 }
 DEFAULT_COLORSPACE = "lin_rec709"
-#: Components of a frame that are radiance (converted by M) and of variances (converted by M squared).
-RADIANCE_AOVS = ("single_scatter", "multiple_scatter")
+#: AOVs whose name ends so hold variances (converted by M squared); every other AOV is a colour (converted by M).
+VARIANCE_SUFFIX = "variance"
 
 
 def check_colorspace(name: str) -> str:
@@ -67,12 +67,7 @@ def convert_frame(frame, name: str):
     rgba[..., :3] = frame.rgba[..., :3] @ m.T
     aovs = {}
     for key, values in frame.aovs.items():
-        if key == "variance":
-            aovs[key] = values @ (m * m).T
-        elif key in RADIANCE_AOVS:
-            aovs[key] = values @ m.T
-        else:
-            aovs[key] = values
+        aovs[key] = values @ ((m * m) if key.endswith(VARIANCE_SUFFIX) else m).T
     return replace(frame, rgba=rgba, aovs=aovs)
 
 

@@ -9,11 +9,34 @@ as ``R, G, B, A``, ``transmittance.R/G/B``, ``depth.Z`` and every AOV the techni
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from warpsky.errors import SceneError
-from warpsky.scene.usd_render import OutputVar
+
+
+@dataclass(frozen=True)
+class OutputVar:
+    """One channel group of an output image.
+
+    Attributes:
+        layer: EXR layer name ("" for the beauty's unprefixed R, G, B, A, which Nuke reads as its rgba layer).
+        source: The warpsky output (a key of :data:`SOURCES`).
+        components: Channel suffixes written, e.g. ``RGBA``, ``RGB``, ``Z``.
+        half: Written as half floats (else 32-bit float).
+        prim: The RenderVar prim path, for messages ("" for the built-in default outputs).
+    """
+
+    layer: str
+    source: str
+    components: str
+    half: bool = False
+    prim: str = ""
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        return tuple(f"{self.layer}.{c}" if self.layer else c for c in self.components)
 
 FULL_WINDOW = (0.0, 0.0, 1.0, 1.0)
 

@@ -68,8 +68,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from warpsky.errors import SceneError
-from warpsky.scene.checks import _vec3
-from warpsky.scene.usd_prims import float_array_attr
+from warpsky.scene.checks import _vec3, float_array_attr
 
 #: ``warpsky:kind`` of an analytic fog prim.
 FOG_KIND = "analyticFog"

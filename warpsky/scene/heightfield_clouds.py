@@ -65,7 +65,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from warpsky.errors import SceneError
-from warpsky.scene.usd_prims import float_array_attr
+from warpsky.scene.checks import float_array_attr
 
 #: ``warpsky:kind`` of a height-field cloud prim.
 HEIGHTFIELD_KIND = "heightFieldClouds"

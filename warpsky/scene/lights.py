@@ -20,12 +20,16 @@ class Sun:
         irradiance: RGB irradiance at normal incidence [W/m^2 per channel, or the stage's light units].
         angular_diameter: Angular diameter of the disk [rad] (USD ``inputs:angle`` is in degrees).
         name: Prim path or label.
+        transmittance: RGB transmittance of the air between the top of the atmosphere and what the sun lights,
+            in [0, 1]: ones as read from a stage; a frame whose air is drawn by a pass sets it once for its media
+            (:class:`~warpsky.light.frame.FrameLight`), so ``irradiance`` always stays the light above the air.
     """
 
     direction: np.ndarray
     irradiance: np.ndarray
     angular_diameter: float = math.radians(0.53)
     name: str = "sun"
+    transmittance: np.ndarray = field(default_factory=lambda: np.ones(3))
 
     def __post_init__(self):
         object.__setattr__(self, "direction", _vec3(self.direction, f"sun {self.name}: direction", unit=True))
@@ -33,6 +37,10 @@ class Sun:
         if np.any(irr < 0.0):
             raise SceneError(f"sun {self.name}: irradiance must be non-negative, got {irr.tolist()}")
         object.__setattr__(self, "irradiance", irr)
+        through = _vec3(self.transmittance, f"sun {self.name}: transmittance")
+        if np.any(through < 0.0) or np.any(through > 1.0):
+            raise SceneError(f"sun {self.name}: transmittance must lie in [0, 1], got {through.tolist()}")
+        object.__setattr__(self, "transmittance", through)
         if not (math.isfinite(self.angular_diameter) and 0.0 <= self.angular_diameter < math.pi):
             raise SceneError(f"sun {self.name}: angular diameter must lie in [0, pi) rad, got {self.angular_diameter}")
 

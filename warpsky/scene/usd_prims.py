@@ -17,24 +17,6 @@ import numpy as np
 from warpsky.errors import SceneError
 
 
-def float_array_attr(prim, name: str, tc, width: int) -> np.ndarray | None:
-    """An authored ``float[]`` (width 1) or ``floatN[]`` (width N) attribute as a (count,) / (count, N) float64
-    array of finite values, or None when unauthored; anything else is a SceneError naming the prim and attribute."""
-    attr = prim.GetAttribute(name)
-    if not attr or not attr.HasAuthoredValue():
-        return None
-    value = attr.Get(tc)
-    try:
-        array = np.array(value if value is not None else [], dtype=np.float64)
-        array = array.reshape(-1) if width == 1 else array.reshape(-1, width)
-    except (TypeError, ValueError):
-        kind = "float[]" if width == 1 else f"float{width}[]"
-        raise SceneError(f"{prim.GetPath()}.{name} must be a {kind}, got {value!r}") from None
-    if not np.all(np.isfinite(array)):
-        raise SceneError(f"{prim.GetPath()}.{name} must hold finite numbers, got {array.tolist()}")
-    return array
-
-
 def _matrix(gf_matrix) -> np.ndarray:
     """Gf.Matrix4d (row vectors, p' = p M) as a column-vector numpy matrix."""
     return np.array(gf_matrix, dtype=np.float64).reshape(4, 4).T

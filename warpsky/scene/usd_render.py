@@ -19,18 +19,11 @@ import re
 from dataclasses import dataclass
 
 from warpsky.errors import SceneError
+from warpsky.output.products import OutputVar
 
-#: warpsky outputs a RenderVar's ``sourceName`` may name: components, and the techniques that produce it (None:
-#: every technique).
-SOURCES = {
-    "color": ("RGBA", None),
-    "alpha": ("A", None),
-    "transmittance": ("RGB", None),
-    "depth": ("Z", None),
-    "variance": ("RGB", ("hybrid", "path_tracer")),
-    "single_scatter": ("RGB", ("hybrid",)),
-    "multiple_scatter": ("RGB", ("hybrid",)),
-}
+#: The outputs of every frame a RenderVar's ``sourceName`` may name, with their components; the AOVs some
+#: techniques add (``Technique.aovs``) are given to :func:`read_render_spec` by the caller.
+SOURCES = {"color": "RGBA", "alpha": "A", "transmittance": "RGB", "depth": "Z"}
 #: Other spellings of the same sources: RenderMan's and Karma's beauty, light path expressions for the beauty.
 ALIASES = {"ci": "color", "c": "color", "rgba": "color", "beauty": "color", "c.*": "color", "z": "depth",
            "a": "alpha"}
@@ -44,29 +37,6 @@ HALF_TYPES = frozenset({"half", "color3h", "half3", "vector3h", "color4h", "half
 SOURCE_TYPES = ("raw", "lpe")
 CONFORM_POLICY = "expandAperture"
 FRAME_TOKEN = re.compile(r"\$F(\d*)|\$\{F(\d*)\}")
-
-
-@dataclass(frozen=True)
-class OutputVar:
-    """One channel group of an output image.
-
-    Attributes:
-        layer: EXR layer name ("" for the beauty's unprefixed R, G, B, A, which Nuke reads as its rgba layer).
-        source: The warpsky output (a key of :data:`SOURCES`).
-        components: Channel suffixes written, e.g. ``RGBA``, ``RGB``, ``Z``.
-        half: Written as half floats (else 32-bit float).
-        prim: The RenderVar prim path, for messages ("" for the built-in default outputs).
-    """
-
-    layer: str
-    source: str
-    components: str
-    half: bool = False
-    prim: str = ""
-
-    @property
-    def channels(self) -> tuple[str, ...]:
-        return tuple(f"{self.layer}.{c}" if self.layer else c for c in self.components)
 
 
 @dataclass(frozen=True)
@@ -128,8 +98,10 @@ def find_settings(stage, settings_path: str | None):
     return None
 
 
-def read_render_spec(stage, settings_path: str | None, meters_per_unit: float = 1.0) -> RenderSpec | None:
-    """The render settings and products of ``stage`` (None when it has no RenderSettings prim)."""
+def read_render_spec(stage, settings_path: str | None, meters_per_unit: float = 1.0, *,
+                     aovs: dict[str, str] | None = None) -> RenderSpec | None:
+    """The render settings and products of ``stage`` (None when it has no RenderSettings prim); ``aovs``: the
+    outputs RenderVars may name besides :data:`SOURCES`, name -> components (those some technique writes)."""
     from pxr import UsdRender
 
     prim = find_settings(stage, settings_path)
@@ -150,7 +122,7 @@ def read_render_spec(stage, settings_path: str | None, meters_per_unit: float = 
         product_prim = stage.GetPrimAtPath(target)
         if not product_prim or not product_prim.IsA(UsdRender.Product):
             raise SceneError(f"{prim.GetPath()}.products targets {target}, which is not a RenderProduct prim")
-        products.append(_product(stage, UsdRender.Product(product_prim), base))
+        products.append(_product(stage, UsdRender.Product(product_prim), base, {**SOURCES, **(aovs or {})}))
     return RenderSpec(str(prim.GetPath()), *base, purposes, colorspace, tuple(products), tuple(notes))
 
 
@@ -186,7 +158,7 @@ def base_values(schema, inherited) -> tuple:
     return camera, resolution, aspect, window
 
 
-def _product(stage, product, base) -> ProductSpec:
+def _product(stage, product, base, sources: dict[str, str]) -> ProductSpec:
     from pxr import UsdRender
 
     prim = product.GetPrim()
@@ -209,7 +181,7 @@ def _product(stage, product, base) -> ProductSpec:
         var_prim = stage.GetPrimAtPath(target)
         if not var_prim or not var_prim.IsA(UsdRender.Var):
             raise SceneError(f"{path}.orderedVars targets {target}, which is not a RenderVar prim")
-        outputs.append(read_var(UsdRender.Var(var_prim)))
+        outputs.append(read_var(UsdRender.Var(var_prim), sources))
     seen: dict[str, str] = {}
     for output in outputs:
         for channel in output.channels:
@@ -220,11 +192,12 @@ def _product(stage, product, base) -> ProductSpec:
     return ProductSpec(path, name, *values, tuple(outputs))
 
 
-def read_var(var) -> OutputVar:
-    """A RenderVar as an :class:`OutputVar`: its source, layer name and channel types checked."""
+def read_var(var, sources: dict[str, str] = SOURCES) -> OutputVar:
+    """A RenderVar as an :class:`OutputVar`: its source (a key of ``sources``, name -> components), layer name
+    and channel types checked."""
     prim = var.GetPrim()
     path = str(prim.GetPath())
-    known = ", ".join(SOURCES)
+    known = ", ".join(sources)
     source_type = str(var.GetSourceTypeAttr().Get() or "raw")
     raw_name = str(var.GetSourceNameAttr().Get() or "")
     if source_type not in SOURCE_TYPES:
@@ -235,9 +208,9 @@ def read_var(var) -> OutputVar:
     if source_type == "lpe" and name != "color":
         raise SceneError(f"RenderVar {path}: light path expression {raw_name!r} is not supported; warpsky writes "
                          "the beauty for 'C.*' and these raw sources: " + known)
-    if name not in SOURCES:
+    if name not in sources:
         raise SceneError(f"RenderVar {path}.sourceName {raw_name!r} is not a warpsky output; known: {known}")
-    components, _ = SOURCES[name]
+    components = sources[name]
     data_type = str(var.GetDataTypeAttr().Get() or "")
     count = next((n for n, types in DATA_TYPES.items() if data_type in types), None)
     allowed = (3, 4) if name == "color" else (len(components),)
@@ -252,12 +225,3 @@ def read_var(var) -> OutputVar:
     if name == "color":
         layer = ""  # the beauty: unprefixed R, G, B, A
     return OutputVar(layer, name, components, data_type in HALF_TYPES, path)
-
-
-def check_outputs(outputs, technique: str) -> None:
-    """Each output is produced by ``technique``; else a SceneError naming the RenderVar and who produces it."""
-    for output in outputs:
-        producers = SOURCES[output.source][1]
-        if producers is not None and technique not in producers:
-            raise SceneError(f"RenderVar {output.prim or output.source}: source {output.source} is written by "
-                             f"technique {' or '.join(producers)}, not {technique}")

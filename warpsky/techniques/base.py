@@ -1,76 +1,108 @@
-"""What every technique is: the :class:`Technique` protocol, and the registry the CLI and the plan look techniques
-up in."""
+"""What every technique is: the :class:`Technique` base class, its capabilities and what it estimates.
+
+A technique renders the scene's voxel media (and, as far as its capabilities say, what lies around them) into one
+:class:`~warpsky.layer.Layer`. The frame runs it in its ``media`` pass (:mod:`warpsky.passes.media`) next to the
+other passes. Nothing outside a technique's folder and :mod:`warpsky.registry` names a technique: the plan, the
+passes, the command line and the output checks read the capabilities below.
+"""
 
 from __future__ import annotations
 
-from typing import ClassVar, Protocol
+import functools
+from typing import ClassVar
 
-from warpsky.errors import UsageError
 from warpsky.layer import Layer
+from warpsky.optics.prepare import TableNeed
+from warpsky.optics.tables import phase_table
 from warpsky.resources import MemoryEstimate, WorkItem
 from warpsky.scene.model import Scene
+from warpsky.settings import Settings
 
 
-class Technique(Protocol):
+class Technique:
     """A renderer of the scene's voxel media: built once per frame from its settings, it draws one :class:`Layer`.
 
-    Capabilities are class attributes every technique declares:
+    Capabilities (class attributes):
 
     - ``traces_air``: the technique carries the atmosphere itself (as a participating medium, with the sun's disk),
-      so no sky pass runs around its layer and its media see unreddened sunlight.
-    - ``renders_layers``: the technique can run next to the stratiform pass (it renders the voxel media without the
-      ground, which the lowest stratiform layer draws).
-    - ``traces_layers`` (optional, default False): the technique traces the stratiform layers itself, voxelised
-      (:mod:`warpsky.techniques.path_tracer.layer_media`), so no stratiform pass runs.
+      so no sky pass runs around its layer and its media see the sun above the air.
+    - ``renders_layers``: the technique can run next to the stratiform pass (it renders the voxel media without
+      the ground, which the lowest stratiform layer draws).
+    - ``traces_layers``: it traces the stratiform layers itself, voxelised, so no stratiform pass runs.
+    - ``traces_decks``: it traces height-field cloud decks and their haze itself, so no height-field pass runs.
+    - ``traces_dome``: a dome's light is path traced exactly (else it is an ambient light of the marching models).
+    - ``aovs``: the extra outputs its layer holds, name -> components (``variance``: ``RGB``), which RenderVars
+      may name.
+    - ``kernel_modules``: the modules whose kernel factories it launches (the first-compile notice checks Warp's
+      cache for them).
+    - ``settings_notes``: what ``render --help`` adds below its settings table.
+
+    Settings are resolved once per frame: the plan calls :meth:`resolve`, and the estimates and the render read
+    :meth:`settings_for`, which resolves again only for a technique used outside a plan.
     """
 
     name: ClassVar[str]
-    Settings: ClassVar[type]
-    traces_air: ClassVar[bool]
-    renders_layers: ClassVar[bool]
-    settings: object
-    device: str
+    Settings: ClassVar[type[Settings]]
+    traces_air: ClassVar[bool] = False
+    renders_layers: ClassVar[bool] = True
+    traces_layers: ClassVar[bool] = False
+    traces_decks: ClassVar[bool] = False
+    traces_dome: ClassVar[bool] = False
+    aovs: ClassVar[dict[str, str]] = {}
+    kernel_modules: ClassVar[tuple[str, ...]] = ()
+    settings_notes: ClassVar[str] = ""
 
-    def resolved_settings(self, scene: Scene) -> object:
-        """The settings with every ``auto`` value filled in for ``scene``; settings that hold no ``auto`` value are
-        returned as they are."""
-        ...
+    def __init__(self, settings: Settings | None = None, *, device: str = "cpu"):
+        self.settings = settings if settings is not None else self.Settings()
+        self.device = device
+        self._resolved: Settings | None = None
+
+    def resolved_settings(self, scene: Scene) -> Settings:
+        """The settings with every ``auto`` value filled in for ``scene`` (settings without one are returned as
+        they are)."""
+        return self.settings
+
+    def resolve(self, scene: Scene) -> Technique:
+        """Resolve the settings for ``scene`` once; later estimates and renders use them as they are."""
+        self._resolved = self.settings = self.resolved_settings(scene)
+        return self
+
+    def settings_for(self, scene: Scene) -> Settings:
+        """The resolved settings: those of :meth:`resolve`, else resolved now for ``scene``."""
+        return self._resolved if self._resolved is not None else self.resolved_settings(scene)
+
+    def with_settings(self, settings: Settings) -> Technique:
+        """A technique of the same class on the same device with ``settings``, resolved when this one is (they
+        must then be resolved settings too)."""
+        other = type(self)(settings, device=self.device)
+        if self._resolved is not None:
+            other._resolved = settings
+        return other
+
+    def for_extra_light(self) -> Technique:
+        """The technique that renders the frame again for each extra light (light adds up): itself, unless some
+        light of its own (a uniform environment) must count once."""
+        return self
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
         """Render ``scene`` at ``width`` x ``height`` pixels (the camera conformed to that aspect ratio)."""
-        ...
+        raise NotImplementedError
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
         """Bytes a render of ``scene`` at ``width`` x ``height`` allocates on the host and the device, by part, as
         an upper bound, without allocating anything (:mod:`warpsky.resources`)."""
-        ...
+        raise NotImplementedError
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Worst-case kernel iterations of that render, by kind, with the settings that set them."""
-        ...
+        return []
 
-#: The technique ``warpsky render`` uses unless told otherwise: exact single scattering plus denoised, path-traced
-#: multiple scattering, rendered to a target error (``hybrid``). ``slicing`` is the interactive technique (Riley
-#: 2004's half-angle slicing), ``single_scatter`` and ``path_tracer`` the references.
-DEFAULT_TECHNIQUE = "hybrid"
+    def tables(self, scene: Scene) -> list[TableNeed]:
+        """The optics tables a render of ``scene`` loads (built before a batch's frames when missing): a phase
+        table per species."""
+        return [TableNeed(name, "phase", functools.partial(phase_table, name)) for name in scene.species]
 
-_REGISTRY: dict[str, str] = {
-    "single_scatter": "warpsky.techniques.single_scatter.technique:SingleScatter",
-    "path_tracer": "warpsky.techniques.path_tracer.technique:PathTracer",
-    "slicing": "warpsky.techniques.slicing.technique:Slicing",
-    "hybrid": "warpsky.techniques.hybrid.technique:Hybrid",
-}
-
-def technique_names() -> list[str]:
-    return sorted(_REGISTRY)
-
-def technique_class(name: str) -> type[Technique]:
-    """Import and return the technique class registered under ``name``."""
-    import importlib
-
-    try:
-        target = _REGISTRY[name]
-    except KeyError:
-        raise UsageError(f"unknown technique {name!r}; available: {', '.join(technique_names())}") from None
-    module_name, class_name = target.split(":")
-    return getattr(importlib.import_module(module_name), class_name)
+    def features(self, scene: Scene, width: int, height: int, features: dict[str, str]) -> dict[str, str]:
+        """``warpsky info``'s lines, given those the plan and the passes wrote: changed where the technique
+        renders something differently (a voxelised layer), else as they are."""
+        return features

@@ -22,75 +22,75 @@ nodes and 16..256 pieces by at most 7e-4 of the brightest pixel (the median pixe
 
 from __future__ import annotations
 
-import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
 from warpsky.camera_rays import pinhole_camera
-from warpsky.device import launch_rows
+from warpsky.device import is_cpu, launch_rows
 from warpsky.errors import UsageError
 from warpsky.layer import Layer
-from warpsky.light.dome import ambient_radiance
+from warpsky.light.dome import ambient_radiance, isotropic_ambient
 from warpsky.light.sun import sunlight
 from warpsky.media.analytic_fog import fog_struct
+from warpsky.passes.base import Pass
 from warpsky.passes.fog.kernels import FogMarch, fog_kernel, sun_transmittance_kernel
+from warpsky.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.scene.model import Scene
+from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.mesh import no_surfaces
 
 #: Length [m] a horizontal sun ray is followed through the slabs by :func:`fog_sun_transmittance`.
 HORIZONTAL_LENGTH = 1.0e9
 
 
-class FogPass:
-    """Renders a scene's analytic fogs (``scene.fogs``) into a :class:`~warpsky.layer.Layer`.
+@documented
+@dataclass(frozen=True)
+class FogSettings(Settings):
+    """Settings of the fog pass (``--set fog.NAME=VALUE``). Every node costs two closed-form optical depths
+    (towards the eye and towards the sun) over all terms; the module docstring gives the measured error of the
+    defaults."""
 
-    ==============  ====  =======  ==========  ====================================================================
-    keyword         unit  default  range       meaning
-    ==============  ====  =======  ==========  ====================================================================
-    ``nodes``       --    4        1..64       Gauss-Legendre nodes per piece of the in-scattering integral
-    ``min_pieces``  --    4        >= 1        pieces of the fogged span at least (a span without features)
-    ``max_pieces``  --    64       >= min      pieces at most (the span / the shortest feature otherwise)
-    ``cut_depth``   --    40       > 0         optical depth (clearest channel) after which the ray is dropped
-    ==============  ====  =======  ==========  ====================================================================
+    owner = "fog"
+    prefix = "fog."
+    nodes: int = setting(4, range="1..64", help="Gauss-Legendre nodes per piece of the in-scattering integral")
+    min_pieces: int = setting(4, range=">= 1", help="pieces of the fogged span at least (a span without features)")
+    max_pieces: int = setting(64, range=">= min_pieces", help="pieces at most (the span / the shortest feature "
+                              "otherwise)")
+    cut_depth: float = setting(40.0, range="> 0", help="optical depth (clearest channel) after which the rest of "
+                               "a ray is dropped")
 
-    Every node costs two closed-form optical depths (towards the eye and towards the sun) over all terms.
-    """
+    def check(self) -> None:
+        if self.max_pieces < self.min_pieces:
+            raise UsageError(f"setting fog.max_pieces must be a whole number >= fog.min_pieces ({self.min_pieces}), "
+                             f"got {self.max_pieces}")
 
-    name = "fog"
 
-    def __init__(self, *, device: str = "cpu", nodes: int = 4, min_pieces: int = 4, max_pieces: int = 64,
-                 cut_depth: float = 40.0):
-        if isinstance(nodes, bool) or not (isinstance(nodes, int) and 1 <= nodes <= 64):
-            raise UsageError(f"fog nodes must be a whole number in 1..64, got {nodes!r}")
-        if isinstance(min_pieces, bool) or not (isinstance(min_pieces, int) and min_pieces >= 1):
-            raise UsageError(f"fog min_pieces must be a whole number >= 1, got {min_pieces!r}")
-        if isinstance(max_pieces, bool) or not (isinstance(max_pieces, int) and max_pieces >= min_pieces):
-            raise UsageError(f"fog max_pieces must be a whole number >= min_pieces ({min_pieces}), got {max_pieces!r}")
-        if not (isinstance(cut_depth, (int, float)) and math.isfinite(cut_depth) and cut_depth > 0.0):
-            raise UsageError(f"fog cut_depth must be a positive optical depth, got {cut_depth!r}")
+class Fog:
+    """Renders a scene's analytic fogs (``scene.fogs``) into a :class:`~warpsky.layer.Layer`. Settings are a
+    :class:`FogSettings`, or its fields as keywords."""
+
+    def __init__(self, settings: FogSettings | None = None, *, device: str = "cpu", **values):
+        self.settings = settings if settings is not None else FogSettings(**values)
         self.device = device
-        self.nodes = nodes
-        self.min_pieces = min_pieces
-        self.max_pieces = max_pieces
-        self.cut_depth = float(cut_depth)
 
     def __repr__(self) -> str:
-        return (f"FogPass(device={self.device!r}, nodes={self.nodes}, min_pieces={self.min_pieces}, "
-                f"max_pieces={self.max_pieces}, cut_depth={self.cut_depth:g})")
+        return f"Fog({self.settings!r}, device={self.device!r})"
 
     def march(self, scene: Scene, ambient=None, occluders=None) -> FogMarch:
         """The kernel's quadrature settings and light for ``scene`` (``ambient``: the isotropic sky radiance, RGB;
         None: :func:`~warpsky.light.dome.ambient_radiance`, the dome's; ``occluders``: the
         :class:`~warpsky.surfaces.mesh.MeshBuffers` of the frame's meshes, which shadow the fog, or None)."""
-        abscissae, weights = np.polynomial.legendre.leggauss(self.nodes)
+        s = self.settings
+        abscissae, weights = np.polynomial.legendre.leggauss(s.nodes)
         march = FogMarch()
         march.nodes = wp.array(0.5 * (abscissae + 1.0), dtype=wp.float64, device=self.device)
         march.weights = wp.array(0.5 * weights, dtype=wp.float64, device=self.device)
-        march.min_pieces = self.min_pieces
-        march.max_pieces = self.max_pieces
-        march.cut_depth = wp.float64(self.cut_depth)
+        march.min_pieces = s.min_pieces
+        march.max_pieces = s.max_pieces
+        march.cut_depth = wp.float64(s.cut_depth)
         light = sunlight(scene)
         direction = np.array([0.0, 1.0, 0.0]) if light is None else np.asarray(light.direction, dtype=np.float64)
         march.sun_direction = wp.vec3d(*direction.tolist())
@@ -136,7 +136,7 @@ class FogPass:
             wp.synchronize_device(device)
             return Layer(radiance.numpy(), transmittance.numpy(), depth.numpy(),
                          stats={"seconds": time.perf_counter() - started, "fogs": len(scene.fogs),
-                                "nodes": self.nodes, "max_pieces": self.max_pieces})
+                                "nodes": self.settings.nodes, "max_pieces": self.settings.max_pieces})
 
 
 def fog_sun_transmittance(scene: Scene, points: np.ndarray, device: str = "cpu") -> np.ndarray:
@@ -156,3 +156,42 @@ def fog_sun_transmittance(scene: Scene, points: np.ndarray, device: str = "cpu")
         wp.launch(sun_transmittance_kernel, dim=len(points),
                   inputs=[fogs, direction, wp.float64(HORIZONTAL_LENGTH), relative, out])
         return out.numpy()
+
+
+class FogPass(Pass):
+    """Biri's analytic fogs, stopped by the nearest opaque surface, lit through the frame's air and shadowed by the
+    frame's meshes."""
+
+    name = "fog"
+    Settings = FogSettings
+
+    @classmethod
+    def runs(cls, scene, technique) -> bool:
+        return bool(scene.fogs)
+
+    @classmethod
+    def refusal(cls, scene, technique):
+        if scene.fogs and technique.traces_air:
+            return "analytic fog", [fog.name for fog in scene.fogs]
+        return None
+
+    @classmethod
+    def describe(cls, scene, technique, settings) -> dict[str, str]:
+        if not scene.fogs:
+            return {"fog": 'none (no prim with warpsky:kind = "analyticFog")'}
+        return {"fog": "; ".join(f"{fog.name}: {fog.describe()}" for fog in scene.fogs)
+                + " (Biri 2002, closed-form optical depths)"}
+
+    def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
+        pixels = width * height
+        return MemoryEstimate().add("fog", host=pixels * (0 if is_cpu(self.device) else LAYER_BYTES),
+                                    device=pixels * LAYER_BYTES)
+
+    def shadow(self, scene):
+        return lambda points: fog_sun_transmittance(scene, points, self.device)
+
+    def render(self, frame) -> list[Layer]:
+        seen = frame.light.lit_at_media(frame.scene)
+        ambient = isotropic_ambient(seen, frame.light.sky)
+        return [Fog(self.settings, device=self.device).render(seen, frame.width, frame.height, limit=frame.limit,
+                                                              ambient=ambient, occluders=frame.occluders)]

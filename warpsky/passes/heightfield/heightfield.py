@@ -34,27 +34,25 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import warp as wp
 
 from warpsky.camera_rays import pinhole_camera
-from warpsky.device import launch_rows
+from warpsky.device import is_cpu, launch_rows
 from warpsky.errors import UsageError
 from warpsky.layer import Layer
-from warpsky.light.dome import ambient_vec
+from warpsky.light.dome import ambient_vec, isotropic_ambient
 from warpsky.light.sun import sun_struct, sunlight
-from warpsky.media.heightfield import feature_length, haze_struct, heightfield_struct
+from warpsky.media.heightfield import feature_length, haze_struct, heightfield_struct, the_deck
+from warpsky.passes.base import Pass
 from warpsky.passes.heightfield.kernels import HeightFieldMarch, heightfield_kernel, sun_transmittance_kernel
+from warpsky.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.scene.heightfield_clouds import HeightFieldClouds
 from warpsky.scene.model import Scene
-
-MODES = ("max", "exact", "sexp")
-
-
-def _positive(name: str, value: float | None) -> None:
-    if value is not None and not (math.isfinite(value) and value > 0.0):
-        raise UsageError(f"height-field setting {name} must be a positive length in metres, got {value}")
+from warpsky.settings import Settings, documented, setting
 
 
 def shadow_feature(clouds: HeightFieldClouds) -> float:
@@ -80,55 +78,55 @@ def automatic_steps(clouds: HeightFieldClouds) -> tuple[float, float]:
     return cloud, min(haze_step_bound(clouds), shadow_feature(clouds) / 8.0)
 
 
-def the_deck(scene: Scene) -> HeightFieldClouds | None:
-    """The scene's one height-field deck (None without); more than one is refused."""
-    decks = scene.heightfield_clouds
-    if len(decks) > 1:
-        raise UsageError(f"the height-field pass renders one deck per scene, got {len(decks)}: "
-                         f"{', '.join(d.name for d in decks)}")
-    return decks[0] if decks else None
+@documented
+@dataclass(frozen=True)
+class HeightFieldSettings(Settings):
+    """Settings of the height-field pass (``--set heightfield.NAME=VALUE``); see the module docstring for what
+    ``max`` and ``sexp`` trade and where they are not trustworthy."""
+
+    owner = "heightfield"
+    prefix = "heightfield."
+    mode: Literal["exact", "max", "sexp"] = setting(
+        "exact", help="the sunlight reaching a point of the deck or the haze: exact = dimmed by the exact optical "
+        "depth along the sun ray; max = by Max's thickness rule (one pattern lookup per sample); sexp = Max's "
+        "quadratic sexp in the cloud integral (vertical-sun model), to measure it")
+    step_length: float | None = setting(None, unit="m", range="> 0", help="step inside the cloud",
+                                        auto="min(0.25 / sigma_max, feature / 16)")
+    haze_step_length: float | None = setting(None, unit="m", range="> 0", help="step in clear haze (resolves the "
+                                             "shafts); authored: that step everywhere",
+                                             auto="min(0.25 / sigma_haze, shadow feature / 8), longer along rays "
+                                             "close to the sun")
+    max_steps: int = setting(4096, range=">= 1", help="most steps per piece of constant extinction")
+    min_transmittance: float = setting(1.0e-4, range="[0, 1)", help="stop once the view is this opaque")
 
 
-class HeightFieldPass:
-    """Renders a scene's height-field clouds and their haze as a :class:`~warpsky.layer.Layer`
-    (single scattering of the sun and of the sky's ambient light; :mod:`~warpsky.passes.heightfield.kernels`).
-    """
+class HeightField:
+    """Renders a scene's height-field clouds and their haze as a :class:`~warpsky.layer.Layer` (single scattering
+    of the sun and of the sky's ambient light; :mod:`~warpsky.passes.heightfield.kernels`). Settings are a
+    :class:`HeightFieldSettings`, or its fields as keywords."""
 
-    def __init__(self, *, device: str = "cpu", mode: str = "exact", step_length: float | None = None,
-                 haze_step_length: float | None = None, max_steps: int = 4096, min_transmittance: float = 1.0e-4):
-        if mode not in MODES:
-            raise UsageError(f"height-field setting mode must be one of {', '.join(MODES)}, got {mode!r}")
-        _positive("step_length", step_length)
-        _positive("haze_step_length", haze_step_length)
-        if isinstance(max_steps, bool) or int(max_steps) != max_steps or max_steps < 1:
-            raise UsageError(f"height-field setting max_steps must be a whole number >= 1, got {max_steps!r}")
-        if not 0.0 <= min_transmittance < 1.0:
-            raise UsageError(f"height-field setting min_transmittance must lie in [0, 1), got {min_transmittance}")
+    def __init__(self, settings: HeightFieldSettings | None = None, *, device: str = "cpu", **values):
+        self.settings = settings if settings is not None else HeightFieldSettings(**values)
         self.device = device
-        self.mode = mode
-        self.step_length = step_length
-        self.haze_step_length = haze_step_length
-        self.max_steps = int(max_steps)
-        self.min_transmittance = float(min_transmittance)
 
     def __repr__(self) -> str:
-        return (f"HeightFieldPass(mode={self.mode!r}, step_length={self.step_length}, "
-                f"haze_step_length={self.haze_step_length}, max_steps={self.max_steps}, device={self.device!r})")
+        return f"HeightField({self.settings!r}, device={self.device!r})"
 
     def march_settings(self, scene: Scene, clouds: HeightFieldClouds, has_limit: bool,
                        ambient=None) -> HeightFieldMarch:
+        s = self.settings
         cloud_auto, haze_auto = automatic_steps(clouds)
         march = HeightFieldMarch()
-        march.cloud_step = float(self.step_length or cloud_auto)
-        march.haze_step = float(self.haze_step_length or haze_auto)
-        march.haze_feature = 0.0 if self.haze_step_length else shadow_feature(clouds)
-        march.shadow = int(self.mode != "exact")
+        march.cloud_step = float(s.step_length or cloud_auto)
+        march.haze_step = float(s.haze_step_length or haze_auto)
+        march.haze_feature = 0.0 if s.haze_step_length else shadow_feature(clouds)
+        march.shadow = int(s.mode != "exact")
         march.haze_step_max = haze_step_bound(clouds)
-        march.max_steps = self.max_steps
-        march.min_transmittance = self.min_transmittance
+        march.max_steps = s.max_steps
+        march.min_transmittance = s.min_transmittance
         march.ambient = ambient_vec(scene) if ambient is None else wp.vec3(*np.asarray(ambient, np.float64).tolist())
         march.ambient_on = int(np.any(np.asarray(march.ambient) > 0.0))
-        march.sexp = int(self.mode == "sexp")
+        march.sexp = int(s.mode == "sexp")
         march.has_limit = int(has_limit)
         return march
 
@@ -161,7 +159,7 @@ class HeightFieldPass:
             launch_rows(heightfield_kernel, height, width, inputs, device)
             wp.synchronize_device(device)
             return Layer(radiance.numpy(), transmittance.numpy(), depth.numpy(), stats={
-                "seconds": time.perf_counter() - started, "mode": self.mode,
+                "seconds": time.perf_counter() - started, "mode": self.settings.mode,
                 "step_length": march.cloud_step, "haze_step_length": march.haze_step})
 
 
@@ -187,3 +185,46 @@ def heightfield_sun_transmittance(scene: Scene, points: np.ndarray, device: str 
             heightfield_struct(clouds, reference, scene.time_s, device), haze_struct(clouds, reference),
             wp.vec3(*np.asarray(light.direction, dtype=np.float64).tolist()), relative, int(exact), out])
         return out.numpy().astype(np.float64)
+
+
+class HeightFieldPass(Pass):
+    """Max's clouds and haze shafts, stopped by the nearest opaque surface, lit through the frame's air."""
+
+    name = "heightfield"
+    Settings = HeightFieldSettings
+
+    @classmethod
+    def runs(cls, scene, technique) -> bool:
+        return bool(scene.heightfield_clouds) and not technique.traces_decks
+
+    @classmethod
+    def refusal(cls, scene, technique):
+        if cls.runs(scene, technique) and technique.traces_air:
+            return "height-field clouds", [clouds.name for clouds in scene.heightfield_clouds]
+        return None
+
+    @classmethod
+    def describe(cls, scene, technique, settings) -> dict[str, str]:
+        if not scene.heightfield_clouds:
+            return {"heightfield": 'none (no prim with warpsky:kind = "heightFieldClouds")'}
+        lines = []
+        for clouds in scene.heightfield_clouds:
+            haze = "with haze" if clouds.haze is not None else "no haze"
+            lines.append(f"{clouds.name}: mean plane {clouds.mean_altitude:g} m, {len(clouds.amplitudes)} waves, "
+                         f"density {clouds.density:g} 1/m, {haze}")
+        return {"heightfield": "; ".join(lines) + f" (Max 1986; single scattering, mode {settings.mode})"}
+
+    def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
+        pixels = width * height
+        return MemoryEstimate().add("heightfield", host=pixels * (0 if is_cpu(self.device) else LAYER_BYTES),
+                                    device=pixels * LAYER_BYTES)
+
+    def shadow(self, scene):
+        """By the exact sun-ray optical depth: Max's thickness rule fails for decks thicker than their features."""
+        return lambda points: heightfield_sun_transmittance(scene, points, self.device, exact=True)
+
+    def render(self, frame) -> list[Layer]:
+        seen = frame.light.lit_at_media(frame.scene)
+        ambient = isotropic_ambient(seen, frame.light.sky)
+        return [HeightField(self.settings, device=self.device).render(seen, frame.width, frame.height,
+                                                                      limit=frame.limit, ambient=ambient)]

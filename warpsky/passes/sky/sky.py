@@ -1,18 +1,18 @@
-"""Host side of the sky pass and the sunlight the atmosphere leaves for the media (Riley 2004 §4.1, §4.2.4)."""
+"""Host side of the sky pass: Riley 2004 §4.1's air in front of and behind the media, with the sun's disk."""
 
 from __future__ import annotations
-
-import dataclasses
 
 import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
 from warpsky.camera_rays import pinhole_camera
+from warpsky.device import is_cpu
 from warpsky.layer import Layer
-from warpsky.light.sun import light_elevation_sine, sun_struct, sunlight
-from warpsky.media.air_analytic import sun_transmittance
+from warpsky.light.sun import sun_struct, sunlight
+from warpsky.passes.base import Pass
 from warpsky.passes.sky.kernels import sky_kernel
+from warpsky.resources import MemoryEstimate
 from warpsky.scene.model import Scene
 from warpsky.surfaces.plane import ground_struct
 
@@ -20,57 +20,14 @@ from warpsky.surfaces.plane import ground_struct
 BELOW = (0.0, -1.0, 0.0)
 
 
-def media_altitude(scene: Scene) -> float:
-    """Altitude above sea level [m] at which the media (else the ground, else the camera) receive sunlight."""
-    atmosphere = scene.atmosphere
-    if scene.media:
-        centres = []
-        for medium in scene.media:
-            n = np.asarray(medium.shape, dtype=np.float64)
-            centre = np.asarray(medium.world_from_index, dtype=np.float64) @ np.append(0.5 * (n - 1.0), 1.0)
-            centres.append(centre[1])
-        y = float(np.mean(centres))
-    elif scene.ground is not None:
-        y = scene.ground.height
-    else:
-        y = float(scene.camera.position[1])
-    return y + atmosphere.altitude
-
-
-def attenuated_sun(scene: Scene) -> Scene:
-    """``scene`` with its sun's irradiance reduced by the air above the media (Eq. 12); night leaves it unlit.
-
-    One transmittance per scene, taken at the media's centre altitude: the variation across a cloud is below 1%
-    for clouds a few km tall at sun elevations above ~5 deg, and documented as an approximation. Its elevation is
-    the sunlight's (:func:`~warpsky.light.sun.light_elevation_sine`), so a setting sun stays lit down to
-    the last sliver of its disk, which the kernels then weigh by its visible fraction.
-    """
-    if scene.atmosphere is None or scene.sun is None:
-        return scene
-    atm = scene.atmosphere
-    t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), light_elevation_sine(scene.sun))
-    return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=scene.sun.irradiance * t))
-
-
-def unattenuated_sun(scene: Scene) -> Scene:
-    """The inverse of :func:`attenuated_sun`: ``scene`` with the sun as it arrives at the top of the atmosphere,
-    for a technique that traces the air itself (unlit where no sunlight reached the media)."""
-    if scene.atmosphere is None or scene.sun is None:
-        return scene
-    atm = scene.atmosphere
-    t = sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene), light_elevation_sine(scene.sun))
-    irradiance = np.where(t > 1e-30, scene.sun.irradiance / np.maximum(t, 1e-30), 0.0)
-    return dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, irradiance=irradiance))
-
-
 #: The sky pass's outputs (front radiance, front transmittance, back radiance): kept across frames as
 #: :func:`warpsky.device_buffers.reusable` arrays ``sky:NAME``, each downloaded once at the end of a frame.
 OUTPUTS = ("front", "front_transmittance", "back")
 
 
-class SkyPass:
-    """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk): the
-    ``sky`` pass of a frame, run when the scene has an atmosphere and the technique does not trace the air."""
+class Sky:
+    """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk), drawn
+    from Riley's closed form (:mod:`warpsky.media.air_analytic`) with the sun above the air."""
 
     def __init__(self, *, device: str = "cpu"):
         self.device = device
@@ -101,3 +58,43 @@ class SkyPass:
             front_layer = Layer(images[0], images[1], np.full(shape, far, np.float32))
             back_layer = Layer(images[2], np.zeros((height, width, 3), np.float32), np.full(shape, far, np.float32))
         return front_layer, back_layer
+
+
+class SkyPass(Pass):
+    """The frame's air: in front of everything the other passes drew and behind it, with the sun's disk. Runs when
+    the scene has an atmosphere and the technique does not trace the air; its air lights the media, layers and
+    scenery (their sun comes through it)."""
+
+    name = "sky"
+    wraps = True
+
+    @classmethod
+    def runs(cls, scene, technique) -> bool:
+        return scene.atmosphere is not None and not technique.traces_air
+
+    @classmethod
+    def describe(cls, scene, technique, settings) -> dict[str, str]:
+        if scene.atmosphere is None:
+            return {"sky": "off (no warpsky:atmosphere prim): black background, no sky pass"}
+        atm = scene.atmosphere
+        night = scene.sun is None or scene.sun.direction[1] <= 0.0
+        how = (f"traced by {technique.name} as a participating medium, with the sun disk" if technique.traces_air
+               else "analytic Riley single-scattering sky, aerial perspective and sun disk")
+        return {"sky": f"{atm.name}: {how}; betaSeaLevel {np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, "
+                       f"scale height {atm.scale_height:g} m, altitude {atm.altitude:g} m"
+                       + ("; sun below the horizon: night (black sky)" if night else "")}
+
+    def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
+        pixels = width * height
+        return MemoryEstimate().add("sky", host=pixels * (20 + (0 if is_cpu(self.device) else 36)),
+                                    device=pixels * 40)
+
+    def render(self, frame) -> list[Layer]:
+        """[front, back]: the air in front runs to the nearest opaque surface where one is hit (the haze and fog in
+        front of it are thin enough that the order of air and fog along the ray matters little), else to the
+        merged layer's depth."""
+        main, opaque = frame.merged, frame.limit
+        far = frame.scene.camera.far
+        air_depth = main.depth if opaque is None else np.where(opaque < far, opaque, main.depth)
+        front, back = Sky(device=self.device).render(frame.scene, frame.width, frame.height, media_depth=air_depth)
+        return [front, back]

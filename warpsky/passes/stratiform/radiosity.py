@@ -29,13 +29,13 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
+from warpsky.device import is_cpu
 from warpsky.passes.stratiform.radiosity_kernels import (
     downsample_kernel,
     exact_gather_kernel,
@@ -43,10 +43,6 @@ from warpsky.passes.stratiform.radiosity_kernels import (
     ring_gather_kernel,
 )
 from warpsky.scene.model import LUMINANCE_WEIGHTS
-
-
-class RadiosityWarning(UserWarning):
-    """The iteration stopped at its cap before the exchanged energy fell below the tolerance."""
 
 
 @dataclass
@@ -62,6 +58,8 @@ class RadiosityResult:
         converged: Whether the residual fell below the tolerance.
         history: Residual after each iteration.
         seconds: Wall time of the iterations (initialisation excluded).
+        warning: One line when the iteration stopped at its cap before the exchanged energy fell below the
+            tolerance (the stratiform pass's layer carries it to the frame's warnings), else None.
     """
 
     ground_received: np.ndarray
@@ -72,6 +70,7 @@ class RadiosityResult:
     converged: bool
     history: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    warning: str | None = None
     device_received: tuple | None = None  # (R_G, R_C) as device arrays, valid until the next solve
 
     @property
@@ -116,7 +115,7 @@ class Radiosity:
         if not (tolerance > 0 and max_iterations >= 1):
             raise ValueError("tolerance must be > 0 and max_iterations >= 1")
         if check_every is None:
-            check_every = 1 if str(device).startswith("cpu") else 8
+            check_every = 1 if is_cpu(device) else 8
         if not check_every >= 1:
             raise ValueError(f"check_every must be >= 1, got {check_every}")
         self.check_every = int(check_every)
@@ -205,13 +204,13 @@ class Radiosity:
             wp.synchronize_device()
             seconds = time.perf_counter() - started
             converged = residual < self.tolerance
-            if not converged:
-                warnings.warn(f"radiosity stopped at the cap of {self.max_iterations} iterations with residual "
-                              f"{residual:.3g} (tolerance {self.tolerance:g}): ground and cloud albedos near 1 "
-                              "converge slowly", RadiosityWarning, stacklevel=2)
+            warning = None if converged else (
+                f"radiosity stopped at the cap of {self.max_iterations} iterations with residual {residual:.3g} "
+                f"(tolerance {self.tolerance:g}): ground and cloud albedos near 1 converge slowly")
             return RadiosityResult(device_buffers.download("radiosity:ground_received", r_g),
                                    device_buffers.download("radiosity:cloud_received", r_c), _rgb(direct, shape),
-                                   len(history), residual, converged, history, seconds, device_received=(r_g, r_c))
+                                   len(history), residual, converged, history, seconds, warning,
+                                   device_received=(r_g, r_c))
 
     def _iterate(self, rho_g, rho_c, r_g, r_c, d_g, d_c, total: float) -> tuple[list[float], float]:
         """Iterations from the initial state (``total``: luminance the ground has received so far): (residual
@@ -255,3 +254,26 @@ def ground_direct(cloud_transmittance, *, pixel: float, h: float, sun_direction,
             transmittance, float(shift[0]), float(shift[2]),
             wp.vec3(*(np.asarray(sun_irradiance, dtype=np.float64) * sun[1]).tolist()), out])
         return device_buffers.download("radiosity:ground_direct", out)
+
+
+#: Full-size (nu, nv) RGB float32 buffers the solver holds (rho_G, rho_C, ones, R_G, R_C, dR_G, dR_C) plus about a
+#: third more for the MIP pyramid.
+RADIOSITY_BUFFERS = 7 + 1 / 3
+
+
+def radiosity_grid(layer, ground_height: float, detail: int):
+    """The radiosity buffers' placement for ``layer`` over a ground at ``ground_height`` [m]: (x0, z0) [m], texel
+    size [m] = h / 2^detail with h the ground-to-base height, and (nu, nv) texels covering the layer plus an 8 h
+    margin, rounded up for the MIP pyramid."""
+    h = layer.base_altitude - ground_height
+    pixel = h / 2**detail
+    margin = 8.0 * h
+    shape = pyramid_shape((math.ceil((layer.size[0] + 2 * margin) / pixel),
+                           math.ceil((layer.size[1] + 2 * margin) / pixel)), detail + 3)
+    return (layer.origin[0] - margin, layer.origin[1] - margin), pixel, shape
+
+
+def radiosity_bytes(layer, ground_height: float, detail: int) -> int:
+    """Bytes of the solver's buffers for ``layer`` over a ground at ``ground_height`` [m] (:func:`radiosity_grid`)."""
+    _, _, (nu, nv) = radiosity_grid(layer, ground_height, detail)
+    return int(nu * nv * 12 * RADIOSITY_BUFFERS)

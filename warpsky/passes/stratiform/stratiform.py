@@ -9,7 +9,8 @@ structure are left out."""
 
 from __future__ import annotations
 
-import math
+import functools
+import json
 import time
 from dataclasses import dataclass
 
@@ -18,32 +19,43 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.camera_rays import pinhole_camera
-from warpsky.device import launch_rows
-from warpsky.errors import UsageError
+from warpsky.device import is_cpu, launch_rows
 from warpsky.layer import Layer
 from warpsky.light.dome import upper_hemisphere
 from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.air_analytic import inscatter, rayleigh
-from warpsky.media.stratiform import GroundTexture, StratiformLayer, at_time, sample_thickness, signed_thickness
+from warpsky.media.layer_voxels import LAYER_SPECIES
+from warpsky.media.stratiform import (
+    GroundTexture,
+    StratiformLayer,
+    at_time,
+    layer_sun_transmittance,
+    sample_thickness,
+    signed_thickness,
+)
+from warpsky.optics.prepare import TableNeed
+from warpsky.optics.tables import modified_mie_table, phase_table
+from warpsky.passes.base import Pass
 from warpsky.passes.stratiform.kernels import LayerGeometry, stratiform_kernel
 from warpsky.passes.stratiform.model1d import order_energies, reference_thickness
-from warpsky.passes.stratiform.optics import stratiform_optics
-from warpsky.passes.stratiform.radiosity import Radiosity, ground_direct, pyramid_shape
+from warpsky.passes.stratiform.optics import FORWARD_CUT_DEG, stratiform_optics
+from warpsky.passes.stratiform.radiosity import Radiosity, ground_direct, radiosity_bytes, radiosity_grid
+from warpsky.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.scene.model import Scene
-from warpsky.settings import TechniqueSettings, documented, setting
+from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.plane import ground_struct
 
 
 @documented
 @dataclass(frozen=True)
-class StratiformSettings(TechniqueSettings):
+class StratiformSettings(Settings):
     """Settings of the stratiform pass (``--set stratiform.NAME=VALUE``).
 
     The ``stratiform.`` prefix sends a ``--set`` to this pass instead of the voxel technique, e.g.
     ``warpsky render usd_scenes/stratocumulus.usda out/sc.####.exr --set stratiform.radiosity=0``.
     """
 
-    technique = "stratiform"
+    owner = "stratiform"
     prefix = "stratiform."
     radiosity: bool | None = setting(None, help="1: iterate ground <-> cloud exchanges; 0: sky and cloud light "
                                      "reach the ground once, nothing comes back to the cloud base",
@@ -53,17 +65,6 @@ class StratiformSettings(TechniqueSettings):
     tolerance: float = setting(1e-4, range="> 0", help="stop when an iteration's exchanged energy ratio is below "
                                "this")
     max_iterations: int = setting(64, range=">= 1", help="iteration cap (warns with the residual)")
-
-    def __post_init__(self):
-        self.normalise()
-        if self.radiosity_detail not in (0, 1, 2, 3, 4):
-            raise UsageError(f"setting stratiform.radiosity_detail must be a whole number in 0..4, "
-                             f"got {self.radiosity_detail}")
-        if not (math.isfinite(self.tolerance) and self.tolerance > 0.0):
-            raise UsageError(f"setting stratiform.tolerance must be > 0, got {self.tolerance}")
-        if not (self.max_iterations >= 1 and float(self.max_iterations).is_integer()):
-            raise UsageError(f"setting stratiform.max_iterations must be a whole number >= 1, "
-                             f"got {self.max_iterations}")
 
     def radiosity_for(self, layer: StratiformLayer) -> bool:
         """Whether the exchange runs for ``layer``: this setting when given, else the layer's attribute."""
@@ -87,18 +88,6 @@ def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray
         for c in range(3)], -1)
     weight = (np.cos(z) * np.sin(z))[..., None] * (0.5 * np.pi / samples) * (2 * np.pi / (2 * samples))
     return (radiance * weight).sum(axis=(0, 1)) / np.pi
-
-
-def radiosity_grid(layer: StratiformLayer, ground_height: float, detail: int):
-    """The radiosity buffers' placement for ``layer`` over a ground at ``ground_height`` [m]: (x0, z0) [m], texel
-    size [m] = h / 2^detail with h the ground-to-base height, and (nu, nv) texels covering the layer plus an 8 h
-    margin, rounded up for the MIP pyramid."""
-    h = layer.base_altitude - ground_height
-    pixel = h / 2**detail
-    margin = 8.0 * h
-    shape = pyramid_shape((math.ceil((layer.size[0] + 2 * margin) / pixel),
-                           math.ceil((layer.size[1] + 2 * margin) / pixel)), detail + 3)
-    return (layer.origin[0] - margin, layer.origin[1] - margin), pixel, shape
 
 
 def _sample(map2d: np.ndarray, origin, size, xs: np.ndarray, zs: np.ndarray) -> np.ndarray:
@@ -194,6 +183,7 @@ class Stratiform:
         if scene.dome is not None:
             sky = sky + upper_hemisphere(scene.dome)[1]  # the dome joins the uniform-equivalent sky above it
         stats = {"radiosity": bool(self.settings.radiosity_for(layer))}
+        warnings: list[str] = []
         # the radiosity's R_G and R_C stay in its kept arrays until the shading kernel has read them
         with (wp.ScopedDevice(self.device), device_buffers.exclusive("stratiform", self.device),
               device_buffers.exclusive("radiosity", self.device)):
@@ -210,6 +200,8 @@ class Stratiform:
                 if result is not None:
                     stats.update(radiosity_iterations=result.iterations, radiosity_residual=result.residual,
                                  radiosity_seconds=result.seconds, radiosity_converged=result.converged)
+                    if result.warning:
+                        warnings.append(f"{layer.name}: {result.warning}")
             else:
                 box, r_g, r_c = (0.0, 0.0, 1.0, 1.0), np.zeros((2, 2, 3)), np.zeros((2, 2, 3))
             if ground_texture is not None:
@@ -240,6 +232,128 @@ class Stratiform:
             wp.synchronize_device(self.device)
             stats["shading_seconds"] = time.perf_counter() - render_started
             out = Layer(*(device_buffers.download(f"stratiform:{name}", array)
-                          for (name, _), array in zip(OUTPUTS, outputs, strict=True)), stats)
+                          for (name, _), array in zip(OUTPUTS, outputs, strict=True)), stats, warnings=warnings)
         stats["seconds"] = time.perf_counter() - started
         return out
+
+
+class StratiformPass(Pass):
+    """Every stratiform layer of the scene as its own Layer (Bouthors slab, plus the ground <-> cloud-base
+    radiosity when a ground lies below), each lit by the sun through the air down to its mid altitude; the lowest
+    layer draws the ground (textured, in the layer's shadow, lit by the radiosity)."""
+
+    name = "stratiform"
+    Settings = StratiformSettings
+    ground_rank = 0
+    ground_note = "drawn by the stratiform pass (layer shadows, radiosity), voxel media cast no shadow"
+    draws = ("layers",)
+
+    @classmethod
+    def runs(cls, scene, technique) -> bool:
+        return bool(scene.layers) and not technique.traces_layers
+
+    @classmethod
+    def refusal(cls, scene, technique):
+        if cls.runs(scene, technique) and not technique.renders_layers:
+            return "stratiform layers", [layer.name for layer in scene.layers]
+        return None
+
+    @classmethod
+    def describe(cls, scene, technique, settings) -> dict[str, str]:
+        if not scene.layers:
+            return {"layers": 'no layers (no prim with warpsky:kind = "stratiformLayer"): stratiform pass and '
+                              "radiosity not built"}
+        if technique.traces_layers:
+            return {"layers": f"traced by {technique.name} itself: no stratiform pass, no radiosity model"}
+        return layer_features(scene, settings)
+
+    def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
+        """The thickness maps, one layer image per layer (and its host copy on a GPU), the merge's copies and the
+        radiosity buffers of every layer above the ground."""
+        pixels, layers = width * height, len(scene.layers)
+        copies = 0 if is_cpu(self.device) else layers
+        estimate = MemoryEstimate()
+        for layer in scene.layers:
+            estimate.add("stratiform maps", device=4 * layer.thickness.size)
+        estimate.add("stratiform layers", host=pixels * (LAYER_BYTES * copies + 40 * (layers + 1)),
+                     device=pixels * LAYER_BYTES * layers)
+        ground, settings = scene.ground, self.settings
+        return estimate.add("radiosity", device=sum(
+            radiosity_bytes(layer, ground.height, int(settings.radiosity_detail)) for layer in scene.layers
+            if ground is not None and ground.height < layer.base_altitude and settings.radiosity_for(layer)))
+
+    def tables(self, scene) -> list[TableNeed]:
+        """The ``stratus`` phase table and Bouthors' modified Mie table split at the forward cut."""
+        return [TableNeed(LAYER_SPECIES, "phase", functools.partial(phase_table, LAYER_SPECIES)),
+                TableNeed(LAYER_SPECIES, "bouthors", functools.partial(modified_mie_table, LAYER_SPECIES,
+                                                                        FORWARD_CUT_DEG), f"{FORWARD_CUT_DEG:g}")]
+
+    def shadow(self, scene):
+        if scene.sun is None:
+            return None
+
+        def through_layers(points):
+            out = 1.0
+            for layer in scene.layers:
+                out = out * layer_sun_transmittance(layer, points, scene.sun.direction, self.device)
+            return out
+
+        return through_layers
+
+    def header(self, parts: list[dict]) -> dict:
+        """``stratiform``: per layer its name, whether the radiosity ran, its iterations, residual, convergence
+        and seconds (JSON)."""
+        keys = ("layer", "radiosity", "radiosity_iterations", "radiosity_residual", "radiosity_converged", "seconds")
+        return {"stratiform": json.dumps([{k: part[k] for k in keys if k in part} for part in parts
+                                          if "layer" in part])}
+
+    def render(self, frame) -> list[Layer]:
+        """One Layer per stratiform layer, in the scene's order; ``stats["layer"]`` names it."""
+        scene, parts = frame.scene, []
+        lowest = min(range(len(scene.layers)), key=lambda i: scene.layers[i].base_altitude)
+        renderer = Stratiform(self.settings, device=self.device)
+        for index, layer in enumerate(scene.layers):
+            lit = frame.light.lit_at(scene, layer.base_altitude + 0.5 * float(layer.thickness.max()))
+            part = renderer.render(lit, frame.width, frame.height, layer=layer,
+                                   draw_ground=index == lowest and frame.ground == self.name)
+            part.stats["layer"] = layer.name
+            parts.append(part)
+        return parts
+
+
+def layer_features(scene, settings) -> dict[str, str]:
+    """One ``layer`` line per stratiform layer and one ``radiosity`` line per layer: what the stratiform pass
+    builds (map, optics, advection; the radiosity buffers and their size, or why there are none)."""
+    features = {}
+    count = len(scene.layers)
+    for number, layer in enumerate(scene.layers, start=1):
+        suffix = "" if count == 1 else f" {number}"
+        nx, nz = layer.thickness.shape
+        line = (f"{layer.name}: stratiform (Bouthors 2006), base {layer.base_altitude:g} m, "
+                f"{layer.size[0]:g} x {layer.size[1]:g} m, map {nx}x{nz}, cover {layer.cover:.0%}, max "
+                f"{float(layer.thickness.max()):g} m, kappa {layer.extinction:.4g} 1/m")
+        adv = layer.advection
+        if adv is None:
+            line += ", static map"
+        else:
+            scale = "half the layer" if adv.curl_scale_m is None else f"{adv.curl_scale_m:g} m"
+            line += (f", advected at t = {layer.time_s:g} s: wind {list(adv.wind_m_s)} m/s, curl "
+                     f"{adv.curl_speed_m_s:g} m/s at {scale}, period {adv.period_s:g} s, seed {adv.seed}")
+        features["layer" + suffix] = line
+        features["radiosity" + suffix] = _radiosity_feature(scene, layer, settings)
+    return features
+
+
+def _radiosity_feature(scene, layer, settings) -> str:
+    ground = scene.ground
+    if ground is None or ground.height >= layer.base_altitude:
+        return "off: no ground below the layer"
+    if not settings.radiosity_for(layer):
+        why = ("stratiform.radiosity=0" if settings.radiosity is not None
+               else f"warpsky:stratiform:radiosity = false on {layer.name}")
+        return f"off ({why}): sky and cloud light reach the ground once"
+    detail = int(settings.radiosity_detail)
+    _, pixel, (nu, nv) = radiosity_grid(layer, ground.height, detail)
+    mib = radiosity_bytes(layer, ground.height, detail) / 2**20
+    return (f"on: ground <-> cloud base, buffers {nu}x{nv} texels of {pixel:g} m (h / 2^{detail}), {mib:.2f} MiB; "
+            f"rings gather, tolerance {settings.tolerance:g}, cap {int(settings.max_iterations)} iterations")

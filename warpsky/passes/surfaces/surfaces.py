@@ -18,7 +18,6 @@ light on slopes) and the sky hidden by the terrain itself.
 from __future__ import annotations
 
 import time
-import warnings
 
 import numpy as np
 import warp as wp
@@ -30,6 +29,7 @@ from warpsky.layer import Layer
 from warpsky.light.dome import upper_hemisphere
 from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.voxel import VoxelMediaBuffers
+from warpsky.passes.base import Pass
 from warpsky.passes.surfaces.kernels import (
     SurfaceImage,
     SurfaceLighting,
@@ -38,6 +38,7 @@ from warpsky.passes.surfaces.kernels import (
     shade_kernel,
     surface_hits,
 )
+from warpsky.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.scene.model import Scene
 from warpsky.surfaces.mesh import MeshBuffers
 
@@ -47,11 +48,7 @@ from warpsky.surfaces.mesh import MeshBuffers
 SHADOW_BIAS = 2.0e-5
 
 
-class SurfaceWarning(UserWarning):
-    """The surfaces pass drew something other than what the scene shows (the camera is under the terrain)."""
-
-
-class SurfacesPass:
+class Surfaces:
     """Opaque Lambertian surfaces: the scene's meshes and (``draw_ground``) its ground plane, as one Layer.
 
     Keeps its BVH between renders: a frame whose meshes have the triangles of the last one (points moved, or the
@@ -86,10 +83,12 @@ class SurfacesPass:
         with wp.ScopedDevice(self.device):
             buffers, plane = self._prepare(scene, camera.position, draw_ground)
             stats = self._stats(buffers)
-            if self._buried_warning(scene, buffers, plane, camera.position):
+            buried = self._buried_warning(scene, buffers, plane, camera.position)
+            if buried is not None:
                 stats["seconds"] = time.perf_counter() - started
                 return Layer(np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3), np.float32),
-                             np.full((height, width), camera.near, np.float32), {**stats, "buried": True})
+                             np.full((height, width), camera.near, np.float32), {**stats, "buried": True},
+                             warnings=[buried])
             image = self._trace(buffers, plane, pinhole_camera(camera, width, height), width, height)
             hit = image.hit.numpy().astype(bool)
             factor = self._host_factor(sun_transmittance, image, hit, camera.position)
@@ -177,16 +176,85 @@ class SurfacesPass:
             factor[hit] = values
         return wp.array(factor, dtype=wp.vec3, device=self.device)
 
-    def _buried_warning(self, scene: Scene, buffers: MeshBuffers, plane: SurfacePlane, eye: np.ndarray) -> bool:
+    def _buried_warning(self, scene: Scene, buffers: MeshBuffers, plane: SurfacePlane,
+                        eye: np.ndarray) -> str | None:
+        """The warning when the camera is under a surface, else None."""
         material = self.camera_buried(buffers, plane)
         if material < 0:
-            return False
+            return None
         names = [m.name for m in scene.meshes] + [scene.ground.name if scene.ground is not None else "ground"]
-        warnings.warn(f"surfaces: the camera at {np.round(eye, 3).tolist()} m is under the surface "
-                      f"{names[material]}; the surfaces pass draws black", SurfaceWarning, stacklevel=3)
-        return True
+        return (f"surfaces: the camera at {np.round(eye, 3).tolist()} m is under the surface {names[material]}; "
+                "the surfaces pass draws black")
 
     @staticmethod
     def _stats(buffers: MeshBuffers) -> dict:
         return {"triangles": buffers.triangle_count, "bvh_seconds": buffers.build_seconds,
                 "bvh_refitted": buffers.refitted}
+
+
+#: One renderer per device for the process: it keeps its BVH, which the next frame refits when only the points or
+#: the camera moved (an animated batch, a turntable).
+_RENDERERS: dict[str, Surfaces] = {}
+
+
+def kept_renderer(device: str) -> Surfaces:
+    """The process's :class:`Surfaces` renderer on ``device``."""
+    if device not in _RENDERERS:
+        _RENDERERS[device] = Surfaces(device=device)
+    return _RENDERERS[device]
+
+
+class SurfacesPass(Pass):
+    """The meshes (terrain) and, in a scene of such scenery without voxel media and stratiform layers, the ground
+    plane; lit through the frame's air, in the shadows of every other pass that casts one (:meth:`Pass.shadow`).
+    Its depth stops the passes after it (Max: "bounded by the distance to the nearest opaque surface"; Biri: the fog
+    integral runs to the depth buffer)."""
+
+    name = "surfaces"
+    ground_rank = 2
+    ground_note = "drawn by the surfaces pass (shadows of fog and height-field clouds)"
+
+    @classmethod
+    def runs(cls, scene, technique) -> bool:
+        if scene.heightfield_clouds and technique.traces_decks:
+            return False
+        scenery = bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
+        return bool(scene.meshes) or (scene.ground is not None and scenery and not scene.media and not scene.layers)
+
+    @classmethod
+    def refusal(cls, scene, technique):
+        if scene.meshes and technique.traces_air:
+            return "meshes", [mesh.name for mesh in scene.meshes]
+        return None
+
+    @classmethod
+    def describe(cls, scene, technique, settings) -> dict[str, str]:
+        if not scene.meshes:
+            return {"meshes": "none (no Mesh prim): no BVH built"}
+        triangles = sum(len(m.triangles) for m in scene.meshes)
+        return {"meshes": f"{len(scene.meshes)} mesh(es) ({', '.join(m.name for m in scene.meshes)}), "
+                          f"{triangles:,} triangles: one Warp BVH, surfaces pass"}
+
+    def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
+        """Points (12 B) and indices (12 B per triangle) plus Warp's BVH (about 64 B per triangle), per-pixel hits."""
+        triangles = sum(len(m.triangles) for m in scene.meshes)
+        return MemoryEstimate().add("meshes", host=40 * triangles,
+                                    device=88 * triangles + width * height * LAYER_BYTES)
+
+    def render(self, frame) -> list[Layer]:
+        seen = frame.light.lit_at_media(frame.scene)
+        shadows = [shadow for runner in frame.runners if runner is not self
+                   for shadow in [runner.shadow(seen)] if shadow is not None]
+
+        def sun_transmittance(points):
+            out = 1.0
+            for shadow in shadows:
+                out = out * shadow(points)
+            return out
+
+        renderer = kept_renderer(self.device)
+        layer = renderer.render(seen, frame.width, frame.height, draw_ground=frame.ground == self.name,
+                                sun_transmittance=sun_transmittance if shadows else None, sky=frame.light.sky[1])
+        frame.limit = layer.depth
+        frame.occluders = renderer.occluders if seen.meshes else None
+        return [layer]

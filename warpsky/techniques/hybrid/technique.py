@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import time
 from dataclasses import dataclass
 
@@ -28,12 +27,14 @@ import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
-from warpsky.errors import UsageError
+from warpsky.device import is_cpu
 from warpsky.layer import Layer
-from warpsky.passes.sky.sky import SkyPass, unattenuated_sun
-from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, march_work
+from warpsky.light.sun import above_air
+from warpsky.passes.sky.sky import Sky
+from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
-from warpsky.settings import TechniqueSettings, documented, setting
+from warpsky.settings import Settings, documented, setting
+from warpsky.techniques.base import Technique
 from warpsky.techniques.hybrid.denoise import (
     bilinear_upsample,
     block_mean,
@@ -42,6 +43,7 @@ from warpsky.techniques.hybrid.denoise import (
     require_denoiser,
 )
 from warpsky.techniques.path_tracer.technique import (
+    PathTracer,
     PathTracerSettings,
     PathTracing,
     path_tracing_memory,
@@ -49,7 +51,7 @@ from warpsky.techniques.path_tracer.technique import (
     pixel_sums,
     sums_layer,
 )
-from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
+from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings, march_work
 
 #: Name under which the multiple-scattering paths keep their device buffers (:mod:`warpsky.device_buffers`).
 BUFFER_NAME = "path_tracer:hybrid"
@@ -59,14 +61,15 @@ COVERED_BELOW = 0.99
 
 @documented
 @dataclass(frozen=True)
-class HybridSettings(TechniqueSettings):
+class HybridSettings(Settings):
     """Settings of the hybrid technique."""
 
-    technique = "hybrid"
+    owner = "hybrid"
     target_error: float = setting(0.05, range="[0, 1)", help="stop adding paths once the frame's estimated "
                                   "relative RMSE over covered pixels is below this; 0 = exactly spp paths")
     time_budget: float | None = setting(None, unit="s", range="> 0", help="stop adding paths after this long "
-                                        "(the estimate reached goes into the stats)", auto="no limit")
+                                        "(after one pass of each half at least, so that there is an error "
+                                        "estimate; the estimate reached goes into the stats)", auto="no limit")
     spp: int = setting(256, range=">= 1", help="most multiple-scattering paths per pixel (exactly this many with "
                        "target_error = 0)")
     samples_per_pass: int | None = setting(None, range=">= 1", help="paths per pixel per pass; passes alternate "
@@ -88,26 +91,6 @@ class HybridSettings(TechniqueSettings):
     shadow_step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering shadow step",
                                                auto="1 x the smallest voxel edge")
 
-    def __post_init__(self):
-        self.normalise()
-        if not (math.isfinite(self.target_error) and 0.0 <= self.target_error < 1.0):
-            raise UsageError(f"setting target_error must lie in [0, 1), got {self.target_error}")
-        if self.time_budget is not None and not (math.isfinite(self.time_budget) and self.time_budget > 0.0):
-            raise UsageError(f"setting time_budget must be a positive number of seconds, got {self.time_budget}")
-        for name in ("spp", "max_bounces", "majorant_block"):
-            if getattr(self, name) < 1:
-                raise UsageError(f"setting {name} must be a whole number >= 1, got {getattr(self, name)}")
-        if self.samples_per_pass is not None and self.samples_per_pass < 1:
-            raise UsageError(f"setting samples_per_pass must be >= 1, got {self.samples_per_pass}")
-        if not 1 <= self.ms_scale <= 8:
-            raise UsageError(f"setting ms_scale must be a whole number in 1..8, got {self.ms_scale}")
-        if self.mean_radius < -1:
-            raise UsageError(f"setting mean_radius must be >= -1, got {self.mean_radius}")
-        for name in ("step_length", "shadow_step_length"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0.0):
-                raise UsageError(f"setting {name} must be a positive length in metres, got {value}")
-
     def single_scatter(self) -> SingleScatterSettings:
         # skylight off: the paths carry the sky's light (traced through the air) and the dome's, first scattering
         # included, so the march takes the sun alone
@@ -120,7 +103,7 @@ class HybridSettings(TechniqueSettings):
                                   pixel_jitter=self.ms_scale > 1)
 
 
-class Hybrid:
+class Hybrid(Technique):
     """Exact single scattering plus path-traced, denoised multiple scattering, rendered to a target error.
 
     Every species, the ground (its direct sunlight marched, its bounces traced) and the stratiform and sky passes
@@ -133,17 +116,18 @@ class Hybrid:
 
     name = "hybrid"
     Settings = HybridSettings
-    traces_air = False
-    renders_layers = True
-
-    def __init__(self, settings: HybridSettings | None = None, *, device: str = "cpu"):
-        self.settings = settings or HybridSettings()
-        self.device = device
+    traces_dome = True
+    aovs = {"variance": "RGB", "single_scatter": "RGB", "multiple_scatter": "RGB"}
+    kernel_modules = SingleScatter.kernel_modules + PathTracer.kernel_modules
+    settings_notes = ("--target-error E, --time-budget S, --spp N and --seed S are shorthands for --set "
+                      "target_error=E / time_budget=S / spp=N / seed=S. Writes single_scatter.RGB, "
+                      "multiple_scatter.RGB and variance.RGB AOVs; the header holds errorEstimate, spp, passes, "
+                      "stoppedBy, targetError, paths and cappedPaths (a warning above 0.1%).")
 
     def resolved_settings(self, scene: Scene) -> HybridSettings:
         s = self.settings
         march = SingleScatter(s.single_scatter(), device=self.device).resolved_settings(scene)
-        per_pass = s.samples_per_pass or (2 if str(self.device).startswith("cpu") else 16)
+        per_pass = s.samples_per_pass or (2 if is_cpu(self.device) else 16)
         return dataclasses.replace(s, step_length=march.step_length, shadow_step_length=march.shadow_step_length,
                                    samples_per_pass=min(per_pass, s.spp))
 
@@ -158,8 +142,8 @@ class Hybrid:
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
         """Bytes a frame allocates: the single-scattering march's, two halves of :class:`PixelSums` on the
         ``ms_scale`` film with their host sums and denoiser copies, the frame-size multiple-scattering images,
-        the front-air sky pass and three AOVs."""
-        s = self.resolved_settings(scene)
+        the front-air transmittance and three AOVs."""
+        s = self.settings_for(scene)
         pixels = width * height
         estimate = SingleScatter(s.single_scatter(), device=self.device).memory_estimate(scene, width, height)
         if not (s.multiple_scattering and scene.media):
@@ -176,7 +160,7 @@ class Hybrid:
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Worst-case grid lookups of the march and path events of the spp cap on the ``ms_scale`` film (none
         counted with a time budget, which bounds them)."""
-        s = self.resolved_settings(scene)
+        s = self.settings_for(scene)
         items = march_work(scene, width * height, float(s.step_length), float(s.shadow_step_length))
         if s.multiple_scattering and scene.media and s.time_budget is None:
             scale = int(s.ms_scale)
@@ -184,7 +168,7 @@ class Hybrid:
         return items
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
-        settings = self.resolved_settings(scene)
+        settings = self.settings_for(scene)
         if settings.multiple_scattering and settings.denoise:
             require_denoiser()
         started = time.perf_counter()
@@ -206,7 +190,8 @@ class Hybrid:
         stats["seconds"] = time.perf_counter() - started
         stats["settings"] = dataclasses.asdict(settings)
         return Layer(single.radiance + multiple, single.transmittance, single.depth, stats=stats,
-                     aovs={"single_scatter": single.radiance, "multiple_scatter": multiple, "variance": variance})
+                     aovs={"single_scatter": single.radiance, "multiple_scatter": multiple, "variance": variance},
+                     warnings=stats.pop("warnings", []))
 
 
 def next_check(passes: int, estimate: float, target: float) -> int:
@@ -223,7 +208,7 @@ def behind_front_air(scene: Scene, width: int, height: int, depth: np.ndarray, m
     """Multiple scattering traced through the air already carries the air between the camera and each event;
     the frame's composite multiplies the media's layer by the sky pass's front transmittance T_f, so the layer
     holds multiple / T_f (and its variance / T_f^2). T_f is the sky pass's own, at the media's depth."""
-    front, _ = SkyPass(device=device).render(scene, width, height, media_depth=depth)
+    front, _ = Sky(device=device).render(scene, width, height, media_depth=depth)
     t_front = np.maximum(front.transmittance, 1e-4)
     return (multiple / t_front).astype(np.float32), (variance / t_front**2).astype(np.float32)
 
@@ -237,7 +222,7 @@ class MultipleScattering:
         self.scale = int(settings.ms_scale)
         # With air, paths are traced through it from the sun at the top of the atmosphere: they carry skylight on
         # the media and the air's own multiple scattering; its single scattering is the sky pass's.
-        self.tracing = PathTracing(unattenuated_sun(scene), width, height, settings.path_tracer(), device,
+        self.tracing = PathTracing(above_air(scene), width, height, settings.path_tracer(), device,
                                    air=scene.atmosphere is not None, multiple_only=True, scale=self.scale,
                                    buffer_name=BUFFER_NAME)
         shape = (self.tracing.height, self.tracing.width)
@@ -266,13 +251,13 @@ class MultipleScattering:
                     stop = "target"
                     break
                 check_at = next_check(passes, estimate, s.target_error)
-            if s.time_budget is not None and time.perf_counter() - started >= s.time_budget:
+            if s.time_budget is not None and passes >= 2 and time.perf_counter() - started >= s.time_budget:
                 stop = "time_budget"
                 break
         wp.synchronize_device(self.device)
         film = self.film()
         mean, variance = film.radiance, film.aovs["variance"]
-        image, denoise_seconds, sanitised = mean, 0.0, 0
+        image, denoise_seconds, sanitised, warnings = mean, 0.0, 0, []
         if s.denoise:
             result = denoise(mean, coverage, radius=s.mean_radius)
             image, denoise_seconds, sanitised = result.image, result.seconds, result.sanitised
@@ -284,12 +269,13 @@ class MultipleScattering:
             if estimated_at != passes:  # paths were added since the last estimate (or there was none)
                 estimate = self.estimate(single_radiance, coverage, covered) if min(self.counts) > 0 else math.inf
             reason = "the time budget" if stop == "time_budget" else f"the path cap (spp = {s.spp})"
-            print(f"warpsky: warning: hybrid stopped by {reason} after {done} paths per pixel with an estimated "
-                  f"error of {estimate:.1%}, above the target {s.target_error:.1%}", file=sys.stderr)
+            warnings.append(f"hybrid stopped by {reason} after {done} paths per pixel with an estimated error of "
+                            f"{estimate:.1%}, above the target {s.target_error:.1%}")
         stats = {"spp": done, "passes": passes, "stopped_by": stop, "error_estimate": estimate,
                  "target_error": s.target_error, "denoise_seconds": denoise_seconds,
                  "sanitised_values": sanitised, "tracking_steps": film.stats["tracking_steps"],
-                 "capped_paths": film.stats["capped_paths"], "paths": done * mean.shape[0] * mean.shape[1]}
+                 "capped_paths": film.stats["capped_paths"], "paths": done * mean.shape[0] * mean.shape[1],
+                 "warnings": warnings}
         return image, variance, stats
 
     def half_mean(self, half: int) -> np.ndarray:

@@ -28,9 +28,8 @@ import math
 import numpy as np
 
 from warpsky.media.deck_voxels import deck_grid, voxelize_deck
-from warpsky.media.heightfield import feature_length
+from warpsky.media.heightfield import feature_length, the_deck
 from warpsky.media.layer_voxels import VOXEL_BUDGET, ColumnGrid
-from warpsky.passes.heightfield.heightfield import the_deck
 from warpsky.resources import MemoryEstimate
 from warpsky.scene.heightfield_clouds import HeightFieldClouds
 from warpsky.scene.model import Scene

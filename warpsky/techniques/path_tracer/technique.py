@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -12,23 +13,26 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.camera_rays import pinhole_camera
-from warpsky.device import launch_rows
-from warpsky.errors import UsageError
+from warpsky.device import is_cpu, launch_rows
 from warpsky.layer import Layer
 from warpsky.light.dome import dome_struct
 from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.air import air_struct
+from warpsky.media.extent import grid_bytes
+from warpsky.media.layer_voxels import LAYER_SPECIES
 from warpsky.media.voxel import VoxelMediaBuffers
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.oriented_phase import oriented_phases
 from warpsky.optics.oriented_sampling import continuation_tables
 from warpsky.optics.phase_sampling import phase_tables_struct
-from warpsky.optics.tables import build_tables
-from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem, grid_bytes
+from warpsky.optics.prepare import TableNeed
+from warpsky.optics.tables import build_tables, phase_table
+from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem
 from warpsky.scene.model import Scene
-from warpsky.settings import TechniqueSettings, documented, setting
+from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.plane import ground_struct
-from warpsky.techniques.path_tracer.deck_media import deck_voxel_memory, with_deck_as_media
+from warpsky.techniques.base import Technique
+from warpsky.techniques.path_tracer.deck_media import deck_voxel_features, deck_voxel_memory, with_deck_as_media
 from warpsky.techniques.path_tracer.kernels import (
     PathSettings,
     PixelSums,
@@ -36,17 +40,21 @@ from warpsky.techniques.path_tracer.kernels import (
     path_trace_kernel,
     sum_samples_kernel,
 )
-from warpsky.techniques.path_tracer.layer_media import layer_voxel_memory, with_layers_as_media
+from warpsky.techniques.path_tracer.layer_media import (
+    layer_voxel_features,
+    layer_voxel_memory,
+    with_layers_as_media,
+)
 from warpsky.techniques.path_tracer.majorants import upload_majorants
 from warpsky.techniques.single_scatter.technique import MEDIA_CACHE
 
 
 @documented
 @dataclass(frozen=True)
-class PathTracerSettings(TechniqueSettings):
+class PathTracerSettings(Settings):
     """Settings of the path tracer."""
 
-    technique = "path_tracer"
+    owner = "path_tracer"
     spp: int = setting(64, range=">= 1", help="samples (paths) per pixel")
     seed: int = setting(0, range=">= 0", help="random seed; a seed gives the same image on the same device")
     max_bounces: int = setting(1024, range=">= 1", help="hard cap on scattering events per path; capped paths are "
@@ -78,25 +86,8 @@ class PathTracerSettings(TechniqueSettings):
                                        "(each column's optical depth is exact)", auto="the deck's band height / 32, "
                                        "grown with deck_voxel_width until the grid fits 2^27 voxels")
 
-    def __post_init__(self):
-        self.normalise()
-        for name in ("spp", "max_bounces", "majorant_block"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 1 and float(value).is_integer()):
-                raise UsageError(f"setting {name} must be a whole number >= 1, got {value}")
-        if not (self.seed >= 0 and float(self.seed).is_integer()):
-            raise UsageError(f"setting seed must be a whole number >= 0, got {self.seed}")
-        if not (math.isfinite(self.environment) and self.environment >= 0.0):
-            raise UsageError(f"setting environment must be a finite radiance >= 0, got {self.environment}")
-        if self.samples_per_pass is not None and not self.samples_per_pass >= 1:
-            raise UsageError(f"setting samples_per_pass must be >= 1, got {self.samples_per_pass}")
-        for name in ("layer_voxel", "layer_voxel_width", "deck_extent", "deck_voxel_width", "deck_voxel"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0.0):
-                raise UsageError(f"setting {name} must be a positive length [m] or auto, got {value}")
 
-
-class PathTracer:
+class PathTracer(Technique):
     """Unbiased volumetric path tracing of voxel media: delta tracking with local majorants, ratio-tracked
     next-event estimation toward the sun, phase sampling from the optics tables, all media combined (Riley Eq. 6),
     the scene's atmosphere as a Rayleigh medium of exponential density (then it also draws the sun's disk),
@@ -116,23 +107,25 @@ class PathTracer:
     traces_layers = True
     #: It traces a height-field cloud deck itself too, voxelised (``deck_extent``, ``deck_voxel*``).
     traces_decks = True
-
-    def __init__(self, settings: PathTracerSettings | None = None, *, device: str = "cpu"):
-        self.settings = settings or PathTracerSettings()
-        self.device = device
+    traces_dome = True
+    aovs = {"variance": "RGB"}
+    kernel_modules = ("warpsky.techniques.path_tracer.kernels",)
+    settings_notes = ("--spp N and --seed S are shorthands for --set spp=N / seed=S. Writes a variance.RGB AOV "
+                      "(variance of each pixel's mean); the header holds spp, paths and cappedPaths (a warning above "
+                      "0.1%).")
 
     def resolved_settings(self, scene: Scene) -> PathTracerSettings:
         """The settings with ``samples_per_pass = auto`` filled in for the device, and at most ``spp``."""
         given = self.settings.samples_per_pass
         if given is not None and given <= self.settings.spp:
             return self.settings
-        per_pass = given or (8 if str(self.device).startswith("cpu") else 64)
+        per_pass = given or (8 if is_cpu(self.device) else 64)
         return dataclasses.replace(self.settings, samples_per_pass=min(per_pass, self.settings.spp))
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
         """Bytes a frame allocates: a :class:`PixelSums` (and on a GPU the paths of one launch when the frame is
         small), the float64 sums of :func:`sums_layer`, the variance AOV, and the media with their majorants."""
-        settings = self.resolved_settings(scene)
+        settings = self.settings_for(scene)
         pixels = width * height
         return (path_tracing_memory(scene, pixels, int(settings.majorant_block), self.device,
                                     int(settings.samples_per_pass))
@@ -143,11 +136,33 @@ class PathTracer:
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Worst-case path events: every path runs to the bounce cap."""
-        settings = self.resolved_settings(scene)
+        settings = self.settings_for(scene)
         return [path_work(settings, width * height)]
 
+    def tables(self, scene: Scene) -> list[TableNeed]:
+        """A phase table per species, and the stratus table of the layers it voxelises."""
+        needs = super().tables(scene)
+        if scene.layers and LAYER_SPECIES not in scene.species:
+            needs.append(TableNeed(LAYER_SPECIES, "phase", functools.partial(phase_table, LAYER_SPECIES)))
+        return needs
+
+    def features(self, scene: Scene, width: int, height: int, features: dict[str, str]) -> dict[str, str]:
+        """The lines of the layers and the deck it voxelises."""
+        settings = self.settings_for(scene)
+        if scene.layers:
+            features = layer_voxel_features(scene, settings, features)
+        if scene.heightfield_clouds:
+            features = deck_voxel_features(scene, settings, width, height, features)
+        return features
+
+    def for_extra_light(self) -> PathTracer:
+        """Itself, without the uniform ``environment`` (it lights the first run only)."""
+        if not self.settings.environment:
+            return self
+        return self.with_settings(dataclasses.replace(self.settings, environment=0.0))
+
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> Layer:
-        settings = self.resolved_settings(scene)
+        settings = self.settings_for(scene)
         started = time.perf_counter()
         scene = with_deck_as_media(with_layers_as_media(scene, settings, self.device), settings, width, height)
         with device_buffers.exclusive("path_tracer", self.device):  # the sums and kept paths below
@@ -253,7 +268,7 @@ def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int
     ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device (and their host copies on a GPU), the
     paths of one launch when they are kept per sample (:func:`per_sample_launches`), the media and their majorant
     grids (built on the host from a copy)."""
-    copies = 0 if str(device).startswith("cpu") else 1
+    copies = 0 if is_cpu(device) else 1
     film = pixel_sums_count if film_pixels is None else film_pixels
     samples = per_sample_launches(device, film, samples_per_pass) * film * SAMPLE_BYTES
     grids = grid_bytes(scene)
@@ -332,7 +347,7 @@ def per_sample_launches(device: str, pixels: int, samples_per_pass: int) -> int:
     most of it idle (128 x 128: 2^14 threads, 20 M paths/s): there a launch runs ``samples_per_pass`` paths of
     every pixel on as many threads (128 x 128 at the GPU default of 64 per pass: 2^20 threads), at most
     :data:`GPU_LAUNCH_THREADS`. The paths' sums are the same either way (:class:`PathTracing`)."""
-    if str(device).startswith("cpu") or pixels >= GPU_RESIDENT_THREADS:
+    if is_cpu(device) or pixels >= GPU_RESIDENT_THREADS:
         return 0
     return max(1, min(int(samples_per_pass), GPU_LAUNCH_THREADS // max(pixels, 1)))
 

@@ -11,28 +11,29 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.camera_rays import pinhole_camera
-from warpsky.device import launch_rows
-from warpsky.errors import UsageError
+from warpsky.device import is_cpu, launch_rows
 from warpsky.layer import Layer
 from warpsky.light.skylight import ambient_settings
 from warpsky.light.sun import sun_struct, sunlight
+from warpsky.media.extent import camera_chord, grid_bytes, longest_chord, media_diagonal
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.oriented_phase import oriented_phases
 from warpsky.optics.tables import build_tables
-from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes, march_work
+from warpsky.resources import MemoryEstimate, WorkItem
 from warpsky.scene.model import Scene
-from warpsky.settings import TechniqueSettings, documented, setting
+from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.plane import ground_struct
+from warpsky.techniques.base import Technique
 from warpsky.techniques.single_scatter.kernels import MarchSettings, single_scatter_kernel
 
 
 @documented
 @dataclass(frozen=True)
-class SingleScatterSettings(TechniqueSettings):
+class SingleScatterSettings(Settings):
     """Settings of the single-scattering ray march."""
 
-    technique = "single_scatter"
+    owner = "single_scatter"
     step_length: float | None = setting(None, unit="m", range="> 0", help="eye-ray step",
                                         auto="0.5 x the smallest voxel edge")
     shadow_step_length: float | None = setting(None, unit="m", range="> 0", help="shadow-ray step toward the sun",
@@ -43,15 +44,6 @@ class SingleScatterSettings(TechniqueSettings):
                              "hemisphere: the analytic sky of a frame with a sky pass, the dome, the ground they "
                              "light, seen through the phase's asymmetry; 0: the dome's mean radiance alone, "
                              "occluded towards the zenith")
-
-    def __post_init__(self):
-        self.normalise()
-        for name in ("step_length", "shadow_step_length"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0.0):
-                raise UsageError(f"setting {name} must be a positive length in metres, got {value}")
-        if not (0.0 <= self.min_transmittance < 1.0):
-            raise UsageError(f"setting min_transmittance must lie in [0, 1), got {self.min_transmittance}")
 
     def resolved(self, min_voxel_size: float) -> SingleScatterSettings:
         """These settings with the automatic step lengths filled in from the smallest voxel edge [m]."""
@@ -70,7 +62,7 @@ MEDIA_CACHE = "voxel_media"
 OUTPUTS = (("radiance", wp.vec3), ("transmittance", wp.vec3), ("depth", float), ("lookups", wp.int64))
 
 
-class SingleScatter:
+class SingleScatter(Technique):
     """Single scattering of sunlight with exact per-step transmittance (Riley 2004, low-albedo mode, Fig. 13).
 
     Light scatters once: sun -> shadow march -> one scattering event (phase of the media at that point, weighted
@@ -84,12 +76,7 @@ class SingleScatter:
 
     name = "single_scatter"
     Settings = SingleScatterSettings
-    traces_air = False
-    renders_layers = True
-
-    def __init__(self, settings: SingleScatterSettings | None = None, *, device: str = "cpu"):
-        self.settings = settings or SingleScatterSettings()
-        self.device = device
+    kernel_modules = ("warpsky.techniques.single_scatter.kernels",)
 
     def resolved_settings(self, scene: Scene) -> SingleScatterSettings:
         """The settings with the automatic step lengths filled in from the scene's smallest voxel edge."""
@@ -105,20 +92,20 @@ class SingleScatter:
         """Bytes a frame allocates: the per-pixel outputs and the media's upload on the device (their host copies
         too when the device is a GPU; the upload's concatenated host copy)."""
         pixels = width * height
-        copies = 0 if str(self.device).startswith("cpu") else 1
+        copies = 0 if is_cpu(self.device) else 1
         return (MemoryEstimate()
                 .add("images", host=copies * pixels * self.PIXEL_BYTES, device=pixels * self.PIXEL_BYTES)
                 .add("grids", host=grid_bytes(scene), device=grid_bytes(scene)))
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
-        """Worst-case grid lookups of the march (:func:`~warpsky.resources.march_work`)."""
-        settings = self.resolved_settings(scene)
+        """Worst-case grid lookups of the march (:func:`march_work`)."""
+        settings = self.settings_for(scene)
         return march_work(scene, width * height, float(settings.step_length), float(settings.shadow_step_length))
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
         """Render ``scene`` at ``width`` x ``height``; the camera is conformed to that aspect ratio here."""
         camera = scene.camera.conformed(width, height)
-        settings = self.resolved_settings(scene)
+        settings = self.settings_for(scene)
         device = self.device
         started = time.perf_counter()
         species = scene.species
@@ -149,3 +136,21 @@ class SingleScatter:
         return Layer(images["radiance"], images["transmittance"], images["depth"],
                      stats={"seconds": seconds, "lookups": int(images["lookups"].sum()),
                             "settings": dataclasses.asdict(settings)})
+
+
+def march_work(scene, pixels: int, step: float, shadow_step: float) -> list[WorkItem]:
+    """Grid lookups of the single-scattering march: per eye step one lookup per medium and a shadow march through
+    every medium towards the sun (one lookup per shadow step). The eye's path is the longest of the frame's rays
+    through the media (:func:`camera_chord`, plus a tenth for rays between the sampled ones); the sun's, the
+    longest segment along the sun that fits in each box (the boxes' diagonal without a sun)."""
+    if not scene.media:
+        return []
+    eye_path = min(1.1 * camera_chord(scene), media_diagonal(scene.media))
+    eye_steps = math.ceil(eye_path / step)
+    sun = scene.sun.direction if scene.sun is not None else None
+    shadow_steps = sum(math.ceil(min(media_diagonal((m,)), longest_chord(m, sun) if sun is not None else math.inf)
+                                 / shadow_step) for m in scene.media)
+    per_pixel = eye_steps * (len(scene.media) + shadow_steps) + shadow_steps
+    return [WorkItem("march lookups", float(per_pixel), pixels,
+                     f"step_length={step:g} m and shadow_step_length={shadow_step:g} m over "
+                     f"{eye_path:.4g} m of media")]

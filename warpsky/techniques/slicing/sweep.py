@@ -25,7 +25,6 @@ plain launches, one warning line is printed per process, and that device is not 
 
 from __future__ import annotations
 
-import sys
 import threading
 from dataclasses import dataclass
 from typing import Any
@@ -35,7 +34,7 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.camera_rays import PinholeCamera
-from warpsky.device import launch_rows
+from warpsky.device import is_cpu, launch_rows
 from warpsky.interrupt import check_stop
 from warpsky.light.skylight import SkyEnvironment
 from warpsky.light.sun import Sun
@@ -64,6 +63,8 @@ COUNTS = {"captured": 0, "replayed": 0, "plain": 0}
 _GRAPHS: dict[str, tuple] = {}  # device -> (key, graph, sweep whose arrays and structs the graph reads)
 _CAPTURE_FAILED: set[str] = set()  # devices whose capture raised: plain launches from then on
 _WARNED = [False]
+#: The failed capture's warning by device, until a frame's layer carries it (:func:`capture_warning`).
+_UNREPORTED: dict[str, str] = {}
 _LOCKS: dict[str, threading.Lock] = {}
 _LOCKS_LOCK = threading.Lock()
 
@@ -84,7 +85,7 @@ def chunk_planes(plane_count: int, light_res: int, device) -> int:
     """Planes per chunk of a sweep of ``plane_count`` planes: as many as :data:`STACK_BYTES` allows, evened out
     over the chunks so that none is a short remainder."""
     per_plane = 2 * 12 * light_res * light_res
-    kind = "cpu" if str(device).startswith("cpu") else "cuda"
+    kind = "cpu" if is_cpu(device) else "cuda"
     most = max(1, STACK_BYTES[kind] // per_plane)
     chunks = -(-max(plane_count, 1) // most)
     return -(-max(plane_count, 1) // chunks)
@@ -215,12 +216,17 @@ def run_sweep(sweep: SliceSweep) -> str:
         _CAPTURE_FAILED.add(name)
         if not _WARNED[0]:
             _WARNED[0] = True
-            print(f"warpsky: warning: CUDA graph capture of the slicing sweep failed on {name} "
-                  f"({type(error).__name__}: {error}); running plain launches", file=sys.stderr)
+            _UNREPORTED[name] = (f"CUDA graph capture of the slicing sweep failed on {name} "
+                                 f"({type(error).__name__}: {error}); running plain launches")
         return _plain(sweep)
     _GRAPHS[name] = (key, graph, sweep)
     wp.capture_launch(graph)
     return _counted("captured")
+
+
+def capture_warning(device) -> str | None:
+    """The warning of a failed graph capture on ``device`` that no frame has reported yet (once per process)."""
+    return _UNREPORTED.pop(str(wp.get_device(device)), None)
 
 
 def _capture(sweep: SliceSweep):

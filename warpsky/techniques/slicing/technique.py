@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
-import math
 import time
 from dataclasses import dataclass
 
@@ -14,24 +13,34 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.camera_rays import pinhole_camera
-from warpsky.device import launch_rows
+from warpsky.device import is_cpu, launch_rows
 from warpsky.errors import UsageError
 from warpsky.layer import Layer
 from warpsky.light.skylight import ambient_settings
 from warpsky.light.sun import sun_struct, sunlight
+from warpsky.media.extent import grid_bytes
 from warpsky.media.voxel import VoxelMediaBuffers, check_field_count
 from warpsky.optics.grid import angle_grid, delta_table, normalise, sphere_integral
 from warpsky.optics.oriented_phase import oriented_phases
 from warpsky.optics.phase import phase_numpy
-from warpsky.optics.tables import ams_table
-from warpsky.resources import MemoryEstimate, WorkItem, grid_bytes
+from warpsky.optics.prepare import TableNeed
+from warpsky.optics.tables import ams_table, phase_table
+from warpsky.resources import MemoryEstimate, WorkItem
 from warpsky.scene.model import PhaseKind, Projection, Scene
-from warpsky.settings import TechniqueSettings, documented, setting
+from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.plane import ground_struct
+from warpsky.techniques.base import Technique
 from warpsky.techniques.slicing.ground import ground_kernel
 from warpsky.techniques.slicing.kernels import AmsTables, SliceFrame, slicing_kernels
 from warpsky.techniques.slicing.occlusion import sky_shadow
-from warpsky.techniques.slicing.sweep import SliceSweep, SweepBuffers, chunk_planes, run_sweep, sweep_lock
+from warpsky.techniques.slicing.sweep import (
+    SliceSweep,
+    SweepBuffers,
+    capture_warning,
+    chunk_planes,
+    run_sweep,
+    sweep_lock,
+)
 
 #: Bytes per pixel of the ground pass's device copy of the layer.
 LAYER_DEVICE_BYTES = 28
@@ -47,7 +56,7 @@ class LightEquation(enum.IntEnum):
 
 @documented
 @dataclass(frozen=True)
-class SlicingSettings(TechniqueSettings):
+class SlicingSettings(Settings):
     """Settings of half-angle slicing.
 
     Defaults come from ``warpsky bench error-vs-time usd_scenes/cumulus.usda`` (128x85, path tracer 4096 spp): with
@@ -59,7 +68,7 @@ class SlicingSettings(TechniqueSettings):
     adds light.
     """
 
-    technique = "slicing"
+    owner = "slicing"
     slice_count: int | None = setting(None, range=">= 1", help="planes through the media's extent along the "
                                       "half-angle axis (thin sheets seen edge-on band when the spacing exceeds "
                                       "their thickness)", auto="one per voxel edge of the finest field across that "
@@ -83,19 +92,6 @@ class SlicingSettings(TechniqueSettings):
                              "hemisphere (the analytic sky of a frame with a sky pass, the dome, the ground they "
                              "light) through the phase's asymmetry, occluded towards the zenith and nadir; "
                              "0: the dome's mean radiance alone, unoccluded")
-
-    def __post_init__(self):
-        self.normalise()
-        for name, low in (("slice_count", 1), ("light_resolution", 2), ("orders", 1)):
-            value = getattr(self, name)
-            if value is None and name == "slice_count":
-                continue
-            if not (math.isfinite(value) and value >= low and float(value).is_integer()):
-                raise UsageError(f"setting {name} must be a whole number >= {low}, got {value}")
-        if not (math.isfinite(self.eye_samples) and self.eye_samples > 0.0):
-            raise UsageError(f"setting eye_samples must be a finite number > 0 [1/voxel], got {self.eye_samples}")
-        if not (math.isfinite(self.xi) and self.xi >= 0.0):
-            raise UsageError(f"setting xi must be a finite phase value >= 0 [1/sr], got {self.xi}")
 
 
 @functools.lru_cache(maxsize=64)
@@ -133,19 +129,14 @@ def media_corners(scene: Scene, origin: np.ndarray) -> np.ndarray:
     return np.concatenate([m.world_corners() for m in scene.media]) - np.asarray(origin, dtype=np.float64)
 
 
-class Slicing:
+class Slicing(Technique):
     """Half-angle slicing with multiple-scattering phase functions (Riley 2004 §4.2, §5): one sweep through the
     media carrying a light buffer (intensity and expected scattering count per channel, Eqs. 22, 25) and the eye
     buffer (Eq. 26 with Ams_{n+1} of the mixed phase at each sample)."""
 
     name = "slicing"
     Settings = SlicingSettings
-    traces_air = False
-    renders_layers = True
-
-    def __init__(self, settings: SlicingSettings | None = None, *, device: str = "cpu"):
-        self.settings = settings or SlicingSettings()
-        self.device = device
+    kernel_modules = ("warpsky.techniques.slicing.kernels",)
 
     #: Bounds of the automatic slice count.
     AUTO_SLICES = (32, 512)
@@ -180,18 +171,27 @@ class Slicing:
         res = int(self.settings.light_resolution)
         planes = int(self.settings.slice_count or self.AUTO_SLICES[1]) if scene.media else 0
         pixels = width * height
-        copies = 0 if str(self.device).startswith("cpu") else 1
+        copies = 0 if is_cpu(self.device) else 1
         return (MemoryEstimate()
                 .add("images", host=pixels * (self.HOST_PIXEL_BYTES + copies * self.PIXEL_BYTES),
                      device=pixels * (self.PIXEL_BYTES + LAYER_DEVICE_BYTES))
                 .add("light buffers", device=2 * res * res * 12 * (1 + chunk_planes(planes, res, self.device)))
                 .add("grids", host=grid_bytes(scene), device=grid_bytes(scene)))
 
+    def tables(self, scene: Scene) -> list[TableNeed]:
+        """A phase table and the Ams_0..orders tables (at the ``orders`` setting) per species."""
+        orders = int(self.settings.orders)
+        needs = []
+        for name in scene.species:
+            needs.append(TableNeed(name, "phase", functools.partial(phase_table, name)))
+            needs.append(TableNeed(name, "ams", functools.partial(ams_table, name, orders), f"{orders}"))
+        return needs
+
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Lookups per pixel (one per medium and slice) and per light-buffer texel (the same)."""
         if not scene.media:
             return []
-        settings = self.resolved_settings(scene)
+        settings = self.settings_for(scene)
         slices, res = int(settings.slice_count), int(settings.light_resolution)
         per_pixel = float(slices * len(scene.media))
         return [WorkItem("slice lookups", per_pixel, width * height, f"slice_count={slices}"),
@@ -231,7 +231,7 @@ class Slicing:
         return ams
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
-        settings = self.resolved_settings(scene)
+        settings = self.settings_for(scene)
         camera = scene.camera.conformed(width, height)
         device = self.device
         started = time.perf_counter()
@@ -249,11 +249,12 @@ class Slicing:
                 sweep = self._sweep(scene, settings, camera, width, height, media, ambient)
                 with sweep_lock(device):
                     how = run_sweep(sweep)
+                    warning = capture_warning(device)
                     radiance, transmittance, depth = self._finish(scene, camera, width, height, media, sweep.buffers,
                                                                   ambient)
                 slices = len(sweep.planes)
             else:
-                how, slices = "none", 0
+                how, slices, warning = "none", 0, None
                 shape = (height, width)
                 images = [wp.zeros(shape, dtype=wp.vec3), wp.full(shape, wp.vec3(1.0, 1.0, 1.0), dtype=wp.vec3),
                           wp.full(shape, far, dtype=float)]
@@ -262,7 +263,7 @@ class Slicing:
                 radiance, transmittance, depth = (image.numpy() for image in images)
             layer = Layer(radiance, transmittance, depth, stats={
                 "seconds": time.perf_counter() - started, "settings": dataclasses.asdict(settings),
-                "slices": slices, "sweep": how})
+                "slices": slices, "sweep": how}, warnings=[warning] if warning else [])
         return layer
 
     def _finish(self, scene: Scene, camera, width: int, height: int, media: VoxelMediaBuffers,

@@ -1,0 +1,72 @@
+"""The media pass: the frame's technique in its place among the passes.
+
+It hands the technique the scene as the media see it. With a pass that draws the air (the sky pass), their sun
+comes through the air above them (:meth:`~warpsky.light.frame.FrameLight.lit_at_media`). Where another pass draws
+the ground plane (the lowest stratiform layer), the technique renders the media without the ground and without what
+that pass draws from the scene (the layers), and where the ground was the only horizon, the sun becomes the light
+of its disk's visible part (:func:`~warpsky.light.sun.visible_sun`), so the ground still hides what has set. Not
+modelled there: shadows between voxel media and layers, and of voxel media on the ground.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from warpsky.light.sun import visible_sun
+from warpsky.passes.base import Pass
+
+
+def has_scenery(scene) -> bool:
+    """Whether ``scene`` holds meshes, height-field clouds or analytic fog (each drawn by its own pass)."""
+    return bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
+
+
+class MediaPass(Pass):
+    """The technique's voxel media (and whatever the technique traces itself: voxelised layers, a deck)."""
+
+    name = "media"
+    ground_rank = 1
+    runs_technique = True
+
+    @classmethod
+    def runs(cls, scene, technique) -> bool:
+        """With voxel media, with layers or a deck the technique traces itself, or in a scene with nothing else to
+        draw (the technique draws the ground, the sky or nothing)."""
+        traced = (scene.layers and technique.traces_layers) or (scene.heightfield_clouds and technique.traces_decks)
+        return bool(scene.media) or bool(traced) or not (scene.layers or has_scenery(scene))
+
+    @classmethod
+    def describe(cls, scene, technique, settings) -> dict[str, str]:
+        if scene.media:
+            voxels = sum(int(np.prod(m.shape)) for m in scene.media)
+            return {"media": f"{len(scene.media)} voxel grid(s), {voxels:,} voxels, {voxels * 4 / 2**20:.1f} MiB"}
+        if scene.layers:
+            return {"media": f"none: {technique.name} does not run, the layers are rendered by the stratiform pass"}
+        return {"media": "none"}
+
+    def memory_estimate(self, scene, width: int, height: int):
+        return self.technique.memory_estimate(scene, width, height)
+
+    def work_estimate(self, scene, width: int, height: int):
+        return list(self.technique.work_estimate(scene, width, height))
+
+    def tables(self, scene) -> list:
+        return self.technique.tables(scene)
+
+    def render(self, frame) -> list:
+        return [frame.technique.render(media_scene(frame), frame.width, frame.height)]
+
+
+def media_scene(frame):
+    """The scene the technique renders in ``frame`` (see the module docstring)."""
+    scene = frame.scene
+    drawn = {name: () for runner in frame.runners for name in runner.draws}
+    if frame.ground not in (None, MediaPass.name):
+        drawn["ground"] = None
+        if scene.atmosphere is None:
+            drawn["sun"] = visible_sun(scene.sun)
+    if drawn:
+        scene = dataclasses.replace(scene, **drawn)
+    return frame.light.lit_at_media(scene) if frame.light.through_air else scene
