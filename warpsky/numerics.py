@@ -1,5 +1,5 @@
 """Device functions of plain numerics every kernel shares: exponential integrals that stay accurate from optical
-depths of 1e-9 to 1e30, and luminance."""
+depths of 1e-9 to 1e30, luminance, and the cells of clamped bilinear and trilinear lookups."""
 
 from __future__ import annotations
 
@@ -46,3 +46,56 @@ def exp3(tau: wp.vec3) -> wp.vec3:
 def luminance(c: wp.vec3) -> float:
     """Rec. 709 luminance."""
     return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+
+
+@wp.struct
+class BilinearCell:
+    """The texel cell around a point in texel coordinates: its lower and upper texel and the point's fractions."""
+
+    lo: wp.vec2i
+    hi: wp.vec2i
+    frac: wp.vec2
+
+
+@wp.func
+def bilinear_cell(p: wp.vec2, n: wp.vec2i) -> BilinearCell:
+    """The cell of continuous texel position ``p`` (texel centres at integers) in a map of ``n`` texels per axis,
+    ``p`` clamped to [0, n - 1] (clamp-to-edge addressing)."""
+    x = wp.clamp(p[0], 0.0, float(n[0] - 1))
+    y = wp.clamp(p[1], 0.0, float(n[1] - 1))
+    out = BilinearCell()
+    out.lo = wp.vec2i(wp.min(int(x), n[0] - 1), wp.min(int(y), n[1] - 1))
+    out.hi = wp.vec2i(wp.min(out.lo[0] + 1, n[0] - 1), wp.min(out.lo[1] + 1, n[1] - 1))
+    out.frac = wp.vec2(x - float(out.lo[0]), y - float(out.lo[1]))
+    return out
+
+
+@wp.func
+def bilinear_mix(c00: wp.vec3, c10: wp.vec3, c01: wp.vec3, c11: wp.vec3, frac: wp.vec2) -> wp.vec3:
+    """Bilinear blend of a cell's corner values ``c<ij>`` (i along the first axis, j along the second) at the
+    fractions ``frac``: first along the first axis, then along the second."""
+    low = c00 * (1.0 - frac[0]) + c10 * frac[0]
+    high = c01 * (1.0 - frac[0]) + c11 * frac[0]
+    return low * (1.0 - frac[1]) + high * frac[1]
+
+
+@wp.struct
+class TrilinearCell:
+    """The grid cell around a point in index coordinates: its lower and upper node and the point's fractions."""
+
+    lo: wp.vec3i
+    hi: wp.vec3i
+    frac: wp.vec3
+
+
+@wp.func
+def trilinear_cell(p: wp.vec3, n: wp.vec3i) -> TrilinearCell:
+    """The cell of index position ``p`` in a grid of ``n`` nodes per axis, ``p`` clamped to [0, n - 1]."""
+    x = wp.clamp(p[0], 0.0, float(n[0] - 1))
+    y = wp.clamp(p[1], 0.0, float(n[1] - 1))
+    z = wp.clamp(p[2], 0.0, float(n[2] - 1))
+    out = TrilinearCell()
+    out.lo = wp.vec3i(wp.min(int(x), n[0] - 1), wp.min(int(y), n[1] - 1), wp.min(int(z), n[2] - 1))
+    out.hi = wp.vec3i(wp.min(out.lo[0] + 1, n[0] - 1), wp.min(out.lo[1] + 1, n[1] - 1), wp.min(out.lo[2] + 1, n[2] - 1))
+    out.frac = wp.vec3(x - float(out.lo[0]), y - float(out.lo[1]), z - float(out.lo[2]))
+    return out

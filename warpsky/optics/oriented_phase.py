@@ -31,6 +31,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.media.voxel import MediaPoint, VoxelMedia
+from warpsky.numerics import bilinear_cell, bilinear_mix
 from warpsky.optics.oriented_ice_kernels import SkyGrid
 
 #: Sun elevations are rounded to this step [deg] before a table is built, so that frames a hair apart share it.
@@ -70,19 +71,14 @@ def oriented_value(phases: OrientedPhases, slice_index: int, look: wp.vec3) -> w
     between the bin centres in (elevation, azimuth from the sun) so that the arcs' edges do not show the bins."""
     local = phases.sun_from_world * look
     horizontal = wp.sqrt(local[0] * local[0] + local[2] * local[2])
-    rows = phases.grid.elevation_bins
-    columns = phases.grid.azimuth_bins
-    y = wp.clamp((wp.atan2(local[1], horizontal) + 0.5 * wp.pi) / phases.grid.elevation_step, 0.0, float(rows - 1))
-    x = wp.clamp(wp.atan2(wp.abs(local[2]), local[0]) / phases.grid.azimuth_step, 0.0, float(columns - 1))
-    r0 = wp.min(int(y), rows - 1)
-    c0 = wp.min(int(x), columns - 1)
-    r1 = wp.min(r0 + 1, rows - 1)
-    c1 = wp.min(c0 + 1, columns - 1)
-    fy = y - float(r0)
-    fx = x - float(c0)
-    low = slice_texel(phases, slice_index, r0, c0) * (1.0 - fx) + slice_texel(phases, slice_index, r0, c1) * fx
-    high = slice_texel(phases, slice_index, r1, c0) * (1.0 - fx) + slice_texel(phases, slice_index, r1, c1) * fx
-    return low * (1.0 - fy) + high * fy
+    y = (wp.atan2(local[1], horizontal) + 0.5 * wp.pi) / phases.grid.elevation_step
+    x = wp.atan2(wp.abs(local[2]), local[0]) / phases.grid.azimuth_step
+    cell = bilinear_cell(wp.vec2(x, y), wp.vec2i(phases.grid.azimuth_bins, phases.grid.elevation_bins))
+    lo = cell.lo  # (column, row)
+    hi = cell.hi
+    return bilinear_mix(slice_texel(phases, slice_index, lo[1], lo[0]), slice_texel(phases, slice_index, lo[1], hi[0]),
+                        slice_texel(phases, slice_index, hi[1], lo[0]), slice_texel(phases, slice_index, hi[1], hi[0]),
+                        cell.frac)
 
 
 @wp.func

@@ -42,7 +42,7 @@ from warpsky.kernel_variants import kernel_variants
 from warpsky.light.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
 from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
-from warpsky.numerics import exp3, one_minus_exp
+from warpsky.numerics import bilinear_cell, bilinear_mix, exp3, one_minus_exp
 from warpsky.optics.kernels import GRID_SIZE, grid_node, scattering_angle
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
 from warpsky.techniques.single_scatter.kernels import media_span
@@ -118,19 +118,11 @@ def light_texel(frame: SliceFrame, p: wp.vec3) -> wp.vec2:
 @wp.func
 def light_lookup(buffer: wp.array2d(dtype=wp.vec3), frame: SliceFrame, p: wp.vec3) -> wp.vec3:
     """Bilinear light-buffer value at p (clamped at the edges)."""
-    uv = light_texel(frame, p)
-    r = frame.light_res
-    x = wp.clamp(uv[0], 0.0, float(r - 1))
-    y = wp.clamp(uv[1], 0.0, float(r - 1))
-    i0 = wp.min(int(x), r - 1)
-    j0 = wp.min(int(y), r - 1)
-    i1 = wp.min(i0 + 1, r - 1)
-    j1 = wp.min(j0 + 1, r - 1)
-    fx = x - float(i0)
-    fy = y - float(j0)
-    a = buffer[j0, i0] * (1.0 - fx) + buffer[j0, i1] * fx
-    b = buffer[j1, i0] * (1.0 - fx) + buffer[j1, i1] * fx
-    return a * (1.0 - fy) + b * fy
+    cell = bilinear_cell(light_texel(frame, p), wp.vec2i(frame.light_res, frame.light_res))
+    lo = cell.lo
+    hi = cell.hi
+    return bilinear_mix(buffer[lo[1], lo[0]], buffer[lo[1], hi[0]], buffer[hi[1], lo[0]], buffer[hi[1], hi[0]],
+                        cell.frac)
 
 
 #: Most samples of the eye ray inside one slice's slab (bounds the cost of few, thick slices).
