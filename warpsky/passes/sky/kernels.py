@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.light.sun import Sun
 from warpsky.media.air_analytic import air_depth, air_inscatter
 from warpsky.numerics import exp3
@@ -29,10 +29,10 @@ def sky_kernel(
     back_radiance: wp.array2d(dtype=wp.vec3),
 ):
     row, col = wp.tid()
-    view = camera_ray(cam, row, col)
-    height = camera_ray_origin(cam, row, col, 0.5, 0.5)[1]  # of the ray's start above the eye (orthographic)
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    view = ray.direction
+    height = ray.origin[1]  # of the ray's start above the eye (orthographic)
     altitude = camera_altitude + height
-    cos_axis = wp.dot(view, camera_forward(cam))
     sun_dir = sun.direction
     # where the air ends: the ground plane, else infinity
     t_end = INFINITE
@@ -46,7 +46,7 @@ def sky_kernel(
     split = t_end
     d = media_depth[row, col]
     if d < cam.far:
-        split = wp.min(d / cos_axis, t_end)
+        split = wp.min(d / ray.cos_axis, t_end)
     cos_theta = wp.dot(sun_dir, view)  # light travels along -sun, leaves towards the eye along -view
     phase = phase_rayleigh(cos_theta)
     sun_y = sun.air_sine  # the sun's optical depth at height h is the vertical column over air_sine

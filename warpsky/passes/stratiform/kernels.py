@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.light.sun import Sun
 from warpsky.passes.stratiform.radiosity_kernels import bilinear
 from warpsky.passes.stratiform.slab import INV_PI, MU_MIN, SlabOptics, order_energies, slab_radiance
@@ -89,9 +89,10 @@ def stratiform_kernel(
 ):
     r, col = wp.tid()
     row = r + row_offset
-    d = camera_ray(cam, row, col)
-    o = camera_ray_origin(cam, row, col, 0.5, 0.5)  # the ray is o + t d
-    cos_axis = wp.dot(d, camera_forward(cam))
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    d = ray.direction
+    o = ray.origin  # the ray is o + t d
+    cos_axis = ray.cos_axis
     sun = sun_light.direction
     sun_irradiance = sun_light.irradiance
     ground_y = ground.offset

@@ -22,7 +22,7 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.sun import Sun
 from warpsky.media.voxel import VoxelMedia
@@ -97,16 +97,14 @@ def surface_hits(surfaces: SurfaceMeshes, plane: SurfacePlane, cam: PinholeCamer
     """One eye ray per pixel centre against the meshes and the plane, within the camera's clipping range."""
     r, col = wp.tid()
     row = r + row_offset
-    view = camera_ray(cam, row, col)
-    origin = camera_ray_origin(cam, row, col, 0.5, 0.5)
-    cos_axis = wp.dot(view, camera_forward(cam))
-    h = nearest_surface(surfaces, plane, origin, view, cam.near / cos_axis, cam.far / cos_axis)
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    h = nearest_surface(surfaces, plane, ray.origin, ray.direction, ray.t_near, ray.t_far)
     image.hit[row, col] = h.hit
-    image.point[row, col] = origin + h.t * view
+    image.point[row, col] = ray.origin + h.t * ray.direction
     image.normal[row, col] = h.shading
     image.albedo[row, col] = h.albedo
     image.scale[row, col] = h.scale
-    image.depth[row, col] = wp.where(h.hit != 0, h.t * cos_axis, cam.far)
+    image.depth[row, col] = wp.where(h.hit != 0, h.t * ray.cos_axis, cam.far)
 
 
 @wp.kernel

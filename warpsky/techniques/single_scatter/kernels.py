@@ -21,7 +21,7 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import ambient_ground
 from warpsky.light.skylight import SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
@@ -130,11 +130,12 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
     ):
         r, col = wp.tid()
         row = r + row_offset
-        view = camera_ray(cam, row, col)
-        origin = camera_ray_origin(cam, row, col, 0.5, 0.5)
-        cos_axis = wp.dot(view, camera_forward(cam))
-        t_near = cam.near / cos_axis
-        t_end = cam.far / cos_axis
+        ray = primary_ray(cam, row, col, 0.5, 0.5)
+        view = ray.direction
+        origin = ray.origin
+        cos_axis = ray.cos_axis
+        t_near = ray.t_near
+        t_end = ray.t_far
         sun_dir = sun.direction
         lit = sun.lit != 0
         # Light travels along -sun_dir and leaves towards the eye along -view.

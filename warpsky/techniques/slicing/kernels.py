@@ -37,7 +37,7 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
@@ -363,12 +363,13 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
         pixel's eye ray inside the slab and inside its ``spans`` at most ``sample_length`` [m] apart."""
         r, col = wp.tid()
         row = r + row_offset
-        view = camera_ray(cam, row, col)
+        ray = primary_ray(cam, row, col, 0.5, 0.5)
+        view = ray.direction
         along = wp.dot(frame.axis, view)
         if wp.abs(along) < 1.0e-6:
             return
         half = 0.5 * frame.spacing / wp.abs(along)
-        cos_axis = wp.dot(view, camera_forward(cam))
+        cos_axis = ray.cos_axis
         theta = scattering_angle(sun.direction, view)
         lobes = ambient_lobes(ambient, view)
         inside = eye.spans[row, col]
@@ -418,9 +419,8 @@ def eye_span_kernel(media: VoxelMedia, cam: PinholeCamera, spans: wp.array2d(dty
     """Each pixel's eye-ray interval [m] inside the media's boxes and the clipping range (empty: y <= x). The eye
     gather samples only there, so a box face cuts a slab's samples where it lies instead of at whole samples."""
     row, col = wp.tid()
-    view = camera_ray(cam, row, col)
-    cos_axis = wp.dot(view, camera_forward(cam))
-    spans[row, col] = media_span(media, wp.vec3(0.0), view, cam.near / cos_axis, cam.far / cos_axis)  # pinhole only
+    ray = primary_ray(cam, row, col, 0.5, 0.5)  # a pinhole's: from the eye
+    spans[row, col] = media_span(media, ray.origin, ray.direction, ray.t_near, ray.t_far)
 
 
 @kernel_variants(low_albedo=(False, True), equation=(0, 24, 25), has_detail=(False, True))
