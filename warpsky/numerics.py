@@ -1,5 +1,6 @@
 """Device functions of plain numerics every kernel shares: exponential integrals that stay accurate from optical
-depths of 1e-9 to 1e30, luminance, and the cells of clamped bilinear and trilinear lookups."""
+depths of 1e-9 to 1e30, luminance, the cells of clamped bilinear and trilinear lookups, and the bisection of
+cumulative tables."""
 
 from __future__ import annotations
 
@@ -99,3 +100,19 @@ def trilinear_cell(p: wp.vec3, n: wp.vec3i) -> TrilinearCell:
     out.hi = wp.vec3i(wp.min(out.lo[0] + 1, n[0] - 1), wp.min(out.lo[1] + 1, n[1] - 1), wp.min(out.lo[2] + 1, n[2] - 1))
     out.frac = wp.vec3(x - float(out.lo[0]), y - float(out.lo[1]), z - float(out.lo[2]))
     return out
+
+
+@wp.func
+def cdf_search(cdf: wp.array(dtype=float), base: int, count: int, u: float) -> int:
+    """The bin i in 0..count-1 with cdf[base + i] <= u < cdf[base + i + 1] of the non-decreasing cumulative table
+    cdf[base], ..., cdf[base + count] (bisection; u below cdf[base + 1] gives 0, u at or above cdf[base + count - 1]
+    gives count - 1)."""
+    lo = int(0)
+    hi = count
+    while hi - lo > 1:
+        mid = (lo + hi) / 2
+        if cdf[base + mid] <= u:
+            lo = mid
+        else:
+            hi = mid
+    return lo

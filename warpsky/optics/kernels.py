@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky.numerics import cdf_search
 from warpsky.optics.grid import angle_grid, cumulative, segment_table
 from warpsky.optics.phase import phase_eval
 
@@ -114,14 +115,7 @@ def sample_table(cdf: wp.array(dtype=float), row: int, u: float) -> wp.vec2:
     base = row * GRID_SIZE
     total = cdf[base + GRID_SIZE - 1]
     target = u * total
-    lo = int(0)
-    hi = GRID_SIZE - 1
-    while hi - lo > 1:
-        mid = (lo + hi) / 2
-        if cdf[base + mid] <= target:
-            lo = mid
-        else:
-            hi = mid
+    lo = cdf_search(cdf, base, GRID_SIZE - 1, target)
     c0 = cdf[base + lo]
     c1 = cdf[base + lo + 1]
     t0 = grid_angle(lo)
