@@ -142,6 +142,22 @@ class MediaPoint:
     scattering: wp.vec3
 
 
+@wp.func
+def media_span(media: VoxelMedia, origin: wp.vec3, view: wp.vec3, t_near: float, t_end: float) -> wp.vec2:
+    """Union (t0, t1) of the media boxes along the view ray ``origin + t * view`` within [t_near, t_end] (empty:
+    t1 <= t0)."""
+    t0 = t_end
+    t1 = t_near
+    for m in range(media.count):
+        grid = media.grids[m]
+        start = grid.eye_index + grid.index_from_world * origin
+        span = grid_interval(grid, start, grid.index_from_world * view, t_near, t_end)
+        if span[1] > span[0]:
+            t0 = wp.min(t0, span[0])
+            t1 = wp.max(t1, span[1])
+    return wp.vec2(t0, t1)
+
+
 @functools.cache
 def media_functions(has_detail: bool):
     """``sample_media(media: VoxelMedia, p: vec3) -> MediaPoint`` at the camera-relative point ``p`` [m],

@@ -9,7 +9,7 @@ cloud shadows); :func:`shade_kernel`'s kernel shades them:
     E_sky(n) = pi L_sky (1 + n_y) / 2 * exp(-tau_up),
 
 with V_sun the meshes' shadow (a BVH any-hit ray towards the sun), T_sun the transmittance of the voxel media
-towards the sun (the single-scatter march's :func:`~warpsky.techniques.single_scatter.kernels.sun_depth_function`)
+towards the sun (:func:`~warpsky.media.shadow.sun_depth_function`, the march the single-scatter technique uses)
 times the host's factor, and E_sky the irradiance a plane of normal n receives from a uniform sky of radiance
 L_sky over the upper hemisphere and black below the horizon (the view factor of the sky from a plane tilted by
 acos(n_y) is (1 + n_y) / 2), under the voxel media's transmittance towards the zenith exp(-tau_up) as the ground of
@@ -25,10 +25,10 @@ import warp as wp
 from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.sun import Sun
+from warpsky.media.shadow import sun_depth_function
 from warpsky.media.voxel import VoxelMedia
 from warpsky.numerics import exp3
 from warpsky.surfaces.mesh import SurfaceHit, SurfaceMeshes, material_albedo, mesh_hit, mesh_occluded, no_hit
-from warpsky.techniques.single_scatter.kernels import sun_depth_function
 
 
 @wp.struct

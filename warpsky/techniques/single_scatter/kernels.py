@@ -26,8 +26,8 @@ from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import ambient_ground
 from warpsky.light.skylight import SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
-from warpsky.media.detail import detailed_value
-from warpsky.media.voxel import VoxelMedia, grid_interval, grid_value, media_functions
+from warpsky.media.shadow import sun_depth_function
+from warpsky.media.voxel import VoxelMedia, media_functions, media_span
 from warpsky.numerics import exp3, exp_lerp_mean3, luminance
 from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_correction_function
@@ -47,58 +47,6 @@ class MarchSettings:
     environment: SkyEnvironment  # the sky around the media (dome, analytic sky, ground) and the media's asymmetry
     ground_ambient: wp.vec3  # E / pi of the sky above the ground: what a white ground reflects, RGB
     ambient_on: int  # 1: light the media and the ground with them (a dome or sky light)
-
-
-@functools.cache
-def sun_depth_function(has_detail: bool):
-    """``sun_optical_depth(media, origin, t, view_dir, sun_dir, shadow_step) -> vec4``: optical depth (RGB in xyz)
-    from the point ``origin + t * view_dir`` of the view ray to the sun, summed over all grids, and the number of
-    grid lookups it took (w); with ``has_detail`` the media's animated detail is included."""
-
-    @wp.func
-    def sun_optical_depth(media: VoxelMedia, origin: wp.vec3, t: float, view_dir: wp.vec3, sun_dir: wp.vec3,
-                          shadow_step: float) -> wp.vec4:
-        tau = wp.vec3(0.0)
-        lookups = float(0.0)
-        for m in range(media.count):
-            grid = media.grids[m]
-            start = grid.eye_index + grid.index_from_world * origin + t * (grid.index_from_world * view_dir)
-            toward_sun = grid.index_from_world * sun_dir  # index steps per metre towards the sun
-            span = grid_interval(grid, start, toward_sun, 0.0, 1.0e30)
-            if span[1] > span[0]:
-                length = span[1] - span[0]
-                count = wp.max(int(wp.ceil(length / shadow_step)), 1)
-                dt = length / float(count)
-                total = float(0.0)
-                # No early exit at large depth: a step's integral depends on the true depth at its far end through
-                # (exp(-a) - exp(-b)) / (b - a), so a truncated b would brighten optically thick steps.
-                for i in range(count):
-                    s = span[0] + (float(i) + 0.5) * dt
-                    value = grid_value(media.values, grid, start + s * toward_sun)
-                    if wp.static(has_detail):
-                        value = detailed_value(value, media.details, m, origin + t * view_dir + s * sun_dir)
-                    total += value
-                tau += grid.extinction * (total * dt)
-                lookups += float(count)
-        return wp.vec4(tau[0], tau[1], tau[2], lookups)
-
-    return sun_optical_depth
-
-
-@wp.func
-def media_span(media: VoxelMedia, origin: wp.vec3, view: wp.vec3, t_near: float, t_end: float) -> wp.vec2:
-    """Union (t0, t1) of the media boxes along the view ray ``origin + t * view`` within [t_near, t_end] (empty:
-    t1 <= t0)."""
-    t0 = t_end
-    t1 = t_near
-    for m in range(media.count):
-        grid = media.grids[m]
-        start = grid.eye_index + grid.index_from_world * origin
-        span = grid_interval(grid, start, grid.index_from_world * view, t_near, t_end)
-        if span[1] > span[0]:
-            t0 = wp.min(t0, span[0])
-            t1 = wp.max(t1, span[1])
-    return wp.vec2(t0, t1)
 
 
 @kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True))

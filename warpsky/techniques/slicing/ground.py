@@ -12,10 +12,10 @@ from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import ambient_ground
 from warpsky.light.sun import Sun
+from warpsky.media.shadow import sun_depth_function
 from warpsky.media.voxel import VoxelMedia
 from warpsky.numerics import exp3
 from warpsky.surfaces.plane import Ground
-from warpsky.techniques.single_scatter.kernels import sun_depth_function
 
 
 @kernel_variants(has_detail=(False, True), has_dome=(False, True))

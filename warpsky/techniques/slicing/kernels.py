@@ -41,11 +41,10 @@ from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
-from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
+from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions, media_span
 from warpsky.numerics import bilinear_cell, bilinear_mix, exp3, one_minus_exp
 from warpsky.optics.kernels import GRID_SIZE, grid_node, scattering_angle
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
-from warpsky.techniques.single_scatter.kernels import media_span
 from warpsky.techniques.slicing.occlusion import SkyShadow, sky_transmittances
 
 
