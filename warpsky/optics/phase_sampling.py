@@ -1,4 +1,6 @@
-"""Phase sampling on the device: each model's sampling and its density, and the mixture of every medium at a point.
+"""Phase sampling on the device: a medium's sampling density whatever its model, and the mixture of every medium at a
+point. Each analytic model's evaluation, sampling and density sit together in :mod:`warpsky.optics.phase`, a
+table's in :mod:`warpsky.optics.kernels`.
 
 A scattering point holds several media (and the air), each with its own phase function. The path tracer samples
 the mixture in two stages: it picks one component with probability proportional to its mean scattering
@@ -16,20 +18,24 @@ import warp as wp
 
 from warpsky.media.voxel import MediaPoint, VoxelMedia
 from warpsky.optics.kernels import (
-    GRID_SIZE,
     TABLE_KIND,
     DevicePhaseTables,
-    grid_angle,
-    grid_node,
     medium_phase,
     sample_table,
     scattering_angle,
+    table_pdf,
 )
 from warpsky.optics.oriented_phase import OrientedPhases, per_unit_scattering
 from warpsky.optics.oriented_sampling import OrientedTables, directional_sample, directional_value
-from warpsky.optics.phase import INV_FOUR_PI, PHASE_HG, PHASE_RAYLEIGH, phase_eval, phase_rayleigh
+from warpsky.optics.phase import (
+    phase_eval,
+    phase_pdf,
+    phase_rayleigh,
+    phase_sample_cos,
+    rayleigh_pdf,
+    rayleigh_sample_cos,
+)
 
-INV_4PI = wp.constant(INV_FOUR_PI)
 #: Tables are sampled by one channel, green (row ``table * 3 + SAMPLED_CHANNEL``); the other channels' ratio to it
 #: is carried by the sample's weight.
 SAMPLED_CHANNEL = wp.constant(1)
@@ -70,35 +76,12 @@ def sampled_row(kind: int) -> int:
 
 
 @wp.func
-def table_pdf(cdf: wp.array(dtype=float), row: int, theta: float) -> float:
-    """Density per steradian with which :func:`~warpsky.optics.kernels.sample_table` returns ``theta`` from row
-    ``row``."""
-    node = grid_node(theta)
-    i = int(node[0])
-    base = row * GRID_SIZE
-    total = cdf[base + GRID_SIZE - 1]
-    mass = cdf[base + i + 1] - cdf[base + i]
-    width = grid_angle(i + 1) - grid_angle(i)
-    return mass / total / width / (2.0 * wp.pi * wp.max(wp.sin(theta), 1.0e-12))
-
-
-@wp.func
-def hg_sample_cos(g: float, u: float) -> float:
-    """cos θ of a Henyey–Greenstein sample (exact inversion; isotropic for |g| < 1e-4)."""
-    if wp.abs(g) < 1.0e-4:
-        return 1.0 - 2.0 * u
-    s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
-    return wp.clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0)
-
-
-@wp.func
-def model_pdf(cdf: wp.array(dtype=float), kind: int, g: float, theta: float) -> float:
-    """Sampling density [1/sr] of one medium's phase sampling at ``theta``."""
+def medium_pdf(cdf: wp.array(dtype=float), kind: int, g: float, theta: float) -> float:
+    """Sampling density [1/sr] at ``theta`` of one medium's phase sampling: its table's (sampled by the green
+    row), or its analytic model's."""
     if kind >= TABLE_KIND:
         return table_pdf(cdf, sampled_row(kind), theta)
-    if kind == PHASE_HG:
-        return phase_eval(kind, g, wp.cos(theta))
-    return INV_4PI  # isotropic; Rayleigh is sampled uniformly too and weighted by p / pdf
+    return phase_pdf(kind, g, wp.cos(theta))
 
 
 @wp.func
@@ -217,7 +200,7 @@ def mixture_functions(has_tables: bool):
                 chosen = m + 1
         chosen = wp.clamp(chosen, 0, wp.max(media.count - 1, 0))
         u = wp.randf(state)
-        cos_theta = 1.0 - 2.0 * u
+        cos_theta = rayleigh_sample_cos(u)
         oriented = int(-1)
         if not use_air:
             grid = media.grids[chosen]
@@ -226,8 +209,8 @@ def mixture_functions(has_tables: bool):
                     cos_theta = wp.cos(sample_table(tables.cdf, sampled_row(grid.phase_kind), u)[0])
                     if tables.continuation.count > 0:
                         oriented = tables.continuation.table_of[chosen]
-            elif grid.phase_kind == PHASE_HG:
-                cos_theta = hg_sample_cos(grid.phase_g, u)
+            else:
+                cos_theta = phase_sample_cos(grid.phase_kind, grid.phase_g, u)
         out = PhaseSample()
         out.direction = rotate_about(d, cos_theta, 2.0 * wp.pi * wp.randf(state))
         if wp.static(has_tables):
@@ -235,15 +218,15 @@ def mixture_functions(has_tables: bool):
                 source, state = directional_sample(tables.continuation, oriented, d, state)
                 out.direction = source
         theta = scattering_angle(d, out.direction)
-        pdf = air_w * INV_4PI
+        pdf = air_w * rayleigh_pdf(wp.cos(theta))
         for m in range(media.count):
             grid = media.grids[m]
             w = mean3(grid.scattering) * point.density[m]
             if w > 0.0:
                 if wp.static(has_tables):
-                    pdf += w * model_pdf(tables.cdf, grid.phase_kind, grid.phase_g, theta)
+                    pdf += w * medium_pdf(tables.cdf, grid.phase_kind, grid.phase_g, theta)
                 else:
-                    pdf += w * model_pdf(tables.cdf, wp.min(grid.phase_kind, PHASE_RAYLEIGH), grid.phase_g, theta)
+                    pdf += w * phase_pdf(grid.phase_kind, grid.phase_g, wp.cos(theta))
         phase_extra = wp.vec3(0.0)
         if wp.static(has_tables):
             if tables.continuation.count > 0:
