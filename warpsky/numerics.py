@@ -1,6 +1,6 @@
 """Device functions of plain numerics every kernel shares: exponential integrals that stay accurate from optical
-depths of 1e-9 to 1e30, luminance, the cells of clamped bilinear and trilinear lookups, and the bisection of
-cumulative tables."""
+depths of 1e-9 to 1e30, luminance and channel means, the cells of clamped bilinear and trilinear lookups, and the
+bisection of cumulative tables."""
 
 from __future__ import annotations
 
@@ -47,6 +47,12 @@ def exp3(tau: wp.vec3) -> wp.vec3:
 def luminance(c: wp.vec3) -> float:
     """Rec. 709 luminance."""
     return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+
+
+@wp.func
+def mean3(v: wp.vec3) -> float:
+    """Mean of the three channels."""
+    return (v[0] + v[1] + v[2]) / 3.0
 
 
 @wp.struct

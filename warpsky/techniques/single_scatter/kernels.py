@@ -26,12 +26,12 @@ from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import ambient_ground
 from warpsky.light.skylight import SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
+from warpsky.media.phase_mixture import oriented_correction_function, phase_sum_function
 from warpsky.media.shadow import sun_depth_function
 from warpsky.media.voxel import VoxelMedia, media_functions, media_span
 from warpsky.numerics import exp3, exp_lerp_mean3, luminance
 from warpsky.optics.kernels import medium_phase, scattering_angle
-from warpsky.optics.oriented_phase import OrientedPhases, oriented_correction_function
-from warpsky.optics.phase_sampling import phase_sum_function
+from warpsky.optics.oriented_phase import OrientedPhases
 from warpsky.surfaces.plane import Ground
 
 oriented_correction = oriented_correction_function(medium_phase)[0]
