@@ -136,9 +136,8 @@ def phase_sum_function(has_tables: bool):
 
 
 @functools.cache
-def mixture_functions(has_tables: bool):
-    """``(mixture_phase, sample_mixture)`` over the media at a point plus one Rayleigh component (the air; zero
-    scattering for none), specialised on whether any medium uses a phase table."""
+def mixture_phase_function(has_tables: bool):
+    """``mixture_phase(media, point, tables, rayleigh, theta) -> vec3`` (see :func:`mixture_functions`)."""
 
     scattered_phase = phase_sum_function(has_tables)
 
@@ -159,6 +158,29 @@ def mixture_functions(has_tables: bool):
                 out[c] = num[c] / den[c]
         return out
 
+    return mixture_phase
+
+
+@wp.func
+def chosen_medium(media: VoxelMedia, point: MediaPoint, air_weight: float, target: float) -> int:
+    """The medium picked by ``target`` in [0, total) of the mean scattering [1/m] at ``point`` laid out air first
+    (``air_weight``), then the media in order (clamped to the media; the caller checks the air)."""
+    chosen = int(0)
+    running = air_weight
+    for m in range(media.count):
+        running += mean3(media.grids[m].scattering) * point.density[m]
+        if running < target:
+            chosen = m + 1
+    return wp.clamp(chosen, 0, wp.max(media.count - 1, 0))
+
+
+@functools.cache
+def mixture_functions(has_tables: bool):
+    """``(mixture_phase, sample_mixture)`` over the media at a point plus one Rayleigh component (the air; zero
+    scattering for none), specialised on whether any medium uses a phase table."""
+
+    mixture_phase = mixture_phase_function(has_tables)
+
     @wp.func
     def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, rayleigh: wp.vec3, d: wp.vec3,
                        state: wp.uint32) -> PhaseSample:
@@ -171,13 +193,7 @@ def mixture_functions(has_tables: bool):
             total += mean3(media.grids[m].scattering) * point.density[m]
         target = wp.randf(state) * total
         use_air = target < air_w or media.count == 0
-        chosen = int(0)
-        running = air_w
-        for m in range(media.count):
-            running += mean3(media.grids[m].scattering) * point.density[m]
-            if running < target:
-                chosen = m + 1
-        chosen = wp.clamp(chosen, 0, wp.max(media.count - 1, 0))
+        chosen = chosen_medium(media, point, air_w, target)
         u = wp.randf(state)
         cos_theta = rayleigh_sample_cos(u)
         oriented = int(-1)

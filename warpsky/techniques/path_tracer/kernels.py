@@ -83,11 +83,10 @@ class SampleResult:
 
 
 @functools.cache
-def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
-    """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
-    without a dome runs exactly the code it ran before domes existed)."""
-    _media_at, delta_track, ratio_track = tracking_functions(has_detail)
-    primary_end, flight_end, sun_reaches = surface_functions(has_ground)
+def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
+    """``trace_path(...) -> PathState``, one path from its camera ray, specialised like the kernels."""
+    delta_track = tracking_functions(has_detail)[1]
+    flight_end = surface_functions(has_ground)[1]
     scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
 
     @wp.func
@@ -132,6 +131,17 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
             bounce += 1
             path = roulette(path, bounce)
         return path
+
+    return trace_path
+
+
+@functools.cache
+def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
+    """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
+    without a dome runs exactly the code it ran before domes existed)."""
+    ratio_track = tracking_functions(has_detail)[2]
+    primary_end, _flight_end, sun_reaches = surface_functions(has_ground)
+    trace_path = path_function(has_ground, has_tables, has_detail, has_dome)
 
     @wp.func
     def pixel_sample(media: VoxelMedia, majorants: Majorants, phase_tables: PhaseTables, air: Air, sun: Sun,
