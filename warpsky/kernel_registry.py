@@ -13,6 +13,7 @@ import warp as wp
 import warpsky.evaluation.stratiform_reference as stratiform_reference
 import warpsky.evaluation.stratiform_slab as evaluation_slab
 import warpsky.media.advection_kernels as advection_kernels
+import warpsky.media.air_front as air_front
 import warpsky.media.fields as fields
 import warpsky.media.heightfield as heightfield_media
 import warpsky.optics.ice_kernels as ice_kernels
@@ -33,7 +34,7 @@ from warpsky.kernel_variants import variant_modules
 #: Modules holding plain (not factory-made) kernels.
 PLAIN_MODULES = (fields, optics, ice_kernels, sky, evaluation_slab, stratiform_reference, radiosity, stratiform_kernels,
                  advection_kernels, slicing, surfaces_kernels, fog_kernels, heightfield_media, heightfield_kernels,
-                 oriented_ice_kernels)
+                 oriented_ice_kernels, air_front)
 
 def kernel_modules() -> list:
     """Warp ``Module`` objects for every kernel warpsky can launch."""
