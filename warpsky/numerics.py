@@ -55,6 +55,15 @@ def mean3(v: wp.vec3) -> float:
     return (v[0] + v[1] + v[2]) / 3.0
 
 
+@wp.func
+def linear_cell(x: float, n: int):
+    """(lower node, upper node, fraction) of the cell of position ``x`` on an axis of ``n`` nodes at the integers,
+    ``x`` clamped to [0, n - 1] (the upper node is the lower one at the last node)."""
+    c = wp.clamp(x, 0.0, float(n - 1))
+    lo = wp.min(int(c), n - 1)
+    return lo, wp.min(lo + 1, n - 1), c - float(lo)
+
+
 @wp.struct
 class BilinearCell:
     """The texel cell around a point in texel coordinates: its lower and upper texel and the point's fractions."""
@@ -68,12 +77,12 @@ class BilinearCell:
 def bilinear_cell(p: wp.vec2, n: wp.vec2i) -> BilinearCell:
     """The cell of continuous texel position ``p`` (texel centres at integers) in a map of ``n`` texels per axis,
     ``p`` clamped to [0, n - 1] (clamp-to-edge addressing)."""
-    x = wp.clamp(p[0], 0.0, float(n[0] - 1))
-    y = wp.clamp(p[1], 0.0, float(n[1] - 1))
+    i0, i1, fx = linear_cell(p[0], n[0])
+    j0, j1, fy = linear_cell(p[1], n[1])
     out = BilinearCell()
-    out.lo = wp.vec2i(wp.min(int(x), n[0] - 1), wp.min(int(y), n[1] - 1))
-    out.hi = wp.vec2i(wp.min(out.lo[0] + 1, n[0] - 1), wp.min(out.lo[1] + 1, n[1] - 1))
-    out.frac = wp.vec2(x - float(out.lo[0]), y - float(out.lo[1]))
+    out.lo = wp.vec2i(i0, j0)
+    out.hi = wp.vec2i(i1, j1)
+    out.frac = wp.vec2(fx, fy)
     return out
 
 
@@ -98,13 +107,13 @@ class TrilinearCell:
 @wp.func
 def trilinear_cell(p: wp.vec3, n: wp.vec3i) -> TrilinearCell:
     """The cell of index position ``p`` in a grid of ``n`` nodes per axis, ``p`` clamped to [0, n - 1]."""
-    x = wp.clamp(p[0], 0.0, float(n[0] - 1))
-    y = wp.clamp(p[1], 0.0, float(n[1] - 1))
-    z = wp.clamp(p[2], 0.0, float(n[2] - 1))
+    i0, i1, fx = linear_cell(p[0], n[0])
+    j0, j1, fy = linear_cell(p[1], n[1])
+    k0, k1, fz = linear_cell(p[2], n[2])
     out = TrilinearCell()
-    out.lo = wp.vec3i(wp.min(int(x), n[0] - 1), wp.min(int(y), n[1] - 1), wp.min(int(z), n[2] - 1))
-    out.hi = wp.vec3i(wp.min(out.lo[0] + 1, n[0] - 1), wp.min(out.lo[1] + 1, n[1] - 1), wp.min(out.lo[2] + 1, n[2] - 1))
-    out.frac = wp.vec3(x - float(out.lo[0]), y - float(out.lo[1]), z - float(out.lo[2]))
+    out.lo = wp.vec3i(i0, j0, k0)
+    out.hi = wp.vec3i(i1, j1, k1)
+    out.frac = wp.vec3(fx, fy, fz)
     return out
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import warp as wp
 
 from warpsky.media.voxel import MediaPoint, VoxelMedia
+from warpsky.numerics import linear_cell
 from warpsky.optics.kernels import GRID_SIZE, grid_node
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
 
@@ -25,6 +26,7 @@ class AmsTables:
 
 @wp.func
 def ams_value(tables: AmsTables, table: int, order: int, channel: int, theta: float) -> float:
+    """Ams of order ``order`` [1/sr] of table ``table`` in one channel at scattering angle ``theta`` [rad]."""
     node = grid_node(theta)
     i = int(node[0])
     base = ((table * tables.orders + order) * 3 + channel) * GRID_SIZE + i
@@ -34,21 +36,15 @@ def ams_value(tables: AmsTables, table: int, order: int, channel: int, theta: fl
 @wp.func
 def ams_at(tables: AmsTables, table: int, n: float, channel: int, theta: float) -> float:
     """Ams of fractional order n (linear between neighbouring orders; clamped to the last)."""
-    top = tables.orders - 1
-    x = wp.clamp(n, 0.0, float(top))
-    lo = wp.min(int(x), top)
-    hi = wp.min(lo + 1, top)
-    f = x - float(lo)
+    lo, hi, f = linear_cell(n, tables.orders)
     return ams_value(tables, table, lo, channel, theta) * (1.0 - f) + ams_value(tables, table, hi, channel, theta) * f
 
 
 @wp.func
 def forward_at(tables: AmsTables, table: int, n: float, channel: int) -> float:
-    top = tables.orders - 1
-    x = wp.clamp(n, 0.0, float(top))
-    lo = wp.min(int(x), top)
-    hi = wp.min(lo + 1, top)
-    f = x - float(lo)
+    """F of fractional order n in one channel of table ``table`` (linear between neighbouring orders; clamped to
+    the last)."""
+    lo, hi, f = linear_cell(n, tables.orders)
     a = tables.forward[(table * tables.orders + lo) * 3 + channel]
     b = tables.forward[(table * tables.orders + hi) * 3 + channel]
     return a * (1.0 - f) + b * f
