@@ -44,6 +44,15 @@ def per_unit_scattering(point: MediaPoint, rayleigh: wp.vec3, value: wp.vec3) ->
     return out
 
 
+@wp.func
+def oriented_slice(point: MediaPoint, phases: OrientedPhases, m: int) -> int:
+    """The frame's oriented slice of medium ``m`` where it is present at ``point``; -1 where it is absent or its
+    crystals are randomly oriented."""
+    if point.density[m] > 0.0:
+        return phases.slice_of[m]
+    return -1
+
+
 def oriented_correction_function(sample_phase):
     """``(oriented_correction, oriented_mixture_correction)``.
 
@@ -58,9 +67,9 @@ def oriented_correction_function(sample_phase):
         if phases.count == 0:
             return out
         for m in range(media.count):
-            value = point.density[m]
-            index = phases.slice_of[m]
-            if value > 0.0 and index >= 0:
+            index = oriented_slice(point, phases, m)
+            if index >= 0:
+                value = point.density[m]
                 grid = media.grids[m]
                 difference = oriented_value(phases, index, look) - sample_phase(tables, grid.phase_kind,
                                                                                 grid.phase_g, theta)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpsky.media.phase_mixture import oriented_slice
 from warpsky.media.voxel import MediaPoint, VoxelMedia
 from warpsky.numerics import linear_cell
 from warpsky.optics.kernels import GRID_SIZE, grid_node
@@ -98,10 +99,9 @@ def oriented_ams_correction(point: MediaPoint, media: VoxelMedia, tables: AmsTab
     if phases.count == 0:
         return out
     for m in range(media.count):
-        value = point.density[m]
-        index = phases.slice_of[m]
-        if value > 0.0 and index >= 0:
-            s = media.grids[m].scattering * value
+        index = oriented_slice(point, phases, m)
+        if index >= 0:
+            s = media.grids[m].scattering * point.density[m]
             oriented = oriented_value(phases, index, look)
             for c in range(3):
                 weight = order_one_weight(tables, order[c])
