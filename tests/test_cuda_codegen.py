@@ -9,7 +9,6 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pytest
-import warp as wp
 
 from warpsky.kernel_registry import compile_ptx, kernel_modules
 from warpsky.kernel_variants import registered_factories

@@ -160,7 +160,7 @@ def test_path_tracer_hg_sampling_chi_square(device):
     """Henyey-Greenstein sampling of the path tracer (exact inversion) against the closed-form CDF in cos theta."""
     import warp as wp
 
-    from warpsky.optics.phase_sampling import hg_sample_cos
+    from warpsky.optics.phase import hg_sample_cos
 
     @wp.kernel
     def draw(g: float, out: wp.array(dtype=float)):

@@ -115,3 +115,25 @@ def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
     assert abs(z_sum) < 4.0, z_sum
     np.testing.assert_allclose(layer.transmittance, front.transmittance, atol=0.03)
     assert front.radiance.min() > 0.0
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_front_air_transmittance_is_the_sky_passs_bit_for_bit(device, projection):
+    """The front-air kernel and the sky pass share the ray's air: same transmittance to the last bit, looking up
+    and down at a ground plane, with media at random depths in some pixels and none in others."""
+    from warpsky.media.air_front import front_air_transmittance
+    from warpsky.passes.sky.sky import Sky
+    from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
+
+    aperture = (36.0, 36.0) if projection == "perspective" else (900.0, 600.0)  # [mm] film, [m] view window
+    camera = Camera("cam", np.array([0.0, 400.0, 0.0]), look_rotation((0.2, -0.1, -1.0)), 18.0, *aperture,
+                    far=50000.0, projection=projection)
+    sun = Sun(np.array([-0.4, 0.25, -1.0]) / np.linalg.norm([-0.4, 0.25, -1.0]), np.ones(3))
+    scene = Scene(camera, sun, ground=Ground(120.0), atmosphere=Atmosphere(altitude=300.0))
+    rng = np.random.default_rng(4)
+    depth = np.where(rng.random((12, 20)) < 0.3, camera.far, rng.random((12, 20)) * 8000.0).astype(np.float32)
+    front, _ = Sky(device=device).render(scene, 20, 12, media_depth=depth)
+    mine = front_air_transmittance(scene, 20, 12, depth, device)
+    assert mine.shape == (12, 20, 3) and mine.dtype == np.float32
+    assert np.array_equal(mine, front.transmittance)
+    assert np.ptp(mine) > 0.01

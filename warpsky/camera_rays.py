@@ -77,7 +77,26 @@ def camera_ray_origin(cam: PinholeCamera, row: int, col: int, fx: float, fy: flo
     s = camera_film_point(cam, row, col, fx, fy)
     return cam.rotation * wp.vec3(s[0], s[1], 0.0)
 
+@wp.struct
+class PrimaryRay:
+    """A camera ray within the clipping range: ``origin + t * direction`` for t_near <= t <= t_far [m]; the point
+    at t lies at depth t * cos_axis along the view axis."""
+
+    direction: wp.vec3  # unit, world
+    origin: wp.vec3  # eye-relative start [m]: zero for a pinhole, the view window's point for an orthographic camera
+    cos_axis: float  # cosine between the direction and the view axis
+    t_near: float  # [m] along the ray to the near clipping plane
+    t_far: float  # [m] along the ray to the far clipping plane
+
+
 @wp.func
-def camera_ray(cam: PinholeCamera, row: int, col: int) -> wp.vec3:
-    """Unit world direction through the centre of pixel (row, col); row 0 is the top of the image."""
-    return camera_ray_at(cam, row, col, 0.5, 0.5)
+def primary_ray(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) -> PrimaryRay:
+    """The ray through the point (fx, fy) in [0, 1)^2 of pixel (row, col) (fx right, fy down; 0.5, 0.5 is its
+    centre) and the distances along it to the clipping planes."""
+    out = PrimaryRay()
+    out.direction = camera_ray_at(cam, row, col, fx, fy)
+    out.origin = camera_ray_origin(cam, row, col, fx, fy)
+    out.cos_axis = wp.dot(out.direction, camera_forward(cam))
+    out.t_near = cam.near / out.cos_axis
+    out.t_far = cam.far / out.cos_axis
+    return out

@@ -96,7 +96,7 @@ def merge_by_depth(layers: list[Layer], far: float) -> Layer:
 
 def pixel_directions(camera, width: int, height: int) -> np.ndarray:
     """(H, W, 3) world unit directions through the pixel centres of ``camera`` conformed to (width, height), as the
-    kernels' ``camera_ray`` gives them (an orthographic camera's all run along its view axis)."""
+    kernels' ``primary_ray`` gives them (an orthographic camera's all run along its view axis)."""
     camera = camera.conformed(width, height)
     if camera.projection is Projection.ORTHOGRAPHIC:
         return np.broadcast_to(camera.forward, (height, width, 3)).copy()

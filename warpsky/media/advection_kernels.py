@@ -16,6 +16,8 @@ every layer alike (none, or uniform wind) shows the texture itself.
 
 from __future__ import annotations
 
+from typing import Any
+
 import warp as wp
 
 MAX_LAYERS = wp.constant(8)
@@ -69,14 +71,15 @@ def periodic_cell(x: float, n: int):
 
 
 @wp.func
-def lerp_exact(a: float, b: float, t: float) -> float:
-    """``a + (b - a) t``: returns ``a`` bit for bit at ``t = 0``."""
+def lerp_exact(a: Any, b: Any, t: float):
+    """``a + (b - a) t`` for a float or a vector: returns ``a`` bit for bit at ``t = 0``."""
     return a + (b - a) * t
 
 
 @wp.func
-def periodic_bilinear(a: wp.array2d(dtype=float), x: float, y: float) -> float:
-    """Bilinear value of the periodic grid ``a`` at (x, y) in cell units (nodes on integers)."""
+def periodic_bilinear(a: wp.array2d(dtype=Any), x: float, y: float):
+    """Bilinear value (float or vector, as ``a`` holds) of the periodic grid ``a`` ([y, x]) at (x, y) in cell units
+    (nodes on integers)."""
     ny = a.shape[0]
     nx = a.shape[1]
     i0, i1, tx = periodic_cell(x, nx)
@@ -85,32 +88,9 @@ def periodic_bilinear(a: wp.array2d(dtype=float), x: float, y: float) -> float:
 
 
 @wp.func
-def periodic_bilinear_vec2(a: wp.array2d(dtype=wp.vec2), x: float, y: float) -> wp.vec2:
-    """Bilinear vec2 value of the periodic grid ``a`` at (x, y) in cell units."""
-    ny = a.shape[0]
-    nx = a.shape[1]
-    i0, i1, tx = periodic_cell(x, nx)
-    j0, j1, ty = periodic_cell(y, ny)
-    c0 = a[j0, i0] + (a[j0, i1] - a[j0, i0]) * tx
-    c1 = a[j1, i0] + (a[j1, i1] - a[j1, i0]) * tx
-    return c0 + (c1 - c0) * ty
-
-
-@wp.func
-def layer_displacement_2d(d: wp.array3d(dtype=wp.vec2), layer: int, x: float, y: float) -> wp.vec2:
-    """Bilinear displacement of ``layer`` at (x, y) in displacement-grid cells (periodic)."""
-    ny = d.shape[1]
-    nx = d.shape[2]
-    i0, i1, tx = periodic_cell(x, nx)
-    j0, j1, ty = periodic_cell(y, ny)
-    c0 = d[layer, j0, i0] + (d[layer, j0, i1] - d[layer, j0, i0]) * tx
-    c1 = d[layer, j1, i0] + (d[layer, j1, i1] - d[layer, j1, i0]) * tx
-    return c0 + (c1 - c0) * ty
-
-
-@wp.func
-def periodic_trilinear(a: wp.array3d(dtype=float), x: float, y: float, z: float) -> float:
-    """Trilinear value of the periodic grid ``a`` ([z, y, x]) at (x, y, z) in cell units."""
+def periodic_trilinear(a: wp.array3d(dtype=Any), x: float, y: float, z: float):
+    """Trilinear value (float or vector, as ``a`` holds) of the periodic grid ``a`` ([z, y, x]) at (x, y, z) in cell
+    units (nodes on integers)."""
     nz = a.shape[0]
     ny = a.shape[1]
     nx = a.shape[2]
@@ -122,42 +102,6 @@ def periodic_trilinear(a: wp.array3d(dtype=float), x: float, y: float, z: float)
     c10 = lerp_exact(a[k1, j0, i0], a[k1, j0, i1], tx)
     c11 = lerp_exact(a[k1, j1, i0], a[k1, j1, i1], tx)
     return lerp_exact(lerp_exact(c00, c01, ty), lerp_exact(c10, c11, ty), tz)
-
-
-@wp.func
-def periodic_trilinear_vec3(a: wp.array3d(dtype=wp.vec3), x: float, y: float, z: float) -> wp.vec3:
-    """Trilinear vec3 value of the periodic grid ``a`` ([z, y, x]) at (x, y, z) in cell units."""
-    nz = a.shape[0]
-    ny = a.shape[1]
-    nx = a.shape[2]
-    i0, i1, tx = periodic_cell(x, nx)
-    j0, j1, ty = periodic_cell(y, ny)
-    k0, k1, tz = periodic_cell(z, nz)
-    c00 = a[k0, j0, i0] + (a[k0, j0, i1] - a[k0, j0, i0]) * tx
-    c01 = a[k0, j1, i0] + (a[k0, j1, i1] - a[k0, j1, i0]) * tx
-    c10 = a[k1, j0, i0] + (a[k1, j0, i1] - a[k1, j0, i0]) * tx
-    c11 = a[k1, j1, i0] + (a[k1, j1, i1] - a[k1, j1, i0]) * tx
-    c0 = c00 + (c01 - c00) * ty
-    c1 = c10 + (c11 - c10) * ty
-    return c0 + (c1 - c0) * tz
-
-
-@wp.func
-def layer_displacement_3d(d: wp.array4d(dtype=wp.vec3), layer: int, x: float, y: float, z: float) -> wp.vec3:
-    """Trilinear displacement of ``layer`` at (x, y, z) in displacement-grid cells (periodic)."""
-    nz = d.shape[1]
-    ny = d.shape[2]
-    nx = d.shape[3]
-    i0, i1, tx = periodic_cell(x, nx)
-    j0, j1, ty = periodic_cell(y, ny)
-    k0, k1, tz = periodic_cell(z, nz)
-    c00 = d[layer, k0, j0, i0] + (d[layer, k0, j0, i1] - d[layer, k0, j0, i0]) * tx
-    c01 = d[layer, k0, j1, i0] + (d[layer, k0, j1, i1] - d[layer, k0, j1, i0]) * tx
-    c10 = d[layer, k1, j0, i0] + (d[layer, k1, j0, i1] - d[layer, k1, j0, i0]) * tx
-    c11 = d[layer, k1, j1, i0] + (d[layer, k1, j1, i1] - d[layer, k1, j1, i0]) * tx
-    c0 = c00 + (c01 - c00) * ty
-    c1 = c10 + (c11 - c10) * ty
-    return c0 + (c1 - c0) * tz
 
 
 @wp.func
@@ -186,8 +130,7 @@ def advected_value_2d(state: LayerState, x: float, y: float) -> float:
     values = vec8(0.0)
     same = int(1)
     for k in range(state.layer_count):
-        d = layer_displacement_2d(
-            state.displacement, k, px * state.cells_per_texel[0], py * state.cells_per_texel[1])
+        d = periodic_bilinear(state.displacement[k], px * state.cells_per_texel[0], py * state.cells_per_texel[1])
         cx[k] = px + d[0]
         cy[k] = py + d[1]
         values[k] = periodic_bilinear(state.texture, cx[k], cy[k])
@@ -215,8 +158,8 @@ def advected_detail(state: DetailState, p: wp.vec3) -> float:
     values = vec8(0.0)
     same = int(1)
     for k in range(state.layer_count):
-        d = layer_displacement_3d(state.displacement, k, q[0] * state.cells_per_texel[0],
-                                  q[1] * state.cells_per_texel[1], q[2] * state.cells_per_texel[2])
+        d = periodic_trilinear(state.displacement[k], q[0] * state.cells_per_texel[0],
+                               q[1] * state.cells_per_texel[1], q[2] * state.cells_per_texel[2])
         cx[k] = q[0] + d[0]
         cy[k] = q[1] + d[1]
         cz[k] = q[2] + d[2]
@@ -274,14 +217,14 @@ def advect_step_2d(
     y = float(j)
     vx = velocity_cells_per_cell[0]
     vy = velocity_cells_per_cell[1]
-    u1 = periodic_bilinear_vec2(velocity, x * vx, y * vy)  # texels/s
+    u1 = periodic_bilinear(velocity, x * vx, y * vy)  # texels/s
     mx = x - 0.5 * dt * u1[0] / texels_per_cell[0]
     my = y - 0.5 * dt * u1[1] / texels_per_cell[1]
-    u2 = periodic_bilinear_vec2(velocity, mx * vx, my * vy)
+    u2 = periodic_bilinear(velocity, mx * vx, my * vy)
     back = -dt * u2  # texels
     px = x + back[0] / texels_per_cell[0]
     py = y + back[1] / texels_per_cell[1]
-    dst[k, j, i] = layer_displacement_2d(src, k, px, py) + back
+    dst[k, j, i] = periodic_bilinear(src[k], px, py) + back
 
 
 @wp.kernel
@@ -316,14 +259,14 @@ def advect_step_3d(
         dst[k, l, j, i] = src[k, l, j, i]
         return
     x = wp.vec3(float(i), float(j), float(l))
-    u1 = periodic_trilinear_vec3(velocity, x[0] * velocity_cells_per_cell[0], x[1] * velocity_cells_per_cell[1],
-                                 x[2] * velocity_cells_per_cell[2])
+    u1 = periodic_trilinear(velocity, x[0] * velocity_cells_per_cell[0], x[1] * velocity_cells_per_cell[1],
+                            x[2] * velocity_cells_per_cell[2])
     m = x - 0.5 * dt * wp.cw_div(u1, texels_per_cell)
-    u2 = periodic_trilinear_vec3(velocity, m[0] * velocity_cells_per_cell[0], m[1] * velocity_cells_per_cell[1],
-                                 m[2] * velocity_cells_per_cell[2])
+    u2 = periodic_trilinear(velocity, m[0] * velocity_cells_per_cell[0], m[1] * velocity_cells_per_cell[1],
+                            m[2] * velocity_cells_per_cell[2])
     back = -dt * u2
     p = x + wp.cw_div(back, texels_per_cell)
-    dst[k, l, j, i] = layer_displacement_3d(src, k, p[0], p[1], p[2]) + back
+    dst[k, l, j, i] = periodic_trilinear(src[k], p[0], p[1], p[2]) + back
 
 
 @wp.kernel

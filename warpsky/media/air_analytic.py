@@ -34,7 +34,9 @@ import math
 import numpy as np
 import warp as wp
 
-from warpsky.numerics import one_minus_exp_over_x
+from warpsky.camera_rays import PinholeCamera, PrimaryRay
+from warpsky.numerics import exp3, one_minus_exp_over_x
+from warpsky.surfaces.plane import Ground
 
 #: Riley 2004 Table 3: sea-level scattering coefficients [1/m] at 680, 550, 440 nm (our R, G, B).
 RILEY_BETA_SEA_LEVEL = (5.8e-6, 1.35e-5, 3.31e-5)
@@ -148,6 +150,26 @@ def rayleigh(cos_theta) -> np.ndarray:
 # ---- the same on the device (float32) -------------------------------------------------------------------------
 
 X_CUT_WP = wp.constant(X_CUT)
+#: The distance [m] kernels take for infinity (a ray that never leaves the air).
+INFINITE = wp.constant(1.0e30)
+
+
+@wp.struct
+class AnalyticAir:
+    """The air of Riley's sky as kernels see it."""
+
+    beta_sea_level: wp.vec3  # scattering (= extinction) coefficient at sea level [1/m], RGB
+    gamma: float  # 1 / scale height [1/m]
+    camera_altitude: float  # the eye's altitude above sea level [m]
+
+
+def analytic_air(atmosphere, camera_position) -> AnalyticAir:
+    """Kernel view of a :class:`~warpsky.scene.model.Atmosphere` seen from ``camera_position`` (world, metres)."""
+    out = AnalyticAir()
+    out.beta_sea_level = wp.vec3(*np.asarray(atmosphere.beta_sea_level, dtype=np.float64).tolist())
+    out.gamma = float(atmosphere.gamma)
+    out.camera_altitude = float(camera_position[1] + atmosphere.altitude)
+    return out
 
 
 @wp.func
@@ -189,3 +211,42 @@ def air_inscatter(beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, sun_
             g = depth[c] * one_minus_exp_over_x(z)
         out[c] = wp.exp(-exponent) * g
     return out
+
+
+@wp.struct
+class AirRay:
+    """One eye ray's stretch of air: where it starts and how far the air reaches along it."""
+
+    altitude: float  # of the ray's start above sea level [m]
+    t_end: float  # [m] to where the air ends: sea level or the ground plane below, else INFINITE
+    split: float  # [m] to the media's representative depth (Riley §4, Fig. 7), at most t_end
+
+
+@wp.func
+def air_ray(air: AnalyticAir, cam: PinholeCamera, ray: PrimaryRay, has_ground: int, ground: Ground,
+            media_depth: float) -> AirRay:
+    """The air along ``ray`` (from its start, :func:`~warpsky.camera_rays.primary_ray`), split at the media's depth
+    ``media_depth`` along the view axis [m] (the far plane or beyond: no media, the split is the air's end)."""
+    out = AirRay()
+    height = ray.origin[1]  # of the ray's start above the eye (orthographic)
+    out.altitude = air.camera_altitude + height
+    # where the air ends: the ground plane, else infinity
+    out.t_end = INFINITE
+    if ray.direction[1] < 0.0:
+        # the air ends at sea level: below it lies a black surface unless a ground plane comes first
+        out.t_end = wp.max(out.altitude, 0.0) / (-ray.direction[1])
+    if has_ground != 0:
+        if ray.direction[1] < 0.0 and ground.offset < height:
+            out.t_end = wp.min(out.t_end, (ground.offset - height) / ray.direction[1])
+    # the media's representative depth splits the air into a front and a back part (Riley §4, Fig. 7)
+    out.split = out.t_end
+    if media_depth < cam.far:
+        out.split = wp.min(media_depth / ray.cos_axis, out.t_end)
+    return out
+
+
+@wp.func
+def split_transmittance(air: AnalyticAir, along: AirRay, view_y: float) -> wp.vec3:
+    """Transmittance of the air from the ray's start to its split (the front air), RGB, along a ray of elevation
+    sine ``view_y``."""
+    return exp3(air_depth(air.beta_sea_level, air.gamma, along.altitude, view_y, along.split))

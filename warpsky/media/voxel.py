@@ -24,6 +24,7 @@ from warpsky.media.detail import (
     detailed_value,
     medium_details,
 )
+from warpsky.numerics import trilinear_cell
 from warpsky.optics.kernels import TABLE_KIND
 from warpsky.scene.model import VoxelMedium
 
@@ -40,28 +41,6 @@ class VoxelGrid:
     scattering: wp.vec3  # extinction * albedo [1/m per unit field value], RGB
     phase_kind: int  # PhaseKind code, or TABLE_KIND + table index for a species
     phase_g: float  # HG asymmetry
-
-
-@wp.struct
-class TrilinearCell:
-    """The grid cell around a point in index coordinates: its lower and upper node and the point's fractions."""
-
-    lo: wp.vec3i
-    hi: wp.vec3i
-    frac: wp.vec3
-
-
-@wp.func
-def trilinear_cell(p: wp.vec3, n: wp.vec3i) -> TrilinearCell:
-    """The cell of index position ``p`` in a grid of ``n`` nodes per axis, ``p`` clamped to [0, n - 1]."""
-    x = wp.clamp(p[0], 0.0, float(n[0] - 1))
-    y = wp.clamp(p[1], 0.0, float(n[1] - 1))
-    z = wp.clamp(p[2], 0.0, float(n[2] - 1))
-    out = TrilinearCell()
-    out.lo = wp.vec3i(wp.min(int(x), n[0] - 1), wp.min(int(y), n[1] - 1), wp.min(int(z), n[2] - 1))
-    out.hi = wp.vec3i(wp.min(out.lo[0] + 1, n[0] - 1), wp.min(out.lo[1] + 1, n[1] - 1), wp.min(out.lo[2] + 1, n[2] - 1))
-    out.frac = wp.vec3(x - float(out.lo[0]), y - float(out.lo[1]), z - float(out.lo[2]))
-    return out
 
 
 @wp.func
@@ -161,6 +140,22 @@ class MediaPoint:
     density: FieldDensities
     extinction: wp.vec3
     scattering: wp.vec3
+
+
+@wp.func
+def media_span(media: VoxelMedia, origin: wp.vec3, view: wp.vec3, t_near: float, t_end: float) -> wp.vec2:
+    """Union (t0, t1) of the media boxes along the view ray ``origin + t * view`` within [t_near, t_end] (empty:
+    t1 <= t0)."""
+    t0 = t_end
+    t1 = t_near
+    for m in range(media.count):
+        grid = media.grids[m]
+        start = grid.eye_index + grid.index_from_world * origin
+        span = grid_interval(grid, start, grid.index_from_world * view, t_near, t_end)
+        if span[1] > span[0]:
+            t0 = wp.min(t0, span[0])
+            t1 = wp.max(t1, span[1])
+    return wp.vec2(t0, t1)
 
 
 @functools.cache

@@ -1,4 +1,4 @@
-"""Phase tables on the device: lookup, inverse-CDF sampling and the combined phase of several media.
+"""Phase tables on the device: lookup, inverse-CDF sampling and its density, and a medium's phase whatever its model.
 
 Tables share the grid of :mod:`warpsky.optics.grid` (M nodes) and are stored flat, row ``(table * 3 + channel)``
 of M values. Lookups interpolate linearly in theta, like the host-side integrals, so a normalised table integrates
@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky.numerics import cdf_search
 from warpsky.optics.grid import angle_grid, cumulative, segment_table
 from warpsky.optics.phase import phase_eval
 
@@ -105,6 +106,13 @@ def medium_phase(values: wp.array(dtype=float), kind: int, g: float, theta: floa
 
 
 @wp.func
+def interval_density(mass: float, total: float, width: float, theta: float) -> float:
+    """Density per steradian at ``theta`` [rad] of samples spread uniformly in theta over a grid interval ``width``
+    [rad] wide that holds ``mass`` of the table's ``total``."""
+    return mass / total / width / (2.0 * wp.pi * wp.max(wp.sin(theta), 1.0e-12))
+
+
+@wp.func
 def sample_table(cdf: wp.array(dtype=float), row: int, u: float) -> wp.vec2:
     """Sample a scattering angle from row ``row``'s cumulative table: (theta [rad], pdf per steradian).
 
@@ -114,14 +122,7 @@ def sample_table(cdf: wp.array(dtype=float), row: int, u: float) -> wp.vec2:
     base = row * GRID_SIZE
     total = cdf[base + GRID_SIZE - 1]
     target = u * total
-    lo = int(0)
-    hi = GRID_SIZE - 1
-    while hi - lo > 1:
-        mid = (lo + hi) / 2
-        if cdf[base + mid] <= target:
-            lo = mid
-        else:
-            hi = mid
+    lo = cdf_search(cdf, base, GRID_SIZE - 1, target)
     c0 = cdf[base + lo]
     c1 = cdf[base + lo + 1]
     t0 = grid_angle(lo)
@@ -131,8 +132,18 @@ def sample_table(cdf: wp.array(dtype=float), row: int, u: float) -> wp.vec2:
     if mass > 0.0:
         frac = wp.clamp((target - c0) / mass, 0.0, 1.0)
     theta = t0 + frac * (t1 - t0)
-    pdf = mass / total / (t1 - t0) / (2.0 * wp.pi * wp.max(wp.sin(theta), 1.0e-12))
-    return wp.vec2(theta, pdf)
+    return wp.vec2(theta, interval_density(mass, total, t1 - t0, theta))
+
+
+@wp.func
+def table_pdf(cdf: wp.array(dtype=float), row: int, theta: float) -> float:
+    """Density per steradian with which :func:`sample_table` returns ``theta`` from row ``row``."""
+    node = grid_node(theta)
+    i = int(node[0])
+    base = row * GRID_SIZE
+    total = cdf[base + GRID_SIZE - 1]
+    mass = cdf[base + i + 1] - cdf[base + i]
+    return interval_density(mass, total, grid_angle(i + 1) - grid_angle(i), theta)
 
 
 @dataclass
@@ -187,4 +198,4 @@ def sample(tables: DevicePhaseTables, row: int, count: int, seed: int, device) -
 
 
 __all__ = ["DevicePhaseTables", "GRID_SIZE", "TABLE_KIND", "lookup", "medium_phase", "sample",
-           "sample_table", "scattering_angle", "table_phase", "table_value"]
+           "sample_table", "scattering_angle", "table_pdf", "table_phase", "table_value"]

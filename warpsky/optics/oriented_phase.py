@@ -30,7 +30,7 @@ import math
 import numpy as np
 import warp as wp
 
-from warpsky.media.voxel import MediaPoint, VoxelMedia
+from warpsky.numerics import bilinear_cell, bilinear_mix
 from warpsky.optics.oriented_ice_kernels import SkyGrid
 
 #: Sun elevations are rounded to this step [deg] before a table is built, so that frames a hair apart share it.
@@ -70,68 +70,14 @@ def oriented_value(phases: OrientedPhases, slice_index: int, look: wp.vec3) -> w
     between the bin centres in (elevation, azimuth from the sun) so that the arcs' edges do not show the bins."""
     local = phases.sun_from_world * look
     horizontal = wp.sqrt(local[0] * local[0] + local[2] * local[2])
-    rows = phases.grid.elevation_bins
-    columns = phases.grid.azimuth_bins
-    y = wp.clamp((wp.atan2(local[1], horizontal) + 0.5 * wp.pi) / phases.grid.elevation_step, 0.0, float(rows - 1))
-    x = wp.clamp(wp.atan2(wp.abs(local[2]), local[0]) / phases.grid.azimuth_step, 0.0, float(columns - 1))
-    r0 = wp.min(int(y), rows - 1)
-    c0 = wp.min(int(x), columns - 1)
-    r1 = wp.min(r0 + 1, rows - 1)
-    c1 = wp.min(c0 + 1, columns - 1)
-    fy = y - float(r0)
-    fx = x - float(c0)
-    low = slice_texel(phases, slice_index, r0, c0) * (1.0 - fx) + slice_texel(phases, slice_index, r0, c1) * fx
-    high = slice_texel(phases, slice_index, r1, c0) * (1.0 - fx) + slice_texel(phases, slice_index, r1, c1) * fx
-    return low * (1.0 - fy) + high * fy
-
-
-@wp.func
-def per_unit_scattering(point: MediaPoint, rayleigh: wp.vec3, value: wp.vec3) -> wp.vec3:
-    """``value`` [1/(m sr)] divided by the scattering coefficient at ``point``, the media's plus ``rayleigh`` [1/m]
-    of air, per channel (0 where nothing scatters): a sum over components in Riley Eq. 6 made a phase [1/sr]."""
-    total = rayleigh + point.scattering
-    out = wp.vec3(0.0)
-    for c in range(3):
-        if total[c] > 0.0:
-            out[c] = value[c] / total[c]
-    return out
-
-
-def oriented_correction_function(sample_phase):
-    """``(oriented_correction, oriented_mixture_correction)``.
-
-    ``oriented_correction(media, point, tables, phases, look, theta) -> vec3``: what the oriented media at
-    ``point`` add to the scattering-weighted phase sum sum_m sigma_s,m P_m(theta) [1/(m sr)] of the techniques,
-    sum over oriented media of sigma_s,m (P_slice(look) - P_m(theta)); zero when no medium is oriented.
-    ``sample_phase(tables, kind, g, theta)`` is the phase the caller's sum used for a medium."""
-    @wp.func
-    def oriented_correction(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float),
-                            phases: OrientedPhases, look: wp.vec3, theta: float) -> wp.vec3:
-        out = wp.vec3(0.0)
-        if phases.count == 0:
-            return out
-        for m in range(media.count):
-            value = point.density[m]
-            index = phases.slice_of[m]
-            if value > 0.0 and index >= 0:
-                grid = media.grids[m]
-                difference = oriented_value(phases, index, look) - sample_phase(tables, grid.phase_kind,
-                                                                                grid.phase_g, theta)
-                out += wp.cw_mul(grid.scattering * value, difference)
-        return out
-
-    @wp.func
-    def oriented_mixture_correction(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float),
-                                    phases: OrientedPhases, rayleigh: wp.vec3, look: wp.vec3,
-                                    theta: float) -> wp.vec3:
-        """The same for a mixture phase (Riley Eq. 6, normalised by the summed scattering, ``rayleigh`` [1/m] of
-        air included): the correction divided by that sum [1/sr]."""
-        if phases.count == 0:
-            return wp.vec3(0.0)
-        return per_unit_scattering(point, rayleigh, oriented_correction(media, point, tables, phases, look, theta))
-
-    return oriented_correction, oriented_mixture_correction
-
+    y = (wp.atan2(local[1], horizontal) + 0.5 * wp.pi) / phases.grid.elevation_step
+    x = wp.atan2(wp.abs(local[2]), local[0]) / phases.grid.azimuth_step
+    cell = bilinear_cell(wp.vec2(x, y), wp.vec2i(phases.grid.azimuth_bins, phases.grid.elevation_bins))
+    lo = cell.lo  # (column, row)
+    hi = cell.hi
+    return bilinear_mix(slice_texel(phases, slice_index, lo[1], lo[0]), slice_texel(phases, slice_index, lo[1], hi[0]),
+                        slice_texel(phases, slice_index, hi[1], lo[0]), slice_texel(phases, slice_index, hi[1], hi[0]),
+                        cell.frac)
 
 
 def sun_elevation_deg(scene) -> float:

@@ -27,6 +27,7 @@ import math
 import numpy as np
 import warp as wp
 
+from warpsky.numerics import cdf_search
 from warpsky.optics.oriented_ice_kernels import SkyGrid
 
 #: Incoming elevations [deg] at which the continuation table is built (the sun's own light uses the frame's exact
@@ -117,20 +118,6 @@ def directional_value(tables: OrientedTables, table: int, s: wp.vec3, look: wp.v
     for c in range(3):
         out[c] = tables.values[a + c] * (1.0 - t) + tables.values[b + c] * t
     return out
-
-
-@wp.func
-def cdf_search(cdf: wp.array(dtype=float), base: int, count: int, u: float) -> int:
-    """The bin i in 0..count-1 with cdf[base + i] <= u < cdf[base + i + 1] (bisection)."""
-    lo = int(0)
-    hi = count
-    while hi - lo > 1:
-        mid = (lo + hi) / 2
-        if cdf[base + mid] <= u:
-            lo = mid
-        else:
-            hi = mid
-    return lo
 
 
 @wp.func

@@ -1,35 +1,18 @@
-"""Phase sampling on the device: each model's sampling and its density, and the mixture of every medium at a point.
-
-A scattering point holds several media (and the air), each with its own phase function. The path tracer samples
-the mixture in two stages: it picks one component with probability proportional to its mean scattering
-coefficient, then samples that component's phase (Henyey–Greenstein by exact inversion, tables by their inverse
-CDF, isotropic and Rayleigh uniformly). The sample's weight is the mixture's phase (Riley 2004, Eq. 6: the
-scattering-weighted phase of all components, per channel) over the mixture's pdf (the weighted sum of every
-component's sampling density), so the estimate is unbiased whatever the component picked.
+"""Phase sampling on the device: the tables kernels sample from (:class:`PhaseTables`), a medium's sampling density
+whatever its model, and the rotation of a direction by a sampled angle. Each analytic model's evaluation, sampling
+and density sit together in :mod:`warpsky.optics.phase`, a table's in :mod:`warpsky.optics.kernels`; the mixture
+of every medium at a point is :mod:`warpsky.media.phase_mixture`.
 """
 
 from __future__ import annotations
 
-import functools
-
 import warp as wp
 
-from warpsky.media.voxel import MediaPoint, VoxelMedia
-from warpsky.optics.kernels import (
-    GRID_SIZE,
-    TABLE_KIND,
-    DevicePhaseTables,
-    grid_angle,
-    grid_node,
-    medium_phase,
-    sample_table,
-    scattering_angle,
-)
-from warpsky.optics.oriented_phase import OrientedPhases, per_unit_scattering
-from warpsky.optics.oriented_sampling import OrientedTables, directional_sample, directional_value
-from warpsky.optics.phase import INV_FOUR_PI, PHASE_HG, PHASE_RAYLEIGH, phase_eval, phase_rayleigh
+from warpsky.optics.kernels import TABLE_KIND, DevicePhaseTables, table_pdf
+from warpsky.optics.oriented_phase import OrientedPhases
+from warpsky.optics.oriented_sampling import OrientedTables
+from warpsky.optics.phase import phase_pdf
 
-INV_4PI = wp.constant(INV_FOUR_PI)
 #: Tables are sampled by one channel, green (row ``table * 3 + SAMPLED_CHANNEL``); the other channels' ratio to it
 #: is carried by the sample's weight.
 SAMPLED_CHANNEL = wp.constant(1)
@@ -70,35 +53,12 @@ def sampled_row(kind: int) -> int:
 
 
 @wp.func
-def table_pdf(cdf: wp.array(dtype=float), row: int, theta: float) -> float:
-    """Density per steradian with which :func:`~warpsky.optics.kernels.sample_table` returns ``theta`` from row
-    ``row``."""
-    node = grid_node(theta)
-    i = int(node[0])
-    base = row * GRID_SIZE
-    total = cdf[base + GRID_SIZE - 1]
-    mass = cdf[base + i + 1] - cdf[base + i]
-    width = grid_angle(i + 1) - grid_angle(i)
-    return mass / total / width / (2.0 * wp.pi * wp.max(wp.sin(theta), 1.0e-12))
-
-
-@wp.func
-def hg_sample_cos(g: float, u: float) -> float:
-    """cos θ of a Henyey–Greenstein sample (exact inversion; isotropic for |g| < 1e-4)."""
-    if wp.abs(g) < 1.0e-4:
-        return 1.0 - 2.0 * u
-    s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
-    return wp.clamp((1.0 + g * g - s * s) / (2.0 * g), -1.0, 1.0)
-
-
-@wp.func
-def model_pdf(cdf: wp.array(dtype=float), kind: int, g: float, theta: float) -> float:
-    """Sampling density [1/sr] of one medium's phase sampling at ``theta``."""
+def medium_pdf(cdf: wp.array(dtype=float), kind: int, g: float, theta: float) -> float:
+    """Sampling density [1/sr] at ``theta`` of one medium's phase sampling: its table's (sampled by the green
+    row), or its analytic model's."""
     if kind >= TABLE_KIND:
         return table_pdf(cdf, sampled_row(kind), theta)
-    if kind == PHASE_HG:
-        return phase_eval(kind, g, wp.cos(theta))
-    return INV_4PI  # isotropic; Rayleigh is sampled uniformly too and weighted by p / pdf
+    return phase_pdf(kind, g, wp.cos(theta))
 
 
 @wp.func
@@ -111,153 +71,3 @@ def rotate_about(d: wp.vec3, cos_theta: float, phi: float) -> wp.vec3:
     v = wp.cross(d, u)
     sin_theta = wp.sqrt(wp.max(1.0 - cos_theta * cos_theta, 0.0))
     return wp.normalize(d * cos_theta + (u * wp.cos(phi) + v * wp.sin(phi)) * sin_theta)
-
-
-@wp.func
-def mean3(v: wp.vec3) -> float:
-    return (v[0] + v[1] + v[2]) / 3.0
-
-
-@wp.struct
-class PhaseSample:
-    direction: wp.vec3
-    weight: wp.vec3  # combined phase / sampling pdf, per channel
-    state: wp.uint32
-
-
-@wp.func
-def continuation_terms(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, d: wp.vec3, s: wp.vec3,
-                       theta: float) -> wp.vec4:
-    """What oriented ice changes in a continued path's mixture, for light from ``s`` scattered along ``d``:
-    (sum of scattering_m (T_m(-d, -s) - P_m(theta)) RGB [1/(m sr)], sum of mean scattering_m (T_m green - its
-    table's sampling density at theta) [1/(m sr)]) over the oriented media m at ``point``: their random table
-    replaced by the oriented one in the phase and in the sampling density."""
-    out = wp.vec4(0.0)
-    for m in range(media.count):
-        value = point.density[m]
-        index = tables.continuation.table_of[m]
-        if value > 0.0 and index >= 0:
-            grid = media.grids[m]
-            oriented = directional_value(tables.continuation, index, -d, -s)
-            difference = wp.cw_mul(grid.scattering * value, oriented - medium_phase(tables.values, grid.phase_kind,
-                                                                                   grid.phase_g, theta))
-            density = oriented[SAMPLED_CHANNEL] - table_pdf(tables.cdf, sampled_row(grid.phase_kind), theta)
-            out += wp.vec4(difference[0], difference[1], difference[2], mean3(grid.scattering) * value * density)
-    return out
-
-
-@functools.cache
-def phase_sum_function(has_tables: bool):
-    """``scattered_phase(media, point, tables, start, theta) -> vec3``: ``start`` plus the sum over the media at
-    ``point`` of scattering_i P_i(theta) [1/(m sr)], in medium order (Riley Eq. 6 before dividing by the summed
-    scattering); ``tables`` are the flat phase tables, ``theta`` the scattering angle [rad]. Specialised on whether
-    any medium uses a phase table (without, ``tables`` is never read). It reads no grid: the densities come from
-    ``point``."""
-
-    @wp.func
-    def scattered_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), start: wp.vec3,
-                        theta: float) -> wp.vec3:
-        out = start
-        for m in range(media.count):
-            value = point.density[m]
-            if value > 0.0:
-                grid = media.grids[m]
-                phase = wp.vec3(0.0)
-                if wp.static(has_tables):
-                    phase = medium_phase(tables, grid.phase_kind, grid.phase_g, theta)
-                else:
-                    phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
-                out += wp.cw_mul(grid.scattering * value, phase)
-        return out
-
-    return scattered_phase
-
-
-@functools.cache
-def mixture_functions(has_tables: bool):
-    """``(mixture_phase, sample_mixture)`` over the media at a point plus one Rayleigh component (the air; zero
-    scattering for none), specialised on whether any medium uses a phase table."""
-
-    scattered_phase = phase_sum_function(has_tables)
-
-    @wp.func
-    def mixture_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), rayleigh: wp.vec3,
-                      theta: float) -> wp.vec3:
-        """Riley Eq. 6: the scattering-weighted phase [1/sr] at scattering angle ``theta`` of the Rayleigh component
-        of scattering ``rayleigh`` [1/m] and every medium at ``point``, summed in that order."""
-        num = scattered_phase(media, point, tables, rayleigh * phase_rayleigh(wp.cos(theta)), theta)
-        den = rayleigh
-        for m in range(media.count):
-            value = point.density[m]
-            if value > 0.0:
-                den += media.grids[m].scattering * value
-        out = wp.vec3(0.0)
-        for c in range(3):
-            if den[c] > 0.0:
-                out[c] = num[c] / den[c]
-        return out
-
-    @wp.func
-    def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, rayleigh: wp.vec3, d: wp.vec3,
-                       state: wp.uint32) -> PhaseSample:
-        """New direction after scattering at ``point`` from direction ``d``: pick the Rayleigh component or a medium
-        by mean scattering, sample its phase (Rayleigh: uniformly), weight by the mixture's phase over the mixture's
-        pdf. Three random draws: the component, cos θ, the azimuth."""
-        air_w = mean3(rayleigh)
-        total = air_w
-        for m in range(media.count):
-            total += mean3(media.grids[m].scattering) * point.density[m]
-        target = wp.randf(state) * total
-        use_air = target < air_w or media.count == 0
-        chosen = int(0)
-        running = air_w
-        for m in range(media.count):
-            running += mean3(media.grids[m].scattering) * point.density[m]
-            if running < target:
-                chosen = m + 1
-        chosen = wp.clamp(chosen, 0, wp.max(media.count - 1, 0))
-        u = wp.randf(state)
-        cos_theta = 1.0 - 2.0 * u
-        oriented = int(-1)
-        if not use_air:
-            grid = media.grids[chosen]
-            if grid.phase_kind >= TABLE_KIND:
-                if wp.static(has_tables):
-                    cos_theta = wp.cos(sample_table(tables.cdf, sampled_row(grid.phase_kind), u)[0])
-                    if tables.continuation.count > 0:
-                        oriented = tables.continuation.table_of[chosen]
-            elif grid.phase_kind == PHASE_HG:
-                cos_theta = hg_sample_cos(grid.phase_g, u)
-        out = PhaseSample()
-        out.direction = rotate_about(d, cos_theta, 2.0 * wp.pi * wp.randf(state))
-        if wp.static(has_tables):
-            if oriented >= 0:  # oriented ice: its table for light arriving along d (six more draws)
-                source, state = directional_sample(tables.continuation, oriented, d, state)
-                out.direction = source
-        theta = scattering_angle(d, out.direction)
-        pdf = air_w * INV_4PI
-        for m in range(media.count):
-            grid = media.grids[m]
-            w = mean3(grid.scattering) * point.density[m]
-            if w > 0.0:
-                if wp.static(has_tables):
-                    pdf += w * model_pdf(tables.cdf, grid.phase_kind, grid.phase_g, theta)
-                else:
-                    pdf += w * model_pdf(tables.cdf, wp.min(grid.phase_kind, PHASE_RAYLEIGH), grid.phase_g, theta)
-        phase_extra = wp.vec3(0.0)
-        if wp.static(has_tables):
-            if tables.continuation.count > 0:
-                terms = continuation_terms(media, point, tables, d, out.direction, theta)
-                pdf += terms[3]
-                phase_extra = wp.vec3(terms[0], terms[1], terms[2])
-        pdf = pdf / wp.max(total, 1.0e-30)
-        out.state = state
-        out.weight = wp.vec3(0.0)
-        if pdf > 0.0:
-            phase = mixture_phase(media, point, tables.values, rayleigh, theta)
-            if wp.static(has_tables):
-                phase += per_unit_scattering(point, rayleigh, phase_extra)
-            out.weight = wp.max(phase, wp.vec3(0.0)) / pdf
-        return out
-
-    return mixture_phase, sample_mixture

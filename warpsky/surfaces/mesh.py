@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpsky.numerics import bilinear_cell, bilinear_mix
 from warpsky.scene.layers import GroundTexture
 
 
@@ -84,18 +85,14 @@ def material_albedo(surfaces: SurfaceMeshes, material: int, p: wp.vec3) -> wp.ve
         return m.albedo
     nx = m.texture_shape[0]
     nz = m.texture_shape[1]
-    u = wp.clamp((p[0] - m.texture_origin[0]) / m.texture_size[0] * float(nx) - 0.5, 0.0, float(nx - 1))
-    v = wp.clamp((p[2] - m.texture_origin[1]) / m.texture_size[1] * float(nz) - 0.5, 0.0, float(nz - 1))
-    i0 = wp.min(int(u), nx - 1)
-    j0 = wp.min(int(v), nz - 1)
-    i1 = wp.min(i0 + 1, nx - 1)
-    j1 = wp.min(j0 + 1, nz - 1)
-    fu = u - float(i0)
-    fv = v - float(j0)
+    u = (p[0] - m.texture_origin[0]) / m.texture_size[0] * float(nx) - 0.5
+    v = (p[2] - m.texture_origin[1]) / m.texture_size[1] * float(nz) - 0.5
+    cell = bilinear_cell(wp.vec2(u, v), m.texture_shape)
+    lo = cell.lo
+    hi = cell.hi
     b = m.texture_offset
-    low = surfaces.texels[b + i0 * nz + j0] * (1.0 - fu) + surfaces.texels[b + i1 * nz + j0] * fu
-    high = surfaces.texels[b + i0 * nz + j1] * (1.0 - fu) + surfaces.texels[b + i1 * nz + j1] * fu
-    return low * (1.0 - fv) + high * fv
+    return bilinear_mix(surfaces.texels[b + lo[0] * nz + lo[1]], surfaces.texels[b + hi[0] * nz + lo[1]],
+                        surfaces.texels[b + lo[0] * nz + hi[1]], surfaces.texels[b + hi[0] * nz + hi[1]], cell.frac)
 
 
 @wp.func

@@ -25,7 +25,7 @@ import math
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, camera_forward, primary_ray
 from warpsky.media.analytic_fog import FogSet, fog_density, fogs_optical_depth
 from warpsky.surfaces.mesh import SurfaceMeshes, mesh_occluded
 
@@ -298,8 +298,9 @@ def fog_kernel(fogs: FogSet, march: FogMarch, cam: PinholeCamera, limit: wp.arra
     depths [m])."""
     tid_row, col = wp.tid()
     row = row_offset + tid_row
-    d32 = camera_ray(cam, row, col)
-    o32 = camera_ray_origin(cam, row, col, 0.5, 0.5)
+    eye_ray = primary_ray(cam, row, col, 0.5, 0.5)
+    d32 = eye_ray.direction
+    o32 = eye_ray.origin
     w = wp.normalize(wp.vec3d(wp.float64(d32[0]), wp.float64(d32[1]), wp.float64(d32[2])))
     o = wp.vec3d(wp.float64(o32[0]), wp.float64(o32[1]), wp.float64(o32[2]))
     forward = camera_forward(cam)

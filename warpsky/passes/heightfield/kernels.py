@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.light.sun import Sun
 from warpsky.media.heightfield import (
     HazeSlab,
@@ -240,13 +240,13 @@ def heightfield_kernel(
 ):
     r, col = wp.tid()
     row = r + row_offset
-    view = camera_ray(cam, row, col)
-    o = camera_ray_origin(cam, row, col, 0.5, 0.5)
-    cos_axis = wp.dot(view, camera_forward(cam))
-    t_near = cam.near / cos_axis
-    t_end = cam.far / cos_axis
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    view = ray.direction
+    o = ray.origin
+    t_near = ray.t_near
+    t_end = ray.t_far
     if march.has_limit != 0:
-        t_end = wp.min(t_end, limit[row, col] / cos_axis)
+        t_end = wp.min(t_end, limit[row, col] / ray.cos_axis)
     state = MarchState()
     state.light = wp.vec3(0.0)
     state.tau = wp.vec3(0.0)
@@ -264,7 +264,8 @@ def heightfield_kernel(
         for k in range(3):
             if state.done == 0 and cuts[k + 1] > cuts[k]:
                 in_haze = wp.where(k == 1, 1.0, 0.0)
-                state = march_segment(hf, haze, sun, march, state, o, view, cuts[k], cuts[k + 1], in_haze, cos_axis)
+                state = march_segment(hf, haze, sun, march, state, o, view, cuts[k], cuts[k + 1], in_haze,
+                                      ray.cos_axis)
     radiance[row, col] = state.light
     transmittance[row, col] = exp3(state.tau)
     if state.weight_sum > 1.0e-6:

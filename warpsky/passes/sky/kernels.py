@@ -4,22 +4,18 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.light.sun import Sun
-from warpsky.media.air_analytic import air_depth, air_inscatter
+from warpsky.media.air_analytic import INFINITE, AnalyticAir, air_depth, air_inscatter, air_ray, split_transmittance
 from warpsky.numerics import exp3
 from warpsky.optics.phase import phase_rayleigh
 from warpsky.surfaces.plane import Ground
-
-INFINITE = wp.constant(1.0e30)
 
 
 @wp.kernel
 def sky_kernel(
     cam: PinholeCamera,
-    camera_altitude: float,
-    beta_sl: wp.vec3,
-    gamma: float,
+    air: AnalyticAir,
     sun: Sun,
     has_ground: int,
     ground: Ground,
@@ -29,30 +25,21 @@ def sky_kernel(
     back_radiance: wp.array2d(dtype=wp.vec3),
 ):
     row, col = wp.tid()
-    view = camera_ray(cam, row, col)
-    height = camera_ray_origin(cam, row, col, 0.5, 0.5)[1]  # of the ray's start above the eye (orthographic)
-    altitude = camera_altitude + height
-    cos_axis = wp.dot(view, camera_forward(cam))
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    view = ray.direction
+    along = air_ray(air, cam, ray, has_ground, ground, media_depth[row, col])
+    altitude = along.altitude
+    t_end = along.t_end
+    split = along.split
+    beta_sl = air.beta_sea_level
+    gamma = air.gamma
     sun_dir = sun.direction
-    # where the air ends: the ground plane, else infinity
-    t_end = INFINITE
-    if view[1] < 0.0:
-        # the air ends at sea level: below it lies a black surface unless a ground plane comes first
-        t_end = wp.max(altitude, 0.0) / (-view[1])
-    if has_ground != 0:
-        if view[1] < 0.0 and ground.offset < height:
-            t_end = wp.min(t_end, (ground.offset - height) / view[1])
-    # the media's representative depth splits the air into a front and a back part (Riley §4, Fig. 7)
-    split = t_end
-    d = media_depth[row, col]
-    if d < cam.far:
-        split = wp.min(d / cos_axis, t_end)
     cos_theta = wp.dot(sun_dir, view)  # light travels along -sun, leaves towards the eye along -view
     phase = phase_rayleigh(cos_theta)
     sun_y = sun.air_sine  # the sun's optical depth at height h is the vertical column over air_sine
     front = air_inscatter(beta_sl, gamma, altitude, view[1], sun_y, split)
     front_radiance[row, col] = wp.cw_mul(sun.irradiance, front) * phase
-    front_transmittance[row, col] = exp3(air_depth(beta_sl, gamma, altitude, view[1], split))
+    front_transmittance[row, col] = split_transmittance(air, along, view[1])
     back = wp.vec3(0.0)
     if split < t_end:
         h_split = altitude + view[1] * split

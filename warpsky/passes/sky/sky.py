@@ -10,6 +10,7 @@ from warpsky.camera_rays import pinhole_camera
 from warpsky.device import is_cpu
 from warpsky.layer import Layer
 from warpsky.light.sun import sun_struct, sunlight
+from warpsky.media.air_analytic import analytic_air
 from warpsky.passes.base import Pass
 from warpsky.passes.sky.kernels import sky_kernel
 from warpsky.resources import MemoryEstimate
@@ -47,8 +48,7 @@ class Sky:
             depth_in = device_buffers.reusable("sky:media_depth", shape, float, self.device)
             depth_in.assign(np.ascontiguousarray(depth, dtype=np.float32))
             wp.launch(sky_kernel, dim=shape, inputs=[
-                pinhole_camera(camera, width, height), float(camera.position[1] + atm.altitude),
-                wp.vec3(*atm.beta_sea_level.tolist()), float(atm.gamma),
+                pinhole_camera(camera, width, height), analytic_air(atm, camera.position),
                 sun_struct(sunlight(scene), unlit_direction=BELOW),
                 int(scene.ground is not None), ground_struct(scene.ground, camera.position),
                 depth_in, front, front_t, back,

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.light.sun import Sun
 from warpsky.passes.stratiform.radiosity_kernels import bilinear
 from warpsky.passes.stratiform.slab import INV_PI, MU_MIN, SlabOptics, order_energies, slab_radiance
@@ -65,6 +65,126 @@ def grid_lookup(buffer: wp.array2d(dtype=wp.vec3), x: float, z: float, x0: float
     return bilinear(buffer, map_coord(x, x0, sx, buffer.shape[0]), map_coord(z, z0, sz, buffer.shape[1]))
 
 
+@wp.struct
+class LayerHit:
+    """Where an eye ray meets the layer."""
+
+    t: float  # [m] along the ray; < 0: it misses the layer
+    thickness: float  # the layer's thickness there [m]
+    normal: wp.vec3  # the surface's normal there (the base's, facing down, from below)
+    below: int  # 1: the ray starts below the cloud base
+
+
+@wp.func
+def top_crossing(thickness: wp.array2d(dtype=float), g: LayerGeometry, o: wp.vec3, d: wp.vec3) -> float:
+    """First t [m] at which the descending ray ``o + t d``, started above the base, reaches the top surface
+    base + thickness(x, z): marched in MARCH_STEPS steps from the top plane (or the eye) down to the base plane and
+    refined by 6 bisections; -1 when it does not."""
+    t_hit = float(-1.0)
+    t0 = wp.max((g.top - o[1]) / d[1], 0.0)
+    t1 = (g.base - o[1]) / d[1]
+    if g.top > o[1]:
+        t0 = 0.0
+    dt = (t1 - t0) / float(MARCH_STEPS)
+    prev = t0
+    for step in range(MARCH_STEPS):
+        t = t0 + float(step + 1) * dt
+        p = o + t * d
+        if t_hit < 0.0 and p[1] <= g.base + thickness_at(thickness, g, p[0], p[2]) + 1.0e-3:
+            lo = prev
+            hi = t
+            for _ in range(6):
+                mid = 0.5 * (lo + hi)
+                q = o + mid * d
+                if q[1] <= g.base + thickness_at(thickness, g, q[0], q[2]):
+                    hi = mid
+                else:
+                    lo = mid
+            t_hit = hi
+        prev = t
+    return t_hit
+
+
+@wp.func
+def top_normal(thickness: wp.array2d(dtype=float), g: LayerGeometry, p: wp.vec3) -> wp.vec3:
+    """Unit normal of the top surface at ``p`` from the thickness map's central differences half a texel apart."""
+    eps = 0.5 * wp.min(g.sx / float(thickness.shape[0]), g.sz / float(thickness.shape[1]))
+    gx = (thickness_at(thickness, g, p[0] + eps, p[2]) - thickness_at(thickness, g, p[0] - eps, p[2])) / (2.0 * eps)
+    gz = (thickness_at(thickness, g, p[0], p[2] + eps) - thickness_at(thickness, g, p[0], p[2] - eps)) / (2.0 * eps)
+    return wp.normalize(wp.vec3(-gx, 1.0, -gz))
+
+
+@wp.func
+def layer_hit(thickness: wp.array2d(dtype=float), g: LayerGeometry, o: wp.vec3, d: wp.vec3) -> LayerHit:
+    """Where the eye ray ``o + t d`` meets the layer: from below the flat base, from above the top surface."""
+    out = LayerHit()
+    out.t = -1.0
+    out.thickness = 0.0
+    out.normal = wp.vec3(0.0, -1.0, 0.0)
+    out.below = wp.where(g.base > o[1], 1, 0)
+    if out.below != 0 and d[1] > 0.0:
+        out.t = (g.base - o[1]) / d[1]
+        p = o + out.t * d
+        out.thickness = thickness_at(thickness, g, p[0], p[2])
+    elif out.below == 0 and d[1] < 0.0:
+        out.t = top_crossing(thickness, g, o, d)
+        if out.t >= 0.0:
+            p = o + out.t * d
+            out.thickness = thickness_at(thickness, g, p[0], p[2])
+            out.normal = top_normal(thickness, g, p)
+    return out
+
+
+@wp.func
+def layer_radiance(tables: wp.array(dtype=float), params: wp.array(dtype=float), optics: SlabOptics, sun_light: Sun,
+                   sky_radiance: wp.vec3, radiosity_c: wp.array2d(dtype=wp.vec3), grid_box: wp.vec4, hit: LayerHit,
+                   o: wp.vec3, d: wp.vec3):
+    """(radiance the layer sends along -d at ``hit``, its unscattered transmittance along d): the sun's orders,
+    the sky through the layer (below) or reflected (above), and the ground's radiosity reflected (below) or
+    through the layer (above)."""
+    p = o + hit.t * d
+    sun = sun_light.direction
+    h = hit.thickness
+    kappa_ref_s = optics.kappa_s[1] / optics.to_reference
+    mu_sun = wp.max(sun[1], MU_MIN)
+    shade = slab_radiance(tables, params, optics, h, hit.normal, sun, d)
+    mu_v = wp.max(wp.abs(d[1]), MU_MIN)
+    e = order_energies(params, h * optics.to_reference, mu_sun, kappa_ref_s)
+    t_ms = e.t_ms
+    r_ms = 1.0 - t_ms
+    unscattered = wp.exp(-optics.kappa * h / mu_v)
+    # T_ms counts the unscattered light too, which reaches the eye from behind the layer through its
+    # transmittance; only the scattered rest is added here, so a thinning edge fades into what lies behind
+    t_scattered = wp.max(t_ms - unscattered, 0.0)
+    c_ground = grid_lookup(radiosity_c, p[0], p[2], grid_box[0], grid_box[1], grid_box[2], grid_box[3]) * INV_PI
+    sun_part = wp.vec3(0.0)
+    if sun_light.lit != 0:  # the horizon is folded into sun_light on the host
+        sun_part = wp.cw_mul(shade.i0 + shade.i1 + shade.i2 + shade.i3, sun_light.irradiance)
+    if hit.below != 0:
+        return sun_part + sky_radiance * t_scattered + c_ground * r_ms, unscattered
+    return sun_part + sky_radiance * r_ms + c_ground * t_scattered, unscattered
+
+
+@wp.func
+def ground_radiance(thickness: wp.array2d(dtype=float), geometry: LayerGeometry, params: wp.array(dtype=float),
+                    optics: SlabOptics, sun_light: Sun, albedo: wp.array2d(dtype=wp.vec3), albedo_box: wp.vec4,
+                    radiosity_g: wp.array2d(dtype=wp.vec3), grid_box: wp.vec4, q: wp.vec3) -> wp.vec3:
+    """Radiance of the ground at ``q``, rho (S_G^d + R_G) / pi: the sun through the layer's unscattered and first
+    two orders where its ray crosses the cloud base, and the ground's received radiosity."""
+    sun = sun_light.direction
+    mu_sun = wp.max(sun[1], MU_MIN)
+    rho = grid_lookup(albedo, q[0], q[2], albedo_box[0], albedo_box[1], albedo_box[2], albedo_box[3])
+    direct = wp.vec3(0.0)
+    if sun_light.lit != 0:
+        # the sun ray from q crosses the cloud base h tan θ_l towards the sun
+        c = q + sun * ((geometry.base - q[1]) / mu_sun)
+        hc = thickness_at(thickness, geometry, c[0], c[2])
+        ec = order_energies(params, hc * optics.to_reference, mu_sun, optics.kappa_s[1] / optics.to_reference)
+        direct = sun_light.irradiance * (mu_sun * (ec.t0 + ec.t1 + ec.t2))
+    received = grid_lookup(radiosity_g, q[0], q[2], grid_box[0], grid_box[1], grid_box[2], grid_box[3])
+    return wp.cw_mul(rho, direct + received) * INV_PI
+
+
 @wp.kernel
 def stratiform_kernel(
     cam: PinholeCamera,
@@ -89,98 +209,28 @@ def stratiform_kernel(
 ):
     r, col = wp.tid()
     row = r + row_offset
-    d = camera_ray(cam, row, col)
-    o = camera_ray_origin(cam, row, col, 0.5, 0.5)  # the ray is o + t d
-    cos_axis = wp.dot(d, camera_forward(cam))
-    sun = sun_light.direction
-    sun_irradiance = sun_light.irradiance
-    ground_y = ground.offset
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    d = ray.direction
+    o = ray.origin  # the ray is o + t d
     out = wp.vec3(0.0)
     tr = wp.vec3(1.0)
     z_depth = cam.far
-    lit = sun_light.lit != 0  # the horizon is folded into sun_light on the host
-    kappa_ref_s = optics.kappa_s[1] / optics.to_reference
-    mu_sun = wp.max(sun[1], MU_MIN)
-    # ---- the cloud layer
-    t_hit = float(-1.0)
-    h = float(0.0)
-    normal = wp.vec3(0.0, -1.0, 0.0)
-    below = geometry.base > o[1]
-    if below and d[1] > 0.0:
-        t_hit = (geometry.base - o[1]) / d[1]
-        p = o + t_hit * d
-        h = thickness_at(thickness, geometry, p[0], p[2])
-    elif (not below) and d[1] < 0.0:
-        # march from the top plane (or the camera) down to the base plane
-        t0 = wp.max((geometry.top - o[1]) / d[1], 0.0)
-        t1 = (geometry.base - o[1]) / d[1]
-        if geometry.top > o[1]:
-            t0 = 0.0
-        dt = (t1 - t0) / float(MARCH_STEPS)
-        prev = t0
-        for step in range(MARCH_STEPS):
-            t = t0 + float(step + 1) * dt
-            p = o + t * d
-            if t_hit < 0.0 and p[1] <= geometry.base + thickness_at(thickness, geometry, p[0], p[2]) + 1.0e-3:
-                lo = prev
-                hi = t
-                for _ in range(6):
-                    mid = 0.5 * (lo + hi)
-                    q = o + mid * d
-                    if q[1] <= geometry.base + thickness_at(thickness, geometry, q[0], q[2]):
-                        hi = mid
-                    else:
-                        lo = mid
-                t_hit = hi
-            prev = t
-        if t_hit >= 0.0:
-            p = o + t_hit * d
-            h = thickness_at(thickness, geometry, p[0], p[2])
-            eps = 0.5 * wp.min(geometry.sx / float(thickness.shape[0]), geometry.sz / float(thickness.shape[1]))
-            gx = (thickness_at(thickness, geometry, p[0] + eps, p[2]) - thickness_at(thickness, geometry, p[0] - eps,
-                                                                                 p[2])) / (2.0 * eps)
-            gz = (thickness_at(thickness, geometry, p[0], p[2] + eps) - thickness_at(thickness, geometry, p[0],
-                                                                                 p[2] - eps)) / (2.0 * eps)
-            normal = wp.normalize(wp.vec3(-gx, 1.0, -gz))
-    if t_hit >= 0.0 and h > 0.0:
-        p = o + t_hit * d
-        shade = slab_radiance(tables, params, optics, h, normal, sun, d)
-        mu_v = wp.max(wp.abs(d[1]), MU_MIN)
-        e = order_energies(params, h * optics.to_reference, mu_sun, kappa_ref_s)
-        t_ms = e.t_ms
-        r_ms = 1.0 - t_ms
-        unscattered = wp.exp(-optics.kappa * h / mu_v)
-        # T_ms counts the unscattered light too, which reaches the eye from behind the layer through its
-        # transmittance; only the scattered rest is added here, so a thinning edge fades into what lies behind
-        t_scattered = wp.max(t_ms - unscattered, 0.0)
-        c_ground = grid_lookup(radiosity_c, p[0], p[2], grid_box[0], grid_box[1], grid_box[2], grid_box[3]) * INV_PI
-        sun_part = wp.vec3(0.0)
-        if lit:
-            sun_part = wp.cw_mul(shade.i0 + shade.i1 + shade.i2 + shade.i3, sun_irradiance)
-        if below:
-            out = sun_part + sky_radiance * t_scattered + c_ground * r_ms
-        else:
-            out = sun_part + sky_radiance * r_ms + c_ground * t_scattered
+    hit = layer_hit(thickness, geometry, o, d)
+    if hit.t >= 0.0 and hit.thickness > 0.0:
+        shown, unscattered = layer_radiance(tables, params, optics, sun_light, sky_radiance, radiosity_c, grid_box,
+                                            hit, o, d)
+        out = shown
         tr = wp.vec3(unscattered)
-        z_depth = t_hit * cos_axis
-    # ---- the ground, seen through the cloud
-    if has_ground != 0 and d[1] < 0.0 and ground_y < o[1]:
-        t_g = (ground_y - o[1]) / d[1]
-        if t_g * cos_axis < cam.far:
-            q = o + t_g * d
-            rho = grid_lookup(albedo, q[0], q[2], albedo_box[0], albedo_box[1], albedo_box[2], albedo_box[3])
-            direct = wp.vec3(0.0)
-            if lit:
-                # the sun ray from q crosses the cloud base h tan θ_l towards the sun
-                c = q + sun * ((geometry.base - q[1]) / mu_sun)
-                hc = thickness_at(thickness, geometry, c[0], c[2])
-                ec = order_energies(params, hc * optics.to_reference, mu_sun, kappa_ref_s)
-                direct = sun_irradiance * (mu_sun * (ec.t0 + ec.t1 + ec.t2))
-            received = grid_lookup(radiosity_g, q[0], q[2], grid_box[0], grid_box[1], grid_box[2], grid_box[3])
-            out += wp.cw_mul(tr, wp.cw_mul(rho, direct + received) * INV_PI)
+        z_depth = hit.t * ray.cos_axis
+    # the ground, seen through the cloud
+    if has_ground != 0 and d[1] < 0.0 and ground.offset < o[1]:
+        t_g = (ground.offset - o[1]) / d[1]
+        if t_g * ray.cos_axis < cam.far:
+            out += wp.cw_mul(tr, ground_radiance(thickness, geometry, params, optics, sun_light, albedo, albedo_box,
+                                                 radiosity_g, grid_box, o + t_g * d))
             tr = wp.vec3(0.0)
             if z_depth >= cam.far:
-                z_depth = t_g * cos_axis
+                z_depth = t_g * ray.cos_axis
     radiance[row, col] = out
     transmittance[row, col] = tr
     depth[row, col] = z_depth

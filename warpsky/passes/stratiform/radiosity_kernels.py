@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.numerics import luminance
+from warpsky.numerics import bilinear_cell, bilinear_mix, luminance
 
 #: Ring weights v1, v2, v3 at MIP levels m, m + 1, m + 3 (§5.3, from f = 0.5, 0.3, 0.2).
 RING_W0 = wp.constant(0.4)
@@ -30,18 +30,10 @@ def downsample_kernel(src: wp.array2d(dtype=wp.vec3), dst: wp.array2d(dtype=wp.v
 @wp.func
 def bilinear(level: wp.array2d(dtype=wp.vec3), u: float, v: float) -> wp.vec3:
     """Bilinear lookup at continuous texel coordinates (u, v) (texel centres at integers), clamped to the edge."""
-    nu = level.shape[0]
-    nv = level.shape[1]
-    uc = wp.clamp(u, 0.0, float(nu - 1))
-    vc = wp.clamp(v, 0.0, float(nv - 1))
-    i0 = wp.min(int(uc), nu - 1)
-    j0 = wp.min(int(vc), nv - 1)
-    i1 = wp.min(i0 + 1, nu - 1)
-    j1 = wp.min(j0 + 1, nv - 1)
-    fu = uc - float(i0)
-    fv = vc - float(j0)
-    return (level[i0, j0] * (1.0 - fu) + level[i1, j0] * fu) * (1.0 - fv) + (
-        level[i0, j1] * (1.0 - fu) + level[i1, j1] * fu) * fv
+    cell = bilinear_cell(wp.vec2(u, v), wp.vec2i(level.shape[0], level.shape[1]))
+    lo = cell.lo
+    hi = cell.hi
+    return bilinear_mix(level[lo[0], lo[1]], level[hi[0], lo[1]], level[lo[0], hi[1]], level[hi[0], hi[1]], cell.frac)
 
 
 @wp.func

@@ -9,7 +9,7 @@ cloud shadows); :func:`shade_kernel`'s kernel shades them:
     E_sky(n) = pi L_sky (1 + n_y) / 2 * exp(-tau_up),
 
 with V_sun the meshes' shadow (a BVH any-hit ray towards the sun), T_sun the transmittance of the voxel media
-towards the sun (the single-scatter march's :func:`~warpsky.techniques.single_scatter.kernels.sun_depth_function`)
+towards the sun (:func:`~warpsky.media.shadow.sun_depth_function`, the march the single-scatter technique uses)
 times the host's factor, and E_sky the irradiance a plane of normal n receives from a uniform sky of radiance
 L_sky over the upper hemisphere and black below the horizon (the view factor of the sky from a plane tilted by
 acos(n_y) is (1 + n_y) / 2), under the voxel media's transmittance towards the zenith exp(-tau_up) as the ground of
@@ -22,13 +22,13 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.sun import Sun
+from warpsky.media.shadow import sun_depth_function
 from warpsky.media.voxel import VoxelMedia
 from warpsky.numerics import exp3
 from warpsky.surfaces.mesh import SurfaceHit, SurfaceMeshes, material_albedo, mesh_hit, mesh_occluded, no_hit
-from warpsky.techniques.single_scatter.kernels import sun_depth_function
 
 
 @wp.struct
@@ -97,16 +97,14 @@ def surface_hits(surfaces: SurfaceMeshes, plane: SurfacePlane, cam: PinholeCamer
     """One eye ray per pixel centre against the meshes and the plane, within the camera's clipping range."""
     r, col = wp.tid()
     row = r + row_offset
-    view = camera_ray(cam, row, col)
-    origin = camera_ray_origin(cam, row, col, 0.5, 0.5)
-    cos_axis = wp.dot(view, camera_forward(cam))
-    h = nearest_surface(surfaces, plane, origin, view, cam.near / cos_axis, cam.far / cos_axis)
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    h = nearest_surface(surfaces, plane, ray.origin, ray.direction, ray.t_near, ray.t_far)
     image.hit[row, col] = h.hit
-    image.point[row, col] = origin + h.t * view
+    image.point[row, col] = ray.origin + h.t * ray.direction
     image.normal[row, col] = h.shading
     image.albedo[row, col] = h.albedo
     image.scale[row, col] = h.scale
-    image.depth[row, col] = wp.where(h.hit != 0, h.t * cos_axis, cam.far)
+    image.depth[row, col] = wp.where(h.hit != 0, h.t * ray.cos_axis, cam.far)
 
 
 @wp.kernel

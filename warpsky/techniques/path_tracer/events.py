@@ -16,10 +16,10 @@ import warp as wp
 from warpsky.light.dome import DomeLight, dome_radiance
 from warpsky.light.sun import Sun
 from warpsky.media.air import Air, air_coefficient, air_scattering, sea_level_distance
+from warpsky.media.phase_mixture import mixture_functions, oriented_correction_function
 from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import medium_phase, scattering_angle
-from warpsky.optics.oriented_phase import oriented_correction_function
-from warpsky.optics.phase_sampling import PhaseTables, mixture_functions
+from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.tracking import Transmittance, tracking_functions

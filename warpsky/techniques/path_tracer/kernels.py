@@ -21,7 +21,7 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_at, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import DomeLight
 from warpsky.light.sun import Sun
@@ -83,11 +83,10 @@ class SampleResult:
 
 
 @functools.cache
-def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
-    """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
-    without a dome runs exactly the code it ran before domes existed)."""
-    _media_at, delta_track, ratio_track = tracking_functions(has_detail)
-    primary_end, flight_end, sun_reaches = surface_functions(has_ground)
+def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
+    """``trace_path(...) -> PathState``, one path from its camera ray, specialised like the kernels."""
+    delta_track = tracking_functions(has_detail)[1]
+    flight_end = surface_functions(has_ground)[1]
     scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
 
     @wp.func
@@ -133,6 +132,17 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
             path = roulette(path, bounce)
         return path
 
+    return trace_path
+
+
+@functools.cache
+def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
+    """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
+    without a dome runs exactly the code it ran before domes existed)."""
+    ratio_track = tracking_functions(has_detail)[2]
+    primary_end, _flight_end, sun_reaches = surface_functions(has_ground)
+    trace_path = path_function(has_ground, has_tables, has_detail, has_dome)
+
     @wp.func
     def pixel_sample(media: VoxelMedia, majorants: Majorants, phase_tables: PhaseTables, air: Air, sun: Sun,
                      cam: PinholeCamera, ground: Ground, dome: DomeLight, settings: PathSettings, row: int, col: int,
@@ -141,19 +151,16 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
         transmittance, the path, the depth of its first event. Its random stream depends on the seed, the pixel and
         the path index alone."""
         state = wp.rand_init(settings.seed + sample * SAMPLE_STRIDE, row * cam.width + col)
-        view = camera_ray(cam, row, col)
-        eye = camera_ray_origin(cam, row, col, 0.5, 0.5)
+        fx = float(0.5)
+        fy = float(0.5)
         if settings.pixel_jitter != 0:
             # a box-filtered pixel, as Mitsuba and pbrt sample it (used by the Mitsuba cross-check)
             fx = wp.randf(state)
             fy = wp.randf(state)
-            view = camera_ray_at(cam, row, col, fx, fy)
-            eye = camera_ray_origin(cam, row, col, fx, fy)
-        cos_axis = wp.dot(view, camera_forward(cam))
-        t_near = cam.near / cos_axis
-        t_far = cam.far / cos_axis
-        origin = eye + view * t_near
-        first = primary_end(air, ground, origin, view, t_far - t_near)
+        ray = primary_ray(cam, row, col, fx, fy)
+        view = ray.direction
+        origin = ray.origin + view * ray.t_near
+        first = primary_end(air, ground, origin, view, ray.t_far - ray.t_near)
         out = SampleResult()
         steps = int(0)
         tracked = int(0)
@@ -166,7 +173,7 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
         path = trace_path(media, majorants, phase_tables, air, sun, ground, dome, settings, sun_reaches(sun, air),
                           start_path(origin, view, state, steps), first)
         if path.hit != 0:
-            out.depth = wp.vec2((t_near + path.first_t) * cos_axis, 1.0)
+            out.depth = wp.vec2((ray.t_near + path.first_t) * ray.cos_axis, 1.0)
         out.radiance = path.radiance
         out.counts = wp.vec3i(path.steps, path.capped, tracked)
         return out

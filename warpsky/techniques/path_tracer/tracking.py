@@ -132,16 +132,30 @@ def positive(v: wp.vec3) -> wp.vec3:
     return wp.vec3(wp.max(v[0], 0.0), wp.max(v[1], 0.0), wp.max(v[2], 0.0))
 
 
-@functools.cache
 def tracking_functions(has_detail: bool):
     """``(media_at, delta_track, ratio_track)``, specialised on animated detail: with it every density lookup is
     multiplied by the medium's detail factor (the majorant grids are scaled by its bound on the host)."""
+    return media_at_function(has_detail), delta_track_function(has_detail), ratio_track_function(has_detail)
+
+
+@functools.cache
+def media_at_function(has_detail: bool):
+    """``media_at(media, air, p) -> PointMedia`` (see :func:`tracking_functions`)."""
     sample_media = media_functions(has_detail)
 
     @wp.func
     def media_at(media: VoxelMedia, air: Air, p: wp.vec3) -> PointMedia:
         """Summed extinction and scattering of the air and all media at the camera-relative point ``p``."""
         return with_air(media, sample_media(media, p), air, p[1])
+
+    return media_at
+
+
+@functools.cache
+def delta_track_function(has_detail: bool):
+    """``delta_track(media, majorants, air, origin, direction, t_max, history, state) -> Flight`` (see
+    :func:`tracking_functions`)."""
+    media_at = media_at_function(has_detail)
 
     @wp.func
     def delta_track(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
@@ -184,6 +198,15 @@ def tracking_functions(has_detail: bool):
         out.state = state
         return out
 
+    return delta_track
+
+
+@functools.cache
+def ratio_track_function(has_detail: bool):
+    """``ratio_track(media, majorants, air, origin, direction, t_max, state) -> Transmittance`` (see
+    :func:`tracking_functions`)."""
+    media_at = media_at_function(has_detail)
+
     @wp.func
     def ratio_track(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
                     t_max: float, state: wp.uint32) -> Transmittance:
@@ -214,4 +237,4 @@ def tracking_functions(has_detail: bool):
         out.state = state
         return out
 
-    return media_at, delta_track, ratio_track
+    return ratio_track

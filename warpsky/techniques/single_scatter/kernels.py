@@ -21,17 +21,17 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray, camera_ray_origin
+from warpsky.camera_rays import PinholeCamera, PrimaryRay, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import ambient_ground
-from warpsky.light.skylight import SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
+from warpsky.light.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
-from warpsky.media.detail import detailed_value
-from warpsky.media.voxel import VoxelMedia, grid_interval, grid_value, media_functions
+from warpsky.media.phase_mixture import oriented_correction_function, phase_sum_function
+from warpsky.media.shadow import sun_depth_function
+from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions, media_span
 from warpsky.numerics import exp3, exp_lerp_mean3, luminance
 from warpsky.optics.kernels import medium_phase, scattering_angle
-from warpsky.optics.oriented_phase import OrientedPhases, oriented_correction_function
-from warpsky.optics.phase_sampling import phase_sum_function
+from warpsky.optics.oriented_phase import OrientedPhases
 from warpsky.surfaces.plane import Ground
 
 oriented_correction = oriented_correction_function(medium_phase)[0]
@@ -49,69 +49,179 @@ class MarchSettings:
     ambient_on: int  # 1: light the media and the ground with them (a dome or sky light)
 
 
-@functools.cache
-def sun_depth_function(has_detail: bool):
-    """``sun_optical_depth(media, origin, t, view_dir, sun_dir, shadow_step) -> vec4``: optical depth (RGB in xyz)
-    from the point ``origin + t * view_dir`` of the view ray to the sun, summed over all grids, and the number of
-    grid lookups it took (w); with ``has_detail`` the media's animated detail is included."""
+@wp.struct
+class EyeMarch:
+    """What the eye march carries from step to step."""
 
-    @wp.func
-    def sun_optical_depth(media: VoxelMedia, origin: wp.vec3, t: float, view_dir: wp.vec3, sun_dir: wp.vec3,
-                          shadow_step: float) -> wp.vec4:
-        tau = wp.vec3(0.0)
-        lookups = float(0.0)
-        for m in range(media.count):
-            grid = media.grids[m]
-            start = grid.eye_index + grid.index_from_world * origin + t * (grid.index_from_world * view_dir)
-            toward_sun = grid.index_from_world * sun_dir  # index steps per metre towards the sun
-            span = grid_interval(grid, start, toward_sun, 0.0, 1.0e30)
-            if span[1] > span[0]:
-                length = span[1] - span[0]
-                count = wp.max(int(wp.ceil(length / shadow_step)), 1)
-                dt = length / float(count)
-                total = float(0.0)
-                # No early exit at large depth: a step's integral depends on the true depth at its far end through
-                # (exp(-a) - exp(-b)) / (b - a), so a truncated b would brighten optically thick steps.
-                for i in range(count):
-                    s = span[0] + (float(i) + 0.5) * dt
-                    value = grid_value(media.values, grid, start + s * toward_sun)
-                    if wp.static(has_detail):
-                        value = detailed_value(value, media.details, m, origin + t * view_dir + s * sun_dir)
-                    total += value
-                tau += grid.extinction * (total * dt)
-                lookups += float(count)
-        return wp.vec4(tau[0], tau[1], tau[2], lookups)
-
-    return sun_optical_depth
+    light: wp.vec3  # radiance scattered towards the eye so far, RGB
+    tau: wp.vec3  # optical depth from the eye to the current step's start, RGB
+    depth_sum: float  # sum over steps of opacity * depth along the view axis [m]
+    weight_sum: float  # sum over steps of opacity
+    lookups: wp.int64  # grid lookups so far
+    tau_sun: wp.vec3  # optical depth from the current step's start to the sun, RGB (when sun_known is 1)
+    sun_known: int  # 1: the step before marched tau_sun
 
 
 @wp.func
-def media_span(media: VoxelMedia, origin: wp.vec3, view: wp.vec3, t_near: float, t_end: float) -> wp.vec2:
-    """Union (t0, t1) of the media boxes along the view ray ``origin + t * view`` within [t_near, t_end] (empty:
-    t1 <= t0)."""
-    t0 = t_end
-    t1 = t_near
-    for m in range(media.count):
-        grid = media.grids[m]
-        start = grid.eye_index + grid.index_from_world * origin
-        span = grid_interval(grid, start, grid.index_from_world * view, t_near, t_end)
-        if span[1] > span[0]:
-            t0 = wp.min(t0, span[0])
-            t1 = wp.max(t1, span[1])
-    return wp.vec2(t0, t1)
+def eye_march_start() -> EyeMarch:
+    """The march before its first step: nothing gathered, clear, nothing looked up."""
+    out = EyeMarch()
+    out.light = wp.vec3(0.0)
+    out.tau = wp.vec3(0.0)
+    out.depth_sum = 0.0
+    out.weight_sum = 0.0
+    out.lookups = wp.int64(0)
+    out.tau_sun = wp.vec3(0.0)
+    out.sun_known = 0
+    return out
+
+
+@wp.func
+def ground_end(ground: Ground, origin: wp.vec3, view: wp.vec3, t_near: float, t_end: float):
+    """(where the ray ``origin + t * view`` ends [m], 1 when the ground plane ends it): the plane is opaque, so it
+    ends the ray where it lies between ``t_near`` and ``t_end`` (the part of the sun below it is already out of
+    sun.irradiance)."""
+    if view[1] != 0.0:
+        t_ground = (ground.offset - origin[1]) / view[1]
+        if t_ground > t_near and t_ground < t_end:
+            return t_ground, 1
+    return t_end, 0
+
+
+@functools.cache
+def light_functions(has_detail: bool):
+    """``(sun_step, sky_step, ground_light)``, the light one step of the eye march and the ground gather through
+    the media's shadow marches, specialised on animated detail."""
+
+    sun_optical_depth = sun_depth_function(has_detail)
+
+    @wp.func
+    def sun_step(media: VoxelMedia, sun: Sun, march: MarchSettings, ray: PrimaryRay, state: EyeMarch, ta: float,
+                 dt: float, scatter: wp.vec3, tau_b: wp.vec3) -> EyeMarch:
+        """``state`` with the sunlight of the step [ta, ta + dt] [m] added: ``scatter`` the scattering-weighted
+        phase sum at its midpoint [1/(m sr)], ``tau_b`` the eye's optical depth at its end; the depth to the sun is
+        marched at both ends (the start's reused from the step before when it was marched)."""
+        out = state
+        if sun.lit != 0 and wp.max(scatter) > 0.0:
+            if out.sun_known == 0:
+                shadow = sun_optical_depth(media, ray.origin, ta, ray.direction, sun.direction, march.shadow_step)
+                out.tau_sun = wp.vec3(shadow[0], shadow[1], shadow[2])
+                out.lookups += wp.int64(shadow[3])
+            shadow_b = sun_optical_depth(media, ray.origin, ta + dt, ray.direction, sun.direction, march.shadow_step)
+            tau_sun_b = wp.vec3(shadow_b[0], shadow_b[1], shadow_b[2])
+            out.lookups += wp.int64(shadow_b[3])
+            mean = exp_lerp_mean3(out.tau + out.tau_sun, tau_b + tau_sun_b)
+            out.light += wp.cw_mul(wp.cw_mul(scatter, sun.irradiance), mean) * dt
+            out.tau_sun = tau_sun_b
+            out.sun_known = 1
+        else:
+            out.sun_known = 0
+        return out
+
+    @wp.func
+    def sky_step(media: VoxelMedia, march: MarchSettings, lobes: AmbientLobes, ray: PrimaryRay, state: EyeMarch,
+                 here: MediaPoint, tm: float, dt: float, tau_b: wp.vec3) -> EyeMarch:
+        """``state`` with the sky's light of the step of length ``dt`` [m] around ``tm`` added (the media ``here``
+        at its midpoint, ``tau_b`` the eye's optical depth at its end), occluded towards the zenith (and the nadir
+        when the lower hemisphere holds light) from the midpoint."""
+        out = state
+        if march.ambient_on != 0 and wp.max(here.scattering) > 0.0:
+            up = sun_optical_depth(media, ray.origin, tm, ray.direction, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
+            out.lookups += wp.int64(up[3])
+            t_down = wp.vec3(0.0)
+            if march.environment.lower_lit != 0:
+                down = sun_optical_depth(media, ray.origin, tm, ray.direction, wp.vec3(0.0, -1.0, 0.0),
+                                         march.shadow_step)
+                out.lookups += wp.int64(down[3])
+                t_down = exp3(wp.vec3(down[0], down[1], down[2]))
+            g = mixed_asymmetry(media, here, march.environment.asymmetry)
+            sky = ambient_inscatter(lobes, g, exp3(wp.vec3(up[0], up[1], up[2])), t_down)
+            out.light += wp.cw_mul(wp.cw_mul(here.scattering, sky), exp_lerp_mean3(out.tau, tau_b)) * dt
+        return out
+
+    @wp.func
+    def ground_light(media: VoxelMedia, sun: Sun, ground: Ground, march: MarchSettings, ray: PrimaryRay,
+                     state: EyeMarch, t_end: float, trans: wp.vec3) -> EyeMarch:
+        """``state`` with the Lambertian ground at ``t_end`` [m] added, lit by the sun and the sky (occluded
+        towards the zenith) through the media and seen through ``trans``; its depth weighted by ``trans``."""
+        out = state
+        if sun.lit != 0:
+            shadow = sun_optical_depth(media, ray.origin, t_end, ray.direction, sun.direction, march.shadow_step)
+            out.lookups += wp.int64(shadow[3])
+            lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (wp.max(sun.direction[1], 0.0) / wp.pi)
+            out.light += wp.cw_mul(wp.cw_mul(lit_ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
+        if march.ambient_on != 0:
+            up = sun_optical_depth(media, ray.origin, t_end, ray.direction, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
+            out.lookups += wp.int64(up[3])
+            shown = ambient_ground(ground.albedo, march.ground_ambient, wp.vec3(up[0], up[1], up[2]))
+            out.light += wp.cw_mul(shown, trans)
+        out.depth_sum += luminance(trans) * t_end * ray.cos_axis
+        out.weight_sum += luminance(trans)
+        return out
+
+    return sun_step, sky_step, ground_light
+
+
+@functools.cache
+def march_functions(has_tables: bool, has_detail: bool):
+    """``eye_march(media, phase_tables, oriented, sun, march, lobes, ray, theta, t0, t1) -> EyeMarch``, specialised
+    on tabulated species and animated detail: the march of the view ray ``ray`` from t0 to t1 [m], ``theta`` the
+    scattering angle of the sunlight towards the eye, ``lobes`` the sky seen along the ray."""
+
+    sample_media = media_functions(has_detail)
+    scattered_phase = phase_sum_function(has_tables)
+    sun_step, sky_step = light_functions(has_detail)[:2]
+
+    @wp.func
+    def march_step(media: VoxelMedia, phase_tables: wp.array(dtype=float), oriented: OrientedPhases, sun: Sun,
+                   march: MarchSettings, lobes: AmbientLobes, ray: PrimaryRay, theta: float, state: EyeMarch,
+                   ta: float, dt: float) -> EyeMarch:
+        """``state`` after the step [ta, ta + dt] [m]: the media at its midpoint, the sun's and the sky's light it
+        scatters towards the eye, its opacity-weighted depth, the eye's optical depth at its end."""
+        tm = ta + 0.5 * dt
+        here = sample_media(media, ray.origin + tm * ray.direction)
+        scatter = scattered_phase(media, here, phase_tables, wp.vec3(0.0), theta)
+        if wp.static(has_tables):  # oriented crystals are ice, a tabulated species
+            scatter += oriented_correction(media, here, phase_tables, oriented, ray.direction, theta)
+        out = state
+        out.lookups += wp.int64(media.count)
+        tau_b = out.tau + here.extinction * dt
+        out = sun_step(media, sun, march, ray, out, ta, dt, scatter, tau_b)
+        out = sky_step(media, march, lobes, ray, out, here, tm, dt, tau_b)
+        opacity = luminance(exp3(out.tau)) - luminance(exp3(tau_b))
+        out.depth_sum += opacity * tm * ray.cos_axis
+        out.weight_sum += opacity
+        out.tau = tau_b
+        return out
+
+    @wp.func
+    def eye_march(media: VoxelMedia, phase_tables: wp.array(dtype=float), oriented: OrientedPhases, sun: Sun,
+                  march: MarchSettings, lobes: AmbientLobes, ray: PrimaryRay, theta: float, t0: float,
+                  t1: float) -> EyeMarch:
+        """The march of ``ray`` from t0 to t1 [m] in equal steps of at most ``march.step``, until the eye's
+        luminance transmittance falls below ``march.min_transmittance``."""
+        out = eye_march_start()
+        if t1 > t0:
+            count = wp.max(int(wp.ceil((t1 - t0) / march.step)), 1)
+            dt = (t1 - t0) / float(count)
+            for i in range(count):
+                out = march_step(media, phase_tables, oriented, sun, march, lobes, ray, theta, out,
+                                 t0 + float(i) * dt, dt)
+                if luminance(exp3(out.tau)) < march.min_transmittance:
+                    break
+        return out
+
+    return eye_march
 
 
 @kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True))
 @functools.cache
 def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False) -> wp.Kernel:
     """The per-pixel march, specialised on whether the scene has a ground plane, tabulated species and animated
-    detail: a scene without them pays nothing for those branches. One loop over the eye steps, with the shadow
-    marches and the step's exact integral inline: splitting it would pass the march state (optical depths, the
-    reused shadow depth, depth moments, lookups) through every call."""
+    detail: a scene without them pays nothing for those branches."""
 
-    sample_media = media_functions(has_detail)
-    scattered_phase = phase_sum_function(has_tables)
-    sun_optical_depth = sun_depth_function(has_detail)
+    eye_march = march_functions(has_tables, has_detail)
+    ground_light = light_functions(has_detail)[2]
 
     @wp.kernel(module="unique")
     def single_scatter(
@@ -130,102 +240,27 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
     ):
         r, col = wp.tid()
         row = r + row_offset
-        view = camera_ray(cam, row, col)
-        origin = camera_ray_origin(cam, row, col, 0.5, 0.5)
-        cos_axis = wp.dot(view, camera_forward(cam))
-        t_near = cam.near / cos_axis
-        t_end = cam.far / cos_axis
-        sun_dir = sun.direction
-        lit = sun.lit != 0
-        # Light travels along -sun_dir and leaves towards the eye along -view.
-        theta = scattering_angle(sun_dir, view)
-        hit_ground = bool(False)
+        ray = primary_ray(cam, row, col, 0.5, 0.5)
+        # Light travels along -sun.direction and leaves towards the eye along -ray.direction.
+        theta = scattering_angle(sun.direction, ray.direction)
+        t_end = ray.t_far
+        hit_ground = int(0)
         if wp.static(has_ground):
-            # The plane is opaque: it ends the ray (the part of the sun below it is already out of sun.irradiance).
-            if view[1] != 0.0:
-                t_ground = (ground.offset - origin[1]) / view[1]
-                if t_ground > t_near and t_ground < t_end:
-                    t_end = t_ground
-                    hit_ground = True
-
-        lobes = ambient_lobes(march.environment, view)
-        span = media_span(media, origin, view, t_near, t_end)
-        t0 = span[0]
-        t1 = span[1]
-        light = wp.vec3(0.0)
-        tau_eye = wp.vec3(0.0)
-        depth_sum = float(0.0)
-        weight_sum = float(0.0)
-        lookups = wp.int64(0)
-        if t1 > t0:
-            count = wp.max(int(wp.ceil((t1 - t0) / march.step)), 1)
-            dt = (t1 - t0) / float(count)
-            tau_sun_a = wp.vec3(0.0)
-            sun_a_known = bool(False)
-            for i in range(count):
-                ta = t0 + float(i) * dt
-                tm = ta + 0.5 * dt
-                here = sample_media(media, origin + tm * view)
-                scatter = scattered_phase(media, here, phase_tables, wp.vec3(0.0), theta)
-                if wp.static(has_tables):  # oriented crystals are ice, a tabulated species
-                    scatter += oriented_correction(media, here, phase_tables, oriented, view, theta)
-                lookups += wp.int64(media.count)
-                tau_eye_b = tau_eye + here.extinction * dt
-                if lit and wp.max(scatter) > 0.0:
-                    if not sun_a_known:
-                        shadow = sun_optical_depth(media, origin, ta, view, sun_dir, march.shadow_step)
-                        tau_sun_a = wp.vec3(shadow[0], shadow[1], shadow[2])
-                        lookups += wp.int64(shadow[3])
-                    shadow = sun_optical_depth(media, origin, ta + dt, view, sun_dir, march.shadow_step)
-                    tau_sun_b = wp.vec3(shadow[0], shadow[1], shadow[2])
-                    lookups += wp.int64(shadow[3])
-                    mean = exp_lerp_mean3(tau_eye + tau_sun_a, tau_eye_b + tau_sun_b)
-                    light += wp.cw_mul(wp.cw_mul(scatter, sun.irradiance), mean) * dt
-                    tau_sun_a = tau_sun_b
-                    sun_a_known = True
-                else:
-                    sun_a_known = False
-                if march.ambient_on != 0 and wp.max(here.scattering) > 0.0:
-                    up = sun_optical_depth(media, origin, tm, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
-                    lookups += wp.int64(up[3])
-                    t_down = wp.vec3(0.0)
-                    if march.environment.lower_lit != 0:
-                        down = sun_optical_depth(media, origin, tm, view, wp.vec3(0.0, -1.0, 0.0), march.shadow_step)
-                        lookups += wp.int64(down[3])
-                        t_down = exp3(wp.vec3(down[0], down[1], down[2]))
-                    g = mixed_asymmetry(media, here, march.environment.asymmetry)
-                    sky = ambient_inscatter(lobes, g, exp3(wp.vec3(up[0], up[1], up[2])), t_down)
-                    light += wp.cw_mul(wp.cw_mul(here.scattering, sky), exp_lerp_mean3(tau_eye, tau_eye_b)) * dt
-                opacity = luminance(exp3(tau_eye)) - luminance(exp3(tau_eye_b))
-                depth_sum += opacity * tm * cos_axis
-                weight_sum += opacity
-                tau_eye = tau_eye_b
-                if luminance(exp3(tau_eye)) < march.min_transmittance:
-                    break
-
-        trans = exp3(tau_eye)
+            t_end, hit_ground = ground_end(ground, ray.origin, ray.direction, ray.t_near, t_end)
+        lobes = ambient_lobes(march.environment, ray.direction)
+        span = media_span(media, ray.origin, ray.direction, ray.t_near, t_end)
+        state = eye_march(media, phase_tables, oriented, sun, march, lobes, ray, theta, span[0], span[1])
+        trans = exp3(state.tau)
         if wp.static(has_ground):
-            if hit_ground:
-                if lit:
-                    shadow = sun_optical_depth(media, origin, t_end, view, sun_dir, march.shadow_step)
-                    lookups += wp.int64(shadow[3])
-                    lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (wp.max(sun_dir[1], 0.0) / wp.pi)
-                    light += wp.cw_mul(wp.cw_mul(lit_ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
-                if march.ambient_on != 0:
-                    up = sun_optical_depth(media, origin, t_end, view, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
-                    lookups += wp.int64(up[3])
-                    shown = ambient_ground(ground.albedo, march.ground_ambient, wp.vec3(up[0], up[1], up[2]))
-                    light += wp.cw_mul(shown, trans)
-                depth_sum += luminance(trans) * t_end * cos_axis
-                weight_sum += luminance(trans)
+            if hit_ground != 0:
+                state = ground_light(media, sun, ground, march, ray, state, t_end, trans)
                 trans = wp.vec3(0.0)
-
-        radiance[row, col] = light
+        radiance[row, col] = state.light
         transmittance[row, col] = trans
-        if weight_sum > 1.0e-6:
-            depth[row, col] = depth_sum / weight_sum
+        if state.weight_sum > 1.0e-6:
+            depth[row, col] = state.depth_sum / state.weight_sum
         else:
             depth[row, col] = cam.far
-        samples[row, col] = lookups
+        samples[row, col] = state.lookups
 
     return single_scatter

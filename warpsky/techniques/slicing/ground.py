@@ -8,14 +8,14 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import ambient_ground
 from warpsky.light.sun import Sun
+from warpsky.media.shadow import sun_depth_function
 from warpsky.media.voxel import VoxelMedia
 from warpsky.numerics import exp3
 from warpsky.surfaces.plane import Ground
-from warpsky.techniques.single_scatter.kernels import sun_depth_function
 
 
 @kernel_variants(has_detail=(False, True), has_dome=(False, True))
@@ -42,11 +42,12 @@ def ground_kernel(has_detail: bool = False, has_dome: bool = False):
         """The Lambertian ground behind the media, lit by the sun through them; it ends every ray that reaches it."""
         r, col = wp.tid()
         row = r + row_offset
-        view = camera_ray(cam, row, col)
+        ray = primary_ray(cam, row, col, 0.5, 0.5)  # a pinhole's: from the eye
+        view = ray.direction
         if view[1] >= 0.0 or ground.offset >= 0.0:
             return
         t = ground.offset / view[1]
-        z = t * wp.dot(view, camera_forward(cam))
+        z = t * ray.cos_axis
         if z > cam.far:
             return
         sun_dir = sun.direction

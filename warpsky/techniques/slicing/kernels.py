@@ -37,15 +37,15 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, camera_forward, camera_ray
+from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
-from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
-from warpsky.numerics import exp3, one_minus_exp
-from warpsky.optics.kernels import GRID_SIZE, grid_node, scattering_angle
-from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
-from warpsky.techniques.single_scatter.kernels import media_span
+from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions, media_span
+from warpsky.numerics import bilinear_cell, bilinear_mix, exp3, one_minus_exp
+from warpsky.optics.kernels import scattering_angle
+from warpsky.optics.oriented_phase import OrientedPhases
+from warpsky.techniques.slicing.ams import AmsTables, mixed_ams_scattering, mixed_forward, oriented_ams_correction
 from warpsky.techniques.slicing.occlusion import SkyShadow, sky_transmittances
 
 
@@ -64,49 +64,6 @@ class SliceFrame:
     front_to_back: int  # 1: the eye composites front to back; 0: back to front
 
 
-@wp.struct
-class AmsTables:
-    """Ams_n per table (T tables, N+1 orders, 3 channels, GRID_SIZE angles), F_n (T, N+1, 3), and per medium its
-    table and Riley's back-scatter term xi."""
-
-    ams: wp.array(dtype=float)
-    forward: wp.array(dtype=float)
-    orders: int  # N + 1
-    table_of: wp.array(dtype=int)  # table index of each medium
-    xi_of: wp.array(dtype=float)  # xi of each medium [1/sr], added to its phase in the eye gather
-
-
-@wp.func
-def ams_value(tables: AmsTables, table: int, order: int, channel: int, theta: float) -> float:
-    node = grid_node(theta)
-    i = int(node[0])
-    base = ((table * tables.orders + order) * 3 + channel) * GRID_SIZE + i
-    return tables.ams[base] + (tables.ams[base + 1] - tables.ams[base]) * node[1]
-
-
-@wp.func
-def ams_at(tables: AmsTables, table: int, n: float, channel: int, theta: float) -> float:
-    """Ams of fractional order n (linear between neighbouring orders; clamped to the last)."""
-    top = tables.orders - 1
-    x = wp.clamp(n, 0.0, float(top))
-    lo = wp.min(int(x), top)
-    hi = wp.min(lo + 1, top)
-    f = x - float(lo)
-    return ams_value(tables, table, lo, channel, theta) * (1.0 - f) + ams_value(tables, table, hi, channel, theta) * f
-
-
-@wp.func
-def forward_at(tables: AmsTables, table: int, n: float, channel: int) -> float:
-    top = tables.orders - 1
-    x = wp.clamp(n, 0.0, float(top))
-    lo = wp.min(int(x), top)
-    hi = wp.min(lo + 1, top)
-    f = x - float(lo)
-    a = tables.forward[(table * tables.orders + lo) * 3 + channel]
-    b = tables.forward[(table * tables.orders + hi) * 3 + channel]
-    return a * (1.0 - f) + b * f
-
-
 @wp.func
 def light_texel(frame: SliceFrame, p: wp.vec3) -> wp.vec2:
     """Continuous light-buffer coordinates (texel units) of point p."""
@@ -118,19 +75,11 @@ def light_texel(frame: SliceFrame, p: wp.vec3) -> wp.vec2:
 @wp.func
 def light_lookup(buffer: wp.array2d(dtype=wp.vec3), frame: SliceFrame, p: wp.vec3) -> wp.vec3:
     """Bilinear light-buffer value at p (clamped at the edges)."""
-    uv = light_texel(frame, p)
-    r = frame.light_res
-    x = wp.clamp(uv[0], 0.0, float(r - 1))
-    y = wp.clamp(uv[1], 0.0, float(r - 1))
-    i0 = wp.min(int(x), r - 1)
-    j0 = wp.min(int(y), r - 1)
-    i1 = wp.min(i0 + 1, r - 1)
-    j1 = wp.min(j0 + 1, r - 1)
-    fx = x - float(i0)
-    fy = y - float(j0)
-    a = buffer[j0, i0] * (1.0 - fx) + buffer[j0, i1] * fx
-    b = buffer[j1, i0] * (1.0 - fx) + buffer[j1, i1] * fx
-    return a * (1.0 - fy) + b * fy
+    cell = bilinear_cell(light_texel(frame, p), wp.vec2i(frame.light_res, frame.light_res))
+    lo = cell.lo
+    hi = cell.hi
+    return bilinear_mix(buffer[lo[1], lo[0]], buffer[lo[1], hi[0]], buffer[hi[1], lo[0]], buffer[hi[1], hi[0]],
+                        cell.frac)
 
 
 #: Most samples of the eye ray inside one slice's slab (bounds the cost of few, thick slices).
@@ -138,65 +87,6 @@ MAX_EYE_SAMPLES = wp.constant(64)
 
 #: Scattering events of one light step evaluated one by one; the rest use the last order's forward fraction.
 MAX_EVENTS = wp.constant(64)
-
-
-@wp.func
-def mixed_forward(point: MediaPoint, media: VoxelMedia, tables: AmsTables, order: float, channel: int) -> float:
-    """alpha F_order of the media mixed at the point: sum of scattering_i F_i over the total extinction."""
-    if point.extinction[channel] <= 0.0:
-        return 0.0
-    num = float(0.0)
-    for m in range(media.count):
-        value = point.density[m]
-        if value > 0.0:
-            num += media.grids[m].scattering[channel] * value * forward_at(tables, tables.table_of[m], order, channel)
-    return num / point.extinction[channel]
-
-
-@wp.func
-def mixed_ams_scattering(point: MediaPoint, media: VoxelMedia, tables: AmsTables, order: wp.vec3,
-                         theta: float) -> wp.vec3:
-    """Sum over the media at the point of scattering_i (Ams_i of order ``order[c]`` at theta + xi_i) per channel c
-    (Riley Eq. 6 applied per order, before dividing by the summed scattering)."""
-    phase = wp.vec3(0.0)
-    for m in range(media.count):
-        value = point.density[m]
-        if value > 0.0:
-            s = media.grids[m].scattering * value
-            for c in range(3):
-                phase[c] = phase[c] + s[c] * (ams_at(tables, tables.table_of[m], order[c], c, theta)
-                                              + tables.xi_of[m])
-    return phase
-
-
-@wp.func
-def order_one_weight(tables: AmsTables, n: float) -> float:
-    """The weight :func:`ams_at` gives Ams_1 at fractional order n."""
-    x = wp.clamp(n, 0.0, float(tables.orders - 1))
-    if x <= 1.0:
-        return x
-    return wp.max(2.0 - x, 0.0)
-
-
-@wp.func
-def oriented_ams_correction(point: MediaPoint, media: VoxelMedia, tables: AmsTables, phases: OrientedPhases,
-                            order: wp.vec3, look: wp.vec3, theta: float) -> wp.vec3:
-    """What oriented ice adds to :func:`mixed_ams_scattering`: light that has not scattered yet (order 1) meets
-    the crystals with the sun's direction, so their share of Ams_1 becomes the frame's oriented slice seen along
-    ``look``; higher orders keep the random-orientation Ams (the light has lost the sun's direction)."""
-    out = wp.vec3(0.0)
-    if phases.count == 0:
-        return out
-    for m in range(media.count):
-        value = point.density[m]
-        index = phases.slice_of[m]
-        if value > 0.0 and index >= 0:
-            s = media.grids[m].scattering * value
-            oriented = oriented_value(phases, index, look)
-            for c in range(3):
-                weight = order_one_weight(tables, order[c])
-                out[c] = out[c] + s[c] * weight * (oriented[c] - ams_value(tables, tables.table_of[m], 1, c, theta))
-    return out
 
 
 @wp.func
@@ -308,10 +198,10 @@ class PlaneRange:
     entry: int
 
 
-@kernel_variants(low_albedo=(False, True), has_detail=(False, True), has_dome=(False, True))
 @functools.cache
-def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool = False):
-    """The eye gather of a chunk of slices (see :func:`slicing_kernels`)."""
+def gather_function(low_albedo: bool, has_detail: bool = False, has_dome: bool = False):
+    """``gather_sample(...) -> (vec3, vec3)``, one sample of the eye gather, specialised as
+    :func:`slice_eye_kernel` is."""
 
     sample_media = media_functions(has_detail)
 
@@ -350,6 +240,46 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
                     out[c] = out[c] + sky[c] * (scattering[c] / extinction[c]) * one_minus_exp(tau[c])
         return out, tau
 
+    return gather_sample
+
+
+@wp.struct
+class EyePixel:
+    """One pixel's eye accumulators (see :class:`EyeBuffers`)."""
+
+    radiance: wp.vec3
+    transmittance: wp.vec3
+    depth_sum: wp.vec2
+
+
+@wp.func
+def composite_slab(frame: SliceFrame, pixel: EyePixel, contribution: wp.vec3, keep: wp.vec3, t: float,
+                   cos_axis: float) -> EyePixel:
+    """``pixel`` with a slab composited in sweep order: ``contribution`` the light it sends towards the eye, ``keep``
+    its transmittance, RGB, ``t`` [m] the distance along the eye ray to its plane, ``cos_axis`` the ray's cosine to
+    the view axis (its depth is weighted by its opacity, front to back also by the transmittance before it)."""
+    out = pixel
+    before = pixel.transmittance
+    if frame.front_to_back != 0:
+        out.radiance = pixel.radiance + wp.cw_mul(before, contribution)
+    else:
+        out.radiance = wp.cw_mul(pixel.radiance, keep) + contribution
+    out.transmittance = wp.cw_mul(before, keep)
+    opacity = 1.0 - (keep[0] + keep[1] + keep[2]) / 3.0
+    weight = opacity * (before[0] + before[1] + before[2]) / 3.0
+    if frame.front_to_back == 0:
+        weight = opacity
+    out.depth_sum = pixel.depth_sum + wp.vec2(weight * t * cos_axis, weight)
+    return out
+
+
+@kernel_variants(low_albedo=(False, True), has_detail=(False, True), has_dome=(False, True))
+@functools.cache
+def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool = False):
+    """The eye gather of a chunk of slices (see :func:`slicing_kernels`)."""
+
+    gather_sample = gather_function(low_albedo, has_detail, has_dome)
+
     @wp.kernel(module="unique")
     def eye_kernel(
         media: VoxelMedia,
@@ -371,18 +301,19 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
         pixel's eye ray inside the slab and inside its ``spans`` at most ``sample_length`` [m] apart."""
         r, col = wp.tid()
         row = r + row_offset
-        view = camera_ray(cam, row, col)
+        ray = primary_ray(cam, row, col, 0.5, 0.5)
+        view = ray.direction
         along = wp.dot(frame.axis, view)
         if wp.abs(along) < 1.0e-6:
             return
         half = 0.5 * frame.spacing / wp.abs(along)
-        cos_axis = wp.dot(view, camera_forward(cam))
         theta = scattering_angle(sun.direction, view)
         lobes = ambient_lobes(ambient, view)
         inside = eye.spans[row, col]
-        radiance = eye.radiance[row, col]
-        transmittance = eye.transmittance[row, col]
-        depth_sum = eye.depth_sum[row, col]
+        pixel = EyePixel()
+        pixel.radiance = eye.radiance[row, col]
+        pixel.transmittance = eye.transmittance[row, col]
+        pixel.depth_sum = eye.depth_sum[row, col]
         for k in range(chunk.count):
             t = chunk.planes[chunk.first + k] / along
             # the slab's piece of the eye ray, relative to the plane (an uncut slab's one sample lies on the plane)
@@ -403,20 +334,10 @@ def slice_eye_kernel(low_albedo: bool, has_detail: bool = False, has_dome: bool 
                 keep = wp.cw_mul(keep, exp3(tau))
             if keep[0] >= 1.0 and keep[1] >= 1.0 and keep[2] >= 1.0:
                 continue
-            before = transmittance
-            if frame.front_to_back != 0:
-                radiance = radiance + wp.cw_mul(before, contribution)
-            else:
-                radiance = wp.cw_mul(radiance, keep) + contribution
-            transmittance = wp.cw_mul(before, keep)
-            opacity = 1.0 - (keep[0] + keep[1] + keep[2]) / 3.0
-            weight = opacity * (before[0] + before[1] + before[2]) / 3.0
-            if frame.front_to_back == 0:
-                weight = opacity
-            depth_sum = depth_sum + wp.vec2(weight * t * cos_axis, weight)
-        eye.radiance[row, col] = radiance
-        eye.transmittance[row, col] = transmittance
-        eye.depth_sum[row, col] = depth_sum
+            pixel = composite_slab(frame, pixel, contribution, keep, t, ray.cos_axis)
+        eye.radiance[row, col] = pixel.radiance
+        eye.transmittance[row, col] = pixel.transmittance
+        eye.depth_sum[row, col] = pixel.depth_sum
 
     return eye_kernel
 
@@ -426,9 +347,8 @@ def eye_span_kernel(media: VoxelMedia, cam: PinholeCamera, spans: wp.array2d(dty
     """Each pixel's eye-ray interval [m] inside the media's boxes and the clipping range (empty: y <= x). The eye
     gather samples only there, so a box face cuts a slab's samples where it lies instead of at whole samples."""
     row, col = wp.tid()
-    view = camera_ray(cam, row, col)
-    cos_axis = wp.dot(view, camera_forward(cam))
-    spans[row, col] = media_span(media, wp.vec3(0.0), view, cam.near / cos_axis, cam.far / cos_axis)  # pinhole only
+    ray = primary_ray(cam, row, col, 0.5, 0.5)  # a pinhole's: from the eye
+    spans[row, col] = media_span(media, ray.origin, ray.direction, ray.t_near, ray.t_far)
 
 
 @kernel_variants(low_albedo=(False, True), equation=(0, 24, 25), has_detail=(False, True))

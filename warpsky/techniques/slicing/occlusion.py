@@ -19,7 +19,8 @@ import warp as wp
 from warpsky import device_buffers
 from warpsky.device import launch_rows
 from warpsky.kernel_variants import kernel_variants
-from warpsky.media.voxel import VoxelMedia, media_functions, trilinear_cell
+from warpsky.media.voxel import VoxelMedia, media_functions
+from warpsky.numerics import trilinear_cell
 
 #: Most grid nodes along one axis of the occlusion grid.
 MAX_NODES = 64

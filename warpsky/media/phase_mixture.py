@@ -1,0 +1,250 @@
+"""The phase of the media mixed at a point, on the device (Riley 2004, Eq. 6): the scattering-weighted phase sum of
+every medium, the mixture's phase and its two-stage sampling, and what oriented ice changes in them.
+
+A scattering point holds several media (and the air), each with its own phase function. The path tracer samples
+the mixture in two stages: it picks one component with probability proportional to its mean scattering
+coefficient, then samples that component's phase (Henyey–Greenstein by exact inversion, tables by their inverse
+CDF, isotropic and Rayleigh uniformly: :mod:`warpsky.optics.phase`, :mod:`warpsky.optics.kernels`). The sample's
+weight is the mixture's phase (the scattering-weighted phase of all components, per channel) over the mixture's
+pdf (the weighted sum of every component's sampling density), so the estimate is unbiased whatever the component
+picked.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from warpsky.media.voxel import MediaPoint, VoxelMedia
+from warpsky.numerics import mean3
+from warpsky.optics.kernels import TABLE_KIND, medium_phase, sample_table, scattering_angle, table_pdf
+from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
+from warpsky.optics.oriented_sampling import directional_sample, directional_value
+from warpsky.optics.phase import (
+    phase_eval,
+    phase_pdf,
+    phase_rayleigh,
+    phase_sample_cos,
+    rayleigh_pdf,
+    rayleigh_sample_cos,
+)
+from warpsky.optics.phase_sampling import SAMPLED_CHANNEL, PhaseTables, medium_pdf, rotate_about, sampled_row
+
+
+@wp.func
+def per_unit_scattering(point: MediaPoint, rayleigh: wp.vec3, value: wp.vec3) -> wp.vec3:
+    """``value`` [1/(m sr)] divided by the scattering coefficient at ``point``, the media's plus ``rayleigh`` [1/m]
+    of air, per channel (0 where nothing scatters): a sum over components in Riley Eq. 6 made a phase [1/sr]."""
+    total = rayleigh + point.scattering
+    out = wp.vec3(0.0)
+    for c in range(3):
+        if total[c] > 0.0:
+            out[c] = value[c] / total[c]
+    return out
+
+
+@wp.func
+def oriented_slice(point: MediaPoint, phases: OrientedPhases, m: int) -> int:
+    """The frame's oriented slice of medium ``m`` where it is present at ``point``; -1 where it is absent or its
+    crystals are randomly oriented."""
+    if point.density[m] > 0.0:
+        return phases.slice_of[m]
+    return -1
+
+
+def oriented_correction_function(sample_phase):
+    """``(oriented_correction, oriented_mixture_correction)``.
+
+    ``oriented_correction(media, point, tables, phases, look, theta) -> vec3``: what the oriented media at
+    ``point`` add to the scattering-weighted phase sum sum_m sigma_s,m P_m(theta) [1/(m sr)] of the techniques,
+    sum over oriented media of sigma_s,m (P_slice(look) - P_m(theta)); zero when no medium is oriented.
+    ``sample_phase(tables, kind, g, theta)`` is the phase the caller's sum used for a medium."""
+    @wp.func
+    def oriented_correction(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float),
+                            phases: OrientedPhases, look: wp.vec3, theta: float) -> wp.vec3:
+        out = wp.vec3(0.0)
+        if phases.count == 0:
+            return out
+        for m in range(media.count):
+            index = oriented_slice(point, phases, m)
+            if index >= 0:
+                value = point.density[m]
+                grid = media.grids[m]
+                difference = oriented_value(phases, index, look) - sample_phase(tables, grid.phase_kind,
+                                                                                grid.phase_g, theta)
+                out += wp.cw_mul(grid.scattering * value, difference)
+        return out
+
+    @wp.func
+    def oriented_mixture_correction(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float),
+                                    phases: OrientedPhases, rayleigh: wp.vec3, look: wp.vec3,
+                                    theta: float) -> wp.vec3:
+        """The same for a mixture phase (Riley Eq. 6, normalised by the summed scattering, ``rayleigh`` [1/m] of
+        air included): the correction divided by that sum [1/sr]."""
+        if phases.count == 0:
+            return wp.vec3(0.0)
+        return per_unit_scattering(point, rayleigh, oriented_correction(media, point, tables, phases, look, theta))
+
+    return oriented_correction, oriented_mixture_correction
+
+
+@wp.struct
+class PhaseSample:
+    direction: wp.vec3
+    weight: wp.vec3  # combined phase / sampling pdf, per channel
+    state: wp.uint32
+
+
+@wp.func
+def continuation_terms(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, d: wp.vec3, s: wp.vec3,
+                       theta: float) -> wp.vec4:
+    """What oriented ice changes in a continued path's mixture, for light from ``s`` scattered along ``d``:
+    (sum of scattering_m (T_m(-d, -s) - P_m(theta)) RGB [1/(m sr)], sum of mean scattering_m (T_m green - its
+    table's sampling density at theta) [1/(m sr)]) over the oriented media m at ``point``: their random table
+    replaced by the oriented one in the phase and in the sampling density."""
+    out = wp.vec4(0.0)
+    for m in range(media.count):
+        value = point.density[m]
+        index = tables.continuation.table_of[m]
+        if value > 0.0 and index >= 0:
+            grid = media.grids[m]
+            oriented = directional_value(tables.continuation, index, -d, -s)
+            difference = wp.cw_mul(grid.scattering * value, oriented - medium_phase(tables.values, grid.phase_kind,
+                                                                                   grid.phase_g, theta))
+            density = oriented[SAMPLED_CHANNEL] - table_pdf(tables.cdf, sampled_row(grid.phase_kind), theta)
+            out += wp.vec4(difference[0], difference[1], difference[2], mean3(grid.scattering) * value * density)
+    return out
+
+
+@functools.cache
+def phase_sum_function(has_tables: bool):
+    """``scattered_phase(media, point, tables, start, theta) -> vec3``: ``start`` plus the sum over the media at
+    ``point`` of scattering_i P_i(theta) [1/(m sr)], in medium order (Riley Eq. 6 before dividing by the summed
+    scattering); ``tables`` are the flat phase tables, ``theta`` the scattering angle [rad]. Specialised on whether
+    any medium uses a phase table (without, ``tables`` is never read). It reads no grid: the densities come from
+    ``point``."""
+
+    @wp.func
+    def scattered_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), start: wp.vec3,
+                        theta: float) -> wp.vec3:
+        out = start
+        for m in range(media.count):
+            value = point.density[m]
+            if value > 0.0:
+                grid = media.grids[m]
+                phase = wp.vec3(0.0)
+                if wp.static(has_tables):
+                    phase = medium_phase(tables, grid.phase_kind, grid.phase_g, theta)
+                else:
+                    phase = wp.vec3(phase_eval(grid.phase_kind, grid.phase_g, wp.cos(theta)))
+                out += wp.cw_mul(grid.scattering * value, phase)
+        return out
+
+    return scattered_phase
+
+
+@functools.cache
+def mixture_phase_function(has_tables: bool):
+    """``mixture_phase(media, point, tables, rayleigh, theta) -> vec3`` (see :func:`mixture_functions`)."""
+
+    scattered_phase = phase_sum_function(has_tables)
+
+    @wp.func
+    def mixture_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), rayleigh: wp.vec3,
+                      theta: float) -> wp.vec3:
+        """Riley Eq. 6: the scattering-weighted phase [1/sr] at scattering angle ``theta`` of the Rayleigh component
+        of scattering ``rayleigh`` [1/m] and every medium at ``point``, summed in that order."""
+        num = scattered_phase(media, point, tables, rayleigh * phase_rayleigh(wp.cos(theta)), theta)
+        den = rayleigh
+        for m in range(media.count):
+            value = point.density[m]
+            if value > 0.0:
+                den += media.grids[m].scattering * value
+        out = wp.vec3(0.0)
+        for c in range(3):
+            if den[c] > 0.0:
+                out[c] = num[c] / den[c]
+        return out
+
+    return mixture_phase
+
+
+@wp.func
+def chosen_medium(media: VoxelMedia, point: MediaPoint, air_weight: float, target: float) -> int:
+    """The medium picked by ``target`` in [0, total) of the mean scattering [1/m] at ``point`` laid out air first
+    (``air_weight``), then the media in order (clamped to the media; the caller checks the air)."""
+    chosen = int(0)
+    running = air_weight
+    for m in range(media.count):
+        running += mean3(media.grids[m].scattering) * point.density[m]
+        if running < target:
+            chosen = m + 1
+    return wp.clamp(chosen, 0, wp.max(media.count - 1, 0))
+
+
+@functools.cache
+def mixture_functions(has_tables: bool):
+    """``(mixture_phase, sample_mixture)`` over the media at a point plus one Rayleigh component (the air; zero
+    scattering for none), specialised on whether any medium uses a phase table."""
+
+    mixture_phase = mixture_phase_function(has_tables)
+
+    @wp.func
+    def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, rayleigh: wp.vec3, d: wp.vec3,
+                       state: wp.uint32) -> PhaseSample:
+        """New direction after scattering at ``point`` from direction ``d``: pick the Rayleigh component or a medium
+        by mean scattering, sample its phase (Rayleigh: uniformly), weight by the mixture's phase over the mixture's
+        pdf. Three random draws: the component, cos θ, the azimuth."""
+        air_w = mean3(rayleigh)
+        total = air_w
+        for m in range(media.count):
+            total += mean3(media.grids[m].scattering) * point.density[m]
+        target = wp.randf(state) * total
+        use_air = target < air_w or media.count == 0
+        chosen = chosen_medium(media, point, air_w, target)
+        u = wp.randf(state)
+        cos_theta = rayleigh_sample_cos(u)
+        oriented = int(-1)
+        if not use_air:
+            grid = media.grids[chosen]
+            if grid.phase_kind >= TABLE_KIND:
+                if wp.static(has_tables):
+                    cos_theta = wp.cos(sample_table(tables.cdf, sampled_row(grid.phase_kind), u)[0])
+                    if tables.continuation.count > 0:
+                        oriented = tables.continuation.table_of[chosen]
+            else:
+                cos_theta = phase_sample_cos(grid.phase_kind, grid.phase_g, u)
+        out = PhaseSample()
+        out.direction = rotate_about(d, cos_theta, 2.0 * wp.pi * wp.randf(state))
+        if wp.static(has_tables):
+            if oriented >= 0:  # oriented ice: its table for light arriving along d (six more draws)
+                source, state = directional_sample(tables.continuation, oriented, d, state)
+                out.direction = source
+        theta = scattering_angle(d, out.direction)
+        pdf = air_w * rayleigh_pdf(wp.cos(theta))
+        for m in range(media.count):
+            grid = media.grids[m]
+            w = mean3(grid.scattering) * point.density[m]
+            if w > 0.0:
+                if wp.static(has_tables):
+                    pdf += w * medium_pdf(tables.cdf, grid.phase_kind, grid.phase_g, theta)
+                else:
+                    pdf += w * phase_pdf(grid.phase_kind, grid.phase_g, wp.cos(theta))
+        phase_extra = wp.vec3(0.0)
+        if wp.static(has_tables):
+            if tables.continuation.count > 0:
+                terms = continuation_terms(media, point, tables, d, out.direction, theta)
+                pdf += terms[3]
+                phase_extra = wp.vec3(terms[0], terms[1], terms[2])
+        pdf = pdf / wp.max(total, 1.0e-30)
+        out.state = state
+        out.weight = wp.vec3(0.0)
+        if pdf > 0.0:
+            phase = mixture_phase(media, point, tables.values, rayleigh, theta)
+            if wp.static(has_tables):
+                phase += per_unit_scattering(point, rayleigh, phase_extra)
+            out.weight = wp.max(phase, wp.vec3(0.0)) / pdf
+        return out
+
+    return mixture_phase, sample_mixture
