@@ -4,7 +4,7 @@ The pass draws what :mod:`warpsky.passes.surfaces.kernels` hits and shades: the 
 (:class:`~warpsky.scene.terrain.TerrainMesh`, through one BVH, :mod:`warpsky.surfaces.mesh`) and, when asked, its
 ground plane (with its albedo map), lit by the sun (self-shadowed, through the voxel media and a transmittance the
 caller computes at the hit points) and by the sky. The Layer is opaque where something is hit, so the lead
-composites it with the media by depth; :meth:`SurfacesPass.depth_only` gives the other passes that depth as the
+composites it with the media by depth; :meth:`Surfaces.depth_only` gives the other passes that depth as the
 limit of their marches.
 
 Lighting (see the kernels' docstring for the formula): the sun is :func:`~warpsky.light.sun.sunlight`
@@ -76,7 +76,7 @@ class Surfaces:
         Returns:
             A Layer: radiance, transmittance 0 where a surface is hit and 1 elsewhere, depth of the hit (the
             camera's far distance elsewhere). Under the terrain (:meth:`camera_buried`) it is black and opaque at
-            the near distance, with one :class:`SurfaceWarning`.
+            the near distance, with one line in its ``warnings``.
         """
         started = time.perf_counter()
         camera = scene.camera.conformed(width, height)
