@@ -82,3 +82,18 @@ def test_monte_carlo_time_of_hybrid_leaves_out_the_march_and_the_denoiser():
                                            "denoise_seconds": 0.25})
     assert monte_carlo(layer) == (1000, 0.5)
     assert monte_carlo(Layer(None, None, None, stats={"seconds": 1.0})) is None
+
+
+def test_stratiform_row_times_the_pass_alone(tmp_path, capsys):
+    """The stratiform row renders the stratiform pass on its own and reports it like a technique's row."""
+    from test_stratiform_scene import write_layer_stage
+
+    stage = write_layer_stage(tmp_path / "layer.usda")
+    out = tmp_path / "speed.json"
+    code = main(["bench", "speed", "--stages", str(stage), "--techniques", STRATIFORM, "--devices", "cpu",
+                 "--res", "8", "--frames", "1", "--threads", "1", "--json", str(out)])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["technique"] == STRATIFORM and "error" not in row and row["warm_ms"] > 0.0, row
+    assert row["paths_per_s"] is None

@@ -228,7 +228,7 @@ def _frame(scene, spec: RowSpec):
     plan = make_plan(scene, technique=technique, settings=spec.settings, resolution=(spec.width, spec.height),
                      device=spec.device)
     if spec.technique == STRATIFORM:
-        return (lambda: render_pass(plan, scene, STRATIFORM)), plan
+        return (lambda: render_pass(plan, scene, STRATIFORM)[0]), plan
     return (lambda: render_layers(plan, scene)[0]), plan
 
 
