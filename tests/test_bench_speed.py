@@ -38,7 +38,9 @@ def test_speed_table_and_json(tmp_path, homogeneous_npy, device, capsys):
     traced = rows[1]
     assert traced["settings"] == {"spp": "2", "seed": "0"} and traced["resolved_settings"]["spp"] == 2
     assert traced["paths_per_frame"] == 2 * traced["width"] * traced["height"] and traced["paths_per_s"] > 0.0
-    assert rows[0]["paths_per_s"] is None
+    per_path = traced["per_path"]
+    assert per_path["steps"] >= per_path["shadow_steps"] > 0.0 and per_path["events"] > 0.0
+    assert rows[0]["paths_per_s"] is None and rows[0]["per_path"] is None
     assert str(out) in printed
 
 

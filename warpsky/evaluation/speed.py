@@ -51,7 +51,7 @@ DEFAULT_SPP = 16
 DEFAULT_STAGES = ("usd_scenes/cumulus.usda", "usd_scenes/stratocumulus.usda")
 #: Columns of :func:`format_table`, in order.
 COLUMNS = ("device", "threads", "stage", "technique", "size", "cold ms", "cold kernels", "warm ms", "fps",
-           "CPU/wall", "kernel ms", "copy ms", "peak MiB", "Mpaths/s", "settings")
+           "CPU/wall", "kernel ms", "copy ms", "peak MiB", "Mpaths/s", "steps/path", "events/path", "settings")
 LEFT_ALIGNED = ("device", "stage", "technique", "cold kernels", "settings")
 ROW_MARKER = "WARPSKY_SPEED_ROW "
 #: What the columns measure (under the table and in the JSON).
@@ -59,7 +59,9 @@ NOTE = ("cold: plan + first frame of a fresh process (kernels compiled or loaded
         "says); warm: median frame after it; CPU/wall: process CPU time over wall time of the warm frames (the "
         "cores kept busy; a GPU row counts the host thread); kernel/copy ms: CUDA events of one more frame (n/a on "
         "the CPU); peak MiB: CUDA mempool high-water mark on GPUs, process peak RSS on the CPU; Mpaths/s: the Monte "
-        "Carlo part only (hybrid: frame time less single scattering and denoising).")
+        "Carlo part only (hybrid: frame time less single scattering and denoising); steps/path: tentative "
+        "collisions and majorant-segment crossings per path (shadow rays towards the sun in brackets); events/path: "
+        "scattering events per path (the rest of the steps are null collisions and crossings).")
 
 
 @dataclass
@@ -255,6 +257,20 @@ def monte_carlo(layer) -> tuple[int, float] | None:
     return int(stats["paths"]), float(seconds)
 
 
+def path_breakdown(layer) -> dict | None:
+    """Per path of a frame's layer: tentative collisions and segment crossings (``steps``), those of shadow rays
+    (``shadow_steps``) and scattering ``events``; None when it traced no paths."""
+    if layer is None:
+        return None
+    stats = next((s for s in [layer.stats, *layer.stats.get("parts", [])] if isinstance(s, dict) and "paths" in s),
+                 None)
+    if stats is None or not stats.get("paths") or "scatter_events" not in stats:
+        return None
+    paths = float(stats["paths"])
+    return {"steps": stats["tracking_steps"] / paths, "shadow_steps": stats["shadow_steps"] / paths,
+            "events": stats["scatter_events"] / paths}
+
+
 def cuda_activity(render, device: str) -> dict:
     """Kernel and copy time [ms] of one frame on ``device`` by CUDA events, with that frame's wall time."""
     import warp as wp
@@ -332,6 +348,7 @@ def measure_row(spec: RowSpec) -> dict:
         "peak_memory": peak_kind,
         "paths_per_frame": traced[0][0] if traced else None,
         "paths_per_s": statistics.median(p / s for p, s in traced) if traced else None,
+        "per_path": path_breakdown(warm[-1][1]),
         "resolved_settings": json.loads(json.dumps(plan.settings_dict(), default=str)),
     }
 
@@ -354,8 +371,15 @@ def table_cells(row: dict) -> list[str]:
         f"{row['cold_ms']:.0f}", row["cold_kernels"], f"{row['warm_ms']:.1f}", f"{row['fps']:.2f}",
         _cell(row.get("cores_busy"), ".2f", "-"),
         _cell(row.get("kernel_ms"), ".2f", gpu_missing), _cell(row.get("copy_ms"), ".2f", gpu_missing),
-        _cell(row.get("peak_mib"), ".0f", "-"), "-" if paths is None else f"{paths / 1e6:.2f}", settings,
+        _cell(row.get("peak_mib"), ".0f", "-"), "-" if paths is None else f"{paths / 1e6:.2f}",
+        _steps_cell(row.get("per_path")), _cell((row.get("per_path") or {}).get("events"), ".1f", "-"), settings,
     ]
+
+
+def _steps_cell(per_path: dict | None) -> str:
+    if not per_path:
+        return "-"
+    return f"{per_path['steps']:.0f} ({per_path['shadow_steps']:.0f})"
 
 
 def format_table(rows: list[dict]) -> str:

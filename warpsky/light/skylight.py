@@ -50,8 +50,7 @@ from warpsky.light.frame import media_altitude
 from warpsky.light.sun import above_air, sunlight
 from warpsky.media.air_analytic import inscatter, rayleigh, transmittance
 from warpsky.media.voxel import MediaPoint, VoxelMedia
-from warpsky.optics.grid import angle_grid, sphere_integral
-from warpsky.scene.model import PhaseKind
+from warpsky.optics.tables import mean_cosine
 
 #: Cells of the equal-area grid per hemisphere: SAMPLES x 2 SAMPLES.
 SAMPLES = 64
@@ -169,18 +168,6 @@ def isotropic_environment(scene) -> Environment | None:
     zero = np.zeros(3)
     ground_sky = upper_hemisphere(scene.dome)[1]
     return Environment(ambient_radiance(scene), np.zeros((3, 3)), zero, np.zeros((3, 3)), ground_sky, False)
-
-
-def mean_cosine(medium) -> np.ndarray:
-    """Asymmetry g per channel of a medium's phase: the mean cosine of its species' table, else its HG g (0 for
-    isotropic and Rayleigh scattering)."""
-    if medium.species is not None:
-        from warpsky.optics.tables import phase_table
-
-        return sphere_integral(phase_table(medium.species) * np.cos(angle_grid()))
-    if medium.phase.kind == PhaseKind.HG:
-        return np.full(3, float(medium.phase.g))
-    return np.zeros(3)
 
 
 # ---- on the device -----------------------------------------------------------------------------------------

@@ -27,6 +27,14 @@ class Air:
 
 
 @wp.func
+def no_air() -> Air:
+    """Air that is off: the media tracked alone."""
+    out = Air()
+    out.enabled = 0
+    return out
+
+
+@wp.func
 def air_coefficient(air: Air, y: float) -> wp.vec3:
     """Air's extinction (= scattering) at camera-relative height y [1/m]."""
     return air.beta_sl * wp.exp(-air.gamma * (air.camera_altitude + y))

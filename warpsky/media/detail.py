@@ -47,14 +47,25 @@ class MediumDetail:
 
     state: DetailState  # the advected noise, positions relative to the camera [m]
     amplitude: float
+    source: int  # the first medium whose noise this one's is (fields of one Volume share it): evaluated once
+
+
+@wp.func
+def detail_z(detail: MediumDetail, p: wp.vec3) -> float:
+    """The advected noise at ``p`` (camera-relative metres) in standard deviations."""
+    return (advected_noise(detail.state, p) - detail.state.mean) / detail.state.std
+
+
+@wp.func
+def factor_of_z(amplitude: float, z: float) -> float:
+    """``max(0, 1 + a clamp(z, -Z, Z))`` with Z = DETAIL_Z_MAX: in [0, 1 + Z a]."""
+    return wp.max(0.0, 1.0 + amplitude * wp.clamp(z, -DETAIL_Z_MAX, DETAIL_Z_MAX))
 
 
 @wp.func
 def detail_factor(detail: MediumDetail, p: wp.vec3) -> float:
-    """Factor on the coarse density at ``p`` (camera-relative metres): ``max(0, 1 + a clamp(z, -Z, Z))`` with ``z``
-    the advected noise in standard deviations and Z = DETAIL_Z_MAX; in [0, 1 + Z a]."""
-    z = (advected_noise(detail.state, p) - detail.state.mean) / detail.state.std
-    return wp.max(0.0, 1.0 + detail.amplitude * wp.clamp(z, -DETAIL_Z_MAX, DETAIL_Z_MAX))
+    """Factor on the coarse density at ``p`` (camera-relative metres): :func:`factor_of_z` of the noise there."""
+    return factor_of_z(detail.amplitude, detail_z(detail, p))
 
 
 @wp.func
@@ -117,10 +128,12 @@ def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_positio
         return None
     camera = np.asarray(camera_position, dtype=np.float64)
     states: dict = {}
+    sources: dict = {}
     out = []
-    for medium in media:
+    for index, medium in enumerate(media):
         entry = MediumDetail()
         entry.amplitude = 0.0
+        entry.source = index
         spec = medium.detail
         if spec is not None and spec.active:
             detail = advected_detail(spec, device)
@@ -132,6 +145,7 @@ def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_positio
             state = states[id(detail)]
             entry.state = _with_origin(state, anchor - camera)
             entry.amplitude = float(spec.amplitude)
+            entry.source = sources.setdefault((id(detail), tuple(anchor.tolist())), index)
         out.append(entry)
     return out
 

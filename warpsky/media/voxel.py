@@ -19,13 +19,10 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.errors import UsageError
-from warpsky.media.detail import (
-    MediumDetail,
-    detailed_value,
-    medium_details,
-)
+from warpsky.media.detail import MediumDetail, detail_z, factor_of_z, medium_details
 from warpsky.numerics import trilinear_cell
 from warpsky.optics.kernels import TABLE_KIND
+from warpsky.optics.tables import mean_cosine
 from warpsky.scene.model import VoxelMedium
 
 
@@ -41,6 +38,8 @@ class VoxelGrid:
     scattering: wp.vec3  # extinction * albedo [1/m per unit field value], RGB
     phase_kind: int  # PhaseKind code, or TABLE_KIND + table index for a species
     phase_g: float  # HG asymmetry
+    reduced_extinction: wp.vec3  # extinction - g scattering: after high-order similarity (isotropic phase), RGB
+    reduced_scattering: wp.vec3  # scattering (1 - g), g the phase's mean cosine per channel, RGB
 
 
 @wp.func
@@ -112,6 +111,8 @@ def grid_interval(grid: VoxelGrid, origin: wp.vec3, direction: wp.vec3, t0: floa
 #: per sample, however many phase functions or scattering orders are evaluated from it afterwards).
 MAX_MEDIA = 16
 FieldDensities = wp.types.vector(length=MAX_MEDIA, dtype=float)
+#: One flag per field (which fields' detail noise a sample has evaluated).
+FieldFlags = wp.types.vector(length=MAX_MEDIA, dtype=int)
 
 
 def check_field_count(media: tuple[VoxelMedium, ...], technique: str, advice: str = "") -> None:
@@ -162,7 +163,8 @@ def media_span(media: VoxelMedia, origin: wp.vec3, view: wp.vec3, t_near: float,
 def media_functions(has_detail: bool):
     """``sample_media(media: VoxelMedia, p: vec3) -> MediaPoint`` at the camera-relative point ``p`` [m],
     specialised on animated detail: with it each field's coarse density is multiplied by its detail factor here,
-    once per sample, so everything downstream (extinction, scattering, phases) sees the detailed density."""
+    once per sample, so everything downstream (extinction, scattering, phases) sees the detailed density. Fields
+    that share one detail (a Volume's cloud, rain and snow) evaluate its noise once per sample."""
 
     @wp.func
     def sample_media(media: VoxelMedia, p: wp.vec3) -> MediaPoint:
@@ -170,11 +172,20 @@ def media_functions(has_detail: bool):
         out.density = FieldDensities()
         out.extinction = wp.vec3(0.0)
         out.scattering = wp.vec3(0.0)
+        noise = FieldDensities()
+        evaluated = FieldFlags()
         for m in range(media.count):
             grid = media.grids[m]
             value = grid_value(media.values, grid, grid.eye_index + grid.index_from_world * p)
             if wp.static(has_detail):
-                value = detailed_value(value, media.details, m, p)
+                if value > 0.0:
+                    detail = media.details[m]
+                    if detail.amplitude > 0.0:
+                        source = detail.source
+                        if evaluated[source] == 0:
+                            noise[source] = detail_z(media.details[source], p)
+                            evaluated[source] = 1
+                        value = value * factor_of_z(detail.amplitude, noise[source])
             if value > 0.0:
                 out.density[m] = value
                 out.extinction += grid.extinction * value
@@ -233,6 +244,10 @@ class VoxelMediaBuffers:
             else:
                 grid.phase_kind = int(medium.phase.kind)
             grid.phase_g = float(medium.phase.g)
+            g = mean_cosine(medium)
+            scattering = medium.extinction_scale * medium.albedo
+            grid.reduced_extinction = wp.vec3(*(medium.extinction_scale - g * scattering).tolist())
+            grid.reduced_scattering = wp.vec3(*(scattering * (1.0 - g)).tolist())
             infos.append(grid)
             chunks.append(medium.density.reshape(-1))
             offset += medium.density.size

@@ -9,6 +9,7 @@ being built prints a line to stderr first (:func:`build_progress`): a build take
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from dataclasses import dataclass, field
@@ -17,8 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.files import atomic_write, cache_dir
+from warpsky.optics.grid import angle_grid, sphere_integral
 from warpsky.optics.multiple import ams_tables, forward_fractions, modified_mie
 from warpsky.optics.species import get_species
+from warpsky.scene.model import PhaseKind
 
 #: Bump when a change to the builders changes table contents.
 CACHE_VERSION = 1
@@ -133,3 +136,19 @@ def build_tables(species: list[str] | tuple[str, ...], *, orders: int | None = N
         forward = np.stack([f for _, f in pairs])
     return OpticsTables(names, phase, sigma, albedo, ams, forward, time.perf_counter() - started,
                         BUILD_LOG[before:])
+
+
+def mean_cosine(medium) -> np.ndarray:
+    """Asymmetry g per channel of a medium's phase: the mean cosine of its species' table, else its HG g (0 for
+    isotropic and Rayleigh scattering)."""
+    if medium.species is not None:
+        return species_mean_cosine(medium.species).copy()
+    if medium.phase.kind == PhaseKind.HG:
+        return np.full(3, float(medium.phase.g))
+    return np.zeros(3)
+
+
+@functools.lru_cache(maxsize=32)
+def species_mean_cosine(species: str) -> np.ndarray:
+    """Mean cosine g per channel of a species' phase table (kept per process; do not write into it)."""
+    return sphere_integral(phase_table(species) * np.cos(angle_grid()))

@@ -84,6 +84,9 @@ class HybridSettings(Settings):
     max_bounces: int = setting(1024, range=">= 1", help="cap on scattering events per path; capped paths are "
                                "counted (capped_paths)")
     majorant_block: int = setting(8, unit="voxel", range=">= 1", help="edge of the coarse majorant cells")
+    similarity_order: int = setting(0, range=">= 0", help="scattering events after which the paths continue through "
+                                    "the media reduced by high-order similarity (sigma_s (1 - g), isotropic); "
+                                    "0 = exact")
     ms_scale: int = setting(1, unit="pixel", range="1..8", help="trace multiple scattering on pixels this many "
                             "times larger (box-filtered), upsampled with the exact coverage as guide")
     step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering eye-ray step",
@@ -100,7 +103,7 @@ class HybridSettings(Settings):
     def path_tracer(self) -> PathTracerSettings:
         return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,
                                   majorant_block=self.majorant_block, samples_per_pass=self.samples_per_pass,
-                                  pixel_jitter=self.ms_scale > 1)
+                                  pixel_jitter=self.ms_scale > 1, similarity_order=self.similarity_order)
 
 
 class Hybrid(Technique):
@@ -274,6 +277,7 @@ class MultipleScattering:
         stats = {"spp": done, "passes": passes, "stopped_by": stop, "error_estimate": estimate,
                  "target_error": s.target_error, "denoise_seconds": denoise_seconds,
                  "sanitised_values": sanitised, "tracking_steps": film.stats["tracking_steps"],
+                 "scatter_events": film.stats["scatter_events"], "shadow_steps": film.stats["shadow_steps"],
                  "capped_paths": film.stats["capped_paths"], "paths": done * mean.shape[0] * mean.shape[1],
                  "warnings": warnings}
         return image, variance, stats

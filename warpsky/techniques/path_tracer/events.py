@@ -15,14 +15,15 @@ import warp as wp
 
 from warpsky.light.dome import DomeLight, dome_radiance
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air, air_coefficient, air_scattering, sea_level_distance
+from warpsky.media.air import Air, air_coefficient, air_scattering, no_air, sea_level_distance
 from warpsky.media.phase_mixture import mixture_functions, oriented_correction_function
 from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import medium_phase, scattering_angle
-from warpsky.optics.phase_sampling import PhaseTables
+from warpsky.optics.phase import isotropic_sample_cos, phase_rayleigh
+from warpsky.optics.phase_sampling import PhaseTables, rotate_about
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.majorants import Majorants
-from warpsky.techniques.path_tracer.tracking import Transmittance, tracking_functions
+from warpsky.techniques.path_tracer.tracking import Transmittance, reduced_with_air, tracking_functions
 
 oriented_mixture_correction = oriented_correction_function(medium_phase)[1]
 
@@ -37,6 +38,17 @@ UNBOUNDED = wp.constant(1.0e30)
 SURFACE_TIE = wp.constant(1.0e-5)
 #: Russian roulette starts once a path has bounced this often.
 ROULETTE_BOUNCE = wp.constant(3)
+
+
+@wp.func
+def reduced_mixture(air_part: wp.vec3, media_part: wp.vec3, total: wp.vec3, cos_theta: float) -> wp.vec3:
+    """The phase [1/sr] of air (Rayleigh, scattering ``air_part``) mixed with isotropic media (``media_part``),
+    per channel; 0 where nothing scatters."""
+    out = wp.vec3(0.0)
+    for c in range(3):
+        if total[c] > 0.0:
+            out[c] = (air_part[c] * phase_rayleigh(cos_theta) + media_part[c] / (4.0 * wp.pi)) / total[c]
+    return out
 
 
 @wp.struct
@@ -55,6 +67,8 @@ class PathState:
     radiance: wp.vec3  # gathered so far
     state: wp.uint32  # the path's one random stream
     steps: int  # tentative collisions so far (the pixel's running count)
+    shadow_steps: int  # of those, the ones of shadow rays towards the sun
+    events: int  # scattering events in the media and the air so far
     alive: int
     capped: int  # 1 when the path stopped at max_bounces
     hit: int  # 1 when the first flight ended in a medium or on the ground
@@ -71,6 +85,8 @@ def start_path(origin: wp.vec3, direction: wp.vec3, state: wp.uint32, steps: int
     out.radiance = wp.vec3(0.0)
     out.state = state
     out.steps = steps
+    out.shadow_steps = 0
+    out.events = 0
     out.alive = 1
     out.capped = 0
     out.hit = 0
@@ -209,26 +225,52 @@ def cosine_up(state: wp.uint32) -> DirectionSample:
 
 @functools.cache
 def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
-    """``(scatter_event, ground_event)``, specialised on a ground plane, tabulated species and animated detail."""
+    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species and
+    animated detail."""
     sample_media = media_functions(has_detail)
     _media_at, _delta_track, ratio_track = tracking_functions(has_detail)
     mixture_phase, sample_mixture = mixture_functions(has_tables)
 
     @wp.func
     def transmittance_to_sun(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, p: wp.vec3,
-                             state: wp.uint32) -> Transmittance:
-        """Transmittance from ``p`` to the sun. Above the grazing elevations the air is ratio-tracked with the
-        media along the flat earth's ray; at grazing ones (``air_sine`` above the direction's sine) the media are
-        tracked alone and the air's optical depth is its vertical column over ``air_sine`` in closed form (the
-        finite grazing air mass every other technique uses)."""
-        if air.enabled != 0 and sun.air_sine > sun.direction[1]:
-            no_air = Air()
-            no_air.enabled = 0
-            out = ratio_track(media, majorants, no_air, p, sun.direction, UNBOUNDED, state)
+                             state: wp.uint32, reduced: int) -> Transmittance:
+        """Transmittance from ``p`` to the sun (with ``reduced``, through the media after high-order similarity):
+        the media ratio-tracked, the air in closed form, its vertical column above ``p`` over ``air_sine`` (exact
+        for the flat earth's ray above the grazing elevations, and there the finite grazing air mass every other
+        technique uses). Tracking the air instead crossed a majorant band every 800 m of height up to 114 km."""
+        out = ratio_track(media, majorants, no_air(), p, sun.direction, UNBOUNDED, state, reduced)
+        if air.enabled != 0:
             column = air_coefficient(air, p[1]) / (air.gamma * sun.air_sine)
             out.value = wp.cw_mul(out.value, wp.vec3(wp.exp(-column[0]), wp.exp(-column[1]), wp.exp(-column[2])))
-            return out
-        return ratio_track(media, majorants, air, p, sun.direction, UNBOUNDED, state)
+        return out
+
+    @wp.func
+    def reduced_scatter_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, sun_on: bool,
+                              path: PathState, p: wp.vec3) -> PathState:
+        """Scattering at ``p`` after high-order similarity: the media scatter isotropically with their reduced
+        coefficients beside the air's Rayleigh phase; the sun through the reduced media times that mixture, then a
+        direction drawn uniformly over the sphere (two random draws) weighted by the mixture over 1 / (4 pi)."""
+        out = path
+        air_part = air_scattering(air, p[1])
+        media_part = reduced_with_air(media, sample_media(media, p), no_air(), p[1]).scattering
+        total = air_part + media_part
+        if sun_on:
+            tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 1)
+            out.state = tr_sun.state
+            out.steps = out.steps + tr_sun.steps
+            out.shadow_steps = out.shadow_steps + tr_sun.steps
+            phase = reduced_mixture(air_part, media_part, total, wp.dot(sun.direction, out.direction))
+            out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, phase),
+                                                    wp.cw_mul(sun.irradiance, tr_sun.value))
+        state = out.state
+        cos_theta = isotropic_sample_cos(wp.randf(state))
+        direction = rotate_about(out.direction, cos_theta, 2.0 * wp.pi * wp.randf(state))
+        out.throughput = wp.cw_mul(out.throughput, reduced_mixture(air_part, media_part, total, cos_theta)
+                                   * (4.0 * wp.pi))
+        out.state = state
+        out.direction = direction
+        out.origin = p
+        return out
 
     @wp.func
     def scatter_event(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
@@ -239,9 +281,10 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
         point = sample_media(media, p)
         rayleigh = air_scattering(air, p[1])
         if sun_on:
-            tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state)
+            tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 0)
             out.state = tr_sun.state
             out.steps = out.steps + tr_sun.steps
+            out.shadow_steps = out.shadow_steps + tr_sun.steps
             theta = scattering_angle(sun.direction, out.direction)
             phase = mixture_phase(media, point, tables.values, rayleigh, theta)
             if wp.static(has_tables):  # oriented crystals are ice, a tabulated species: their sunlit phase
@@ -258,15 +301,17 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
 
     @wp.func
     def ground_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, ground: Ground, sun_on: bool,
-                     path: PathState, p: wp.vec3) -> PathState:
-        """Lambertian ground under ``p``: the sun through the media, then a cosine-weighted bounce."""
+                     path: PathState, p: wp.vec3, reduced: int) -> PathState:
+        """Lambertian ground under ``p``: the sun through the media (with ``reduced``, after high-order
+        similarity), then a cosine-weighted bounce."""
         out = path
         if wp.static(has_ground):
             q = wp.vec3(p[0], ground.offset, p[2])
             if sun_on:
-                tr_sun = transmittance_to_sun(media, majorants, air, sun, q, out.state)
+                tr_sun = transmittance_to_sun(media, majorants, air, sun, q, out.state, reduced)
                 out.state = tr_sun.state
                 out.steps = out.steps + tr_sun.steps
+                out.shadow_steps = out.shadow_steps + tr_sun.steps
                 lit_ground = wp.cw_mul(sun.irradiance, tr_sun.value)
                 out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, ground.albedo), lit_ground) * (
                     wp.max(sun.direction[1], 0.0) / wp.pi
@@ -278,4 +323,4 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
             out.origin = q + wp.vec3(0.0, 1.0e-4, 0.0)
         return out
 
-    return scatter_event, ground_event
+    return scatter_event, reduced_scatter_event, ground_event

@@ -25,8 +25,10 @@ from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import DomeLight
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air
+from warpsky.media.air import Air, no_air
+from warpsky.media.air_analytic import air_depth
 from warpsky.media.voxel import VoxelMedia
+from warpsky.numerics import exp3
 from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.events import (
@@ -59,6 +61,7 @@ class PathSettings:
     sample_count: int  # paths per pixel in this launch
     max_bounces: int
     multiple_only: int  # 1: leave out single scattering (the sun at the first event) and the primary transmittance
+    similarity_order: int  # after this many scattering events the media are reduced (high-order similarity); 0: never
 
 
 @wp.struct
@@ -69,7 +72,7 @@ class PixelSums:
     radiance_sq: wp.array2d(dtype=wp.vec3)
     transmittance_sum: wp.array2d(dtype=wp.vec3)
     depth_sum: wp.array2d(dtype=wp.vec2)  # (sum of depths, hits)
-    counters: wp.array2d(dtype=wp.vec2i)  # (tracking steps, capped paths)
+    counters: wp.array2d(dtype=wp.vec4i)  # (tracking steps, capped paths, scattering events, shadow-ray steps)
 
 
 @wp.struct
@@ -79,7 +82,17 @@ class SampleResult:
     radiance: wp.vec3
     transmittance: wp.vec3  # the primary ray's ratio-tracked transmittance (when counts[2] is 1)
     depth: wp.vec2  # (depth of the first event, 1), or (0, 0) when the first flight ended nowhere
-    counts: wp.vec3i  # (tracking steps, 1 if capped, 1 if the transmittance was tracked)
+    counts: wp.vec4i  # (tracking steps, 1 if capped, scattering events, shadow-ray steps)
+    tracked: int  # 1 if the primary transmittance was tracked
+
+
+@wp.func
+def air_transmittance(air: Air, origin: wp.vec3, view: wp.vec3, distance: float) -> wp.vec3:
+    """Transmittance of the air from ``origin`` over ``distance`` [m] along ``view`` in closed form (Riley Eq. 11;
+    ones without air): the primary ray's air is not tracked, its majorant bands would cost a step every 800 m."""
+    if air.enabled == 0:
+        return wp.vec3(1.0)
+    return exp3(air_depth(air.beta_sl, air.gamma, air.camera_altitude + origin[1], view[1], distance))
 
 
 @functools.cache
@@ -87,7 +100,7 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
     """``trace_path(...) -> PathState``, one path from its camera ray, specialised like the kernels."""
     delta_track = tracking_functions(has_detail)[1]
     flight_end = surface_functions(has_ground)[1]
-    scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
+    scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
 
     @wp.func
     def trace_path(media: VoxelMedia, majorants: Majorants, phase_tables: PhaseTables, air: Air, sun: Sun,
@@ -105,9 +118,12 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
             if bounce >= settings.max_bounces:
                 path.capped = 1
                 break
+            reduced = int(0)
+            if settings.similarity_order > 0 and bounce >= settings.similarity_order:
+                reduced = 1
             end = flight_end(air, ground, path.origin, path.direction, bounce, first)
             flight = delta_track(media, majorants, air, path.origin, path.direction, end.t, path.throughput,
-                                 path.state)
+                                 path.state, reduced)
             path.state = flight.state
             path.steps = path.steps + flight.steps
             path.throughput = wp.cw_mul(path.throughput, flight.weight)
@@ -125,9 +141,13 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                 path.hit = 1
                 path.first_t = flight.t
             if flight.scattered == 1:
-                path = scatter_event(media, majorants, phase_tables, air, sun, lit, path, p)
+                path.events = path.events + 1
+                if reduced != 0:
+                    path = reduced_scatter_event(media, majorants, air, sun, lit, path, p)
+                else:
+                    path = scatter_event(media, majorants, phase_tables, air, sun, lit, path, p)
             else:
-                path = ground_event(media, majorants, air, sun, ground, lit, path, p)
+                path = ground_event(media, majorants, air, sun, ground, lit, path, p, reduced)
             bounce += 1
             path = roulette(path, bounce)
         return path
@@ -165,9 +185,9 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
         steps = int(0)
         tracked = int(0)
         if first.surface == SURFACE_NONE and settings.multiple_only == 0:
-            tr = ratio_track(media, majorants, air, origin, view, first.t, state)
+            tr = ratio_track(media, majorants, no_air(), origin, view, first.t, state, 0)
             state = tr.state
-            out.transmittance = tr.value
+            out.transmittance = wp.cw_mul(tr.value, air_transmittance(air, origin, view, first.t))
             steps = tr.steps
             tracked = 1
         path = trace_path(media, majorants, phase_tables, air, sun, ground, dome, settings, sun_reaches(sun, air),
@@ -175,7 +195,8 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
         if path.hit != 0:
             out.depth = wp.vec2((ray.t_near + path.first_t) * ray.cos_axis, 1.0)
         out.radiance = path.radiance
-        out.counts = wp.vec3i(path.steps, path.capped, tracked)
+        out.counts = wp.vec4i(path.steps, path.capped, path.events, path.shadow_steps)
+        out.tracked = tracked
         return out
 
     return pixel_sample
@@ -184,7 +205,7 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
 @wp.func
 def add_sample(sums: PixelSums, row: int, col: int, sample: SampleResult):
     """Add one path's radiance, its square, its tracked transmittance and its depth to pixel (row, col)."""
-    if sample.counts[2] != 0:
+    if sample.tracked != 0:
         sums.transmittance_sum[row, col] = sums.transmittance_sum[row, col] + sample.transmittance
     if sample.depth[1] != 0.0:
         sums.depth_sum[row, col] = sums.depth_sum[row, col] + sample.depth
@@ -228,8 +249,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
         count = settings.sample_count
         if keep:
             count = 1
-        steps = int(0)
-        capped = int(0)
+        counts = wp.vec4i(0, 0, 0, 0)
         for s in range(count):
             sample = pixel_sample(media, majorants, phase_tables, air, sun, cam, ground, dome, settings, pixel_row,
                                   col, settings.first_sample + path + s)
@@ -237,10 +257,9 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
                 samples[row, col] = sample
             else:
                 add_sample(sums, pixel_row, col, sample)
-                steps += sample.counts[0]
-                capped += sample.counts[1]
+                counts = counts + sample.counts
         if not keep:
-            sums.counters[pixel_row, col] = sums.counters[pixel_row, col] + wp.vec2i(steps, capped)
+            sums.counters[pixel_row, col] = sums.counters[pixel_row, col] + counts
 
     return path_trace
 
@@ -257,13 +276,11 @@ def sum_samples_kernel() -> wp.Kernel:
         r, col = wp.tid()
         row = r + row_offset
         height = sums.radiance_sum.shape[0]
-        steps = int(0)
-        capped = int(0)
+        counts = wp.vec4i(0, 0, 0, 0)
         for s in range(sample_count):
             sample = samples[s * height + row, col]
             add_sample(sums, row, col, sample)
-            steps += sample.counts[0]
-            capped += sample.counts[1]
-        sums.counters[row, col] = sums.counters[row, col] + wp.vec2i(steps, capped)
+            counts = counts + sample.counts
+        sums.counters[row, col] = sums.counters[row, col] + counts
 
     return sum_samples

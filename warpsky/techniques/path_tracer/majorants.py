@@ -15,6 +15,7 @@ from warpsky import device_buffers
 from warpsky.media.air import Air, air_coefficient
 from warpsky.media.detail import detail_factor_bound
 from warpsky.media.voxel import VoxelMedia, grid_interval
+from warpsky.optics.tables import mean_cosine
 from warpsky.scene.model import VoxelMedium
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
@@ -32,10 +33,13 @@ class MajorantGrid:
 
 @wp.struct
 class Majorants:
-    """Every medium's majorant grid: one :class:`MajorantGrid` per medium over one flat buffer of bounds [1/m]."""
+    """Every medium's majorant grid: one :class:`MajorantGrid` per medium over one flat buffer of bounds [1/m], and
+    the same bounds for the media after high-order similarity (``reduced``; the same buffer when paths never
+    switch to it)."""
 
     grids: wp.array(dtype=MajorantGrid)
     values: wp.array(dtype=float)
+    reduced: wp.array(dtype=float)
 
 
 @wp.struct
@@ -71,9 +75,9 @@ def air_segment(air: Air, origin: wp.vec3, direction: wp.vec3, t: float, t_max: 
 
 @wp.func
 def majorant_segment(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
-                     t: float, t_max: float) -> Segment:
+                     t: float, t_max: float, reduced: int) -> Segment:
     """Sum of the majorants of the air and all media at ``origin + t * direction`` and where the first of them
-    changes."""
+    changes; with ``reduced`` the media's bounds after high-order similarity."""
     out = air_segment(air, origin, direction, t, t_max)
     for m in range(media.count):
         grid = media.grids[m]
@@ -102,7 +106,11 @@ def majorant_segment(media: VoxelMedia, majorants: Majorants, air: Air, origin: 
                 exit_t = wp.min(exit_t, (float(c + 1) * mg.block - 0.5 - p0[a]) / dir_index[a])
             elif dir_index[a] < 0.0:
                 exit_t = wp.min(exit_t, (float(c) * mg.block - 0.5 - p0[a]) / dir_index[a])
-        out.majorant += majorants.values[mg.offset + (cell[0] * mg.shape[1] + cell[1]) * mg.shape[2] + cell[2]]
+        index = mg.offset + (cell[0] * mg.shape[1] + cell[1]) * mg.shape[2] + cell[2]
+        if reduced != 0:
+            out.majorant += majorants.reduced[index]
+        else:
+            out.majorant += majorants.values[index]
         out.end = wp.min(out.end, wp.max(exit_t, t + nudge))
     return out
 
@@ -133,16 +141,23 @@ def majorant_grid(density: np.ndarray, block: int) -> np.ndarray:
     return full.reshape(cells[0], block, cells[1], block, cells[2], block).max(axis=(1, 3, 5))
 
 
-def upload_majorants(media: tuple[VoxelMedium, ...], block: int, device, *,
-                     cache_name: str | None = None) -> tuple[Majorants, int]:
+def upload_majorants(media: tuple[VoxelMedium, ...], block: int, device, *, cache_name: str | None = None,
+                     reduced: bool = False) -> tuple[Majorants, int]:
     """Majorant grids of ``media`` (cells of ``block`` voxels, bounds on extinction times the detail bound, with
-    :data:`MAJORANT_MARGIN`) uploaded to ``device``, and the number of cells. With ``cache_name`` the bounds go
-    through :func:`warpsky.device_buffers.upload` (no copy when the previous frame's bounds were the same)."""
-    mgrids, chunks, offset = [], [], 0
+    :data:`MAJORANT_MARGIN`) uploaded to ``device``, and the number of cells; with ``reduced`` also the bounds on
+    the extinction after high-order similarity (sigma_t - g sigma_s). With ``cache_name`` the bounds go through
+    :func:`warpsky.device_buffers.upload` (no copy when the previous frame's bounds were the same)."""
+    mgrids, chunks, reduced_chunks, offset = [], [], [], 0
     for medium in media:
-        bound = majorant_grid(medium.density, block) * float(np.max(medium.extinction_scale))
+        cells = majorant_grid(medium.density, block)
+        bound = cells * float(np.max(medium.extinction_scale))
         bound *= float(MAJORANT_MARGIN)
         bound *= detail_factor_bound(medium)
+        if reduced:
+            scattering = medium.extinction_scale * medium.albedo
+            coefficient = float(np.max(medium.extinction_scale - mean_cosine(medium) * scattering))
+            reduced_chunks.append((cells * max(coefficient, 0.0) * float(MAJORANT_MARGIN)
+                                   * detail_factor_bound(medium)).reshape(-1))
         mg = MajorantGrid()
         mg.offset = offset
         mg.shape = wp.vec3i(*bound.shape)
@@ -156,5 +171,10 @@ def upload_majorants(media: tuple[VoxelMedium, ...], block: int, device, *,
         out.values = wp.array(values, dtype=float, device=device)
     else:
         out.values = device_buffers.upload(cache_name, values, float, device)
+    out.reduced = out.values
+    if reduced and reduced_chunks:
+        bounds = np.concatenate(reduced_chunks).astype(np.float32)
+        out.reduced = (wp.array(bounds, dtype=float, device=device) if cache_name is None
+                       else device_buffers.upload(f"{cache_name}:reduced", bounds, float, device))
     out.grids = wp.array(mgrids if mgrids else [MajorantGrid()], dtype=MajorantGrid, device=device)
     return out, offset

@@ -12,6 +12,13 @@ probability P = Σ_c w_c σ_t,c / (μ̄ Σ_c w_c), w the path's throughput (hist
 channel, keeps the sum of the weights on null collisions (no blow-up in chromatic air), and is exactly 1 for grey
 media.
 
+High-order similarity (Zhao, Wu, Ramamoorthi and Bala 2014): once a path has scattered ``similarity_order`` times,
+its flights and its shadow rays run through the media after the order-1 similarity transform, sigma_s* =
+sigma_s (1 - g) with an isotropic phase and sigma_t* = sigma_a + sigma_s*, g the phase's mean cosine (the air,
+Rayleigh, keeps its own coefficients): ``reduced`` 1 selects those coefficients and their majorants. Light scattered
+that often has lost most of its angular structure, so the transform changes it little while cutting the collisions
+of a forward-scattering medium by 1 / (1 - g) (6.7 for g = 0.85).
+
 Positions are camera-relative metres (float32-safe far from the origin, as in :mod:`warpsky.media.voxel`).
 """
 
@@ -62,6 +69,26 @@ def with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointM
     return out
 
 
+@wp.func
+def reduced_with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointMedia:
+    """:func:`with_air` after high-order similarity: the media's reduced extinction and scattering at ``point``
+    (the air's are unchanged)."""
+    out = PointMedia()
+    out.extinction = wp.vec3(0.0)
+    out.scattering = wp.vec3(0.0)
+    if air.enabled != 0:
+        coefficient = air_coefficient(air, y)
+        out.extinction = coefficient
+        out.scattering = coefficient
+    for m in range(media.count):
+        value = point.density[m]
+        if value > 0.0:
+            grid = media.grids[m]
+            out.extinction += grid.reduced_extinction * value
+            out.scattering += grid.reduced_scattering * value
+    return out
+
+
 @wp.struct
 class Collision:
     """Where :func:`next_collision` stopped: a tentative collision (``found`` 1) or the end of the ray."""
@@ -75,14 +102,15 @@ class Collision:
 
 @wp.func
 def next_collision(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
-                   t_start: float, t_max: float, steps_start: int, state: wp.uint32) -> Collision:
-    """The next tentative collision after ``t_start`` (one random draw per exponential step), or ``t_max``."""
+                   t_start: float, t_max: float, steps_start: int, state: wp.uint32, reduced: int) -> Collision:
+    """The next tentative collision after ``t_start`` (one random draw per exponential step), or ``t_max``; with
+    ``reduced`` against the majorants after high-order similarity."""
     t = float(t_start)
     steps = int(steps_start)
     found = int(0)
     majorant = float(0.0)
     while t < t_max and steps < MAX_TRACKING_STEPS:
-        seg = majorant_segment(media, majorants, air, origin, direction, t, t_max)
+        seg = majorant_segment(media, majorants, air, origin, direction, t, t_max, reduced)
         if seg.majorant <= 0.0:
             if seg.end >= t_max:
                 break
@@ -140,26 +168,30 @@ def tracking_functions(has_detail: bool):
 
 @functools.cache
 def media_at_function(has_detail: bool):
-    """``media_at(media, air, p) -> PointMedia`` (see :func:`tracking_functions`)."""
+    """``media_at(media, air, p, reduced) -> PointMedia`` (see :func:`tracking_functions`)."""
     sample_media = media_functions(has_detail)
 
     @wp.func
-    def media_at(media: VoxelMedia, air: Air, p: wp.vec3) -> PointMedia:
-        """Summed extinction and scattering of the air and all media at the camera-relative point ``p``."""
-        return with_air(media, sample_media(media, p), air, p[1])
+    def media_at(media: VoxelMedia, air: Air, p: wp.vec3, reduced: int) -> PointMedia:
+        """Summed extinction and scattering of the air and all media at the camera-relative point ``p`` (with
+        ``reduced``, after high-order similarity)."""
+        point = sample_media(media, p)
+        if reduced != 0:
+            return reduced_with_air(media, point, air, p[1])
+        return with_air(media, point, air, p[1])
 
     return media_at
 
 
 @functools.cache
 def delta_track_function(has_detail: bool):
-    """``delta_track(media, majorants, air, origin, direction, t_max, history, state) -> Flight`` (see
+    """``delta_track(media, majorants, air, origin, direction, t_max, history, state, reduced) -> Flight`` (see
     :func:`tracking_functions`)."""
     media_at = media_at_function(has_detail)
 
     @wp.func
     def delta_track(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
-                    t_max: float, history: wp.vec3, state: wp.uint32) -> Flight:
+                    t_max: float, history: wp.vec3, state: wp.uint32, reduced: int) -> Flight:
         """Weighted delta tracking from ``origin`` along ``direction`` up to ``t_max`` (see the module docstring);
         one random draw per collision after those of :func:`next_collision`."""
         out = Flight()
@@ -169,13 +201,13 @@ def delta_track_function(has_detail: bool):
         steps = int(0)
         found = int(1)
         while found != 0:
-            hit = next_collision(media, majorants, air, origin, direction, t, t_max, steps, state)
+            hit = next_collision(media, majorants, air, origin, direction, t, t_max, steps, state, reduced)
             t = hit.t
             steps = hit.steps
             state = hit.state
             found = hit.found
             if found != 0:
-                point = media_at(media, air, origin + t * direction)
+                point = media_at(media, air, origin + t * direction, reduced)
                 # history-aware spectral tracking (Kutz et al. 2017): scatter with the throughput-weighted
                 # probability, so the channels' weights keep their sum on null collisions and cannot blow up
                 hw = wp.cw_mul(history, weight)
@@ -203,13 +235,13 @@ def delta_track_function(has_detail: bool):
 
 @functools.cache
 def ratio_track_function(has_detail: bool):
-    """``ratio_track(media, majorants, air, origin, direction, t_max, state) -> Transmittance`` (see
+    """``ratio_track(media, majorants, air, origin, direction, t_max, state, reduced) -> Transmittance`` (see
     :func:`tracking_functions`)."""
     media_at = media_at_function(has_detail)
 
     @wp.func
     def ratio_track(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
-                    t_max: float, state: wp.uint32) -> Transmittance:
+                    t_max: float, state: wp.uint32, reduced: int) -> Transmittance:
         """Unbiased transmittance estimate per channel along the segment (ratio tracking); a random draw for
         Russian roulette once the estimate falls below 1e-3."""
         tr = wp.vec3(1.0)
@@ -217,13 +249,13 @@ def ratio_track_function(has_detail: bool):
         steps = int(0)
         found = int(1)
         while found != 0:
-            hit = next_collision(media, majorants, air, origin, direction, t, t_max, steps, state)
+            hit = next_collision(media, majorants, air, origin, direction, t, t_max, steps, state, reduced)
             t = hit.t
             steps = hit.steps
             state = hit.state
             found = hit.found
             if found != 0:
-                point = media_at(media, air, origin + t * direction)
+                point = media_at(media, air, origin + t * direction, reduced)
                 tr = wp.cw_mul(tr, positive(wp.vec3(1.0) - point.extinction / hit.majorant))
                 if wp.max(tr) < 1.0e-3:
                     # Russian roulette on a nearly opaque segment keeps the estimate unbiased and the cost bounded
