@@ -83,7 +83,8 @@ class HybridSettings(Settings):
                                "tune half: the correction raised the p90 error there)")
     max_bounces: int = setting(1024, range=">= 1", help="cap on scattering events per path; capped paths are "
                                "counted (capped_paths)")
-    majorant_block: int = setting(8, unit="voxel", range=">= 1", help="edge of the coarse majorant cells")
+    majorant_block: int | None = setting(None, unit="voxel", range=">= 1", help="edge of the coarse majorant cells",
+                                         auto="per medium, as the path tracer's")
     similarity_order: int = setting(0, range=">= 0", help="scattering events after which the paths continue through "
                                     "the media reduced by high-order similarity (sigma_s (1 - g), isotropic); "
                                     "0 = exact")
@@ -153,7 +154,7 @@ class Hybrid(Technique):
             return estimate
         scale = int(s.ms_scale)
         coarse = -(-width // scale) * -(-height // scale)
-        estimate.merge(path_tracing_memory(scene, 2 * coarse, int(s.majorant_block), self.device,
+        estimate.merge(path_tracing_memory(scene, 2 * coarse, s.majorant_block, self.device,
                                            int(s.samples_per_pass), film_pixels=coarse))
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.atmosphere is not None:

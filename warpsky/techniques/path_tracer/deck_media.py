@@ -33,6 +33,7 @@ from warpsky.media.layer_voxels import VOXEL_BUDGET, ColumnGrid
 from warpsky.resources import MemoryEstimate
 from warpsky.scene.heightfield_clouds import HeightFieldClouds
 from warpsky.scene.model import Scene
+from warpsky.techniques.path_tracer.majorants import AUTO_BLOCKS
 
 #: Voxel rows over the deck's band when ``deck_voxel`` is auto.
 DECK_VOXEL_ROWS = 32
@@ -152,7 +153,7 @@ def deck_voxel_memory(scene: Scene, settings, width: int, height: int) -> Memory
     planned = deck_plan(scene, settings, width, height)
     if planned is not None:
         voxels = planned[1].voxels
-        block = max(1, int(settings.majorant_block))
+        block = max(1, int(settings.majorant_block or AUTO_BLOCKS[0]))
         estimate.add("deck voxels", host=8 * voxels + 3 * 8 * 2**22,
                      device=4 * voxels + 4 * voxels / block**3 + 8)
     return estimate

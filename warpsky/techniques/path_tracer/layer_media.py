@@ -26,6 +26,7 @@ from warpsky.optics.tables import is_cached
 from warpsky.resources import MemoryEstimate
 from warpsky.scene.layers import StratiformLayer
 from warpsky.scene.model import Scene
+from warpsky.techniques.path_tracer.majorants import AUTO_BLOCKS
 
 #: Voxel rows over a layer's largest thickness when ``layer_voxel`` is auto. On a broken 100 m deck (map texels
 #: 125 m, 16 x 16 pixels) halving both automatic edges changed the mean radiance of the cloudy pixels by
@@ -99,7 +100,7 @@ def layer_voxel_memory(scene: Scene, settings) -> MemoryEstimate:
     for layer in scene.layers:
         width, height = layer_voxel_sizes(layer, settings)
         voxels = layer_grid(layer, width, vertical=height, max_voxels=2**62).voxels
-        block = max(1, int(settings.majorant_block))
+        block = max(1, int(settings.majorant_block or AUTO_BLOCKS[0]))
         estimate.add("layer voxels", host=16 * voxels, device=4 * voxels + 4 * voxels / block**3 + 4)
     return estimate
 

@@ -45,7 +45,7 @@ from warpsky.techniques.path_tracer.layer_media import (
     layer_voxel_memory,
     with_layers_as_media,
 )
-from warpsky.techniques.path_tracer.majorants import upload_majorants
+from warpsky.techniques.path_tracer.majorants import medium_block, upload_majorants
 from warpsky.techniques.single_scatter.technique import MEDIA_CACHE
 
 
@@ -64,8 +64,10 @@ class PathTracerSettings(Settings):
                                     "isotropic; Zhao et al. 2014): far fewer collisions in thick forward-scattering "
                                     "media, biased by what the angular structure of such light still carries; 0 = "
                                     "exact")
-    majorant_block: int = setting(8, unit="voxel", range=">= 1", help="edge of the coarse majorant cells; a huge "
-                                  "value gives one global majorant per medium (slower, same expectation)")
+    majorant_block: int | None = setting(None, unit="voxel", range=">= 1", auto="per medium, 8 down to 2 voxels so "
+                                         "that a cell edge holds at most 6 optical depths at the densest point",
+                                         help="edge of the coarse majorant cells; a huge value gives one global "
+                                         "majorant per medium (slower, same expectation)")
     environment: float = setting(0.0, range=">= 0", help="uniform radiance arriving from every direction (grey), "
                                  "for furnace tests and overcast light; 0 = none")
     samples_per_pass: int | None = setting(None, range=">= 1", help="paths per pixel per kernel launch",
@@ -132,7 +134,7 @@ class PathTracer(Technique):
         small), the float64 sums of :func:`sums_layer`, the variance AOV, and the media with their majorants."""
         settings = self.settings_for(scene)
         pixels = width * height
-        return (path_tracing_memory(scene, pixels, int(settings.majorant_block), self.device,
+        return (path_tracing_memory(scene, pixels, settings.majorant_block, self.device,
                                     int(settings.samples_per_pass))
                 .add("images", host=pixels * SUMS_LAYER_BYTES)
                 .add("AOVs", host=pixels * AOV_BYTES)
@@ -221,7 +223,7 @@ class PathTracing:
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
             media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
                                              cache=MEDIA_CACHE)
-            majorants, self.majorant_cells = upload_majorants(scene.media, int(settings.majorant_block), device,
+            majorants, self.majorant_cells = upload_majorants(scene.media, settings.majorant_block, device,
                                                               cache_name="path_tracer:majorants",
                                                               reduced=int(settings.similarity_order) > 0)
         flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None)
@@ -268,7 +270,7 @@ SAMPLE_BYTES = 56
 SUMS_LAYER_BYTES = 192
 
 
-def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int, device: str,
+def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int | None, device: str,
                         samples_per_pass: int = 1, *, film_pixels: int | None = None) -> MemoryEstimate:
     """Bytes of :class:`PathTracing` on a film of ``film_pixels`` pixels (default ``pixel_sums_count``) and
     ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device (and their host copies on a GPU), the
@@ -278,7 +280,7 @@ def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int
     film = pixel_sums_count if film_pixels is None else film_pixels
     samples = per_sample_launches(device, film, samples_per_pass) * film * SAMPLE_BYTES
     grids = grid_bytes(scene)
-    majorants = sum(4 * math.prod(-(-n // majorant_block) for n in m.shape) for m in scene.media)
+    majorants = sum(4 * math.prod(-(-n // medium_block(m, majorant_block)) for n in m.shape) for m in scene.media)
     return (MemoryEstimate()
             .add("path sums", host=copies * pixel_sums_count * PIXEL_SUMS_BYTES,
                  device=pixel_sums_count * PIXEL_SUMS_BYTES)
