@@ -85,6 +85,9 @@ class HybridSettings(Settings):
                                "counted (capped_paths)")
     majorant_block: int | None = setting(None, unit="voxel", range=">= 1", help="edge of the coarse majorant cells",
                                          auto="per medium, as the path tracer's")
+    bake_detail: bool = setting(False, help="1: the multiple-scattering paths trace the media's animated detail baked "
+                                "for the frame into a grid within a detail texel (the single-scattering march keeps "
+                                "the procedural detail); 0: procedural at every collision")
     similarity_order: int = setting(0, range=">= 0", help="scattering events after which the paths continue through "
                                     "the media reduced by high-order similarity (sigma_s (1 - g), isotropic); "
                                     "0 = exact")
@@ -104,7 +107,8 @@ class HybridSettings(Settings):
     def path_tracer(self) -> PathTracerSettings:
         return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,
                                   majorant_block=self.majorant_block, samples_per_pass=self.samples_per_pass,
-                                  pixel_jitter=self.ms_scale > 1, similarity_order=self.similarity_order)
+                                  pixel_jitter=self.ms_scale > 1, similarity_order=self.similarity_order,
+                                  bake_detail=self.bake_detail)
 
 
 class Hybrid(Technique):
@@ -155,7 +159,8 @@ class Hybrid(Technique):
         scale = int(s.ms_scale)
         coarse = -(-width // scale) * -(-height // scale)
         estimate.merge(path_tracing_memory(scene, 2 * coarse, s.majorant_block, self.device,
-                                           int(s.samples_per_pass), film_pixels=coarse))
+                                           int(s.samples_per_pass), film_pixels=coarse,
+                                           bake_detail=bool(s.bake_detail)))
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.atmosphere is not None:
             estimate.add("sky", host=pixels * 64, device=pixels * 40)

@@ -18,6 +18,7 @@ from warpsky.layer import Layer
 from warpsky.light.dome import dome_struct
 from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.air import air_struct
+from warpsky.media.detail_bake import baked_bytes, baked_media
 from warpsky.media.extent import grid_bytes
 from warpsky.media.layer_voxels import LAYER_SPECIES
 from warpsky.media.voxel import VoxelMediaBuffers
@@ -59,6 +60,10 @@ class PathTracerSettings(Settings):
     seed: int = setting(0, range=">= 0", help="random seed; a seed gives the same image on the same device")
     max_bounces: int = setting(1024, range=">= 1", help="hard cap on scattering events per path; capped paths are "
                                "counted in the stats (capped_paths): their missing light is a bias")
+    bake_detail: bool = setting(False, help="1: trace the media's animated detail baked for the frame into a grid "
+                                "within a detail texel (one lookup per collision, majorants of the detailed density; "
+                                "a resampled field, not the procedural one); 0: the procedural detail at every "
+                                "collision (exact)")
     similarity_order: int = setting(0, range=">= 0", help="after this many scattering events a path continues "
                                     "through the media reduced by high-order similarity (sigma_s (1 - g), "
                                     "isotropic; Zhao et al. 2014): far fewer collisions in thick forward-scattering "
@@ -135,7 +140,7 @@ class PathTracer(Technique):
         settings = self.settings_for(scene)
         pixels = width * height
         return (path_tracing_memory(scene, pixels, settings.majorant_block, self.device,
-                                    int(settings.samples_per_pass))
+                                    int(settings.samples_per_pass), bake_detail=bool(settings.bake_detail))
                 .add("images", host=pixels * SUMS_LAYER_BYTES)
                 .add("AOVs", host=pixels * AOV_BYTES)
                 .merge(layer_voxel_memory(scene, settings))
@@ -191,6 +196,10 @@ class PathTracer(Technique):
         return layer
 
 
+#: Name under which media with baked detail are kept on the device (the exact march keeps the procedural ones).
+BAKED_CACHE = "voxel_media:baked"
+
+
 class PathTracing:
     """The path tracer set up for one frame: tables, media, majorants and the specialised kernel uploaded once;
     :meth:`launch` adds paths per pixel to a :class:`PixelSums` (progressive passes reuse everything).
@@ -219,11 +228,14 @@ class PathTracing:
         self.multiple_only = multiple_only
         self.camera = camera
         species = scene.species
+        media_list, cache = scene.media, MEDIA_CACHE
+        if settings.bake_detail and any(m.detail is not None and m.detail.active for m in scene.media):
+            media_list, cache = baked_media(scene.media, scene.time_s, camera.position, device), BAKED_CACHE
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
-            media = VoxelMediaBuffers.upload(scene.media, camera.position, device, species, time_s=scene.time_s,
-                                             cache=MEDIA_CACHE)
-            majorants, self.majorant_cells = upload_majorants(scene.media, settings.majorant_block, device,
+            media = VoxelMediaBuffers.upload(media_list, camera.position, device, species, time_s=scene.time_s,
+                                             cache=cache)
+            majorants, self.majorant_cells = upload_majorants(media_list, settings.majorant_block, device,
                                                               cache_name="path_tracer:majorants",
                                                               reduced=int(settings.similarity_order) > 0)
         flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None)
@@ -271,15 +283,16 @@ SUMS_LAYER_BYTES = 192
 
 
 def path_tracing_memory(scene: Scene, pixel_sums_count: int, majorant_block: int | None, device: str,
-                        samples_per_pass: int = 1, *, film_pixels: int | None = None) -> MemoryEstimate:
+                        samples_per_pass: int = 1, *, film_pixels: int | None = None,
+                        bake_detail: bool = False) -> MemoryEstimate:
     """Bytes of :class:`PathTracing` on a film of ``film_pixels`` pixels (default ``pixel_sums_count``) and
     ``pixel_sums_count`` pixels of :class:`PixelSums`: the sums on the device (and their host copies on a GPU), the
     paths of one launch when they are kept per sample (:func:`per_sample_launches`), the media and their majorant
-    grids (built on the host from a copy)."""
+    grids (built on the host from a copy), and with ``bake_detail`` the grids of the baked detail."""
     copies = 0 if is_cpu(device) else 1
     film = pixel_sums_count if film_pixels is None else film_pixels
     samples = per_sample_launches(device, film, samples_per_pass) * film * SAMPLE_BYTES
-    grids = grid_bytes(scene)
+    grids = grid_bytes(scene) + (baked_bytes(scene.media) if bake_detail else 0)
     majorants = sum(4 * math.prod(-(-n // medium_block(m, majorant_block)) for n in m.shape) for m in scene.media)
     return (MemoryEstimate()
             .add("path sums", host=copies * pixel_sums_count * PIXEL_SUMS_BYTES,

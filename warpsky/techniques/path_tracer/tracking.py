@@ -32,6 +32,9 @@ from warpsky.media.air import Air, air_coefficient
 from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
 from warpsky.techniques.path_tracer.majorants import Majorants, majorant_segment
 
+#: Ratio tracking plays Russian roulette once its largest channel falls below this (on the storm, 1e-3 with survival
+#: 1/2 left shadow rays 30 tentative collisions long on average).
+ROULETTE_TRANSMITTANCE = wp.constant(0.1)
 #: Hard cap on tentative collisions per tracking call (guards against non-progress; counted in the stats).
 MAX_TRACKING_STEPS = wp.constant(1000000)
 
@@ -243,7 +246,7 @@ def ratio_track_function(has_detail: bool):
     def ratio_track(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
                     t_max: float, state: wp.uint32, reduced: int) -> Transmittance:
         """Unbiased transmittance estimate per channel along the segment (ratio tracking); a random draw for
-        Russian roulette once the estimate falls below 1e-3."""
+        Russian roulette once the estimate falls below ROULETTE_TRANSMITTANCE."""
         tr = wp.vec3(1.0)
         t = float(0.0)
         steps = int(0)
@@ -257,12 +260,16 @@ def ratio_track_function(has_detail: bool):
             if found != 0:
                 point = media_at(media, air, origin + t * direction, reduced)
                 tr = wp.cw_mul(tr, positive(wp.vec3(1.0) - point.extinction / hit.majorant))
-                if wp.max(tr) < 1.0e-3:
-                    # Russian roulette on a nearly opaque segment keeps the estimate unbiased and the cost bounded
-                    if wp.randf(state) < 0.5:
+                largest = wp.max(tr)
+                if largest < ROULETTE_TRANSMITTANCE:
+                    # Russian roulette once the estimate is small: it survives with probability
+                    # largest / ROULETTE_TRANSMITTANCE and is divided by it, so the estimate stays unbiased and
+                    # a ray into an opaque cloud ends after a few collisions
+                    q = largest / ROULETTE_TRANSMITTANCE
+                    if wp.randf(state) >= q:
                         tr = wp.vec3(0.0)
                         break
-                    tr = tr * 2.0
+                    tr = tr / q
         out = Transmittance()
         out.value = tr
         out.steps = steps
