@@ -8,7 +8,8 @@ import re
 from conftest import StageSpec, look_rotation, write_stage
 
 from warpsky.cli import main
-from warpsky.evaluation.speed import COLUMNS, STRATIFORM, format_table, monte_carlo, plan_rows
+from warpsky.evaluation.speed import STRATIFORM, monte_carlo, plan_rows
+from warpsky.evaluation.speed_table import COLUMNS, format_table
 from warpsky.layer import Layer
 
 

@@ -129,11 +129,17 @@ def Xform "World"
     }}
 }}
 """)
-    layer = path_traced(str(tmp_path / "box.usda"), device, 8, spp=256, environment=1.0)
+    layer = path_traced(str(tmp_path / "box.usda"), device, 8, spp=1024, environment=1.0)
     seen = layer.radiance + layer.transmittance
-    # every channel's mean; single pixels of red and blue are noisier than green's, whose distribution is drawn
-    # (where the halos' dispersion leaves green dim, red and blue carry large weights)
-    np.testing.assert_allclose(seen.mean(axis=(0, 1)), 1.0, atol=0.015)
-    z = (seen[..., 1] - 1.0) / np.sqrt(layer.aovs["variance"][..., 1] + 1e-30)
-    assert np.max(np.abs(z)) < 5.0  # 64 values: a false alarm has probability ~4e-5
+    # every channel's mean within 4 standard errors (and 0.5%); red and blue are noisier than green, whose
+    # distribution is drawn (where the halos' dispersion leaves green dim, red and blue carry large weights):
+    # at 256 paths per pixel red's mean ranged 0.971-1.028 over five seeds
+    error = np.sqrt(layer.aovs["variance"].reshape(-1, 3).sum(axis=0)) / seen[..., 0].size
+    assert np.all(np.abs(seen.mean(axis=(0, 1)) - 1.0) < 4.0 * error + 0.005), (seen.mean(axis=(0, 1)), error)
+    # per pixel: the small tables' noisy cells give the weights a heavy tail, whose sample variance falls short of
+    # the true one in most runs, so pixels stray further than a Gaussian would (at 256 paths a max |z| < 5 held for
+    # 2 of 7 seeds, before and after the tracker's changes; at 1024, median |z| 0.8-1.1 and max 3.8-4.8 over six);
+    # a pixel biased by 5% would stand at |z| ~ 5
+    z = np.abs(seen[..., 1] - 1.0) / np.sqrt(layer.aovs["variance"][..., 1] + 1e-30)
+    assert np.median(z) < 1.5 and np.max(z) < 8.0, (np.median(z), np.max(z))  # Gaussian: median 0.67
     assert layer.transmittance.mean() < 0.5  # the box is optically thick: most paths scatter, many times

@@ -224,12 +224,10 @@ def cosine_up(state: wp.uint32) -> DirectionSample:
 
 
 @functools.cache
-def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
-    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species and
+def sun_transmittance_function(has_detail: bool):
+    """``transmittance_to_sun(media, majorants, air, sun, p, state, reduced) -> Transmittance``, specialised on
     animated detail."""
-    sample_media = media_functions(has_detail)
-    _media_at, _delta_track, ratio_track = tracking_functions(has_detail)
-    mixture_phase, sample_mixture = mixture_functions(has_tables)
+    ratio_track = tracking_functions(has_detail)[2]
 
     @wp.func
     def transmittance_to_sun(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, p: wp.vec3,
@@ -243,6 +241,16 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
             column = air_coefficient(air, p[1]) / (air.gamma * sun.air_sine)
             out.value = wp.cw_mul(out.value, wp.vec3(wp.exp(-column[0]), wp.exp(-column[1]), wp.exp(-column[2])))
         return out
+
+    return transmittance_to_sun
+
+
+@functools.cache
+def reduced_event_function(has_detail: bool):
+    """``reduced_scatter_event(media, majorants, air, sun, sun_on, path, p) -> PathState``: scattering after
+    high-order similarity, specialised on animated detail."""
+    sample_media = media_functions(has_detail)
+    transmittance_to_sun = sun_transmittance_function(has_detail)
 
     @wp.func
     def reduced_scatter_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, sun_on: bool,
@@ -271,6 +279,17 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
         out.direction = direction
         out.origin = p
         return out
+
+    return reduced_scatter_event
+
+
+@functools.cache
+def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
+    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species and
+    animated detail."""
+    sample_media = media_functions(has_detail)
+    transmittance_to_sun = sun_transmittance_function(has_detail)
+    mixture_phase, sample_mixture = mixture_functions(has_tables)
 
     @wp.func
     def scatter_event(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
@@ -323,4 +342,4 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
             out.origin = q + wp.vec3(0.0, 1.0e-4, 0.0)
         return out
 
-    return scatter_event, reduced_scatter_event, ground_event
+    return scatter_event, reduced_event_function(has_detail), ground_event
