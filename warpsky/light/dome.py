@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from warpsky.numerics import exp3
+
 
 @wp.struct
 class DomeLight:
@@ -132,8 +134,7 @@ def ground_ambient_vec(scene) -> wp.vec3:
 def ambient_scattered(scattering: wp.vec3, ambient: wp.vec3, tau_up: wp.vec3) -> wp.vec3:
     """Ambient dome light scattered towards the eye per metre [radiance/m]: sigma_s L_mean (the phase integrates to
     1) times the transmittance exp(-tau_up) towards the zenith (the occlusion factor)."""
-    return wp.cw_mul(wp.cw_mul(scattering, ambient), wp.vec3(wp.exp(-tau_up[0]), wp.exp(-tau_up[1]),
-                                                              wp.exp(-tau_up[2])))
+    return wp.cw_mul(wp.cw_mul(scattering, ambient), exp3(tau_up))
 
 
 @wp.func

@@ -115,6 +115,15 @@ FieldDensities = wp.types.vector(length=MAX_MEDIA, dtype=float)
 FieldFlags = wp.types.vector(length=MAX_MEDIA, dtype=int)
 
 
+def reduced_coefficients(medium: VoxelMedium) -> tuple[np.ndarray, np.ndarray]:
+    """Extinction and scattering [1/m per unit field value], RGB, of ``medium`` after the order-1 similarity transform
+    (high-order similarity): sigma_t - g sigma_s and sigma_s (1 - g) scattered isotropically, g its phase's mean
+    cosine per channel."""
+    g = mean_cosine(medium)
+    scattering = medium.extinction_scale * medium.albedo
+    return medium.extinction_scale - g * scattering, scattering * (1.0 - g)
+
+
 def check_field_count(media: tuple[VoxelMedium, ...], technique: str, advice: str = "") -> None:
     """Raise a UsageError when ``technique``, whose samples keep every field's density in a
     :data:`FieldDensities` vector, is given more than :data:`MAX_MEDIA` fields."""
@@ -244,10 +253,9 @@ class VoxelMediaBuffers:
             else:
                 grid.phase_kind = int(medium.phase.kind)
             grid.phase_g = float(medium.phase.g)
-            g = mean_cosine(medium)
-            scattering = medium.extinction_scale * medium.albedo
-            grid.reduced_extinction = wp.vec3(*(medium.extinction_scale - g * scattering).tolist())
-            grid.reduced_scattering = wp.vec3(*(scattering * (1.0 - g)).tolist())
+            reduced_extinction, reduced_scattering = reduced_coefficients(medium)
+            grid.reduced_extinction = wp.vec3(*reduced_extinction.tolist())
+            grid.reduced_scattering = wp.vec3(*reduced_scattering.tolist())
             infos.append(grid)
             chunks.append(medium.density.reshape(-1))
             offset += medium.density.size

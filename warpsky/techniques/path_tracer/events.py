@@ -18,6 +18,7 @@ from warpsky.light.sun import Sun
 from warpsky.media.air import Air, air_coefficient, air_scattering, no_air, sea_level_distance
 from warpsky.media.phase_mixture import mixture_functions, oriented_correction_function
 from warpsky.media.voxel import VoxelMedia, media_functions
+from warpsky.numerics import exp3
 from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.phase import isotropic_sample_cos, phase_rayleigh
 from warpsky.optics.phase_sampling import PhaseTables, rotate_about
@@ -239,7 +240,7 @@ def sun_transmittance_function(has_detail: bool):
         out = ratio_track(media, majorants, no_air(), p, sun.direction, UNBOUNDED, state, reduced)
         if air.enabled != 0:
             column = air_coefficient(air, p[1]) / (air.gamma * sun.air_sine)
-            out.value = wp.cw_mul(out.value, wp.vec3(wp.exp(-column[0]), wp.exp(-column[1]), wp.exp(-column[2])))
+            out.value = wp.cw_mul(out.value, exp3(column))
         return out
 
     return transmittance_to_sun

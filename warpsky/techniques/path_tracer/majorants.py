@@ -14,8 +14,7 @@ import warp as wp
 from warpsky import device_buffers
 from warpsky.media.air import Air, air_coefficient
 from warpsky.media.detail import detail_factor_bound
-from warpsky.media.voxel import VoxelMedia, grid_interval
-from warpsky.optics.tables import mean_cosine
+from warpsky.media.voxel import VoxelMedia, grid_interval, reduced_coefficients
 from warpsky.scene.model import VoxelMedium
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
@@ -164,6 +163,15 @@ def majorant_grid(density: np.ndarray, block: int) -> np.ndarray:
     return full.reshape(cells[0], block, cells[1], block, cells[2], block).max(axis=(1, 3, 5))
 
 
+def cell_bounds(cells: np.ndarray, coefficient: float, medium: VoxelMedium) -> np.ndarray:
+    """Majorants [1/m] of cells whose densest field values are ``cells`` (:func:`majorant_grid`), for extinction
+    ``coefficient`` per unit field value: with :data:`MAJORANT_MARGIN` and the detail bound."""
+    bound = cells * coefficient
+    bound *= float(MAJORANT_MARGIN)
+    bound *= detail_factor_bound(medium)
+    return bound
+
+
 def upload_majorants(media: tuple[VoxelMedium, ...], block: int | None, device, *, cache_name: str | None = None,
                      reduced: bool = False) -> tuple[Majorants, int]:
     """Majorant grids of ``media`` (cells of ``block`` voxels, None: each medium's :func:`medium_block`; bounds on
@@ -175,14 +183,10 @@ def upload_majorants(media: tuple[VoxelMedium, ...], block: int | None, device, 
     for medium in media:
         edge = medium_block(medium, block)
         cells = majorant_grid(medium.density, edge)
-        bound = cells * float(np.max(medium.extinction_scale))
-        bound *= float(MAJORANT_MARGIN)
-        bound *= detail_factor_bound(medium)
+        bound = cell_bounds(cells, float(np.max(medium.extinction_scale)), medium)
         if reduced:
-            scattering = medium.extinction_scale * medium.albedo
-            coefficient = float(np.max(medium.extinction_scale - mean_cosine(medium) * scattering))
-            reduced_chunks.append((cells * max(coefficient, 0.0) * float(MAJORANT_MARGIN)
-                                   * detail_factor_bound(medium)).reshape(-1))
+            coefficient = float(np.max(reduced_coefficients(medium)[0]))
+            reduced_chunks.append(cell_bounds(cells, max(coefficient, 0.0), medium).reshape(-1))
         mg = MajorantGrid()
         mg.offset = offset
         mg.shape = wp.vec3i(*bound.shape)

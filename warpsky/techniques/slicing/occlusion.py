@@ -20,7 +20,7 @@ from warpsky import device_buffers
 from warpsky.device import launch_rows
 from warpsky.kernel_variants import kernel_variants
 from warpsky.media.voxel import VoxelMedia, media_functions
-from warpsky.numerics import trilinear_cell
+from warpsky.numerics import exp3, trilinear_cell
 
 #: Most grid nodes along one axis of the occlusion grid.
 MAX_NODES = 64
@@ -68,8 +68,7 @@ def sky_transmittances(shadow: SkyShadow, p: wp.vec3):
         return wp.vec3(1.0), wp.vec3(1.0)
     up = shadow_depth(shadow.up, shadow, p)
     down = shadow_depth(shadow.down, shadow, p)
-    return (wp.vec3(wp.exp(-up[0]), wp.exp(-up[1]), wp.exp(-up[2])),
-            wp.vec3(wp.exp(-down[0]), wp.exp(-down[1]), wp.exp(-down[2])))
+    return exp3(up), exp3(down)
 
 
 @kernel_variants(has_detail=(False, True))
