@@ -103,7 +103,7 @@ def cmd_info(args) -> int:
             out.append(f"            oriented ice: {ice.fraction:.3g} of the crystals {ice.habit}s falling as "
                        f"{ice.orientation}s (tilt {ice.tilt_deg:g}°), the rest random columns; a phase table per "
                        "frame at the sun's elevation")
-        if medium.detail is not None and medium.detail.amplitude > 0.0:
+        if medium.has_detail:
             d = medium.detail
             out.append(f"            advected detail: amplitude {d.amplitude:g}, scale {d.scale:g} m, wind "
                        f"{np.round(np.asarray(d.wind), 3).tolist()} m/s, curl {d.curl_speed:g} m/s, "

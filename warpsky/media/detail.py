@@ -81,7 +81,7 @@ def detailed_value(value: float, details: wp.array(dtype=MediumDetail), m: int, 
 def detail_factor_bound(medium: VoxelMedium) -> float:
     """Largest factor animated detail can multiply ``medium``'s density by: ``1 + DETAIL_Z_MAX amplitude`` (1
     without active detail), what a majorant must allow for."""
-    if medium.detail is None or not medium.detail.active:
+    if not medium.has_detail:
         return 1.0
     return 1.0 + float(DETAIL_Z_MAX) * float(medium.detail.amplitude)
 
@@ -124,7 +124,7 @@ def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_positio
     """One ``MediumDetail`` per medium at ``time_s`` [s], positions relative to ``camera_position`` (world m,
     float64); None when no medium has active detail. Arrays inside are the cached objects' buffers: launch the
     kernels that read them before asking for another time."""
-    if not any(m.detail is not None and m.detail.active for m in media):
+    if not any(m.has_detail for m in media):
         return None
     camera = np.asarray(camera_position, dtype=np.float64)
     states: dict = {}
@@ -135,7 +135,7 @@ def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_positio
         entry.amplitude = 0.0
         entry.source = index
         spec = medium.detail
-        if spec is not None and spec.active:
+        if medium.has_detail:
             detail = advected_detail(spec, device)
             if id(detail) not in states:  # one advection per spec and frame, however many fields share it
                 states[id(detail)] = detail.state(time_s)

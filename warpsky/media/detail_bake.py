@@ -48,8 +48,7 @@ def refinement(medium) -> int:
 
 def baked_bytes(media) -> int:
     """Bytes of the float32 grids :func:`baked_media` makes for ``media`` (those with active detail)."""
-    return sum(4 * int(np.prod(m.shape)) * refinement(m) ** 3 for m in media
-               if m.detail is not None and m.detail.active)
+    return sum(4 * int(np.prod(m.shape)) * refinement(m) ** 3 for m in media if m.has_detail)
 
 
 def fine_world_from_index(world_from_index: np.ndarray, r: int) -> np.ndarray:
@@ -71,7 +70,7 @@ def baked_media(media: tuple, time_s: float, camera_position, device) -> tuple:
     out = []
     with wp.ScopedDevice(device):
         for medium, detail in zip(media, details, strict=True):
-            if medium.detail is None or not medium.detail.active:
+            if not medium.has_detail:
                 out.append(medium)
                 continue
             r = refinement(medium)

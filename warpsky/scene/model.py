@@ -227,6 +227,11 @@ class VoxelMedium:
         return tuple(int(n) for n in self.density.shape)
 
     @property
+    def has_detail(self) -> bool:
+        """Whether animated detail changes this medium's density (a :class:`DetailSpec` with amplitude > 0)."""
+        return self.detail is not None and self.detail.active
+
+    @property
     def voxel_size(self) -> np.ndarray:
         """Length in metres of one index step along each index axis."""
         return np.linalg.norm(self.world_from_index[:3, :3], axis=0)

@@ -229,7 +229,7 @@ class PathTracing:
         self.camera = camera
         species = scene.species
         media_list, cache = scene.media, MEDIA_CACHE
-        if settings.bake_detail and any(m.detail is not None and m.detail.active for m in scene.media):
+        if settings.bake_detail and any(m.has_detail for m in scene.media):
             media_list, cache = baked_media(scene.media, scene.time_s, camera.position, device), BAKED_CACHE
         with wp.ScopedDevice(device):
             tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
