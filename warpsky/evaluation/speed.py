@@ -233,14 +233,23 @@ def _timed(render) -> tuple[float, object, float]:
     return 1e3 * (time.perf_counter() - started), layer, 1e3 * (time.process_time() - cpu_started)
 
 
-def monte_carlo(layer) -> tuple[int, float] | None:
-    """(paths, seconds spent tracing them) of a frame's layer, or None when it traced no paths. For hybrid the
-    tracing time is the frame's less its single-scattering march and denoising."""
+def path_stats(layer) -> dict | None:
+    """The stats of the part of a frame's layer that traced paths (the layer's own or one of its ``parts``), or None
+    when it traced none."""
     if layer is None:
         return None
     stats = next((s for s in [layer.stats, *layer.stats.get("parts", [])] if isinstance(s, dict) and "paths" in s),
                  None)
     if stats is None or not stats.get("paths"):
+        return None
+    return stats
+
+
+def monte_carlo(layer) -> tuple[int, float] | None:
+    """(paths, seconds spent tracing them) of a frame's layer, or None when it traced no paths. For hybrid the
+    tracing time is the frame's less its single-scattering march and denoising."""
+    stats = path_stats(layer)
+    if stats is None:
         return None
     seconds = stats["seconds"] - stats.get("single_scatter_seconds", 0.0) - stats.get("denoise_seconds", 0.0)
     return int(stats["paths"]), float(seconds)
@@ -249,11 +258,8 @@ def monte_carlo(layer) -> tuple[int, float] | None:
 def path_breakdown(layer) -> dict | None:
     """Per path of a frame's layer: tentative collisions and segment crossings (``steps``), those of shadow rays
     (``shadow_steps``) and scattering ``events``; None when it traced no paths."""
-    if layer is None:
-        return None
-    stats = next((s for s in [layer.stats, *layer.stats.get("parts", [])] if isinstance(s, dict) and "paths" in s),
-                 None)
-    if stats is None or not stats.get("paths") or "scatter_events" not in stats:
+    stats = path_stats(layer)
+    if stats is None or "scatter_events" not in stats:
         return None
     paths = float(stats["paths"])
     return {"steps": stats["tracking_steps"] / paths, "shadow_steps": stats["shadow_steps"] / paths,
@@ -340,14 +346,6 @@ def measure_row(spec: RowSpec) -> dict:
         "per_path": path_breakdown(warm[-1][1]),
         "resolved_settings": json.loads(json.dumps(plan.settings_dict(), default=str)),
     }
-
-
-
-
-
-
-
-
 
 
 def report(rows: list[dict], *, command: list[str], spp: int, started: float, load_before) -> dict:

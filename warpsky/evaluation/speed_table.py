@@ -20,7 +20,6 @@ NOTE = ("cold: plan + first frame of a fresh process (kernels compiled or loaded
         "scattering events per path (the rest of the steps are null collisions and crossings).")
 
 
-# ------------------------------------------------------------------------------------------------------ report
 def _cell(value, fmt: str, missing: str) -> str:
     return missing if value is None else format(value, fmt)
 
