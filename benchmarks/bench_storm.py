@@ -36,6 +36,7 @@ def variants(scene) -> list[tuple[str, object]]:
 
 
 def path_rows(scene, size: int, spp: int) -> list[dict]:
+    from warpsky.evaluation.speed import path_breakdown
     from warpsky.passes.frame import render_layers
     from warpsky.plan import make_plan
 
@@ -46,10 +47,8 @@ def path_rows(scene, size: int, spp: int) -> list[dict]:
         started = time.perf_counter()
         main, _ = render_layers(plan, variant)
         seconds = time.perf_counter() - started
-        stats, paths = main.stats, float(main.stats["paths"])
-        rows.append({"variant": label, "seconds": seconds, "paths_per_s": paths / seconds,
-                     "steps": stats["tracking_steps"] / paths, "shadow_steps": stats["shadow_steps"] / paths,
-                     "events": stats["scatter_events"] / paths, "capped": stats["capped_paths"]})
+        rows.append({"variant": label, "seconds": seconds, "paths_per_s": float(main.stats["paths"]) / seconds,
+                     **path_breakdown(main), "capped": main.stats["capped_paths"]})
     return rows
 
 
