@@ -106,21 +106,21 @@ def render_pass(plan, scene, name: str) -> list[Layer]:
 
 def depth_layers(plan, scene, technique=None) -> list[Layer]:
     """The layers of ``plan``'s depth-merged passes on ``scene`` (lit by one light), in pass order, unmerged."""
-    frame = frame_state(plan, scene, technique)
-    for runner in plan.pass_runners:
+    return _depth_passes_run(frame_state(plan, scene, technique)).layers
+
+
+def _depth_passes_run(frame: FrameState) -> FrameState:
+    """``frame`` after its depth-merged passes (those that do not wrap the others) ran in order."""
+    for runner in frame.runners:
         if not runner.wraps:
             frame.layers += runner.render(frame)
-    return frame.layers
+    return frame
 
 
 def _lit_by(plan, scene, technique) -> tuple[Layer, list[Layer]]:
     """Every pass run once on ``scene`` (lit by one light): (merged layer, layers front to back)."""
-    runners = plan.pass_runners
-    wrapping = [runner for runner in runners if runner.wraps]
-    frame = frame_state(plan, scene, technique)
-    for runner in runners:
-        if not runner.wraps:
-            frame.layers += runner.render(frame)
+    wrapping = [runner for runner in plan.pass_runners if runner.wraps]
+    frame = _depth_passes_run(frame_state(plan, scene, technique))
     main = merge_by_depth(frame.layers, far=scene.camera.far) if len(frame.layers) > 1 else frame.layers[0]
     frame.merged = main
     if not wrapping:
