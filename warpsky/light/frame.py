@@ -59,21 +59,21 @@ class FrameLight:
     def transmittance_at(self, altitude: float) -> np.ndarray:
         """RGB transmittance of the sunlight from the top of the atmosphere down to ``altitude`` [m of the stage's
         y] (ones without air drawn around the frame, or without a sun)."""
-        scene = self.scene
-        if not self.through_air or scene.atmosphere is None or scene.sun is None:
-            return np.ones(3)
-        atm = scene.atmosphere
-        return sun_transmittance(atm.beta_sea_level, atm.gamma, altitude + atm.altitude,
-                                 light_elevation_sine(scene.sun))
+        return self._down_to(lambda atm: altitude + atm.altitude)
 
     @functools.cached_property
     def media_transmittance(self) -> np.ndarray:
         """RGB transmittance of the sunlight down to the media's altitude (:func:`media_altitude`)."""
+        return self._down_to(lambda atm: media_altitude(self.scene))
+
+    def _down_to(self, sea_level_altitude) -> np.ndarray:
+        """RGB transmittance of the sunlight down to ``sea_level_altitude(atmosphere)`` [m above sea level]; ones
+        without air drawn around the frame, or without a sun."""
         scene = self.scene
         if not self.through_air or scene.atmosphere is None or scene.sun is None:
             return np.ones(3)
         atm = scene.atmosphere
-        return sun_transmittance(atm.beta_sea_level, atm.gamma, media_altitude(scene),
+        return sun_transmittance(atm.beta_sea_level, atm.gamma, sea_level_altitude(atm),
                                  light_elevation_sine(scene.sun))
 
     def lit_at_media(self, scene=None):
