@@ -7,7 +7,7 @@ PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind family terrain valley-fog sunbeams sundogs
+	cumulus-wind family family-thick terrain valley-fog sunbeams sundogs
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
@@ -19,6 +19,8 @@ help:
 	@echo "make venv               - create $(VENV) and install warpsky with all extras (redone when pyproject changes)"
 	@echo "make data               - generate the demo cumulus field data/cumulus.nvdb"
 	@echo "make family             - generate the 24-stage validation family (seed 2026) in data/family"
+	@echo "make family-thick       - generate the 12-stage thick family (optical depth 100-1000, seed 2027) in"
+	@echo "                          data/family_thick"
 	@echo "make cumulus-wind       - 48 frames of the cumulus in wind (usd_scenes/cumulus_wind.usda) to out/"
 	@echo "make stratocumulus      - stratocumulus over water, sand and snow, radiosity on and off, to out/"
 	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
@@ -55,6 +57,13 @@ data/family/family.json: tools/make_validation_family.py warpsky/evaluation/fami
 	$(PY) tools/make_validation_family.py --out data/family
 
 family: data/family/family.json
+
+# The thick family: 12 seeded storms, dense decks and cumulus of peak optical depth 100-1000, at 64 x 64.
+data/family_thick/family.json: tools/make_validation_family.py warpsky/evaluation/family_stages.py \
+		warpsky/evaluation/family_shapes.py $(STAMP)
+	$(PY) tools/make_validation_family.py --profile thick --out data/family_thick --seed 2027 --count 12
+
+family-thick: data/family_thick/family.json
 
 demo: $(STAMP) data/cumulus.nvdb
 	$(VENV)/bin/warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png

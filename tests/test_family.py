@@ -136,3 +136,34 @@ def test_cli_needs_exactly_one_of_stage_and_family(tmp_path, capsys):
     assert "neither" in capsys.readouterr().err
     assert main(["bench", "error-vs-time", "--family", str(tmp_path / "nowhere")]) == 2
     assert "family.json" in capsys.readouterr().err
+
+
+def test_thick_profile_storms_carry_three_species_at_their_optical_depths(tmp_path):
+    from warpsky.evaluation.family_stages import PROFILES, RAIN_OPTICAL_DEPTH
+
+    make_family(tmp_path / "thick", seed=2027, count=12, resolution=16, profile="thick")
+    blob = json.loads((tmp_path / "thick" / "family.json").read_text())
+    assert blob["profile"] == "thick" and blob["image_size"] == 64
+    members = blob["members"]
+    for half in ("tune", "test"):
+        assert {m["kind"] for m in members if m["half"] == half} == set(PROFILES["thick"].kinds)
+    depths = [m["optical_depth"] for m in members]
+    assert min(depths) == pytest.approx(100.0, rel=1e-5) and max(depths) == pytest.approx(1000.0, rel=1e-5)
+    storms = [m for m in members if m["kind"] == "storm"]
+    assert storms and all(m["phase"] == "cloud" for m in storms)
+    for m in storms:
+        scene = StageReader(tmp_path / "thick" / m["stage"]).scene_at(None)
+        assert scene.resolution == (64, 64)
+        by_species = {medium.species: medium for medium in scene.media}
+        assert set(by_species) == {"cloud", "ice", "rain"}
+        cloud, ice, rain = by_species["cloud"], by_species["ice"], by_species["rain"]
+        # droplets and ice share the cell's grid and add up to its field; the ice sits in the anvil, above
+        np.testing.assert_allclose(cloud.density + ice.density, np.load(tmp_path / "thick" / m["field"]) +
+                                   np.load(tmp_path / "thick" / m["ice_field"]), rtol=1e-6)
+        heights = np.arange(cloud.density.shape[1])
+        assert (ice.density.sum(axis=(0, 2)) @ heights / ice.density.sum()
+                > cloud.density.sum(axis=(0, 2)) @ heights / cloud.density.sum())
+        edges = np.linalg.norm(rain.world_from_index[:3, :3], axis=0)
+        column = max(float(rain.density.sum(axis=a, dtype=np.float64).max()) * edges[a] for a in range(3))
+        assert float(rain.extinction_scale[0]) * column == pytest.approx(RAIN_OPTICAL_DEPTH, rel=1e-5)
+        assert rain.world_from_index[1, 3] < m["base_m"]  # the shaft hangs below the cell's base

@@ -11,7 +11,7 @@ from conftest import StageSpec, look_rotation, path_traced, render_layer, write_
 from warpsky.errors import UsageError
 from warpsky.plan import make_plan
 from warpsky.scene.usd import StageReader
-from warpsky.techniques.hybrid.denoise import box_sum, keep_local_mean, sanitise
+from warpsky.techniques.hybrid.denoise import box_sum, keep_local_mean, sanitise, split_fireflies, spread_excess
 from warpsky.techniques.hybrid.technique import Hybrid, HybridSettings
 
 STEP = {"step_length": 0.05, "shadow_step_length": 0.05}
@@ -159,6 +159,26 @@ def test_sanitise_and_local_mean():
     fixed = keep_local_mean(biased, noisy, np.ones((16, 16)), 3)
     assert fixed.mean() == pytest.approx(noisy.mean(), rel=0.02)
     np.testing.assert_array_equal(keep_local_mean(biased, noisy, np.ones((16, 16)), -1), biased)
+
+
+def test_firefly_split_keeps_every_photon():
+    """Fireflies over a smooth field: the split caps them at k times the local median, and spreading their excess
+    conserves the image's sum exactly and sends nothing onto pixels without weight."""
+    rng = np.random.default_rng(3)
+    image = (0.5 + 0.1 * rng.random((24, 24, 3))).astype(np.float32)
+    image[5, 7] *= 300.0
+    image[20, 3] *= 40.0
+    image[0, 23] *= 100.0  # at the corner: a clipped box
+    weight = np.ones((24, 24))
+    weight[:, 12:] = 0.0
+    weight[0, 23] = 1.0
+    kept, excess = split_fireflies(image, weight, 4.0)
+    np.testing.assert_allclose(kept + excess, image, rtol=1e-6)
+    assert kept.max() < 4.0 * 0.62 and excess.min() >= 0.0 and np.count_nonzero(excess.sum(axis=-1)) == 3
+    spread = spread_excess(excess, weight, 3)
+    np.testing.assert_allclose(spread.sum(axis=(0, 1)), excess.sum(axis=(0, 1)), rtol=1e-5)
+    assert spread[:, 12:].sum() == pytest.approx(spread[0, 23].sum()) and spread[5, 4].sum() > 0.0
+    np.testing.assert_array_equal(split_fireflies(image[:4, :4], weight[:4, :4], 1e9)[1], 0.0)
 
 
 def test_hybrid_is_listed():

@@ -49,12 +49,17 @@ def measure(technique: str, values: dict, family_dir: Path, half: str, width: in
         plan = frame_plan(scene, technique, values, width, height, device)
         plan.renderer.render(scene, 8, 8)  # compile / load: not timed
         started = time.perf_counter()
-        radiance, _, _, _ = render_frame_radiance(plan, scene)
+        radiance, _, _, layer = render_frame_radiance(plan, scene)
         seconds = time.perf_counter() - started
         metrics = error_metrics(radiance, reference, covered, variance)
-        rows.append({"stage": member["name"], "kind": member["kind"], "seconds": seconds, **metrics})
+        estimate = float(layer.stats.get("error_estimate", math.nan))
+        ratio = estimate / metrics["net_rmse"] if metrics["net_rmse"] > 0 else math.nan
+        rows.append({"stage": member["name"], "kind": member["kind"], "seconds": seconds, **metrics,
+                     "estimate": estimate, "estimate_ratio": ratio, "spp": layer.stats.get("spp")})
         log(f"    {member['name']:<20} rel RMSE {metrics['rel_rmse']:.4f} net {metrics['net_rmse']:.4f} "
-            f"bias {metrics['bias']:+.4f} {seconds:.3f} s")
+            f"bias {metrics['bias']:+.4f} {seconds:.3f} s"
+            + (f"  estimate {estimate:.4f} ({ratio:.2f} x net) at {layer.stats.get('spp')} spp"
+               if math.isfinite(estimate) else ""))
     return rows
 
 
@@ -63,7 +68,10 @@ def summary(rows: list[dict]) -> dict:
     net = np.array([r["net_rmse"] for r in rows])
     bias = np.array([r["bias"] for r in rows])
     worst = rows[int(np.argmax(net))]["stage"]
-    return {"stages": len(rows), "median": float(np.median(raw)), "p90": float(np.percentile(raw, 90)),
+    ratios = np.array([r["estimate_ratio"] for r in rows if math.isfinite(r.get("estimate_ratio", math.nan))])
+    calibration = ({"ratio_median": float(np.median(ratios)), "ratio_min": float(ratios.min()),
+                    "ratio_max": float(ratios.max())} if ratios.size else {})
+    return {**calibration, "stages": len(rows), "median": float(np.median(raw)), "p90": float(np.percentile(raw, 90)),
             "worst": float(raw.max()), "net_median": float(np.median(net)), "net_p90": float(np.percentile(net, 90)),
             "net_worst": float(net.max()), "net_worst_stage": worst, "median_bias": float(np.median(bias)),
             "mean_bias": float(bias.mean()), "median_abs_bias": float(np.median(np.abs(bias))),
@@ -77,7 +85,8 @@ def main(argv=None) -> int:
     parser.add_argument("--set", dest="fixed", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--family", type=Path, default=ROOT / "data" / "family")
     parser.add_argument("--half", default="tune", choices=("tune", "test", "all"))
-    parser.add_argument("--res", type=int, default=128, help="image size (square) of the references")
+    parser.add_argument("--res", type=int, default=None, help="image size (square) of the references (default: "
+                        "the family's, family.json image_size)")
     parser.add_argument("--reference-spp", type=int, default=4096)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--json", type=Path, default=None, help="write every row and summary here")
@@ -87,6 +96,10 @@ def main(argv=None) -> int:
     from warpsky.device import init_warp
 
     init_warp()
+    if args.res is None:
+        from warpsky.evaluation.family_stages import load_family
+
+        args.res = int(load_family(args.family).get("image_size", 128))
     name, _, values = args.grid.partition("=")
     fixed = {}
     for item in args.fixed:
@@ -108,7 +121,9 @@ def main(argv=None) -> int:
         s = r["summary"]
         print(f"{r['settings'][name]!s:>12} {s['median']:>8.4f} {s['p90']:>8.4f} {s['worst']:>8.4f} "
               f"{s['net_median']:>8.4f} {s['net_p90']:>8.4f} {s['net_worst']:>9.4f} {s['median_bias']:>+9.4f} "
-              f"{s['mean_bias']:>+9.4f} {s['median_seconds']:>9.3f}")
+              f"{s['mean_bias']:>+9.4f} {s['median_seconds']:>9.3f}"
+              + (f"   estimate / net: median {s['ratio_median']:.2f}, {s['ratio_min']:.2f}..{s['ratio_max']:.2f}"
+                 if "ratio_median" in s else ""))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"technique": args.technique, "half": args.half, "results": results},

@@ -12,6 +12,7 @@ from warpsky.device import resolve_device
 from warpsky.errors import UsageError
 from warpsky.evaluation.error_vs_time import format_table, run_report, write_outputs
 from warpsky.evaluation.family import FAMILY_HELP, format_family_table, run_family, write_family_outputs
+from warpsky.evaluation.family_stages import load_family
 from warpsky.evaluation.speed import add_speed_parser, run_speed_command
 from warpsky.plan import resolve_resolution
 from warpsky.scene.usd import StageReader
@@ -48,7 +49,8 @@ def add_parser(sub, resolution_type) -> None:
     evt.add_argument("--time", type=float, default=None, help="time code (default: earliest; STAGE only)")
     evt.add_argument("--camera", metavar="PATH", help="camera prim path (STAGE only)")
     evt.add_argument("--res", type=resolution_type, default=None, metavar="WxH",
-                     help="image size (default 128 wide: the camera's aspect for STAGE, 128x128 for --family)")
+                     help="image size (default 128 wide: the camera's aspect for STAGE; for --family the family's "
+                     "own, family.json image_size: 128x128 thin, 64x64 thick)")
     evt.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
     evt.add_argument("--no-cache", action="store_true", help="render the reference even if it is cached")
     evt.add_argument("-o", "--output-dir", type=Path, default=Path("out"), help="where the CSV/JSON/PNG go")
@@ -89,7 +91,8 @@ def _bench_family(args, techniques: list[str], device: str, log) -> int:
     """``bench error-vs-time --family DIR``: the family report, or only its references."""
     if args.camera is not None or args.time is not None:
         raise UsageError("--camera and --time apply to a STAGE; a family's stages use their own camera and time")
-    width, height = args.res or (128, 128)
+    size = int(load_family(args.family).get("image_size", 128))
+    width, height = args.res or (size, size)
     height = height or width
     report = run_family(
         args.family, techniques, width, height, device, half=args.half, reference_spp=args.reference_spp,

@@ -120,17 +120,20 @@ def render_frame_radiance(plan: RenderPlan, scene):
 
 
 def reference_image(scene, width, height, device, *, spp: int, seed: int, use_cache: bool = True,
-                    cache_path: Path | None = None):
+                    cache_path: Path | None = None, max_bounces: int | None = None):
     """(radiance, transmittance, variance, seconds, cached) of the path-traced reference frame, cached at
-    ``cache_path`` (default: under ``$WARPSKY_CACHE/reference`` by a hash of the scene and the device kind)."""
+    ``cache_path`` (default: under ``$WARPSKY_CACHE/reference`` by a hash of the scene and the device kind). The
+    file also holds ``capped_paths``, the paths cut at ``max_bounces`` (the path tracer's default when None)."""
     path = cache_path or cache_dir() / "reference" / f"{_reference_key(scene, width, height, device, spp, seed)}.npz"
     if use_cache and path.is_file():
         with np.load(path) as data:
             return data["radiance"], data["transmittance"], data["variance"], float(data["seconds"]), True
-    plan = frame_plan(scene, "path_tracer", {"spp": spp, "seed": seed}, width, height, device)
+    values = {"spp": spp, "seed": seed} | ({} if max_bounces is None else {"max_bounces": max_bounces})
+    plan = frame_plan(scene, "path_tracer", values, width, height, device)
     radiance, transmittance, aovs, layer = render_frame_radiance(plan, scene)
     arrays = {"radiance": radiance, "transmittance": transmittance, "variance": aovs["variance"],
-              "seconds": np.float64(layer.stats["seconds"])}
+              "seconds": np.float64(layer.stats["seconds"]),
+              "capped_paths": np.int64(layer.stats.get("capped_paths", 0))}
     atomic_write(path, lambda tmp: np.savez(tmp, **arrays))
     return radiance, transmittance, aovs["variance"], layer.stats["seconds"], False
 

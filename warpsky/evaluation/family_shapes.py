@@ -12,6 +12,8 @@ stratocumulus  a wide sheet with a bumpy top and holes where a low-frequency noi
 towering       a column of stacked bulges under a wide, flat anvil pushed downwind
 cirrus         a thin sheet of streaks (noise stretched along one direction), high up and tenuous
 inside         a broad, dense blob the camera is placed inside
+storm          a towering cell (the thick family's): its anvil ice (``field:ice``), the rest cloud droplets,
+               with a rain shaft below the base in a Volume of its own (:func:`storm_species`)
 ============== =====================================================================================
 """
 
@@ -221,7 +223,33 @@ def inside(rng, footprint: float, base: float, resolution: int) -> CloudShape:
 
 
 SHAPES = {"cumulus": cumulus, "stratocumulus": stratocumulus, "towering": towering, "cirrus": cirrus,
-          "inside": inside}
+          "inside": inside, "storm": towering}
+#: Height fractions of a storm cell over which the droplets give way to the anvil's ice.
+ICE_FROM, ICE_TO = 0.62, 0.78
+#: The rain shaft's width (a fraction of the cell's footprint) and how far it reaches up into the cell.
+RAIN_WIDTH, RAIN_INTO_CELL = 0.45, 0.25
+
+
+def storm_species(rng, shape: CloudShape, resolution: int) -> tuple[np.ndarray, np.ndarray, CloudShape]:
+    """(cloud droplets, anvil ice) splitting a towering cell's field by height (smoothstep from ``ICE_FROM`` to
+    ``ICE_TO`` of its height), and a rain shaft from the ground to ``RAIN_INTO_CELL`` of the way up the cell: a
+    column ``RAIN_WIDTH`` of the footprint wide, densest at its axis, streaked by noise stretched vertically."""
+    height = float(shape.upper[1] - shape.lower[1])
+    y = (np.arange(shape.density.shape[1]) + 0.5) / shape.density.shape[1]
+    t = np.clip((y - ICE_FROM) / (ICE_TO - ICE_FROM), 0.0, 1.0)
+    ice_weight = (t * t * (3.0 - 2.0 * t))[None, :, None]
+    cloud, ice = shape.density * (1.0 - ice_weight), shape.density * ice_weight
+    width = RAIN_WIDTH * float(shape.upper[0] - shape.lower[0])
+    top = float(shape.lower[1]) + RAIN_INTO_CELL * height
+    size = np.array([width, top, width])
+    (_, (X, Y, Z)) = _grid(size, max(resolution // 2, MIN_CELLS))
+    radial = np.hypot(X / width - 0.5, Z / width - 0.5) / 0.5
+    streaks = fbm(np.stack([X / width, 0.1 * Y / top, Z / width], axis=-1), rng, 4, octaves=3)
+    fade = np.clip((top - Y) / (0.3 * (top - float(shape.lower[1]))), 0.0, 1.0)
+    rain = np.clip(1.0 - radial, 0.0, None) * fade * (0.4 + 0.6 * streaks)
+    centre = 0.5 * (shape.lower + shape.upper)
+    lower = np.array([centre[0] - width / 2, 0.0, centre[2] - width / 2])
+    return cloud.astype(np.float32), ice.astype(np.float32), _finish(rain, lower, size)
 
 
 def peak_column(density: np.ndarray, voxel_size: np.ndarray) -> tuple[float, int]:

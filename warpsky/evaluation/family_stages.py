@@ -27,6 +27,12 @@ The peak optical depth is ``warpsky:extinctionScale`` x the largest line integra
 x, y or z lines (the straight line through the cloud's thickest part); the scale is set so it hits the target.
 Cameras are square (128 x 128 by the stage's render settings), placed so the occupied voxels fill about 90% of the
 frame's half-width, at least 30 m above the ground; the ``inside`` kind puts the camera at the blob's centre.
+
+The ``thick`` profile (:data:`PROFILES`) draws the same way from other values: kinds cumulus (peak optical depth
+100-1000), stratocumulus (100-500, seen from below or above), ``storm`` (150-1000: a towering cell whose anvil is
+ice, ``ICE_OPTICAL_DEPTH`` of the droplets' depth, over a rain shaft of optical depth ``RAIN_OPTICAL_DEPTH`` in a
+Volume of its own; always the Mie ``cloud`` phase) and inside (100-300); albedo 1 and 0.99; ``hg`` and ``cloud``
+phase; 64 x 64 images, so path-traced references fit a CPU.
 """
 
 from __future__ import annotations
@@ -38,13 +44,11 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.evaluation.family_shapes import KINDS, SHAPES, CloudShape, peak_column
+from warpsky.evaluation.family_shapes import SHAPES, CloudShape, peak_column, storm_species
 
 #: Bumped whenever the generator's output changes for a seed.
 FAMILY_VERSION = 1
 HALVES = ("tune", "test")
-OPTICAL_DEPTH = {"cumulus": (1.0, 300.0), "stratocumulus": (1.0, 100.0), "towering": (3.0, 300.0),
-                 "cirrus": (0.1, 3.0), "inside": (0.3, 30.0)}
 #: Horizontal size [m] and cloud base altitude [m] ranges per kind.
 FOOTPRINT = {"cumulus": (1000.0, 2600.0), "stratocumulus": (2000.0, 3000.0), "towering": (1800.0, 2800.0),
              "cirrus": (1500.0, 3000.0), "inside": (1200.0, 2500.0)}
@@ -53,13 +57,10 @@ BASE = {"cumulus": (700.0, 1500.0), "stratocumulus": (1200.0, 2000.0), "towering
 #: Camera pitch ranges [deg] per kind (positive: looking up); stratocumulus is seen from below or from above.
 PITCH = {"cumulus": (-12.0, 12.0), "stratocumulus": (20.0, 40.0), "towering": (-5.0, 15.0),
          "cirrus": (25.0, 50.0), "inside": (-10.0, 10.0)}
-ALBEDOS = (1.0, 0.9)
-PHASES = ("hg", "cloud", "isotropic")
 HG_G = 0.85
 #: Sun azimuth relative to the camera's view azimuth [deg] per lighting.
 LIGHTING = {"front": 180.0, "side": 90.0, "back": 0.0}
 ELEVATION = (2.0, 90.0)
-IMAGE_SIZE = 128
 FOCAL_LENGTH = 30.0
 APERTURE = 24.0  # square film back, same units as FOCAL_LENGTH
 FILL = 0.9
@@ -67,6 +68,43 @@ MIN_CAMERA_HEIGHT = 30.0  # [m]
 SUN_CLEARANCE = 40.0  # [deg] smallest angle between the sun and the view axis
 GROUND_ALBEDO = 0.2
 SCALE_HEIGHT = 8000.0  # [m]
+#: A storm's anvil ice: its peak optical depth as a fraction of the droplets'; its rain shaft's peak optical depth.
+ICE_OPTICAL_DEPTH = 0.1
+RAIN_OPTICAL_DEPTH = 3.0
+
+
+@dataclass(frozen=True)
+class FamilyProfile:
+    """What a family draws from: its kinds and their peak optical depths, albedos, phases and image size."""
+
+    name: str
+    optical_depth: dict  # kind -> (lowest, highest) peak optical depth
+    albedos: tuple
+    phases: tuple
+    image_size: int
+
+    @property
+    def kinds(self) -> tuple:
+        return tuple(self.optical_depth)
+
+
+#: ``thin``: the validation family of every kind from cirrus to cumulus. ``thick``: storms and dense decks of peak
+#: optical depth 100-1000, where light scatters hundreds of times.
+PROFILES = {
+    "thin": FamilyProfile("thin", {"cumulus": (1.0, 300.0), "stratocumulus": (1.0, 100.0),
+                                   "towering": (3.0, 300.0), "cirrus": (0.1, 3.0), "inside": (0.3, 30.0)},
+                          albedos=(1.0, 0.9), phases=("hg", "cloud", "isotropic"), image_size=128),
+    "thick": FamilyProfile("thick", {"cumulus": (100.0, 1000.0), "stratocumulus": (100.0, 500.0),
+                                     "storm": (150.0, 1000.0), "inside": (100.0, 300.0)},
+                           albedos=(1.0, 0.99), phases=("hg", "cloud"), image_size=64),
+}
+for _kind, _parent in (("storm", "towering"),):  # a storm cell is a towering cloud with rain and an ice anvil
+    FOOTPRINT[_kind], BASE[_kind], PITCH[_kind] = FOOTPRINT[_parent], BASE[_parent], PITCH[_parent]
+#: The thin family's values, as the tests and docs name them.
+OPTICAL_DEPTH = PROFILES["thin"].optical_depth
+ALBEDOS = PROFILES["thin"].albedos
+PHASES = PROFILES["thin"].phases
+IMAGE_SIZE = PROFILES["thin"].image_size
 
 
 @dataclass
@@ -121,15 +159,15 @@ def _spread(lo: float, hi: float, count: int, *, log: bool) -> list[float]:
     return [float(lo + (hi - lo) * s) for s in steps]
 
 
-def plan_members(seed: int, count: int) -> list[MemberPlan]:
-    """Draw the parameters of ``count`` members from ``seed`` (see the module docstring)."""
+def plan_members(seed: int, count: int, profile: FamilyProfile = PROFILES["thin"]) -> list[MemberPlan]:
+    """Draw the parameters of ``count`` members of ``profile`` from ``seed`` (see the module docstring)."""
     if count < 2:
         raise ValueError(f"a family needs at least 2 members (one per half), got {count}")
     rng = np.random.default_rng(seed)
     halves = [HALVES[i % 2] for i in range(count)]
     drawn: dict[str, list] = {k: [None] * count for k in ("kind", "albedo", "phase", "lighting", "ground",
                                                           "atmosphere")}
-    choices = {"kind": KINDS, "albedo": ALBEDOS, "phase": PHASES, "lighting": tuple(LIGHTING),
+    choices = {"kind": profile.kinds, "albedo": profile.albedos, "phase": profile.phases, "lighting": tuple(LIGHTING),
                "ground": (True, False), "atmosphere": (True, False)}
     for half in HALVES:
         members = [i for i in range(count) if halves[i] == half]
@@ -137,9 +175,9 @@ def plan_members(seed: int, count: int) -> list[MemberPlan]:
             for i, value in zip(members, _balanced(rng, values, len(members)), strict=True):
                 drawn[name][i] = value
     depth = [0.0] * count
-    for kind in KINDS:
+    for kind in profile.kinds:
         order = _interleaved(rng, [i for i in range(count) if drawn["kind"][i] == kind], halves)
-        for i, value in zip(order, _spread(*OPTICAL_DEPTH[kind], len(order), log=True), strict=True):
+        for i, value in zip(order, _spread(*profile.optical_depth[kind], len(order), log=True), strict=True):
             depth[i] = value
     elevation = [0.0] * count
     order = _interleaved(rng, list(range(count)), halves)
@@ -153,7 +191,8 @@ def plan_members(seed: int, count: int) -> list[MemberPlan]:
             pitch = -pitch  # seen from above
         plans.append(MemberPlan(
             index=i, half=halves[i], kind=kind, optical_depth_target=depth[i], albedo=drawn["albedo"][i],
-            phase=drawn["phase"][i], lighting=drawn["lighting"][i], sun_elevation_deg=elevation[i],
+            phase="cloud" if kind == "storm" else drawn["phase"][i], lighting=drawn["lighting"][i],
+            sun_elevation_deg=elevation[i],
             ground=drawn["ground"][i], atmosphere=drawn["atmosphere"][i],
             footprint_m=float(rng.uniform(*FOOTPRINT[kind])), base_m=float(rng.uniform(*BASE[kind])),
             view_azimuth_deg=float(rng.uniform(0.0, 360.0)), view_pitch_deg=float(pitch),
@@ -234,14 +273,20 @@ def member_shape(plan: MemberPlan, resolution: int) -> CloudShape:
     return SHAPES[plan.kind](rng, plan.footprint_m, plan.base_m, resolution)
 
 
-def build_member(plan: MemberPlan, resolution: int) -> tuple[dict, CloudShape]:
-    """The member's record (what family.json lists) and its field."""
+def build_member(plan: MemberPlan, resolution: int) -> tuple[dict, CloudShape, dict]:
+    """The member's record (what family.json lists), its field and, for a storm, its other species' fields
+    (``cloud``, ``ice`` arrays on the field's grid and the ``rain`` shaft's :class:`CloudShape`)."""
     shape = member_shape(plan, resolution)
-    column, axis = peak_column(shape.density, shape.voxel_size)
+    species = {}
+    if plan.kind == "storm":
+        cloud, ice, rain = storm_species(np.random.default_rng(plan.shape_seed + 1), shape, resolution)
+        species = {"cloud": cloud, "ice": ice, "rain": rain}
+    density = species.get("cloud", shape.density)
+    column, axis = peak_column(density, shape.voxel_size)
     scale = float(np.float32(plan.optical_depth_target / column))  # stored as a USD float
     position, forward = place_camera(plan, shape)
     sun, sun_azimuth = place_sun(plan, forward)
-    max_density = float(shape.density.max())
+    max_density = float(density.max())
     record = {
         "name": plan.name, "stage": f"{plan.name}.usda", "field": f"{plan.name}.npy", **asdict(plan),
         "g": HG_G if plan.phase == "hg" else None,
@@ -252,28 +297,47 @@ def build_member(plan: MemberPlan, resolution: int) -> tuple[dict, CloudShape]:
         "grid_shape": list(shape.density.shape), "voxel_m": shape.voxel_size.tolist(),
         "lower_m": shape.lower.tolist(), "upper_m": shape.upper.tolist(),
     }
-    return record, shape
+    if species:
+        ice_column, _ = peak_column(species["ice"], shape.voxel_size)
+        rain = species["rain"]
+        rain_column, _ = peak_column(rain.density, rain.voxel_size)
+        record.update(
+            ice_field=f"{plan.name}_ice.npy", rain_field=f"{plan.name}_rain.npy",
+            ice_extinction_scale=float(np.float32(ICE_OPTICAL_DEPTH * plan.optical_depth_target / ice_column)),
+            rain_extinction_scale=float(np.float32(RAIN_OPTICAL_DEPTH / rain_column)),
+            rain_grid_shape=list(rain.density.shape), rain_lower_m=rain.lower.tolist(),
+            rain_upper_m=rain.upper.tolist())
+    return record, shape, species
 
 
-def make_family(out: str | Path, *, seed: int = 2026, count: int = 24, resolution: int = 48, log=None) -> Path:
-    """Write ``count`` members (a ``.usda`` stage and its ``.npy`` field each) and ``family.json`` into ``out``;
-    returns the path of family.json."""
+def make_family(out: str | Path, *, seed: int = 2026, count: int = 24, resolution: int = 48,
+                profile: str = "thin", log=None) -> Path:
+    """Write ``count`` members of ``profile`` (:data:`PROFILES`; a ``.usda`` stage and its ``.npy`` fields each)
+    and ``family.json`` into ``out``; returns the path of family.json."""
     if not 8 <= resolution <= 64:
         raise ValueError(f"grid resolution must lie in 8..64 voxels, got {resolution}")
+    if profile not in PROFILES:
+        raise ValueError(f"unknown family profile {profile!r}; known: {', '.join(PROFILES)}")
+    chosen = PROFILES[profile]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     records = []
-    for plan in plan_members(seed, count):
-        record, shape = build_member(plan, resolution)
-        np.save(out / record["field"], shape.density)
-        write_member_stage(out / record["stage"], record, shape, seed=seed)
+    for plan in plan_members(seed, count, chosen):
+        record, shape, species = build_member(plan, resolution)
+        np.save(out / record["field"], species.get("cloud", shape.density))
+        if species:
+            np.save(out / record["ice_field"], species["ice"])
+            np.save(out / record["rain_field"], species["rain"].density)
+        write_member_stage(out / record["stage"], record, shape, seed=seed, image_size=chosen.image_size)
         records.append(record)
         if log is not None:
             log(f"{record['stage']:<24} {record['half']:<4} tau {record['optical_depth']:8.3g}  "
                 f"{record['phase']:<9} albedo {record['albedo']:g}  sun {record['sun_elevation_deg']:5.1f} deg "
                 f"{record['lighting']:<5} ground {int(record['ground'])} atmosphere {int(record['atmosphere'])}")
     blob = {"generator": "tools/make_validation_family.py", "version": FAMILY_VERSION, "seed": seed,
-            "count": count, "resolution": resolution, "image_size": IMAGE_SIZE, "members": records}
+            "count": count, "resolution": resolution, "image_size": chosen.image_size, "members": records}
+    if profile != "thin":  # the thin family's file stays as it was before profiles existed
+        blob["profile"] = profile
     path = out / "family.json"
     path.write_text(json.dumps(blob, indent=1) + "\n")
     return path
@@ -294,10 +358,22 @@ def _attribute(prim, name: str, type_name: str, value) -> None:
     prim.CreateAttribute(name, getattr(Sdf.ValueTypeNames, type_name)).Set(value)
 
 
-def write_member_stage(path: Path, record: dict, shape: CloudShape, *, seed: int) -> Path:
-    """One member as a Y-up, metre stage: camera, sun, the Volume on its ``.npy`` field, optional ground and
-    atmosphere, and render settings of ``IMAGE_SIZE`` square."""
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdRender, UsdVol
+def _field(stage, volume, species: str, file: str, scale: float) -> None:
+    """``volume``'s ``field:SPECIES`` on the ``.npy`` ``file`` with its extinction scale."""
+    from pxr import Sdf, UsdVol
+
+    asset = UsdVol.OpenVDBAsset.Define(stage, volume.GetPath().AppendChild(species))
+    asset.CreateFilePathAttr(Sdf.AssetPath(f"./{file}"))
+    _attribute(asset.GetPrim(), "warpsky:extinctionScale", "Float", scale)
+    volume.CreateFieldRelationship(species, asset.GetPath())
+
+
+def write_member_stage(path: Path, record: dict, shape: CloudShape, *, seed: int,
+                       image_size: int = IMAGE_SIZE) -> Path:
+    """One member as a Y-up, metre stage: camera, sun, the Volume on its ``.npy`` field (a storm's with its ice
+    beside, and its rain shaft's Volume), optional ground and atmosphere, and render settings of ``image_size``
+    square."""
+    from pxr import Gf, Usd, UsdGeom, UsdLux, UsdRender, UsdVol
 
     stage = Usd.Stage.CreateInMemory()
     layer = stage.GetRootLayer()
@@ -324,11 +400,13 @@ def write_member_stage(path: Path, record: dict, shape: CloudShape, *, seed: int
     volume = UsdVol.Volume.Define(stage, "/World/Cloud")
     volume.CreateExtentAttr([Gf.Vec3f(*shape.lower.tolist()), Gf.Vec3f(*shape.upper.tolist())])
     field_name = "cloud" if record["phase"] == "cloud" else "density"
-    asset = UsdVol.OpenVDBAsset.Define(stage, f"/World/Cloud/{field_name}")
-    asset.CreateFilePathAttr(Sdf.AssetPath(f"./{record['field']}"))
-    _attribute(asset.GetPrim(), "warpsky:extinctionScale", "Float", record["extinction_scale"])
-    volume.CreateFieldRelationship(field_name, asset.GetPath())
+    _field(stage, volume, field_name, record["field"], record["extinction_scale"])
     _attribute(volume.GetPrim(), "warpsky:albedo", "Float", record["albedo"])
+    if "ice_field" in record:
+        _field(stage, volume, "ice", record["ice_field"], record["ice_extinction_scale"])
+        rain = UsdVol.Volume.Define(stage, "/World/Rain")
+        rain.CreateExtentAttr([Gf.Vec3f(*record["rain_lower_m"]), Gf.Vec3f(*record["rain_upper_m"])])
+        _field(stage, rain, "rain", record["rain_field"], record["rain_extinction_scale"])
     if field_name == "density":
         _attribute(volume.GetPrim(), "warpsky:phase", "Token", record["phase"])
         if record["phase"] == "hg":
@@ -345,7 +423,7 @@ def write_member_stage(path: Path, record: dict, shape: CloudShape, *, seed: int
         _attribute(atmosphere, "warpsky:atmosphere:scaleHeight", "Float", SCALE_HEIGHT)
     settings = UsdRender.Settings.Define(stage, "/Render/Settings")
     settings.CreateCameraRel().SetTargets([camera.GetPath()])
-    settings.CreateResolutionAttr(Gf.Vec2i(IMAGE_SIZE, IMAGE_SIZE))
+    settings.CreateResolutionAttr(Gf.Vec2i(image_size, image_size))
     stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
     layer.Export(str(path))
     return path

@@ -81,6 +81,9 @@ class HybridSettings(Settings):
     mean_radius: int = setting(-1, unit="pixel", range=">= -1", help="box radius over which the denoised image "
                                "keeps the noisy image's local mean; -1 = off (chosen on the validation family's "
                                "tune half: the correction raised the p90 error there)")
+    firefly: float = setting(0.0, range=">= 0", help="before denoising, light above this many times a pixel's "
+                             "neighbourhood median (rare bright paths) is spread over the covered pixels around it "
+                             "instead, keeping the frame's mean; 0 = off")
     max_bounces: int = setting(1024, range=">= 1", help="cap on scattering events per path; capped paths are "
                                "counted (capped_paths)")
     majorant_block: int | None = setting(None, unit="voxel", range=">= 1", help="edge of the coarse majorant cells",
@@ -268,7 +271,7 @@ class MultipleScattering:
         mean, variance = film.radiance, film.aovs["variance"]
         image, denoise_seconds, sanitised, warnings = mean, 0.0, 0, []
         if s.denoise:
-            result = denoise(mean, coverage, radius=s.mean_radius)
+            result = denoise(mean, coverage, radius=s.mean_radius, firefly=s.firefly)
             image, denoise_seconds, sanitised = result.image, result.seconds, result.sanitised
         if self.scale > 1:
             height, width = fine_coverage.shape[:2]
@@ -304,8 +307,9 @@ class MultipleScattering:
             return 0.0
         a, b = self.half_mean(0), self.half_mean(1)
         if self.settings.denoise:
-            radius = self.settings.mean_radius
-            a, b = denoise(a, coverage, radius=radius).image, denoise(b, coverage, radius=radius).image
+            radius, firefly = self.settings.mean_radius, self.settings.firefly
+            a = denoise(a, coverage, radius=radius, firefly=firefly).image
+            b = denoise(b, coverage, radius=radius, firefly=firefly).image
             spread = 0.5 * (a - b)
         else:
             spread = np.sqrt(self.film().aovs["variance"])
