@@ -181,6 +181,24 @@ def test_firefly_split_keeps_every_photon():
     np.testing.assert_array_equal(split_fireflies(image[:4, :4], weight[:4, :4], 1e9)[1], 0.0)
 
 
+def test_forward_cut_table_keeps_every_angle_above_the_cut(species_phase):
+    """The cut phase is the exact one over 1 - f above the cut, flat below it, normalised; f is the share of the
+    peak above the plateau (about 43 % of a cloud droplet's scattering within 3 deg)."""
+    from warpsky.optics.grid import angle_grid, sphere_integral
+    from warpsky.optics.multiple import forward_cut
+
+    phase = species_phase("cloud")
+    cut, fraction = forward_cut(phase, np.radians(3.0))
+    theta = angle_grid()
+    above = theta >= np.radians(3.0)
+    np.testing.assert_allclose(sphere_integral(cut), 1.0, rtol=1e-9)
+    np.testing.assert_allclose(cut[:, above] * (1.0 - fraction[:, None]), phase[:, above], rtol=1e-9)
+    assert np.all((0.38 < fraction) & (fraction < 0.48))
+    assert np.all(cut[:, ~above] <= cut[:, above][:, :1] * (1.0 + 1e-9))
+    np.testing.assert_allclose(forward_cut(np.full((3, theta.size), 1.0 / (4.0 * np.pi)), 0.05)[1], 0.0,
+                               atol=1e-12)
+
+
 def test_hybrid_is_listed():
     assert Hybrid.name == "hybrid" and not Hybrid.traces_air and Hybrid.renders_layers
 

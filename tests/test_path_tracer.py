@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, path_traced, render_layer, write_stage
+from conftest import StageSpec, add_field, look_rotation, path_traced, render_layer, write_stage
 
 from warpsky.scene.usd import StageReader
 from warpsky.techniques.path_tracer.majorants import majorant_grid
@@ -46,6 +46,23 @@ def test_white_furnace_returns_the_environment(box, device, phase, g):
     assert seen.mean() == pytest.approx(1.0, abs=0.01)
     np.testing.assert_allclose(seen, 1.0, atol=0.15)
     assert layer.stats["capped_paths"] == 0
+
+
+def test_white_furnace_with_droplets_mixes_the_hero_channels(box, device, homogeneous_npy, species_phase):
+    """Mie droplets (a phase table per colour channel) at optical depth 200 across the box, albedo 1, in a white
+    environment: every channel sees exactly the environment. Paths sample the tables by a hero channel drawn per
+    path and are weighted by the balance heuristic over the three heroes, so no channel's weight grows with the
+    ~100 events of a path: red and blue are as quiet as green (sampled by green alone, red and blue had 20x green's
+    pixel spread here and came out 5 % low at 64 paths per pixel)."""
+    species_phase("cloud")
+    stage = box(sun_direction=None, extinction_scale=0.001)
+    add_field(stage, "cloud", homogeneous_npy, scale=10.0)
+    layer = path_traced(stage, device, 8, spp=64, environment=1.0, max_bounces=100000)
+    seen = (layer.radiance + layer.transmittance).reshape(-1, 3)
+    assert layer.stats["capped_paths"] == 0 and layer.stats["scatter_events"] > 60 * layer.stats["paths"]
+    np.testing.assert_allclose(seen.mean(axis=0), 1.0, atol=0.03)
+    spread = seen.std(axis=0)
+    assert spread.max() < 0.12 and spread.max() < 2.0 * spread.min()
 
 
 def test_tight_and_loose_majorants_agree(tmp_path, device):
@@ -248,3 +265,40 @@ def test_similarity_continuation_on_a_thick_forward_scattering_slab(tmp_path, ho
         print(f"tau 100, mu {mu}: similarity after 64 events {value:.5f} +- {noise:.5f}, adding-doubling "
               f"{expected:.5f}, {layer.stats['tracking_steps'] / layer.stats['paths']:.0f} steps per path")
         assert abs(value - expected) < 0.06 * expected + 2.0 * noise, (value, expected, noise)
+
+
+def _cloud_slab(tmp_path, homogeneous_npy, tau: float, sideways: float, mu: float, name: str):
+    """:func:`_slab_stage` filled with Mie droplets (``field:cloud``) of optical depth ``tau``."""
+    stage = _slab_stage(tmp_path, homogeneous_npy, 1e-5, "isotropic", None, sideways, mu, name)
+    add_field(stage, "cloud", homogeneous_npy, scale=tau / 10.0)
+    return stage
+
+
+@pytest.mark.slow
+def test_forward_cut_agrees_with_exact_paths_and_removes_the_peak_noise(tmp_path, homogeneous_npy, device,
+                                                                        species_phase):
+    """A slab of Mie droplets of optical depth 1 under a zenith sun, seen from above and below: cutting the
+    diffraction peak (3 deg) after the first event changes the radiance by less than 4 % (plus noise) and cuts the
+    noise of the mean by more than 4x (measured +4 % / -2 % within the exact tracer's noise, and 14x)."""
+    species_phase("cloud")
+    for name, (sideways, mu) in {"up": (0.0, 1.0), "below": (np.sin(np.arccos(0.7)), -0.7)}.items():
+        stage = _cloud_slab(tmp_path, homogeneous_npy, 1.0, sideways, mu, name)
+        exact = path_traced(stage, device, 8, spp=8192, seed=3)
+        cut = path_traced(stage, device, 8, spp=2048, seed=4, forward_cut=3.0)
+        values = [layer.radiance[..., 1].mean() for layer in (exact, cut)]
+        noise = [np.sqrt(layer.aovs["variance"][..., 1].sum()) / 64 for layer in (exact, cut)]
+        assert abs(values[1] - values[0]) < 0.04 * values[0] + 4.0 * np.hypot(*noise), (name, values, noise)
+        assert noise[1] < noise[0] / 4.0, (name, noise)
+
+
+def test_forward_cut_leaves_analytic_phases_alone_and_refuses_similarity(box, device):
+    """Henyey-Greenstein media have no table to cut: the image is the exact one bit for bit. Cutting and
+    high-order similarity together are refused by name."""
+    from warpsky.errors import UsageError
+
+    stage = box(phase="hg", g=0.85, extinction_scale=0.5)
+    exact = path_traced(stage, device, 8, spp=16, seed=2)
+    cut = path_traced(stage, device, 8, spp=16, seed=2, forward_cut=3.0)
+    np.testing.assert_array_equal(exact.radiance, cut.radiance)
+    with pytest.raises(UsageError, match="forward_cut.*similarity_order"):
+        path_traced(stage, device, 8, spp=4, forward_cut=3.0, similarity_order=4)

@@ -8,6 +8,14 @@ CDF, isotropic and Rayleigh uniformly: :mod:`warpsky.optics.phase`, :mod:`warpsk
 weight is the mixture's phase (the scattering-weighted phase of all components, per channel) over the mixture's
 pdf (the weighted sum of every component's sampling density), so the estimate is unbiased whatever the component
 picked.
+
+Tabulated phases differ per colour channel (a droplet's diffraction peak and rainbow move with wavelength). A
+path samples them by one *hero* channel drawn at its start, and is weighted by the balance heuristic over the
+three channels as heroes (spectral MIS, Wilkie et al. 2014, "Hero wavelength spectral sampling"): every channel's
+throughput is divided by the mean over heroes of the whole path's direction densities, kept as their ratios to
+the largest (``PhaseSample.ratio``). Sampling by one fixed channel instead weights the others by the product of
+their phase ratios over every event, which in a cloud of optical depth 100 (hundreds of events) has a heavy tail:
+coloured fireflies; with the heroes mixed the phase's part of a path's weight stays below 3.
 """
 
 from __future__ import annotations
@@ -18,7 +26,7 @@ import warp as wp
 
 from warpsky.media.voxel import MediaPoint, VoxelMedia
 from warpsky.numerics import mean3
-from warpsky.optics.kernels import TABLE_KIND, medium_phase, sample_table, scattering_angle, table_pdf
+from warpsky.optics.kernels import TABLE_KIND, medium_phase, sample_table, scattering_angle
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
 from warpsky.optics.oriented_sampling import directional_sample, directional_value
 from warpsky.optics.phase import (
@@ -29,7 +37,13 @@ from warpsky.optics.phase import (
     rayleigh_pdf,
     rayleigh_sample_cos,
 )
-from warpsky.optics.phase_sampling import SAMPLED_CHANNEL, PhaseTables, medium_pdf, rotate_about, sampled_row
+from warpsky.optics.phase_sampling import (
+    SAMPLED_CHANNEL,
+    PhaseTables,
+    channel_row,
+    medium_pdf3,
+    rotate_about,
+)
 
 
 @wp.func
@@ -92,28 +106,36 @@ def oriented_correction_function(sample_phase):
 @wp.struct
 class PhaseSample:
     direction: wp.vec3
-    weight: wp.vec3  # combined phase / sampling pdf, per channel
+    weight: wp.vec3  # combined phase / sampling pdf, per channel (divided by the heroes' mean path density)
+    ratio: wp.vec3  # the path's direction densities with each channel as hero, over their largest
     state: wp.uint32
+
+
+@wp.struct
+class ContinuationTerms:
+    phase: wp.vec3  # sum of scattering_m (T_m(-d, -s) - P_m(theta)) per channel [1/(m sr)]
+    pdf: wp.vec3  # sum of mean scattering_m (T_m green - the table's density with each channel as hero)
 
 
 @wp.func
 def continuation_terms(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, d: wp.vec3, s: wp.vec3,
-                       theta: float) -> wp.vec4:
-    """What oriented ice changes in a continued path's mixture, for light from ``s`` scattered along ``d``:
-    (sum of scattering_m (T_m(-d, -s) - P_m(theta)) RGB [1/(m sr)], sum of mean scattering_m (T_m green - its
-    table's sampling density at theta) [1/(m sr)]) over the oriented media m at ``point``: their random table
-    replaced by the oriented one in the phase and in the sampling density."""
-    out = wp.vec4(0.0)
+                       theta: float) -> ContinuationTerms:
+    """What oriented ice changes in a continued path's mixture, for light from ``s`` scattered along ``d``, over
+    the oriented media m at ``point``: their random table replaced by the oriented one in the phase and in the
+    sampling density (oriented tables are sampled by green whichever the hero)."""
+    out = ContinuationTerms()
+    out.phase = wp.vec3(0.0)
+    out.pdf = wp.vec3(0.0)
     for m in range(media.count):
         value = point.density[m]
         index = tables.continuation.table_of[m]
         if value > 0.0 and index >= 0:
             grid = media.grids[m]
             oriented = directional_value(tables.continuation, index, -d, -s)
-            difference = wp.cw_mul(grid.scattering * value, oriented - medium_phase(tables.values, grid.phase_kind,
+            out.phase += wp.cw_mul(grid.scattering * value, oriented - medium_phase(tables.values, grid.phase_kind,
                                                                                    grid.phase_g, theta))
-            density = oriented[SAMPLED_CHANNEL] - table_pdf(tables.cdf, sampled_row(grid.phase_kind), theta)
-            out += wp.vec4(difference[0], difference[1], difference[2], mean3(grid.scattering) * value * density)
+            random = medium_pdf3(tables.cdf, grid.phase_kind, grid.phase_g, theta)
+            out.pdf += (wp.vec3(oriented[SAMPLED_CHANNEL]) - random) * (mean3(grid.scattering) * value)
     return out
 
 
@@ -192,10 +214,11 @@ def mixture_functions(has_tables: bool):
 
     @wp.func
     def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, rayleigh: wp.vec3, d: wp.vec3,
-                       state: wp.uint32) -> PhaseSample:
+                       hero: int, ratio: wp.vec3, state: wp.uint32) -> PhaseSample:
         """New direction after scattering at ``point`` from direction ``d``: pick the Rayleigh component or a medium
-        by mean scattering, sample its phase (Rayleigh: uniformly), weight by the mixture's phase over the mixture's
-        pdf. Three random draws: the component, cos θ, the azimuth."""
+        by mean scattering, sample its phase (Rayleigh: uniformly; a table by the path's ``hero`` channel), weight
+        by the mixture's phase over the mixture's pdf (with tables: over the path's density ratios ``ratio`` mixed
+        over the heroes, see the module docstring). Three random draws: the component, cos θ, the azimuth."""
         air_w = mean3(rayleigh)
         total = air_w
         for m in range(media.count):
@@ -210,41 +233,48 @@ def mixture_functions(has_tables: bool):
             grid = media.grids[chosen]
             if grid.phase_kind >= TABLE_KIND:
                 if wp.static(has_tables):
-                    cos_theta = wp.cos(sample_table(tables.cdf, sampled_row(grid.phase_kind), u)[0])
+                    cos_theta = wp.cos(sample_table(tables.cdf, channel_row(grid.phase_kind, hero), u)[0])
                     if tables.continuation.count > 0:
                         oriented = tables.continuation.table_of[chosen]
             else:
                 cos_theta = phase_sample_cos(grid.phase_kind, grid.phase_g, u)
         out = PhaseSample()
         out.direction = rotate_about(d, cos_theta, 2.0 * wp.pi * wp.randf(state))
+        out.ratio = ratio
         if wp.static(has_tables):
             if oriented >= 0:  # oriented ice: its table for light arriving along d (six more draws)
                 source, state = directional_sample(tables.continuation, oriented, d, state)
                 out.direction = source
         theta = scattering_angle(d, out.direction)
-        pdf = air_w * rayleigh_pdf(wp.cos(theta))
-        for m in range(media.count):
-            grid = media.grids[m]
-            w = mean3(grid.scattering) * point.density[m]
-            if w > 0.0:
-                if wp.static(has_tables):
-                    pdf += w * medium_pdf(tables.cdf, grid.phase_kind, grid.phase_g, theta)
-                else:
-                    pdf += w * phase_pdf(grid.phase_kind, grid.phase_g, wp.cos(theta))
-        phase_extra = wp.vec3(0.0)
-        if wp.static(has_tables):
-            if tables.continuation.count > 0:
-                terms = continuation_terms(media, point, tables, d, out.direction, theta)
-                pdf += terms[3]
-                phase_extra = wp.vec3(terms[0], terms[1], terms[2])
-        pdf = pdf / wp.max(total, 1.0e-30)
         out.state = state
         out.weight = wp.vec3(0.0)
-        if pdf > 0.0:
+        if wp.static(has_tables):
+            pdf3 = wp.vec3(air_w * rayleigh_pdf(wp.cos(theta)))
+            for m in range(media.count):
+                grid = media.grids[m]
+                w = mean3(grid.scattering) * point.density[m]
+                if w > 0.0:
+                    pdf3 += medium_pdf3(tables.cdf, grid.phase_kind, grid.phase_g, theta) * w
             phase = mixture_phase(media, point, tables.values, rayleigh, theta)
-            if wp.static(has_tables):
-                phase += per_unit_scattering(point, rayleigh, phase_extra)
-            out.weight = wp.max(phase, wp.vec3(0.0)) / pdf
+            if tables.continuation.count > 0:
+                terms = continuation_terms(media, point, tables, d, out.direction, theta)
+                pdf3 += terms.pdf
+                phase += per_unit_scattering(point, rayleigh, terms.phase)
+            path_pdf = wp.cw_mul(ratio, wp.max(pdf3, wp.vec3(0.0)) / wp.max(total, 1.0e-30))
+            mixed = mean3(path_pdf)
+            if mixed > 0.0:
+                out.weight = wp.max(phase, wp.vec3(0.0)) * (mean3(ratio) / mixed)
+                out.ratio = path_pdf / wp.max(wp.max(path_pdf[0], path_pdf[1]), path_pdf[2])
+        else:
+            pdf = air_w * rayleigh_pdf(wp.cos(theta))
+            for m in range(media.count):
+                grid = media.grids[m]
+                w = mean3(grid.scattering) * point.density[m]
+                if w > 0.0:
+                    pdf += w * phase_pdf(grid.phase_kind, grid.phase_g, wp.cos(theta))
+            pdf = pdf / wp.max(total, 1.0e-30)
+            if pdf > 0.0:
+                out.weight = wp.max(mixture_phase(media, point, tables.values, rayleigh, theta), wp.vec3(0.0)) / pdf
         return out
 
     return mixture_phase, sample_mixture

@@ -228,13 +228,15 @@ class VoxelMediaBuffers:
     @classmethod
     def upload(
         cls, media: tuple[VoxelMedium, ...], camera_position: np.ndarray, device, species: tuple[str, ...] = (),
-        *, time_s: float = 0.0, cache: str | None = None,
+        *, time_s: float = 0.0, cache: str | None = None, table_offset: int = 0, values: wp.array | None = None,
     ) -> VoxelMediaBuffers:
         """Upload ``media``; a medium of species ``species[i]`` uses phase table i; animated detail at ``time_s``
         [s] (see :mod:`warpsky.media.detail`). With ``cache`` (a name such as ``"slicing"``) the values, grid
         structs and details go through :func:`warpsky.device_buffers.upload` as ``<cache>:values``,
         ``<cache>:grids`` and ``<cache>:details``: kept on the device across frames and uploaded only when their
-        contents change (the returned arrays are then shared: do not write into them)."""
+        contents change (the returned arrays are then shared: do not write into them). ``table_offset`` shifts the
+        species' table indices (tables appended after theirs); ``values`` reuses the field values of buffers
+        already uploaded for the same fields, so only the grid structs are new."""
         infos = []
         chunks = []
         offset = 0
@@ -249,7 +251,7 @@ class VoxelMediaBuffers:
             grid.extinction = wp.vec3(*medium.extinction_scale.tolist())
             grid.scattering = wp.vec3(*(medium.extinction_scale * medium.albedo).tolist())
             if medium.species is not None:
-                grid.phase_kind = int(TABLE_KIND) + species.index(medium.species)
+                grid.phase_kind = int(TABLE_KIND) + table_offset + species.index(medium.species)
             else:
                 grid.phase_kind = int(medium.phase.kind)
             grid.phase_g = float(medium.phase.g)
@@ -265,7 +267,10 @@ class VoxelMediaBuffers:
         sizes = [float(m.voxel_size.min()) for m in media]
         entries = medium_details(tuple(media), time_s, camera_position, device)
         grid_list, entries_or_dummy = infos if infos else [VoxelGrid()], entries if entries else [MediumDetail()]
-        if cache is None:
+        if values is not None:  # the grids of other buffers of the same fields (other coefficients or tables)
+            grids = wp.array(grid_list, dtype=VoxelGrid, device=device)
+            details = wp.array(entries_or_dummy, dtype=MediumDetail, device=device)
+        elif cache is None:
             values = wp.array(flat, dtype=float, device=device)
             grids = wp.array(grid_list, dtype=VoxelGrid, device=device)
             details = wp.array(entries_or_dummy, dtype=MediumDetail, device=device)

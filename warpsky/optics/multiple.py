@@ -236,3 +236,20 @@ def modified_mie(phase: np.ndarray, theta_f: float) -> ModifiedMie:
     p_f = normalise(np.where(inside, phase, 0.0))
     p_s = normalise(np.where(inside, 0.0, phase))
     return ModifiedMie(forward_weight, p_s, p_f, convolve(p_s, p_s, max_degree=3600), float(theta_f))
+
+
+def forward_cut(phase: np.ndarray, theta_f: float) -> tuple[np.ndarray, np.ndarray]:
+    """(truncated phase (C, M), peak fraction f (C,)): ``phase`` (C, M, normalised) with its forward peak above
+    its value at ``theta_f`` [rad] cut off, ``p = f delta + (1 - f) p_cut`` (the delta-M idea, Wiscombe 1977, with
+    the peak flattened to a plateau rather than Bouthors' split, so the truncated phase keeps light going forward).
+    A medium whose scattering coefficient is reduced to sigma_s (1 - f), its extinction by f sigma_s, and which
+    scatters by ``p_cut`` treats light deflected by less than ``theta_f`` as not scattered."""
+    phase = np.atleast_2d(np.asarray(phase, dtype=np.float64))
+    if not 0.0 < theta_f < np.pi:
+        raise ValueError(f"theta_f must lie in (0, pi), got {theta_f}")
+    theta = angle_grid()
+    plateau = np.array([np.interp(theta_f, theta, row) for row in phase])
+    inside = theta < theta_f
+    flattened = np.where(inside, np.minimum(phase, plateau[:, None]), phase)
+    fraction = np.clip(sphere_integral(phase) - sphere_integral(flattened), 0.0, 1.0)
+    return normalise(flattened), fraction

@@ -13,8 +13,8 @@ from warpsky.optics.oriented_phase import OrientedPhases
 from warpsky.optics.oriented_sampling import OrientedTables
 from warpsky.optics.phase import phase_pdf
 
-#: Tables are sampled by one channel, green (row ``table * 3 + SAMPLED_CHANNEL``); the other channels' ratio to it
-#: is carried by the sample's weight.
+#: Oriented ice's continuation tables are sampled by one channel, green; the other channels' ratio to it is carried
+#: by the sample's weight. Random-orientation tables are sampled by a path's hero channel (:func:`channel_row`).
 SAMPLED_CHANNEL = wp.constant(1)
 
 
@@ -50,6 +50,22 @@ def phase_tables_struct(tables: DevicePhaseTables, oriented: OrientedPhases | No
 def sampled_row(kind: int) -> int:
     """Row of the cumulative tables that phase kind ``kind`` (>= TABLE_KIND) is sampled from."""
     return (kind - TABLE_KIND) * 3 + SAMPLED_CHANNEL
+
+
+@wp.func
+def channel_row(kind: int, channel: int) -> int:
+    """Row of the cumulative tables of phase kind ``kind`` (>= TABLE_KIND) for colour channel ``channel``."""
+    return (kind - TABLE_KIND) * 3 + channel
+
+
+@wp.func
+def medium_pdf3(cdf: wp.array(dtype=float), kind: int, g: float, theta: float) -> wp.vec3:
+    """Sampling density [1/sr] at ``theta`` of one medium's phase sampling by each colour channel as the hero: a
+    table's three rows, an analytic model's one density in every channel."""
+    if kind >= TABLE_KIND:
+        return wp.vec3(table_pdf(cdf, channel_row(kind, 0), theta), table_pdf(cdf, channel_row(kind, 1), theta),
+                       table_pdf(cdf, channel_row(kind, 2), theta))
+    return wp.vec3(phase_pdf(kind, g, wp.cos(theta)))
 
 
 @wp.func

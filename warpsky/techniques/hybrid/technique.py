@@ -94,6 +94,10 @@ class HybridSettings(Settings):
     similarity_order: int = setting(0, range=">= 0", help="scattering events after which the paths continue through "
                                     "the media reduced by high-order similarity (sigma_s (1 - g), isotropic); "
                                     "0 = exact")
+    forward_cut: float = setting(0.0, unit="deg", range="[0, 30]", help="after their first event the multiple-"
+                                 "scattering paths treat light a tabulated species deflects by less than this angle "
+                                 "(its diffraction peak) as not scattered (delta-M; see the path tracer's setting); "
+                                 "0 = exact")
     ms_scale: int = setting(1, unit="pixel", range="1..8", help="trace multiple scattering on pixels this many "
                             "times larger (box-filtered), upsampled with the exact coverage as guide")
     step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering eye-ray step",
@@ -111,7 +115,7 @@ class HybridSettings(Settings):
         return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,
                                   majorant_block=self.majorant_block, samples_per_pass=self.samples_per_pass,
                                   pixel_jitter=self.ms_scale > 1, similarity_order=self.similarity_order,
-                                  bake_detail=self.bake_detail)
+                                  bake_detail=self.bake_detail, forward_cut=self.forward_cut)
 
 
 class Hybrid(Technique):

@@ -74,6 +74,8 @@ class PathState:
     capped: int  # 1 when the path stopped at max_bounces
     hit: int  # 1 when the first flight ended in a medium or on the ground
     first_t: float  # where the first flight ended [m from the near plane]
+    hero: int  # the colour channel whose phase tables the path samples (green without tables)
+    ratio: wp.vec3  # the path's direction densities with each channel as hero, over their largest
 
 
 @wp.func
@@ -92,6 +94,8 @@ def start_path(origin: wp.vec3, direction: wp.vec3, state: wp.uint32, steps: int
     out.capped = 0
     out.hit = 0
     out.first_t = 0.0
+    out.hero = 1
+    out.ratio = wp.vec3(1.0)
     return out
 
 
@@ -312,8 +316,9 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
                                                      out.direction, theta)
             out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, phase),
                                                     wp.cw_mul(sun.irradiance, tr_sun.value))
-        ps = sample_mixture(media, point, tables, rayleigh, out.direction, out.state)
+        ps = sample_mixture(media, point, tables, rayleigh, out.direction, out.hero, out.ratio, out.state)
         out.state = ps.state
+        out.ratio = ps.ratio
         out.throughput = wp.cw_mul(out.throughput, ps.weight)
         out.direction = ps.direction
         out.origin = p

@@ -43,6 +43,7 @@ from warpsky.techniques.path_tracer.events import (
     start_path,
     surface_functions,
 )
+from warpsky.techniques.path_tracer.forward_cut import CutMedia, peak_light_function
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.tracking import tracking_functions
 
@@ -62,6 +63,7 @@ class PathSettings:
     max_bounces: int
     multiple_only: int  # 1: leave out single scattering (the sun at the first event) and the primary transmittance
     similarity_order: int  # after this many scattering events the media are reduced (high-order similarity); 0: never
+    forward_cut: int  # 1: after the first event paths continue through the cut media (forward_cut.py)
 
 
 @wp.struct
@@ -101,18 +103,24 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
     delta_track = tracking_functions(has_detail)[1]
     flight_end = surface_functions(has_ground)[1]
     scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
+    first_event_peak_light = peak_light_function(has_tables, has_detail, has_ground)
 
     @wp.func
-    def trace_path(media: VoxelMedia, majorants: Majorants, phase_tables: PhaseTables, air: Air, sun: Sun,
-                   ground: Ground, dome: DomeLight, settings: PathSettings, sun_on: bool, start: PathState,
+    def trace_path(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
+                   sun: Sun, ground: Ground, dome: DomeLight, settings: PathSettings, sun_on: bool, start: PathState,
                    first: RayEnd) -> PathState:
         """One path from the camera ray ``start`` (which ends at ``first``): per bounce a free flight, then a
         scattering event, a ground bounce, or the end (environment, sun disk, sea level), then roulette. With
         ``settings.multiple_only`` the first event takes no sunlight and a camera ray does not see the sun's disk:
         the path carries light scattered at least twice (media, air or ground), the part that an exact
         single-scattering march and the analytic sky leave out, and all the dome's light but what the camera sees
-        of it directly (the composite's background)."""
+        of it directly (the composite's background). With ``settings.forward_cut`` the flights and events after
+        the first run through the ``cut`` media, and the first event adds the sunlight of its peak scatterings."""
         path = start
+        if wp.static(has_tables):  # the hero channel of the phase tables' sampling, uniformly (one draw)
+            state = path.state
+            path.hero = wp.min(int(wp.randf(state) * 3.0), 2)
+            path.state = state
         bounce = int(0)
         while path.alive != 0:
             if bounce >= settings.max_bounces:
@@ -121,8 +129,13 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
             reduced = int(0)
             if settings.similarity_order > 0 and bounce >= settings.similarity_order:
                 reduced = 1
+            here = media
+            bounds = majorants
+            if settings.forward_cut != 0 and bounce >= 1:
+                here = cut.media
+                bounds = cut.majorants
             end = flight_end(air, ground, path.origin, path.direction, bounce, first)
-            flight = delta_track(media, majorants, air, path.origin, path.direction, end.t, path.throughput,
+            flight = delta_track(here, bounds, air, path.origin, path.direction, end.t, path.throughput,
                                  path.state, reduced)
             path.state = flight.state
             path.steps = path.steps + flight.steps
@@ -140,14 +153,25 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
             if bounce == 0:
                 path.hit = 1
                 path.first_t = flight.t
+                if settings.forward_cut != 0 and sun_on:
+                    q = p
+                    if flight.scattered == 0:
+                        q = wp.vec3(p[0], ground.offset, p[2])
+                    peak = first_event_peak_light(media, majorants, cut, phase_tables, air, sun, ground,
+                                                  path.throughput, path.direction, q, 1 - flight.scattered,
+                                                  path.state)
+                    path.radiance = path.radiance + peak.radiance
+                    path.state = peak.state
+                    path.steps = path.steps + peak.steps
+                    path.shadow_steps = path.shadow_steps + peak.steps
             if flight.scattered == 1:
                 path.events = path.events + 1
                 if reduced != 0:
-                    path = reduced_scatter_event(media, majorants, air, sun, lit, path, p)
+                    path = reduced_scatter_event(here, bounds, air, sun, lit, path, p)
                 else:
-                    path = scatter_event(media, majorants, phase_tables, air, sun, lit, path, p)
+                    path = scatter_event(here, bounds, phase_tables, air, sun, lit, path, p)
             else:
-                path = ground_event(media, majorants, air, sun, ground, lit, path, p, reduced)
+                path = ground_event(here, bounds, air, sun, ground, lit, path, p, reduced)
             bounce += 1
             path = roulette(path, bounce)
         return path
@@ -164,9 +188,9 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
     trace_path = path_function(has_ground, has_tables, has_detail, has_dome)
 
     @wp.func
-    def pixel_sample(media: VoxelMedia, majorants: Majorants, phase_tables: PhaseTables, air: Air, sun: Sun,
-                     cam: PinholeCamera, ground: Ground, dome: DomeLight, settings: PathSettings, row: int, col: int,
-                     sample: int) -> SampleResult:
+    def pixel_sample(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
+                     sun: Sun, cam: PinholeCamera, ground: Ground, dome: DomeLight, settings: PathSettings, row: int,
+                     col: int, sample: int) -> SampleResult:
         """Path ``sample`` of pixel (row, col): the camera ray (jittered in the pixel when asked), the primary
         transmittance, the path, the depth of its first event. Its random stream depends on the seed, the pixel and
         the path index alone."""
@@ -190,8 +214,8 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
             out.transmittance = wp.cw_mul(tr.value, air_transmittance(air, origin, view, first.t))
             steps = tr.steps
             tracked = 1
-        path = trace_path(media, majorants, phase_tables, air, sun, ground, dome, settings, sun_reaches(sun, air),
-                          start_path(origin, view, state, steps), first)
+        path = trace_path(media, majorants, cut, phase_tables, air, sun, ground, dome, settings,
+                          sun_reaches(sun, air), start_path(origin, view, state, steps), first)
         if path.hit != 0:
             out.depth = wp.vec2((ray.t_near + path.first_t) * ray.cos_axis, 1.0)
         out.radiance = path.radiance
@@ -229,6 +253,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
     def path_trace(
         media: VoxelMedia,
         majorants: Majorants,
+        cut: CutMedia,
         phase_tables: PhaseTables,
         air: Air,
         sun: Sun,
@@ -251,8 +276,8 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
             count = 1
         counts = wp.vec4i(0, 0, 0, 0)
         for s in range(count):
-            sample = pixel_sample(media, majorants, phase_tables, air, sun, cam, ground, dome, settings, pixel_row,
-                                  col, settings.first_sample + path + s)
+            sample = pixel_sample(media, majorants, cut, phase_tables, air, sun, cam, ground, dome, settings,
+                                  pixel_row, col, settings.first_sample + path + s)
             if keep:
                 samples[row, col] = sample
             else:

@@ -14,6 +14,7 @@ import warp as wp
 from warpsky import device_buffers
 from warpsky.camera_rays import pinhole_camera
 from warpsky.device import is_cpu, launch_rows
+from warpsky.errors import UsageError
 from warpsky.layer import Layer
 from warpsky.light.dome import dome_struct
 from warpsky.light.sun import sun_struct, sunlight
@@ -34,6 +35,7 @@ from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.plane import ground_struct
 from warpsky.techniques.base import Technique
 from warpsky.techniques.path_tracer.deck_media import deck_voxel_features, deck_voxel_memory, with_deck_as_media
+from warpsky.techniques.path_tracer.forward_cut import CutMedia, cut_medium, cut_species_phase
 from warpsky.techniques.path_tracer.kernels import (
     PathSettings,
     PixelSums,
@@ -69,6 +71,11 @@ class PathTracerSettings(Settings):
                                     "isotropic; Zhao et al. 2014): far fewer collisions in thick forward-scattering "
                                     "media, biased by what the angular structure of such light still carries; 0 = "
                                     "exact")
+    forward_cut: float = setting(0.0, unit="deg", range="[0, 30]", help="after its first event a path treats "
+                                 "light a tabulated species deflects by less than this angle (its diffraction "
+                                 "peak) as not scattered: sigma_s (1 - f), the phase flattened below the cut "
+                                 "(delta-M). Removes the heavy tail of next-event estimation in thick Mie clouds; "
+                                 "biased by the peak's angular spread; 0 = exact")
     majorant_block: int | None = setting(None, unit="voxel", range=">= 1", auto="per medium, 8 down to 2 voxels so "
                                          "that a cell edge holds at most 6 optical depths at the densest point",
                                          help="edge of the coarse majorant cells; a huge value gives one global "
@@ -128,6 +135,10 @@ class PathTracer(Technique):
 
     def resolved_settings(self, scene: Scene) -> PathTracerSettings:
         """The settings with ``samples_per_pass = auto`` filled in for the device, and at most ``spp``."""
+        if self.settings.forward_cut > 0.0 and self.settings.similarity_order > 0:
+            raise UsageError("settings forward_cut and similarity_order reduce the media two ways; set one of them "
+                             f"(got forward_cut={self.settings.forward_cut:g}, "
+                             f"similarity_order={self.settings.similarity_order})")
         given = self.settings.samples_per_pass
         if given is not None and given <= self.settings.spp:
             return self.settings
@@ -231,13 +242,25 @@ class PathTracing:
         media_list, cache = scene.media, MEDIA_CACHE
         if settings.bake_detail and any(m.has_detail for m in scene.media):
             media_list, cache = baked_media(scene.media, scene.time_s, camera.position, device), BAKED_CACHE
+        self.forward_cut = cuts_paths(scene, settings)
         with wp.ScopedDevice(device):
-            tables = DevicePhaseTables.upload(build_tables(species).phase if species else None, device)
+            phase = build_tables(species).phase if species else None
+            cut = cut_species_phase(species, float(settings.forward_cut)) if self.forward_cut else None
+            tables = DevicePhaseTables.upload(phase if cut is None else cut.phase, device)
             media = VoxelMediaBuffers.upload(media_list, camera.position, device, species, time_s=scene.time_s,
                                              cache=cache)
             majorants, self.majorant_cells = upload_majorants(media_list, settings.majorant_block, device,
                                                               cache_name="path_tracer:majorants",
                                                               reduced=int(settings.similarity_order) > 0)
+            cut_struct = CutMedia()
+            cut_struct.media, cut_struct.majorants = media.media, majorants
+            if cut is not None:
+                cut_list = tuple(cut_medium(m, species, cut.fraction) for m in media_list)
+                cut_media = VoxelMediaBuffers.upload(cut_list, camera.position, device, species, time_s=scene.time_s,
+                                                     table_offset=len(species), values=media.values)
+                cut_struct.media = cut_media.media
+                cut_struct.majorants = upload_majorants(cut_list, settings.majorant_block, device,
+                                                        cache_name="path_tracer:majorants:cut")[0]
         flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None)
         capacity = per_sample_launches(device, width * height, int(settings.samples_per_pass or 1))
         if per_sample is not None:
@@ -251,8 +274,8 @@ class PathTracing:
         dome = dome_struct(scene.dome, device)
         oriented = oriented_phases(scene, device, cache="path_tracer")
         continuation = continuation_tables(scene, device, cache="path_tracer")
-        self._keep = (tables, media, dome, oriented, continuation)  # the structs below point into these buffers
-        self.fixed = [media.media, majorants, phase_tables_struct(tables, oriented, continuation),
+        self._keep = (tables, media, dome, oriented, continuation, cut_struct)  # the structs below point into these
+        self.fixed = [media.media, majorants, cut_struct, phase_tables_struct(tables, oriented, continuation),
                       air_struct(scene.atmosphere if air else None, camera.position), sun_struct(sunlight(scene)),
                       pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position), dome]
 
@@ -260,13 +283,15 @@ class PathTracing:
         """Add paths ``first_sample .. first_sample + count - 1`` of every pixel to ``sums`` (asynchronous on
         GPUs)."""
         if not self.samples_per_launch:
-            launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only)
+            launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only,
+                                   forward_cut=self.forward_cut)
             launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums, None], self.device)
             return
         end = first_sample + count
         while first_sample < end:
             chunk = min(self.samples_per_launch, end - first_sample)
-            launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only)
+            launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only,
+                                   forward_cut=self.forward_cut)
             launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, sums, self.samples],
                         self.device)
             launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
@@ -340,8 +365,16 @@ def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> Pi
     return out
 
 
+def cuts_paths(scene: Scene, settings: PathTracerSettings) -> bool:
+    """Whether paths continue through cut media (:mod:`.forward_cut`): a cut is set, a species is tabulated, and
+    no ice is oriented (its phase at the first event and its continuation tables are not cut)."""
+    from warpsky.optics.oriented_phase import oriented_media
+
+    return float(settings.forward_cut) > 0.0 and bool(scene.species) and not oriented_media(scene.media)
+
+
 def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int, *,
-                  multiple_only: bool = False) -> PathSettings:
+                  multiple_only: bool = False, forward_cut: bool = False) -> PathSettings:
     """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``."""
     out = PathSettings()
     out.environment = wp.vec3(float(settings.environment))
@@ -352,6 +385,7 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     out.max_bounces = int(settings.max_bounces)
     out.multiple_only = int(multiple_only)
     out.similarity_order = int(settings.similarity_order)
+    out.forward_cut = int(forward_cut)
     return out
 
 

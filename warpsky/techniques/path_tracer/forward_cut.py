@@ -1,0 +1,131 @@
+"""Paths that treat the media's forward diffraction peak as no scattering after their first event.
+
+A cloud droplet's phase function puts about 43 % of its scattering within 3 deg of straight ahead (ice 61 %, rain
+51 %: :func:`warpsky.optics.multiple.forward_cut`). In next-event estimation that peak is a heavy tail: the rare
+event whose direction lies within a degree of the sun's gets up to 800 times the phase of an isotropic one, so in
+an optically thick Mie cloud those events carry much of the light from a tiny share of the paths, and a pixel's
+noise does not fall below its mean for thousands of paths. Light deflected by less than a few degrees has barely
+moved, so after its first event a path continues through *cut* media (the delta-M idea, Wiscombe 1977; a
+first-order similarity relation, Zhao et al. 2014, that keeps every angle above the cut exact): scattering
+sigma_s (1 - f), extinction sigma_t - f sigma_s, the phase with its peak flattened to its value at the cut. Its
+flights, shadow rays and phase sampling there are those of ordinary media (:class:`CutMedia` holds the same
+values with other coefficients, tables and majorants).
+
+The first flight and the first event stay exact, so the camera's view of the media and everything single
+scattering depends on are unchanged. What the cut media count as direct sunlight at later events (light scattered
+into the peak on its way) is light of an extra order in the exact media; at the first event the exact NEE takes the
+sun through the exact media, so the path adds the sun through the cut media *minus* that
+(:func:`first_event_peak_light`): the sunlight that reaches the first event through peak scatterings only, which
+a single-scattering march (hybrid's, exact) leaves out too. Tabulated species are cut; analytic phases
+(Henyey-Greenstein, isotropic, Rayleigh) are not, and a frame with oriented ice is not cut at all.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import numpy as np
+import warp as wp
+
+from warpsky.light.sun import Sun
+from warpsky.media.air import Air, air_scattering
+from warpsky.media.phase_mixture import mixture_functions
+from warpsky.media.voxel import VoxelMedia, media_functions
+from warpsky.optics.kernels import scattering_angle
+from warpsky.optics.multiple import forward_cut
+from warpsky.optics.phase_sampling import PhaseTables
+from warpsky.optics.tables import phase_table
+from warpsky.scene.model import VoxelMedium
+from warpsky.surfaces.plane import Ground
+from warpsky.techniques.path_tracer.majorants import Majorants
+
+
+@wp.struct
+class CutMedia:
+    """The media a path continues through after its first event (the exact ones when paths are not cut)."""
+
+    media: VoxelMedia
+    majorants: Majorants
+
+
+@wp.struct
+class PeakLight:
+    """What :func:`first_event_peak_light` adds to a path: light, shadow-ray steps, the advanced random stream."""
+
+    radiance: wp.vec3
+    steps: int
+    state: wp.uint32
+
+
+@dataclasses.dataclass(frozen=True)
+class CutTables:
+    """Host side of a cut: the truncated tables appended after the species' own, and each species' peak share."""
+
+    phase: np.ndarray  # (2 S, 3, M): the species' tables, then the same species cut
+    fraction: np.ndarray  # (S, 3): f per species and channel
+
+
+def cut_tables(species: tuple[str, ...], phase: np.ndarray, cut_deg: float) -> CutTables:
+    """The species' ``phase`` tables (S, 3, M) followed by their cut versions at ``cut_deg`` degrees."""
+    pairs = [forward_cut(phase[i], math.radians(cut_deg)) for i in range(len(species))]
+    cut = np.stack([p for p, _ in pairs]) if pairs else np.zeros_like(phase)
+    fraction = np.stack([f for _, f in pairs]) if pairs else np.zeros((0, 3))
+    return CutTables(np.concatenate([phase, cut]), fraction)
+
+
+def cut_medium(medium: VoxelMedium, species: tuple[str, ...], fraction: np.ndarray) -> VoxelMedium:
+    """``medium`` with the coefficients of its cut (unchanged for analytic phases and oriented ice): extinction
+    sigma_t (1 - f albedo), albedo albedo (1 - f) / (1 - f albedo)."""
+    if medium.species is None or (medium.ice is not None and medium.ice.orientation != "random"):
+        return medium
+    f = fraction[species.index(medium.species)]
+    albedo = np.asarray(medium.albedo, dtype=np.float64)
+    kept = 1.0 - f * albedo
+    return dataclasses.replace(medium, extinction_scale=np.asarray(medium.extinction_scale) * kept,
+                               albedo=np.where(kept > 0.0, albedo * (1.0 - f) / np.maximum(kept, 1e-30), 0.0))
+
+
+def cut_species_phase(species: tuple[str, ...], cut_deg: float) -> CutTables:
+    """:func:`cut_tables` of the species' cached phase tables."""
+    phase = np.stack([phase_table(s) for s in species]) if species else np.zeros((0, 3, 1))
+    return cut_tables(species, phase, cut_deg)
+
+
+@functools.cache
+def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
+    """``first_event_peak_light(media, majorants, cut, tables, air, sun, ground, throughput, direction, p,
+    on_ground, state) -> PeakLight``, specialised like the path tracer's kernels."""
+    from warpsky.techniques.path_tracer.events import sun_transmittance_function
+
+    sample_media = media_functions(has_detail)
+    transmittance_to_sun = sun_transmittance_function(has_detail)
+    mixture_phase = mixture_functions(has_tables)[0]
+
+    @wp.func
+    def first_event_peak_light(media: VoxelMedia, majorants: Majorants, cut: CutMedia, tables: PhaseTables,
+                               air: Air, sun: Sun, ground: Ground, throughput: wp.vec3, direction: wp.vec3,
+                               p: wp.vec3, on_ground: int, state: wp.uint32) -> PeakLight:
+        """The sunlight a path's first event at ``p`` gets through peak scatterings alone: the sun through the
+        cut media minus through the exact ones (two ratio-tracked shadow rays), times the exact phase towards
+        ``direction`` (or the ground's Lambertian reflection)."""
+        exact = transmittance_to_sun(media, majorants, air, sun, p, state, 0)
+        through_cut = transmittance_to_sun(cut.media, cut.majorants, air, sun, p, exact.state, 0)
+        out = PeakLight()
+        out.radiance = wp.vec3(0.0)
+        out.state = through_cut.state
+        out.steps = exact.steps + through_cut.steps
+        gained = wp.cw_mul(sun.irradiance, through_cut.value - exact.value)
+        if on_ground != 0:
+            if wp.static(has_ground):
+                out.radiance = wp.cw_mul(wp.cw_mul(throughput, ground.albedo), gained) * (
+                    wp.max(sun.direction[1], 0.0) / wp.pi)
+        else:
+            point = sample_media(media, p)
+            phase = mixture_phase(media, point, tables.values, air_scattering(air, p[1]),
+                                  scattering_angle(sun.direction, direction))
+            out.radiance = wp.cw_mul(wp.cw_mul(throughput, phase), gained)
+        return out
+
+    return first_event_peak_light
