@@ -1,7 +1,8 @@
 """Benchmark: what a path costs in the storm, and the default technique on it against a path-traced reference.
 
 Part 1, the exact path tracer on ``usd_scenes/storm.usda`` at one frame, as shipped and with parts of the scene
-removed (the advected detail, the species other than cloud, the air): paths per second and, per path, tentative
+removed (the advected detail, the species other than cloud, the air) and with the diffraction peaks cut after
+the first event (``forward_cut``): paths per second and, per path, tentative
 collisions and majorant crossings (``steps``), those of shadow rays towards the sun and scattering events. Part 2
 (with ``--reference EXR``, a path-traced frame with a variance AOV at the same size, e.g. ``warpsky render
 usd_scenes/storm.usda ref.exr --frames 40 --res 96 --technique path_tracer --spp 2048 --seed 99 --float``):
@@ -26,13 +27,18 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def variants(scene) -> list[tuple[str, object]]:
-    """(label, scene) of the storm as shipped and without detail, other species or air."""
+def variants(scene) -> list[tuple[str, object, dict]]:
+    """(label, scene, extra settings) of the storm as shipped, without detail, other species or air, and with the
+    diffraction peaks cut after the first event (``forward_cut``, hybrid's default)."""
+    from warpsky.techniques.hybrid.technique import HybridSettings
+
     without_detail = tuple(dataclasses.replace(m, detail=None) for m in scene.media)
     cloud = tuple(m for m in scene.media if m.species == "cloud")
-    return [("as shipped", scene), ("no detail", dataclasses.replace(scene, media=without_detail)),
-            ("cloud only", dataclasses.replace(scene, media=cloud)),
-            ("no air", dataclasses.replace(scene, atmosphere=None))]
+    cut = HybridSettings().forward_cut or 3.0
+    return [("as shipped", scene, {}), ("no detail", dataclasses.replace(scene, media=without_detail), {}),
+            ("cloud only", dataclasses.replace(scene, media=cloud), {}),
+            ("no air", dataclasses.replace(scene, atmosphere=None), {}),
+            (f"cut {cut:g} deg", scene, {"forward_cut": cut})]
 
 
 def path_rows(scene, size: int, spp: int) -> list[dict]:
@@ -41,8 +47,9 @@ def path_rows(scene, size: int, spp: int) -> list[dict]:
     from warpsky.plan import make_plan
 
     rows = []
-    for label, variant in variants(scene):
-        plan = make_plan(variant, technique="path_tracer", settings={"spp": spp, "seed": 1}, resolution=(size, None))
+    for label, variant, extra in variants(scene):
+        plan = make_plan(variant, technique="path_tracer", settings={"spp": spp, "seed": 1, **extra},
+                         resolution=(size, None))
         render_layers(plan, variant)
         started = time.perf_counter()
         main, _ = render_layers(plan, variant)
