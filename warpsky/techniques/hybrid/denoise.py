@@ -10,13 +10,6 @@ denoised image is therefore rescaled so that its local means, over a box of ``(2
 of the noisy input, which are unbiased: the denoiser keeps the fine structure, the noisy
 image the level. ``r`` is a trade between that bias and the noise of the local means (the noise of a mean over
 n pixels falls as 1/sqrt(n)).
-
-Rare bright paths (in optically thick clouds seen against the sun, the forward peak of a few paths per pixel
-carries much of the light) look like fireflies to the network, which removes them and darkens the frame. With a
-``firefly`` threshold k the noisy image is split first (:func:`split_fireflies`): each pixel keeps at most k times
-its neighbourhood's median luminance, and the excess is spread over the covered pixels around it
-(:func:`spread_excess`, which conserves its sum exactly) instead of being denoised. The frame's mean is kept; the
-bright paths' light lands within ``FIREFLY_RADIUS`` pixels of where it was found.
 """
 
 from __future__ import annotations
@@ -26,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from warpsky.device import is_cpu
 from warpsky.errors import UsageError
-from warpsky.scene.model import LUMINANCE_WEIGHTS
 
 #: The extra that installs the denoiser.
 DENOISE_EXTRA = "pip install 'warpsky[denoise]' (or pip install pyoidn)"
@@ -84,49 +77,12 @@ def keep_local_mean(denoised: np.ndarray, noisy: np.ndarray, weight: np.ndarray,
     return np.maximum(out, 0.0).astype(np.float32)
 
 
-#: Pixels around a firefly over which its excess light is spread (a box of 2 r + 1 pixels), and the box of the
-#: median it is measured against.
-FIREFLY_RADIUS = 3
-MEDIAN_RADIUS = 2
-
-
-def local_median(values: np.ndarray, radius: int) -> np.ndarray:
-    """Median of (H, W) ``values`` over a (2 radius + 1)^2 box around every pixel (edges repeated)."""
-    padded = np.pad(values, radius, mode="edge")
-    windows = np.lib.stride_tricks.sliding_window_view(padded, (2 * radius + 1, 2 * radius + 1))
-    return np.median(windows.reshape(*values.shape, -1), axis=-1)
-
-
-def split_fireflies(image: np.ndarray, covered: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
-    """(kept, excess) with ``kept + excess == image``: each pixel of (H, W, 3) ``image`` scaled down to at most
-    ``threshold`` times its neighbourhood's median luminance (``MEDIAN_RADIUS``; never below a quarter of the mean
-    over the ``covered`` (H, W) weights, so a silhouette's dark surroundings do not make every edge pixel a
-    firefly); what it had above that is the excess."""
-    luminance = image @ LUMINANCE_WEIGHTS.astype(np.float32)
-    weight = float(covered.sum())
-    floor = 0.25 * float((luminance * covered).sum()) / weight if weight > 0.0 else 0.0
-    limit = threshold * np.maximum(local_median(luminance, MEDIAN_RADIUS), floor)
-    scale = np.where(luminance > limit, limit / np.maximum(luminance, 1e-30), 1.0)[..., None]
-    kept = (image * scale).astype(np.float32)
-    return kept, (image - kept).astype(np.float32)
-
-
-def spread_excess(excess: np.ndarray, weight: np.ndarray, radius: int) -> np.ndarray:
-    """Each pixel's (H, W, 3) ``excess`` shared among the pixels of its (2 radius + 1)^2 box in proportion to their
-    ``weight`` (H, W; a pixel without weight around it keeps its own): the sum over the image is unchanged."""
-    w = np.asarray(weight, dtype=np.float64)[..., None]
-    around = box_sum(w, radius)
-    alone = around <= 0.0
-    shares = np.where(alone, 0.0, excess / np.where(alone, 1.0, around))
-    return (w * box_sum(shares, radius) + np.where(alone, excess, 0.0)).astype(np.float32)
-
-
 def denoise(image: np.ndarray, coverage: np.ndarray, *, radius: int, quality: str = "high",
-            firefly: float = 0.0) -> Denoised:
+            device: str = "cpu") -> Denoised:
     """Denoise the (H, W, 3) radiance ``image`` guided by ``coverage`` (H, W, 3) in [0, 1], then restore its local
-    means (see :func:`keep_local_mean`). With ``firefly`` > 0 the light above that many times the local median is
-    spread instead of denoised (see the module docstring). Radiance is scaled to a mean of about 1 for the
-    network and back."""
+    means (see :func:`keep_local_mean`). Radiance is scaled to a mean of about 1 for the network and back. On a CUDA
+    ``device`` Open Image Denoise runs there (:mod:`~warpsky.techniques.hybrid.oidn_device`, ``quality`` high),
+    where it has a device; elsewhere on the CPU."""
     pyoidn = require_denoiser()
     started = time.perf_counter()
     color, count = sanitise(image)
@@ -134,18 +90,17 @@ def denoise(image: np.ndarray, coverage: np.ndarray, *, radius: int, quality: st
     level = float(color.mean())
     if level <= 0.0:
         return Denoised(color, time.perf_counter() - started, count)
-    excess = None
-    if firefly > 0.0:
-        weight = guide @ LUMINANCE_WEIGHTS.astype(np.float32)
-        kept, excess = split_fireflies(color, weight, firefly)
-    else:
-        kept = color
-    scaled = np.ascontiguousarray(kept / level, dtype=np.float32)
-    out = pyoidn.denoise(scaled, np.ascontiguousarray(guide), hdr=True, clean_aux=True, quality=quality) * level
+    scaled = np.ascontiguousarray(color / level, dtype=np.float32)
+    out = None
+    if not is_cpu(device):
+        from warpsky.techniques.hybrid.oidn_device import denoise_on_device
+
+        out = denoise_on_device(scaled, guide, device)
+    if out is None:
+        out = pyoidn.denoise(scaled, np.ascontiguousarray(guide), hdr=True, clean_aux=True, quality=quality)
+    out = out * level
     out, _ = sanitise(out)
-    out = keep_local_mean(out, kept, np.ones(color.shape[:2]), radius)
-    if excess is not None:
-        out = out + spread_excess(excess, weight, FIREFLY_RADIUS)
+    out = keep_local_mean(out, color, np.ones(color.shape[:2]), radius)
     return Denoised(out, time.perf_counter() - started, count)
 
 

@@ -7,8 +7,8 @@ event left out, so the two parts never count the same light twice), then denoise
 (:mod:`~warpsky.techniques.hybrid.denoise`). After their first event the paths treat the diffraction peak of
 tabulated species (within ``forward_cut`` degrees) as no scattering
 (:mod:`~warpsky.techniques.path_tracer.forward_cut`): the one approximation in the default settings, which in thick
-Mie clouds removes a heavy tail of the paths' sunlight. A dome's light is path traced whole, its first scattering included
-(the march cannot integrate a dome exactly and takes the sun alone), so the sum stays unbiased; with
+Mie clouds removes a heavy tail of the paths' sunlight. A dome's light is path traced whole, its first scattering
+included (the march cannot integrate a dome exactly and takes the sun alone), so the sum stays unbiased; with
 ``multiple_scattering = 0`` the dome lights nothing but the background. Passes of paths are added until the
 frame's estimated relative error falls below ``target_error``, or ``time_budget`` or ``spp`` is reached.
 
@@ -89,9 +89,6 @@ class HybridSettings(Settings):
     mean_radius: int = setting(-1, unit="pixel", range=">= -1", help="box radius over which the denoised image "
                                "keeps the noisy image's local mean; -1 = off (chosen on the validation family's "
                                "tune half: the correction raised the p90 error there)")
-    firefly: float = setting(0.0, range=">= 0", help="before denoising, light above this many times a pixel's "
-                             "neighbourhood median (rare bright paths) is spread over the covered pixels around it "
-                             "instead, keeping the frame's mean; 0 = off")
     max_bounces: int = setting(1024, range=">= 1", help="cap on scattering events per path; capped paths are "
                                "counted (capped_paths)")
     majorant_block: int | None = setting(None, unit="voxel", range=">= 1", help="edge of the coarse majorant cells",
@@ -284,7 +281,7 @@ class MultipleScattering:
         mean, variance = film.radiance, film.aovs["variance"]
         image, denoise_seconds, sanitised, warnings = mean, 0.0, 0, []
         if s.denoise:
-            result = denoise(mean, coverage, radius=s.mean_radius, firefly=s.firefly)
+            result = denoise(mean, coverage, radius=s.mean_radius, device=self.device)
             image, denoise_seconds, sanitised = result.image, result.seconds, result.sanitised
         if self.scale > 1:
             height, width = fine_coverage.shape[:2]
@@ -320,9 +317,9 @@ class MultipleScattering:
             return 0.0
         a, b = self.half_mean(0), self.half_mean(1)
         if self.settings.denoise:
-            radius, firefly = self.settings.mean_radius, self.settings.firefly
-            a = denoise(a, coverage, radius=radius, firefly=firefly).image
-            b = denoise(b, coverage, radius=radius, firefly=firefly).image
+            radius, device = self.settings.mean_radius, self.device
+            a = denoise(a, coverage, radius=radius, device=device).image
+            b = denoise(b, coverage, radius=radius, device=device).image
             spread = 0.5 * (a - b) * ESTIMATE_CALIBRATION
         else:
             spread = np.sqrt(self.film().aovs["variance"])

@@ -39,6 +39,7 @@ from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.optics.tables import phase_table
 from warpsky.scene.model import VoxelMedium
 from warpsky.surfaces.plane import Ground
+from warpsky.techniques.path_tracer.events import sun_transmittance_function
 from warpsky.techniques.path_tracer.majorants import Majorants
 
 
@@ -97,8 +98,6 @@ def cut_species_phase(species: tuple[str, ...], cut_deg: float) -> CutTables:
 def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
     """``first_event_peak_light(media, majorants, cut, tables, air, sun, ground, throughput, direction, p,
     on_ground, state) -> PeakLight``, specialised like the path tracer's kernels."""
-    from warpsky.techniques.path_tracer.events import sun_transmittance_function
-
     sample_media = media_functions(has_detail)
     transmittance_to_sun = sun_transmittance_function(has_detail)
     mixture_phase = mixture_functions(has_tables)[0]
