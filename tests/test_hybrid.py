@@ -6,7 +6,7 @@ import builtins
 
 import numpy as np
 import pytest
-from conftest import StageSpec, look_rotation, path_traced, render_layer, write_stage
+from conftest import StageSpec, add_field, look_rotation, path_traced, render_layer, write_stage
 
 from warpsky.errors import UsageError
 from warpsky.plan import make_plan
@@ -120,6 +120,22 @@ def test_stiff_thick_cloud_is_finite_and_reports_capped_paths(box, device):
     layer = hybrid(stage, device, 8, spp=4, target_error=0, max_bounces=64)
     assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
     assert layer.stats["capped_paths"] > 0
+
+
+@pytest.mark.parametrize("inside", [False, True])
+def test_stiff_droplet_cloud_with_the_cut(box, device, homogeneous_npy, species_phase, inside):
+    """Mie droplets of optical depth 10^4 across the box at albedo exactly 1, the sun on the horizon, seen from
+    outside and from inside the cloud, with the default forward cut: finite, non-negative, an error estimate in the
+    stats, and inside, where most paths reach the 256-event cap, those paths counted rather than dropped silently."""
+    species_phase("cloud")
+    position = (0.0, 0.0, 0.0) if inside else (3.0, 4.0, 42.0)
+    stage = box(extinction_scale=1e-6, sun_direction=(1.0, 1e-5, 0.0), camera_position=position)
+    add_field(stage, "cloud", homogeneous_npy, scale=500.0)
+    layer = hybrid(stage, device, 8, spp=4, time_budget=30, max_bounces=256)
+    for values in (layer.radiance, layer.aovs["multiple_scatter"], layer.aovs["variance"]):
+        assert np.all(np.isfinite(values)) and values.min() >= 0.0
+    assert np.isfinite(layer.stats["error_estimate"])
+    assert (layer.stats["capped_paths"] > 0.5 * layer.stats["paths"]) == inside
 
 
 def test_missing_denoiser_names_the_extra(box, monkeypatch):
