@@ -234,6 +234,22 @@ def test_denoiser_on_cuda_agrees_with_the_cpu():
     assert np.abs(cuda - cpu).max() < 0.2 * cpu.mean() and abs(cuda.mean() - cpu.mean()) < 0.005 * cpu.mean()
 
 
+def test_info_names_the_forward_cut(species_phase):
+    """warpsky info's ``forward cut`` line: the cut and each species' peak share, why paths are exact, or nothing
+    for a scene without tables."""
+    from types import SimpleNamespace
+
+    from warpsky.techniques.path_tracer.forward_cut import cut_feature
+
+    species_phase("cloud")
+    droplets = SimpleNamespace(species=("cloud",), media=(SimpleNamespace(ice=None),))
+    assert "cloud f 0.43" in cut_feature(droplets, 3.0, {})["forward cut"]
+    assert cut_feature(droplets, 0.0, {})["forward cut"].startswith("off")
+    oriented = SimpleNamespace(species=("ice",), media=(SimpleNamespace(ice=SimpleNamespace(orientation="plates")),))
+    assert "oriented ice" in cut_feature(oriented, 3.0, {})["forward cut"]
+    assert cut_feature(SimpleNamespace(species=(), media=()), 3.0, {"sun": "x"}) == {"sun": "x"}
+
+
 def test_hybrid_is_listed():
     assert Hybrid.name == "hybrid" and not Hybrid.traces_air and Hybrid.renders_layers
 

@@ -47,6 +47,7 @@ from warpsky.techniques.hybrid.denoise import (
     guided_upsample,
     require_denoiser,
 )
+from warpsky.techniques.path_tracer.forward_cut import cut_feature
 from warpsky.techniques.path_tracer.technique import (
     PathTracer,
     PathTracerSettings,
@@ -188,6 +189,11 @@ class Hybrid(Technique):
             scale = int(s.ms_scale)
             items.append(path_work(s.path_tracer(), -(-width // scale) * -(-height // scale)))
         return items
+
+    def features(self, scene: Scene, width: int, height: int, features: dict[str, str]) -> dict[str, str]:
+        """The ``forward cut`` line of its multiple-scattering paths."""
+        s = self.settings_for(scene)
+        return cut_feature(scene, float(s.forward_cut), features) if s.multiple_scattering else features
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:
         settings = self.settings_for(scene)

@@ -88,6 +88,38 @@ def cut_medium(medium: VoxelMedium, species: tuple[str, ...], fraction: np.ndarr
                                albedo=np.where(kept > 0.0, albedo * (1.0 - f) / np.maximum(kept, 1e-30), 0.0))
 
 
+def cuts(scene, cut_deg: float) -> bool:
+    """Whether paths continue through cut media: a cut is set, a species is tabulated, and no ice is oriented (its
+    phase at the first event and its continuation tables are not cut)."""
+    from warpsky.optics.oriented_phase import oriented_media
+
+    return cut_deg > 0.0 and bool(scene.species) and not oriented_media(scene.media)
+
+
+def cut_feature(scene, cut_deg: float, features: dict[str, str]) -> dict[str, str]:
+    """``features`` with warpsky info's ``forward cut`` line for a scene with tabulated species: the cut and each
+    species' peak share f (from tables already cached; the others say so), or why paths are exact."""
+    from warpsky.optics.tables import is_cached
+
+    if not scene.species:
+        return features
+    if cut_deg <= 0.0:
+        line = "off: paths scatter by the exact tables"
+    elif not cuts(scene, cut_deg):
+        line = f"off (set to {cut_deg:g} deg): the frame has oriented ice"
+    else:
+        shares = []
+        for name in scene.species:
+            if is_cached(name):
+                f = forward_cut(phase_table(name), math.radians(cut_deg))[1]
+                shares.append(f"{name} f {float(np.mean(f)):.2f}")
+            else:
+                shares.append(f"{name} (f once its table is built)")
+        line = (f"{cut_deg:g} deg after each path's first event, peaks treated as unscattered (delta-M): "
+                f"{', '.join(shares)}; forward_cut=0 for exact paths")
+    return {**features, "forward cut": line}
+
+
 def cut_species_phase(species: tuple[str, ...], cut_deg: float) -> CutTables:
     """:func:`cut_tables` of the species' cached phase tables."""
     phase = np.stack([phase_table(s) for s in species]) if species else np.zeros((0, 3, 1))

@@ -35,7 +35,7 @@ from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.plane import ground_struct
 from warpsky.techniques.base import Technique
 from warpsky.techniques.path_tracer.deck_media import deck_voxel_features, deck_voxel_memory, with_deck_as_media
-from warpsky.techniques.path_tracer.forward_cut import CutMedia, cut_medium, cut_species_phase
+from warpsky.techniques.path_tracer.forward_cut import CutMedia, cut_feature, cut_medium, cut_species_phase, cuts
 from warpsky.techniques.path_tracer.kernels import (
     PathSettings,
     PixelSums,
@@ -170,13 +170,13 @@ class PathTracer(Technique):
         return needs
 
     def features(self, scene: Scene, width: int, height: int, features: dict[str, str]) -> dict[str, str]:
-        """The lines of the layers and the deck it voxelises."""
+        """The lines of the layers and the deck it voxelises, and of the forward cut."""
         settings = self.settings_for(scene)
         if scene.layers:
             features = layer_voxel_features(scene, settings, features)
         if scene.heightfield_clouds:
             features = deck_voxel_features(scene, settings, width, height, features)
-        return features
+        return cut_feature(scene, float(settings.forward_cut), features)
 
     def for_extra_light(self) -> PathTracer:
         """Itself, without the uniform ``environment`` (it lights the first run only)."""
@@ -242,7 +242,7 @@ class PathTracing:
         media_list, cache = scene.media, MEDIA_CACHE
         if settings.bake_detail and any(m.has_detail for m in scene.media):
             media_list, cache = baked_media(scene.media, scene.time_s, camera.position, device), BAKED_CACHE
-        self.forward_cut = cuts_paths(scene, settings)
+        self.forward_cut = cuts(scene, float(settings.forward_cut))
         with wp.ScopedDevice(device):
             phase = build_tables(species).phase if species else None
             cut = cut_species_phase(species, float(settings.forward_cut)) if self.forward_cut else None
@@ -363,14 +363,6 @@ def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> Pi
             array.zero_()
         setattr(out, field, array)
     return out
-
-
-def cuts_paths(scene: Scene, settings: PathTracerSettings) -> bool:
-    """Whether paths continue through cut media (:mod:`.forward_cut`): a cut is set, a species is tabulated, and
-    no ice is oriented (its phase at the first event and its continuation tables are not cut)."""
-    from warpsky.optics.oriented_phase import oriented_media
-
-    return float(settings.forward_cut) > 0.0 and bool(scene.species) and not oriented_media(scene.media)
 
 
 def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int, *,
