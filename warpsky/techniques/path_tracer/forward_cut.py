@@ -2,9 +2,9 @@
 
 A cloud droplet's phase function puts about 43 % of its scattering within 3 deg of straight ahead (ice 61 %, rain
 51 %: :func:`warpsky.optics.multiple.forward_cut`). In next-event estimation that peak is a heavy tail: the rare
-event whose direction lies within a degree of the sun's gets up to 800 times the phase of an isotropic one, so in
-an optically thick Mie cloud those events carry much of the light from a tiny share of the paths, and a pixel's
-noise does not fall below its mean for thousands of paths. Light deflected by less than a few degrees has barely
+event whose direction lies within a degree of the sun's gets a phase of up to 800 per steradian (10^4 times an
+isotropic one's), so in an optically thick Mie cloud those events carry much of the light from a tiny share of the
+paths, and a pixel's noise does not fall below its mean for thousands of paths. Light deflected by less than a few degrees has barely
 moved, so after its first event a path continues through *cut* media (the delta-M idea, Wiscombe 1977; a
 first-order similarity relation, Zhao et al. 2014, that keeps every angle above the cut exact): scattering
 sigma_s (1 - f), extinction sigma_t - f sigma_s, the phase with its peak flattened to its value at the cut. Its
