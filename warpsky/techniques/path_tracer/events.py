@@ -228,6 +228,16 @@ def cosine_up(state: wp.uint32) -> DirectionSample:
     return out
 
 
+@wp.func
+def air_to_sun(air: Air, sun: Sun, p: wp.vec3) -> wp.vec3:
+    """The air's transmittance from ``p`` to the sun in closed form (ones without air): its vertical column above
+    ``p`` over ``air_sine``."""
+    out = wp.vec3(1.0)
+    if air.enabled != 0:
+        out = exp3(air_coefficient(air, p[1]) / (air.gamma * sun.air_sine))
+    return out
+
+
 @functools.cache
 def sun_transmittance_function(has_detail: bool):
     """``transmittance_to_sun(media, majorants, air, sun, p, state, reduced) -> Transmittance``, specialised on
@@ -242,9 +252,7 @@ def sun_transmittance_function(has_detail: bool):
         for the flat earth's ray above the grazing elevations, and there the finite grazing air mass every other
         technique uses). Tracking the air instead crossed a majorant band every 800 m of height up to 114 km."""
         out = ratio_track(media, majorants, no_air(), p, sun.direction, UNBOUNDED, state, reduced)
-        if air.enabled != 0:
-            column = air_coefficient(air, p[1]) / (air.gamma * sun.air_sine)
-            out.value = wp.cw_mul(out.value, exp3(column))
+        out.value = wp.cw_mul(out.value, air_to_sun(air, sun, p))
         return out
 
     return transmittance_to_sun

@@ -4,9 +4,10 @@ A cloud droplet's phase function puts about 43 % of its scattering within 3 deg 
 51 %: :func:`warpsky.optics.multiple.forward_cut`). In next-event estimation that peak is a heavy tail: the rare
 event whose direction lies within a degree of the sun's gets a phase of up to 800 per steradian (10^4 times an
 isotropic one's), so in an optically thick Mie cloud those events carry much of the light from a tiny share of the
-paths, and a pixel's noise does not fall below its mean for thousands of paths. Light deflected by less than a few degrees has barely
-moved, so after its first event a path continues through *cut* media (the delta-M idea, Wiscombe 1977; a
-first-order similarity relation, Zhao et al. 2014, that keeps every angle above the cut exact): scattering
+paths, and a pixel's noise does not fall below its mean for thousands of paths. Light deflected by less than a few
+degrees has barely moved, so after its first event a path continues through *cut* media (the delta-M idea,
+Wiscombe 1977; a first-order similarity relation, Zhao et al. 2014, that keeps every angle above the cut exact):
+scattering
 sigma_s (1 - f), extinction sigma_t - f sigma_s, the phase with its peak flattened to its value at the cut. Its
 flights, shadow rays and phase sampling there are those of ordinary media (:class:`CutMedia` holds the same
 values with other coefficients, tables and majorants).
@@ -16,7 +17,8 @@ scattering depends on are unchanged. What the cut media count as direct sunlight
 into the peak on its way) is light of an extra order in the exact media; at the first event the exact NEE takes the
 sun through the exact media, so the path adds the sun through the cut media *minus* that
 (:func:`first_event_peak_light`): the sunlight that reaches the first event through peak scatterings only, which
-a single-scattering march (hybrid's, exact) leaves out too. Tabulated species are cut; analytic phases
+a single-scattering march (hybrid's, exact) leaves out too. Both transmittances are ratio-tracked on one ray, so
+their difference is never negative. Tabulated species are cut; analytic phases
 (Henyey-Greenstein, isotropic, Rayleigh) are not, and a frame with oriented ice is not cut at all.
 """
 
@@ -30,7 +32,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air, air_scattering
+from warpsky.media.air import Air, air_scattering, no_air
 from warpsky.media.phase_mixture import mixture_functions
 from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import scattering_angle
@@ -39,8 +41,9 @@ from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.optics.tables import phase_table
 from warpsky.scene.model import VoxelMedium
 from warpsky.surfaces.plane import Ground
-from warpsky.techniques.path_tracer.events import sun_transmittance_function
+from warpsky.techniques.path_tracer.events import UNBOUNDED, air_to_sun
 from warpsky.techniques.path_tracer.majorants import Majorants
+from warpsky.techniques.path_tracer.tracking import ROULETTE_TRANSMITTANCE, next_collision, positive
 
 
 @wp.struct
@@ -131,23 +134,59 @@ def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
     """``first_event_peak_light(media, majorants, cut, tables, air, sun, ground, throughput, direction, p,
     on_ground, state) -> PeakLight``, specialised like the path tracer's kernels."""
     sample_media = media_functions(has_detail)
-    transmittance_to_sun = sun_transmittance_function(has_detail)
     mixture_phase = mixture_functions(has_tables)[0]
+
+    @wp.func
+    def peak_transmittance(media: VoxelMedia, majorants: Majorants, cut: CutMedia, p: wp.vec3, d: wp.vec3,
+                           state: wp.uint32) -> PeakLight:
+        """Ratio tracking of the exact and the cut media's transmittance from ``p`` along ``d`` on one ray, with
+        the exact media's majorants (which bound the cut extinction too): at every tentative collision both
+        estimates take their own factor 1 - sigma_t / majorant. The cut's extinction is never above the exact
+        one's, so ``radiance`` = cut - exact is never negative; Russian roulette on the cut estimate below
+        ``ROULETTE_TRANSMITTANCE`` keeps both unbiased."""
+        exact = wp.vec3(1.0)
+        through_cut = wp.vec3(1.0)
+        t = float(0.0)
+        steps = int(0)
+        found = int(1)
+        while found != 0:
+            hit = next_collision(media, majorants, no_air(), p, d, t, UNBOUNDED, steps, state, 0)
+            t = hit.t
+            steps = hit.steps
+            state = hit.state
+            found = hit.found
+            if found != 0:
+                point = sample_media(media, p + t * d)
+                reduced = wp.vec3(0.0)
+                for m in range(cut.media.count):
+                    reduced += cut.media.grids[m].extinction * point.density[m]
+                exact = wp.cw_mul(exact, positive(wp.vec3(1.0) - point.extinction / hit.majorant))
+                through_cut = wp.cw_mul(through_cut, positive(wp.vec3(1.0) - reduced / hit.majorant))
+                largest = wp.max(through_cut)
+                if largest < ROULETTE_TRANSMITTANCE:
+                    q = largest / ROULETTE_TRANSMITTANCE
+                    if wp.randf(state) >= q:
+                        through_cut = wp.vec3(0.0)
+                        exact = wp.vec3(0.0)
+                        break
+                    through_cut = through_cut / q
+                    exact = exact / q
+        out = PeakLight()
+        out.radiance = positive(through_cut - exact)
+        out.steps = steps
+        out.state = state
+        return out
 
     @wp.func
     def first_event_peak_light(media: VoxelMedia, majorants: Majorants, cut: CutMedia, tables: PhaseTables,
                                air: Air, sun: Sun, ground: Ground, throughput: wp.vec3, direction: wp.vec3,
                                p: wp.vec3, on_ground: int, state: wp.uint32) -> PeakLight:
         """The sunlight a path's first event at ``p`` gets through peak scatterings alone: the sun through the
-        cut media minus through the exact ones (two ratio-tracked shadow rays), times the exact phase towards
-        ``direction`` (or the ground's Lambertian reflection)."""
-        exact = transmittance_to_sun(media, majorants, air, sun, p, state, 0)
-        through_cut = transmittance_to_sun(cut.media, cut.majorants, air, sun, p, exact.state, 0)
-        out = PeakLight()
+        cut media minus through the exact ones (:func:`peak_transmittance`, times the air's transmittance in
+        closed form), times the exact phase towards ``direction`` (or the ground's Lambertian reflection)."""
+        out = peak_transmittance(media, majorants, cut, p, sun.direction, state)
+        gained = wp.cw_mul(wp.cw_mul(sun.irradiance, out.radiance), air_to_sun(air, sun, p))
         out.radiance = wp.vec3(0.0)
-        out.state = through_cut.state
-        out.steps = exact.steps + through_cut.steps
-        gained = wp.cw_mul(sun.irradiance, through_cut.value - exact.value)
         if on_ground != 0:
             if wp.static(has_ground):
                 out.radiance = wp.cw_mul(wp.cw_mul(throughput, ground.albedo), gained) * (
