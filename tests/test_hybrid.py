@@ -234,6 +234,13 @@ def test_denoiser_on_cuda_agrees_with_the_cpu():
     assert np.abs(cuda - cpu).max() < 0.2 * cpu.mean() and abs(cuda.mean() - cpu.mean()) < 0.005 * cpu.mean()
 
 
+def test_forward_cut_and_similarity_are_refused_together(box):
+    stage = box()
+    with pytest.raises(UsageError, match="forward_cut.*similarity_order"):
+        hybrid(stage, "cpu", 8, spp=2, similarity_order=4)
+    hybrid(stage, "cpu", 8, spp=2, similarity_order=4, forward_cut=0, target_error=0)
+
+
 def test_info_names_the_forward_cut(species_phase):
     """warpsky info's ``forward cut`` line: the cut and each species' peak share, why paths are exact, or nothing
     for a scene without tables."""

@@ -47,7 +47,7 @@ from warpsky.techniques.hybrid.denoise import (
     guided_upsample,
     require_denoiser,
 )
-from warpsky.techniques.path_tracer.forward_cut import cut_feature
+from warpsky.techniques.path_tracer.forward_cut import check_cut_settings, cut_feature
 from warpsky.techniques.path_tracer.technique import (
     PathTracer,
     PathTracerSettings,
@@ -148,6 +148,7 @@ class Hybrid(Technique):
 
     def resolved_settings(self, scene: Scene) -> HybridSettings:
         s = self.settings
+        check_cut_settings(float(s.forward_cut), int(s.similarity_order))
         march = SingleScatter(s.single_scatter(), device=self.device).resolved_settings(scene)
         per_pass = s.samples_per_pass or (2 if is_cpu(self.device) else 16)
         return dataclasses.replace(s, step_length=march.step_length, shadow_step_length=march.shadow_step_length,

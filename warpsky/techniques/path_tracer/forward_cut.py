@@ -91,6 +91,16 @@ def cut_medium(medium: VoxelMedium, species: tuple[str, ...], fraction: np.ndarr
                                albedo=np.where(kept > 0.0, albedo * (1.0 - f) / np.maximum(kept, 1e-30), 0.0))
 
 
+def check_cut_settings(cut_deg: float, similarity_order: int) -> None:
+    """A UsageError naming both settings when the cut and high-order similarity are both set: they reduce the
+    media two ways."""
+    if cut_deg > 0.0 and similarity_order > 0:
+        from warpsky.errors import UsageError
+
+        raise UsageError("settings forward_cut and similarity_order reduce the media two ways; set one of them "
+                         f"(got forward_cut={cut_deg:g}, similarity_order={similarity_order})")
+
+
 def cuts(scene, cut_deg: float) -> bool:
     """Whether paths continue through cut media: a cut is set, a species is tabulated, and no ice is oriented (its
     phase at the first event and its continuation tables are not cut)."""

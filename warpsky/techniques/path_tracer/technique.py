@@ -14,7 +14,6 @@ import warp as wp
 from warpsky import device_buffers
 from warpsky.camera_rays import pinhole_camera
 from warpsky.device import is_cpu, launch_rows
-from warpsky.errors import UsageError
 from warpsky.layer import Layer
 from warpsky.light.dome import dome_struct
 from warpsky.light.sun import sun_struct, sunlight
@@ -35,7 +34,14 @@ from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.plane import ground_struct
 from warpsky.techniques.base import Technique
 from warpsky.techniques.path_tracer.deck_media import deck_voxel_features, deck_voxel_memory, with_deck_as_media
-from warpsky.techniques.path_tracer.forward_cut import CutMedia, cut_feature, cut_medium, cut_species_phase, cuts
+from warpsky.techniques.path_tracer.forward_cut import (
+    CutMedia,
+    check_cut_settings,
+    cut_feature,
+    cut_medium,
+    cut_species_phase,
+    cuts,
+)
 from warpsky.techniques.path_tracer.kernels import (
     PathSettings,
     PixelSums,
@@ -135,10 +141,7 @@ class PathTracer(Technique):
 
     def resolved_settings(self, scene: Scene) -> PathTracerSettings:
         """The settings with ``samples_per_pass = auto`` filled in for the device, and at most ``spp``."""
-        if self.settings.forward_cut > 0.0 and self.settings.similarity_order > 0:
-            raise UsageError("settings forward_cut and similarity_order reduce the media two ways; set one of them "
-                             f"(got forward_cut={self.settings.forward_cut:g}, "
-                             f"similarity_order={self.settings.similarity_order})")
+        check_cut_settings(float(self.settings.forward_cut), int(self.settings.similarity_order))
         given = self.settings.samples_per_pass
         if given is not None and given <= self.settings.spp:
             return self.settings
