@@ -259,7 +259,8 @@ class VoxelMediaBuffers:
             grid.reduced_extinction = wp.vec3(*reduced_extinction.tolist())
             grid.reduced_scattering = wp.vec3(*reduced_scattering.tolist())
             infos.append(grid)
-            chunks.append(medium.density.reshape(-1))
+            if values is None:
+                chunks.append(medium.density.reshape(-1))
             offset += medium.density.size
         if offset >= 2**31:
             raise ValueError("voxel media exceed 2^31 values; split them or use coarser grids")

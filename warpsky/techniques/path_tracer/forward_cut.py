@@ -43,7 +43,7 @@ from warpsky.scene.model import VoxelMedium
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.events import UNBOUNDED, air_to_sun
 from warpsky.techniques.path_tracer.majorants import Majorants
-from warpsky.techniques.path_tracer.tracking import ROULETTE_TRANSMITTANCE, next_collision, positive
+from warpsky.techniques.path_tracer.tracking import ROULETTE_TRANSMITTANCE, media_sums, next_collision, positive
 
 
 @wp.struct
@@ -133,12 +133,6 @@ def cut_feature(scene, cut_deg: float, features: dict[str, str]) -> dict[str, st
     return {**features, "forward cut": line}
 
 
-def cut_species_phase(species: tuple[str, ...], cut_deg: float) -> CutTables:
-    """:func:`cut_tables` of the species' cached phase tables."""
-    phase = np.stack([phase_table(s) for s in species]) if species else np.zeros((0, 3, 1))
-    return cut_tables(species, phase, cut_deg)
-
-
 @functools.cache
 def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
     """``first_event_peak_light(media, majorants, cut, tables, air, sun, ground, throughput, direction, p,
@@ -167,9 +161,7 @@ def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
             found = hit.found
             if found != 0:
                 point = sample_media(media, p + t * d)
-                reduced = wp.vec3(0.0)
-                for m in range(cut.media.count):
-                    reduced += cut.media.grids[m].extinction * point.density[m]
+                reduced = media_sums(cut.media, point, wp.vec3(0.0), 0).extinction
                 exact = wp.cw_mul(exact, positive(wp.vec3(1.0) - point.extinction / hit.majorant))
                 through_cut = wp.cw_mul(through_cut, positive(wp.vec3(1.0) - reduced / hit.majorant))
                 largest = wp.max(through_cut)

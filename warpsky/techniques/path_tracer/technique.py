@@ -39,7 +39,7 @@ from warpsky.techniques.path_tracer.forward_cut import (
     check_cut_settings,
     cut_feature,
     cut_medium,
-    cut_species_phase,
+    cut_tables,
     cuts,
 )
 from warpsky.techniques.path_tracer.kernels import (
@@ -248,7 +248,7 @@ class PathTracing:
         self.forward_cut = cuts(scene, float(settings.forward_cut))
         with wp.ScopedDevice(device):
             phase = build_tables(species).phase if species else None
-            cut = cut_species_phase(species, float(settings.forward_cut)) if self.forward_cut else None
+            cut = cut_tables(species, phase, float(settings.forward_cut)) if self.forward_cut else None
             tables = DevicePhaseTables.upload(phase if cut is None else cut.phase, device)
             media = VoxelMediaBuffers.upload(media_list, camera.position, device, species, time_s=scene.time_s,
                                              cache=cache)

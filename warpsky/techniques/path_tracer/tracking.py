@@ -61,14 +61,28 @@ def with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointM
             out.extinction = coefficient + point.extinction
             out.scattering = coefficient + point.scattering
         else:
-            out.extinction = coefficient
-            out.scattering = coefficient
-            for m in range(media.count):
-                value = point.density[m]
-                if value > 0.0:
-                    grid = media.grids[m]
-                    out.extinction += grid.extinction * value
-                    out.scattering += grid.scattering * value
+            out = media_sums(media, point, coefficient, 0)
+    return out
+
+
+@wp.func
+def media_sums(media: VoxelMedia, point: MediaPoint, start: wp.vec3, reduced: int) -> PointMedia:
+    """``start`` (the air's coefficient, or zero) plus each medium's extinction and scattering at the densities of
+    ``point``, in medium order; with ``reduced`` their coefficients after high-order similarity. ``media`` may
+    hold other coefficients for the same fields than the ones ``point`` was sampled from (the cut media)."""
+    out = PointMedia()
+    out.extinction = start
+    out.scattering = start
+    for m in range(media.count):
+        value = point.density[m]
+        if value > 0.0:
+            grid = media.grids[m]
+            if reduced != 0:
+                out.extinction += grid.reduced_extinction * value
+                out.scattering += grid.reduced_scattering * value
+            else:
+                out.extinction += grid.extinction * value
+                out.scattering += grid.scattering * value
     return out
 
 
@@ -76,20 +90,10 @@ def with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointM
 def reduced_with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointMedia:
     """:func:`with_air` after high-order similarity: the media's reduced extinction and scattering at ``point``
     (the air's are unchanged)."""
-    out = PointMedia()
-    out.extinction = wp.vec3(0.0)
-    out.scattering = wp.vec3(0.0)
+    start = wp.vec3(0.0)
     if air.enabled != 0:
-        coefficient = air_coefficient(air, y)
-        out.extinction = coefficient
-        out.scattering = coefficient
-    for m in range(media.count):
-        value = point.density[m]
-        if value > 0.0:
-            grid = media.grids[m]
-            out.extinction += grid.reduced_extinction * value
-            out.scattering += grid.reduced_scattering * value
-    return out
+        start = air_coefficient(air, y)
+    return media_sums(media, point, start, 1)
 
 
 @wp.struct
