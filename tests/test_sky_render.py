@@ -105,7 +105,7 @@ def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
 
     camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.3, 0.9, -1.0)), 24.0, 36.0, 36.0)
     sun = Sun(np.array([-0.4, 0.25, -1.0]) / np.linalg.norm([-0.4, 0.25, -1.0]), np.ones(3))
-    scene = Scene(camera, sun, atmosphere=Atmosphere())
+    scene = Scene(camera, sun, atmosphere=Atmosphere(multiple_scattering=False))
     front, _ = Sky(device=device).render(scene, 8, 8)
     layer = PathTracer(PathTracerSettings(spp=4096, max_bounces=1, seed=9), device=device).render(scene, 8, 8)
     variance = layer.aovs["variance"]

@@ -1,9 +1,9 @@
 """The analytic sky as a light: its radiance over the upper hemisphere, for the passes that light surfaces and media
 with a uniform-equivalent sky (the surfaces, fog and height-field passes).
 
-The sky's radiance along a direction of elevation sine v above the horizon is Riley's single-scattering air to
-infinity, L(v) = E_sun P_R(theta) inscatter(v) (:func:`~warpsky.media.air_analytic.inscatter`, the same
-closed form the sky pass draws), with the unreddened sun E_sun. Averaged on an equal-area grid of the upper
+The sky's radiance along a direction above the horizon is the air to infinity as the sky pass draws it
+(:func:`~warpsky.media.air_multiple.air_radiance`: Riley's single scattering E_sun P_R(theta) inscatter(v) plus the
+multiple-scattering table's light), with the unreddened sun E_sun. Averaged on an equal-area grid of the upper
 hemisphere it gives the mean radiance and E / pi, the uniform radiance that gives a horizontal surface the sky's
 irradiance.
 """
@@ -14,7 +14,7 @@ import numpy as np
 
 from warpsky.light.dome import hemisphere_directions, upper_hemisphere
 from warpsky.light.sun import sunlight
-from warpsky.media.air_analytic import inscatter, rayleigh
+from warpsky.media.air_multiple import air_radiance
 
 
 def sky_hemisphere(scene, samples: int = 64) -> tuple[np.ndarray, np.ndarray]:
@@ -26,9 +26,7 @@ def sky_hemisphere(scene, samples: int = 64) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(3), np.zeros(3)
     directions = hemisphere_directions(samples, upper=True).reshape(-1, 3)
     altitude = float(scene.camera.position[1]) + atmosphere.altitude
-    depth = inscatter(atmosphere.beta_sea_level[None, :], atmosphere.gamma, altitude, directions[:, 1:2],
-                      light.air_sine, np.inf)
-    radiance = light.irradiance[None, :] * depth * rayleigh(directions @ light.direction)[:, None]
+    radiance = air_radiance(scene, light, altitude, directions)
     return radiance.mean(axis=0), 2.0 * (radiance * directions[:, 1:2]).mean(axis=0)
 
 

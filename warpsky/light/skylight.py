@@ -6,8 +6,9 @@ comes from, world axes, Y up):
 
 * upper hemisphere (w_y > 0): the dome, and with a sky pass (an atmosphere the technique does not trace, a lit
   sun) Riley's single-scattering air to infinity seen from the media's altitude h,
-  L_sky(w) = E_sun P_R(w . l) inscatter(h, w_y) (:func:`~warpsky.media.air_analytic.inscatter`, the closed
-  form the sky pass draws and :func:`~warpsky.light.sky.sky_hemisphere` averages), from the sun as it
+  L_sky(w) = E_sun P_R(w . l) inscatter(h, w_y) plus the multiple-scattering table's light
+  (:func:`~warpsky.media.air_multiple.air_radiance`, what the sky pass draws and
+  :func:`~warpsky.light.sky.sky_hemisphere` averages), from the sun as it
   arrives at the top of the air (the technique receives it reddened by the air above the media and
   :func:`~warpsky.light.sun.above_air` leaves that out). With an atmosphere the dome lies
   beyond the air and is seen through its transmittance exp(-beta(h) / (gamma w_y)).
@@ -48,7 +49,8 @@ import warp as wp
 from warpsky.light.dome import ambient_radiance, hemisphere_directions, upper_hemisphere
 from warpsky.light.frame import media_altitude
 from warpsky.light.sun import above_air, sunlight
-from warpsky.media.air_analytic import inscatter, rayleigh, transmittance
+from warpsky.media.air_analytic import transmittance
+from warpsky.media.air_multiple import air_radiance
 from warpsky.media.voxel import MediaPoint, VoxelMedia
 from warpsky.optics.tables import mean_cosine
 
@@ -95,20 +97,20 @@ def projection(radiance: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
     return mean, moment
 
 
-def _upper_radiance(dome, atmosphere, light, directions: np.ndarray, altitude: float) -> np.ndarray:
-    """(N, 3) radiance from the upper-hemisphere ``directions`` at ``altitude`` above sea level [m]: the ``dome``
-    (beyond the ``atmosphere``'s transmittance when there is one) plus, with the sunlight ``light``, the air's
-    single scattering."""
+def _upper_radiance(scene, atmosphere, light, directions: np.ndarray, altitude: float) -> np.ndarray:
+    """(N, 3) radiance from the upper-hemisphere ``directions`` at ``altitude`` above sea level [m]: ``scene``'s
+    dome (beyond the ``atmosphere``'s transmittance when there is one) plus, with the sunlight ``light``, the air as
+    the sky pass draws it (:func:`~warpsky.media.air_multiple.air_radiance`)."""
     out = np.zeros((len(directions), 3))
     up = directions[:, 1:2]
+    dome = scene.dome
     if dome is not None:
         dome = dome.radiance(directions)
         if atmosphere is not None:
             dome = dome * transmittance(atmosphere.beta_sea_level[None, :], atmosphere.gamma, altitude, up, np.inf)
         out = out + dome
     if light is not None:
-        depth = inscatter(atmosphere.beta_sea_level[None, :], atmosphere.gamma, altitude, up, light.air_sine, np.inf)
-        out = out + light.irradiance[None, :] * depth * rayleigh(directions @ light.direction)[:, None]
+        out = out + air_radiance(scene, light, altitude, directions)
     return out
 
 
@@ -134,15 +136,15 @@ def media_environment(scene, *, traces_air: bool = False, samples: int = SAMPLES
     down = hemisphere_directions(samples, upper=False).reshape(-1, 3)
     albedo = ground_albedo(scene)
     if atmosphere is None:
-        upper = _upper_radiance(scene.dome, None, None, up, 0.0)
+        upper = _upper_radiance(scene, None, None, up, 0.0)
         ground_sky = 2.0 * (upper * up[:, 1:2]).mean(axis=0)
         lower = np.broadcast_to(albedo * ground_sky, (len(down), 3)) if albedo is not None else scene.dome.radiance(
             down)
     else:
         altitude = media_altitude(scene)
         floor = scene.ground.height + atmosphere.altitude if scene.ground is not None else 0.0
-        upper = _upper_radiance(scene.dome, atmosphere, light, up, altitude)
-        ground_sky = 2.0 * (_upper_radiance(scene.dome, atmosphere, light, up, floor) * up[:, 1:2]).mean(axis=0)
+        upper = _upper_radiance(scene, atmosphere, light, up, altitude)
+        ground_sky = 2.0 * (_upper_radiance(scene, atmosphere, light, up, floor) * up[:, 1:2]).mean(axis=0)
         beta = atmosphere.beta_sea_level[None, :]
         distance = max(altitude - floor, 0.0) / -down[:, 1:2]
         lower = np.zeros((len(down), 3))
@@ -150,8 +152,7 @@ def media_environment(scene, *, traces_air: bool = False, samples: int = SAMPLES
             lower = lower + albedo * ground_sky * transmittance(beta, atmosphere.gamma, altitude, down[:, 1:2],
                                                                 distance)
         if light is not None:
-            depth = inscatter(beta, atmosphere.gamma, altitude, down[:, 1:2], light.air_sine, distance)
-            lower = lower + light.irradiance[None, :] * depth * rayleigh(down @ light.direction)[:, None]
+            lower = lower + air_radiance(scene, light, altitude, down, distance)
     upper_mean, upper_moment = projection(upper, up)
     lower_mean, lower_moment = projection(lower, down)
     return Environment(upper_mean, upper_moment, lower_mean, lower_moment, ground_sky,

@@ -289,6 +289,11 @@ class Atmosphere:
     ``...:scaleHeight`` float ``scale_height``              m      8000                    1/γ of Eq. 10
     ``...:altitude`` float    ``altitude``                  m      0                       altitude above sea level
                                                                                            of the stage's y = 0
+    ``...:multiple            ``multiple_scattering``       --     true                    add the light the air
+    Scattering`` bool                                                                      scatters more than once
+                                                                                           (Hillaire 2020 table);
+                                                                                           false: Riley's single-
+                                                                                           scattering sky exactly
     ========================= ============================= ====== ======================= ========================
 
     The sun's irradiance is the DistantLight's, taken as outside the atmosphere.
@@ -298,6 +303,7 @@ class Atmosphere:
     scale_height: float = 8000.0
     altitude: float = 0.0
     name: str = "atmosphere"
+    multiple_scattering: bool = True
 
     def __post_init__(self):
         beta = _vec3(self.beta_sea_level, f"atmosphere {self.name}: betaSeaLevel")

@@ -216,7 +216,8 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading):
             if not names or not self._rendered(prim, tc):
                 continue
             known = {"warpsky:atmosphere:betaSeaLevel", "warpsky:atmosphere:scaleHeight",
-                     "warpsky:atmosphere:altitude", "warpsky:atmosphere:enabled"}
+                     "warpsky:atmosphere:altitude", "warpsky:atmosphere:enabled",
+                     "warpsky:atmosphere:multipleScattering"}
             unknown = sorted(set(names) - known)
             if unknown:
                 raise SceneError(f"atmosphere {prim.GetPath()}: unknown attribute(s) {', '.join(unknown)}; known: "
@@ -237,6 +238,13 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading):
                         raise SceneError(f"atmosphere {prim.GetPath()}: warpsky:atmosphere:{attr} must be a float "
                                          f"[scene units], got {value!r}")
                     kwargs[key] = float(value) * scale
+            multiple = prim.GetAttribute("warpsky:atmosphere:multipleScattering")
+            if multiple and multiple.HasAuthoredValue():
+                value = multiple.Get(tc)
+                if not isinstance(value, (bool, int)):
+                    raise SceneError(f"atmosphere {prim.GetPath()}: warpsky:atmosphere:multipleScattering must be a "
+                                     f"bool, got {value!r}")
+                kwargs["multiple_scattering"] = bool(value)
             return Atmosphere(**kwargs)
         return None
 

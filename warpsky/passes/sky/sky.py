@@ -1,4 +1,5 @@
-"""Host side of the sky pass: Riley 2004 §4.1's air in front of and behind the media, with the sun's disk."""
+"""Host side of the sky pass: Riley 2004 §4.1's air in front of and behind the media, with the sun's disk, and the
+light the air scatters more than once (:mod:`warpsky.media.air_multiple`)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,11 @@ from warpsky.device import is_cpu
 from warpsky.layer import Layer
 from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.air_analytic import analytic_air
+from warpsky.media.air_multiple import multiple_struct, scene_table
 from warpsky.passes.base import Pass
 from warpsky.passes.sky.kernels import sky_kernel
 from warpsky.resources import MemoryEstimate
-from warpsky.scene.model import Scene
+from warpsky.scene.model import Projection, Scene
 from warpsky.surfaces.plane import ground_struct
 
 #: Direction the sky pass gives an absent sun: below the horizon.
@@ -26,9 +28,24 @@ BELOW = (0.0, -1.0, 0.0)
 OUTPUTS = ("front", "front_transmittance", "back")
 
 
+def view_rays(scene: Scene, camera):
+    """(atmosphere, eye altitude, floor altitude) [m above sea level] for the sky pass's view table when every
+    camera ray starts at the eye (a pinhole), else None; the floor is where :func:`~warpsky.media.air_analytic.
+    air_ray` ends a downward ray: the ground plane below the eye, else sea level."""
+    if camera.projection != Projection.PERSPECTIVE:
+        return None
+    atm = scene.atmosphere
+    altitude = float(camera.position[1]) + atm.altitude
+    floor = 0.0
+    if scene.ground is not None and scene.ground.height < camera.position[1]:
+        floor = max(float(scene.ground.height) + atm.altitude, 0.0)
+    return atm, altitude, floor
+
+
 class Sky:
     """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk), drawn
-    from Riley's closed form (:mod:`warpsky.media.air_analytic`) with the sun above the air."""
+    from Riley's closed form (:mod:`warpsky.media.air_analytic`) with the sun above the air, plus the multiple-
+    scattering table's light (:mod:`warpsky.media.air_multiple`) unless the atmosphere turns it off."""
 
     def __init__(self, *, device: str = "cpu"):
         self.device = device
@@ -47,9 +64,12 @@ class Sky:
                 array.zero_()
             depth_in = device_buffers.reusable("sky:media_depth", shape, float, self.device)
             depth_in.assign(np.ascontiguousarray(depth, dtype=np.float32))
+            light = sunlight(scene)
             wp.launch(sky_kernel, dim=shape, inputs=[
                 pinhole_camera(camera, width, height), analytic_air(atm, camera.position),
-                sun_struct(sunlight(scene), unlit_direction=BELOW),
+                multiple_struct(scene_table(scene, light), self.device, name="sky:multiple",
+                                views=view_rays(scene, camera)),
+                sun_struct(light, unlit_direction=BELOW),
                 int(scene.ground is not None), ground_struct(scene.ground, camera.position),
                 depth_in, front, front_t, back,
             ])
@@ -79,7 +99,10 @@ class SkyPass(Pass):
         atm = scene.atmosphere
         night = scene.sun is None or scene.sun.direction[1] <= 0.0
         how = (f"traced by {technique.name} as a participating medium, with the sun disk" if technique.traces_air
-               else "analytic Riley single-scattering sky, aerial perspective and sun disk")
+               else "Riley's single-scattering sky in closed form"
+               + (" plus the multiple-scattering table (Hillaire 2020, with the floor's bounces)"
+                  if atm.multiple_scattering else " (multiple scattering off)")
+               + ", aerial perspective and sun disk")
         return {"sky": f"{atm.name}: {how}; betaSeaLevel {np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, "
                        f"scale height {atm.scale_height:g} m, altitude {atm.altitude:g} m"
                        + ("; sun below the horizon: night (black sky)" if night else "")}

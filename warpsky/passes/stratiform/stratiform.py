@@ -23,7 +23,7 @@ from warpsky.device import is_cpu, launch_rows
 from warpsky.layer import Layer
 from warpsky.light.dome import upper_hemisphere
 from warpsky.light.sun import sun_struct, sunlight
-from warpsky.media.air_analytic import inscatter, rayleigh
+from warpsky.media.air_multiple import air_radiance
 from warpsky.media.layer_voxels import LAYER_SPECIES
 from warpsky.media.stratiform import (
     GroundTexture,
@@ -73,7 +73,8 @@ class StratiformSettings(Settings):
 
 def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray:
     """Uniform radiance [sun units/sr] with the same irradiance on a horizontal surface at ``altitude`` [m above
-    the stage's y = 0] as the analytic Riley sky above it; 0 without an atmosphere or sunlight."""
+    the stage's y = 0] as the sky pass's air above it (:func:`~warpsky.media.air_multiple.air_radiance`); 0 without
+    an atmosphere or sunlight."""
     light = sunlight(scene)
     if scene.atmosphere is None or light is None or not light.lit:
         return np.zeros(3)
@@ -82,10 +83,7 @@ def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray
     az = (np.arange(2 * samples) + 0.5) / (2 * samples) * 2 * np.pi
     z, a = np.meshgrid(zen, az, indexing="ij")
     dirs = np.stack([np.sin(z) * np.cos(a), np.cos(z), np.sin(z) * np.sin(a)], -1)
-    cos_theta = dirs @ light.direction
-    radiance = np.stack([light.irradiance[c] * rayleigh(cos_theta) * inscatter(
-        atm.beta_sea_level[c], atm.gamma, altitude + atm.altitude, dirs[..., 1], light.air_sine, np.inf)
-        for c in range(3)], -1)
+    radiance = air_radiance(scene, light, altitude + atm.altitude, dirs.reshape(-1, 3)).reshape(dirs.shape)
     weight = (np.cos(z) * np.sin(z))[..., None] * (0.5 * np.pi / samples) * (2 * np.pi / (2 * samples))
     return (radiance * weight).sum(axis=(0, 1)) / np.pi
 

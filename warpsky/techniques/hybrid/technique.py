@@ -250,10 +250,14 @@ class MultipleScattering:
         self.device = device
         self.scale = int(settings.ms_scale)
         # With air, paths are traced through it from the sun at the top of the atmosphere: they carry skylight on
-        # the media and the air's own multiple scattering; its single scattering is the sky pass's.
+        # the media and the light between air, media and ground. The air's own light, single and multiple
+        # scattering, is the sky pass's: a path whose first event is in the air ends there (air_by_table), unless
+        # the atmosphere turns the table off (then the paths carry the air's multiple scattering as before).
+        atmosphere = scene.atmosphere
         self.tracing = PathTracing(above_air(scene), width, height, settings.path_tracer(), device,
-                                   air=scene.atmosphere is not None, multiple_only=True, scale=self.scale,
-                                   buffer_name=BUFFER_NAME)
+                                   air=atmosphere is not None, multiple_only=True, scale=self.scale,
+                                   buffer_name=BUFFER_NAME,
+                                   air_by_table=atmosphere is not None and atmosphere.multiple_scattering)
         shape = (self.tracing.height, self.tracing.width)
         self.halves = [pixel_sums(shape, device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
         self.counts = [0, 0]

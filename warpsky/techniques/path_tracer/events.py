@@ -297,6 +297,41 @@ def reduced_event_function(has_detail: bool):
 
 
 @functools.cache
+def media_first_function(has_detail: bool):
+    """``media_first(media, air, path, p) -> PathState``, specialised on animated detail."""
+    sample_media = media_functions(has_detail)
+
+    @wp.func
+    def media_first(media: VoxelMedia, air: Air, path: PathState, p: wp.vec3) -> PathState:
+        """The first scattering event of a path whose air-only light a table already holds (the sky pass's
+        multiple-scattering table): the event is the air's with probability q = sum of the air's scattering over
+        the sum of all (over the channels), and then the path ends, its light being the table's; otherwise it is
+        the media's, each channel weighted by its media share over 1 - q, so every channel's expectation is the
+        media's share of the event exactly (one random draw when 0 < q < 1). The path then scatters with the
+        media's phase alone (``air_weight`` 0)."""
+        out = path
+        rayleigh = air_scattering(air, p[1])
+        media_part = sample_media(media, p).scattering
+        total = rayleigh + media_part
+        q = (rayleigh[0] + rayleigh[1] + rayleigh[2]) / wp.max(total[0] + total[1] + total[2], 1.0e-30)
+        if q <= 0.0:
+            return out
+        state = out.state
+        if q >= 1.0 or wp.randf(state) < q:
+            out.alive = 0
+        else:
+            weight = wp.vec3(0.0)
+            for c in range(3):
+                if total[c] > 0.0:
+                    weight[c] = media_part[c] / (total[c] * (1.0 - q))
+            out.throughput = wp.cw_mul(out.throughput, weight)
+        out.state = state
+        return out
+
+    return media_first
+
+
+@functools.cache
 def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
     """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species and
     animated detail."""
@@ -306,12 +341,13 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
 
     @wp.func
     def scatter_event(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
-                      sun_on: bool, path: PathState, p: wp.vec3) -> PathState:
+                      sun_on: bool, path: PathState, p: wp.vec3, air_weight: float) -> PathState:
         """Scattering at ``p``: the sun through the media times the mixed phase, then a new direction sampled from
-        the mixture (one media lookup serves both)."""
+        the mixture (one media lookup serves both); the air's part of the mixture weighs ``air_weight`` (0: the
+        media scatter alone, after :func:`media_first`)."""
         out = path
         point = sample_media(media, p)
-        rayleigh = air_scattering(air, p[1])
+        rayleigh = air_scattering(air, p[1]) * air_weight
         if sun_on:
             tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 0)
             out.state = tr_sun.state

@@ -34,11 +34,13 @@ from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.events import (
     SURFACE_GROUND,
     SURFACE_NONE,
+    UNBOUNDED,
     PathState,
     RayEnd,
     escaped_dome,
     escaped_radiance,
     event_functions,
+    media_first_function,
     roulette,
     start_path,
     surface_functions,
@@ -64,6 +66,7 @@ class PathSettings:
     multiple_only: int  # 1: leave out single scattering (the sun at the first event) and the primary transmittance
     similarity_order: int  # after this many scattering events the media are reduced (high-order similarity); 0: never
     forward_cut: int  # 1: after the first event paths continue through the cut media (forward_cut.py)
+    air_by_table: int  # 1: paths whose first event is the air's end there (a table holds the air's own light)
 
 
 @wp.struct
@@ -103,6 +106,7 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
     delta_track = tracking_functions(has_detail)[1]
     flight_end = surface_functions(has_ground)[1]
     scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
+    media_first = media_first_function(has_detail)
     first_event_peak_light = peak_light_function(has_tables, has_detail, has_ground)
 
     @wp.func
@@ -166,10 +170,16 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                     path.shadow_steps = path.shadow_steps + peak.steps
             if flight.scattered == 1:
                 path.events = path.events + 1
+                air_weight = float(1.0)
+                if bounce == 0 and settings.air_by_table != 0 and air.enabled != 0:
+                    path = media_first(here, air, path, p)
+                    air_weight = 0.0
+                    if path.alive == 0:
+                        break
                 if reduced != 0:
                     path = reduced_scatter_event(here, bounds, air, sun, lit, path, p)
                 else:
-                    path = scatter_event(here, bounds, phase_tables, air, sun, lit, path, p)
+                    path = scatter_event(here, bounds, phase_tables, air, sun, lit, path, p, air_weight)
             else:
                 path = ground_event(here, bounds, air, sun, ground, lit, path, p, reduced)
             bounce += 1
@@ -204,7 +214,12 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
         ray = primary_ray(cam, row, col, fx, fy)
         view = ray.direction
         origin = ray.origin + view * ray.t_near
-        first = primary_end(air, ground, origin, view, ray.t_far - ray.t_near)
+        # the far clip bounds what the camera sees of the media and the ground, not the air (which the sky pass
+        # also draws to its end): with air the camera ray runs to the ground, sea level or space
+        t_end = ray.t_far - ray.t_near
+        if air.enabled != 0:
+            t_end = UNBOUNDED
+        first = primary_end(air, ground, origin, view, t_end)
         out = SampleResult()
         steps = int(0)
         tracked = int(0)

@@ -219,7 +219,8 @@ class PathTracing:
     :meth:`launch` adds paths per pixel to a :class:`PixelSums` (progressive passes reuse everything).
 
     ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
-    at least twice, for techniques that march single scattering exactly. The media's values (under
+    at least twice, for techniques that march single scattering exactly; ``air_by_table`` leaves out the paths
+    whose first event is in the air, whose light the sky pass's multiple-scattering table holds. The media's values (under
     :data:`MEDIA_CACHE`, shared with the single-scattering march) and majorants go through
     :func:`warpsky.device_buffers.upload`: the next frame of a batch with the same grids copies nothing; the sums
     and kept paths are :func:`warpsky.device_buffers.reusable` arrays under ``buffer_name``.
@@ -232,8 +233,9 @@ class PathTracing:
 
     def __init__(self, scene: Scene, width: int, height: int, settings: PathTracerSettings, device: str, *,
                  air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer",
-                 per_sample: bool | None = None):
+                 per_sample: bool | None = None, air_by_table: bool = False):
         self.settings = settings
+        self.air_by_table = bool(air_by_table and air)
         self.device = device
         camera = scene.camera.conformed(width, height)
         if scale > 1:
@@ -287,14 +289,14 @@ class PathTracing:
         GPUs)."""
         if not self.samples_per_launch:
             launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only,
-                                   forward_cut=self.forward_cut)
+                                   forward_cut=self.forward_cut, air_by_table=self.air_by_table)
             launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums, None], self.device)
             return
         end = first_sample + count
         while first_sample < end:
             chunk = min(self.samples_per_launch, end - first_sample)
             launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only,
-                                   forward_cut=self.forward_cut)
+                                   forward_cut=self.forward_cut, air_by_table=self.air_by_table)
             launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, sums, self.samples],
                         self.device)
             launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
@@ -369,8 +371,10 @@ def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> Pi
 
 
 def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int, *,
-                  multiple_only: bool = False, forward_cut: bool = False) -> PathSettings:
-    """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``."""
+                  multiple_only: bool = False, forward_cut: bool = False, air_by_table: bool = False) -> PathSettings:
+    """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``; with
+    ``air_by_table`` a path whose first event is the air's ends there (:func:`~warpsky.techniques.path_tracer.
+    events.media_first_function`)."""
     out = PathSettings()
     out.environment = wp.vec3(float(settings.environment))
     out.seed = int(settings.seed)
@@ -381,6 +385,7 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     out.multiple_only = int(multiple_only)
     out.similarity_order = int(settings.similarity_order)
     out.forward_cut = int(forward_cut)
+    out.air_by_table = int(air_by_table)
     return out
 
 
