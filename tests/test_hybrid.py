@@ -277,3 +277,36 @@ def test_a_frame_with_one_lit_pixel(box, device):
     assert noisy.aovs["multiple_scatter"].sum() > noisy.aovs["single_scatter"].sum()  # most light is multiple
     kept = hybrid(stage, device, 15, spp=64, target_error=0, seed=4, mean_radius=2)
     assert kept.radiance.sum() == pytest.approx(noisy.radiance.sum(), rel=0.05)
+
+
+def test_hybrid_frame_with_air_matches_the_path_tracer(box, device):
+    """With air, hybrid's frame (the sky pass's air, single and multiple scattering, around the media; paths
+    whose first event is in the air end there) against the path tracer's, which traces everything: the sky
+    pixels within 2.5 % + 4 sigma, the cloud's within 3 % + 4 sigma (the table's error, not double counting:
+    the air's multiple scattering counted twice puts the sky 5-50 % high)."""
+    from conftest import add_atmosphere
+
+    from warpsky.composite import composite
+    from warpsky.passes.frame import render_layers
+
+    # sea level 100 m below the stage's origin: the ground plane (y = -12) lies above it
+    stage = add_atmosphere(box(ground=(-12.0, 0.3), albedo=0.95, phase="hg", g=0.6), altitude=100.0)
+    scene = StageReader(stage).scene_at(None)
+    frames, layers = {}, {}
+    for technique, settings in (("hybrid", dict(spp=256, target_error=0, denoise=0, seed=3, **STEP)),
+                                ("path_tracer", dict(spp=512, seed=5))):
+        plan = make_plan(scene, technique=technique, settings={k: str(v) for k, v in settings.items()},
+                         resolution=(16, 16), device=device)
+        layers[technique], parts = render_layers(plan, scene)
+        frames[technique] = composite(parts, scene.camera.far)
+    mine, traced = frames["hybrid"], frames["path_tracer"]
+    variance = mine.aovs.get("variance", 0.0) + traced.aovs["variance"]
+    media = layers["hybrid"].transmittance @ np.array([0.2126, 0.7152, 0.0722])
+    cloud = media < 0.5
+    sky = (media > 0.999) & (layers["hybrid"].depth >= scene.camera.far)  # neither cloud nor ground
+    assert cloud.sum() > 20 and sky.sum() > 20
+    for mask, tolerance in ((sky, 0.025), (cloud, 0.03)):
+        a = mine.rgba[..., :3][mask].mean(axis=0)
+        b = traced.rgba[..., :3][mask].mean(axis=0)
+        sigma = np.sqrt(variance[mask].sum(axis=0)) / mask.sum()
+        assert np.all(np.abs(a - b) < tolerance * b + 4.0 * sigma), (a / b, sigma / b)

@@ -233,10 +233,10 @@ def _cached(beta: tuple, scale_height: float, floor: float, albedo: tuple, sun_y
 
 
 def floor_of(scene) -> tuple[float, np.ndarray]:
-    """(altitude above sea level [m], albedo RGB) of what ends the air below: the ground plane, else a black sea
-    level (as the path tracer's air ends)."""
+    """(altitude above sea level [m], albedo RGB) of what ends the air below, as the path tracer's air ends: the
+    ground plane where it lies at or above sea level, else a black sea level."""
     atmosphere = scene.atmosphere
-    if scene.ground is not None:
+    if scene.ground is not None and scene.ground.height + atmosphere.altitude >= 0.0:
         return float(scene.ground.height + atmosphere.altitude), np.asarray(scene.ground.albedo, dtype=np.float64)
     return 0.0, np.zeros(3)
 
@@ -471,8 +471,9 @@ def multiple_struct(table: MultipleTable | None, device, name: str = "air_multip
     out.floor = float(table.floor) if table is not None else 0.0
     out.height = float(table.height) if table is not None else 1.0
     out.view_nodes = 0
-    out.views = device_buffers.reusable(f"{name}:views", (2, 4), wp.vec3, device)
-    if table is not None and views is not None:
+    if table is None or views is None:
+        out.views = device_buffers.reusable(f"{name}:no views", (2, 4), wp.vec3, device)
+    else:
         atmosphere, altitude, floor = views
         out.views = device_buffers.reusable(f"{name}:views", (VIEW_NODES, 4), wp.vec3, device)
         beta = wp.vec3(*np.asarray(atmosphere.beta_sea_level, dtype=np.float64).tolist())

@@ -12,7 +12,7 @@ from warpsky.device import is_cpu
 from warpsky.layer import Layer
 from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.air_analytic import analytic_air
-from warpsky.media.air_multiple import multiple_struct, scene_table
+from warpsky.media.air_multiple import floor_of, multiple_struct, scene_table
 from warpsky.passes.base import Pass
 from warpsky.passes.sky.kernels import sky_kernel
 from warpsky.resources import MemoryEstimate
@@ -103,9 +103,16 @@ class SkyPass(Pass):
                + (" plus the multiple-scattering table (Hillaire 2020, with the floor's bounces)"
                   if atm.multiple_scattering else " (multiple scattering off)")
                + ", aerial perspective and sun disk")
-        return {"sky": f"{atm.name}: {how}; betaSeaLevel {np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, "
-                       f"scale height {atm.scale_height:g} m, altitude {atm.altitude:g} m"
-                       + ("; sun below the horizon: night (black sky)" if night else "")}
+        out = {"sky": f"{atm.name}: {how}; betaSeaLevel {np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, "
+                      f"scale height {atm.scale_height:g} m, altitude {atm.altitude:g} m, flat earth, Rayleigh air"
+                      + ("; sun below the horizon: night (black sky)" if night else "")}
+        table = None if technique.traces_air else scene_table(scene, sunlight(scene))
+        if table is not None:
+            floor, albedo = floor_of(scene)
+            out["sky table"] = (f"multiple scattering: {len(table.values)} altitudes x RGB over {floor:g}..."
+                                f"{floor + table.height:g} m, floor albedo {np.round(albedo, 3).tolist()}, built in "
+                                f"{1e3 * table.seconds:.0f} ms (cached per air, floor and sun)")
+        return out
 
     def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
         pixels = width * height

@@ -101,13 +101,43 @@ def air_transmittance(air: Air, origin: wp.vec3, view: wp.vec3, distance: float)
 
 
 @functools.cache
+def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool):
+    """``first_event(...) -> PathState``, what a path does where its first flight ends, specialised like the
+    kernels."""
+    first_event_peak_light = peak_light_function(has_tables, has_detail, has_ground)
+
+    @wp.func
+    def first_event(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
+                    sun: Sun, ground: Ground, settings: PathSettings, sun_on: bool, path: PathState, t: float,
+                    scattered: int, p: wp.vec3) -> PathState:
+        """The first flight ended at ``t`` (``p``, scattering or on the ground): its depth is recorded, and with
+        ``settings.forward_cut`` the sunlight of the event's peak scatterings added."""
+        out = path
+        out.hit = 1
+        out.first_t = t
+        if settings.forward_cut != 0 and sun_on:
+            q = p
+            if scattered == 0:
+                q = wp.vec3(p[0], ground.offset, p[2])
+            peak = first_event_peak_light(media, majorants, cut, phase_tables, air, sun, ground, out.throughput,
+                                          out.direction, q, 1 - scattered, out.state)
+            out.radiance = out.radiance + peak.radiance
+            out.state = peak.state
+            out.steps = out.steps + peak.steps
+            out.shadow_steps = out.shadow_steps + peak.steps
+        return out
+
+    return first_event
+
+
+@functools.cache
 def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
     """``trace_path(...) -> PathState``, one path from its camera ray, specialised like the kernels."""
     delta_track = tracking_functions(has_detail)[1]
     flight_end = surface_functions(has_ground)[1]
     scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
     media_first = media_first_function(has_detail)
-    first_event_peak_light = peak_light_function(has_tables, has_detail, has_ground)
+    first_event = first_event_function(has_ground, has_tables, has_detail)
 
     @wp.func
     def trace_path(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
@@ -155,19 +185,8 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                 break
             p = path.origin + flight.t * path.direction
             if bounce == 0:
-                path.hit = 1
-                path.first_t = flight.t
-                if settings.forward_cut != 0 and sun_on:
-                    q = p
-                    if flight.scattered == 0:
-                        q = wp.vec3(p[0], ground.offset, p[2])
-                    peak = first_event_peak_light(media, majorants, cut, phase_tables, air, sun, ground,
-                                                  path.throughput, path.direction, q, 1 - flight.scattered,
-                                                  path.state)
-                    path.radiance = path.radiance + peak.radiance
-                    path.state = peak.state
-                    path.steps = path.steps + peak.steps
-                    path.shadow_steps = path.shadow_steps + peak.steps
+                path = first_event(media, majorants, cut, phase_tables, air, sun, ground, settings, sun_on, path,
+                                   flight.t, flight.scattered, p)
             if flight.scattered == 1:
                 path.events = path.events + 1
                 air_weight = float(1.0)
