@@ -96,8 +96,7 @@ def azimuthal_rayleigh(mu, sun_y: float) -> np.ndarray:
     return 3.0 / (16.0 * math.pi) * (1.0 + mu * mu * sun_y * sun_y + 0.5 * (1.0 - mu * mu) * (1.0 - sun_y * sun_y))
 
 
-def build(beta_sea_level, scale_height: float, floor: float, albedo, sun_y: float, air_sine: float,
-          ground_lit: bool = True) -> MultipleTable:
+def build(beta_sea_level, scale_height: float, floor: float, albedo, sun_y: float, air_sine: float) -> MultipleTable:
     """The table for air of sea-level scattering ``beta_sea_level`` [1/m, RGB] and ``scale_height`` [m] over a
     Lambertian floor of ``albedo`` (RGB) at ``floor`` [m above sea level], lit by a sun of elevation sine ``sun_y``
     (its direction) and ``air_sine`` (its air mass, :func:`~warpsky.media.air_analytic.air_sine`)."""
@@ -113,7 +112,6 @@ def build(beta_sea_level, scale_height: float, floor: float, albedo, sun_y: floa
     up, down = mu[None, :, None], -mu[None, :, None]
     w = weight[None, :, None]
     # up: the air to infinity
-    t_up = transmittance(beta, gamma, h, up, np.inf)
     i_up = inscatter(beta, gamma, h, up, air_sine, np.inf)
     l1_up = azimuthal_rayleigh(up, sun_y) * i_up
     # down: the air to the floor, then the floor
@@ -122,9 +120,8 @@ def build(beta_sea_level, scale_height: float, floor: float, albedo, sun_y: floa
     i_down = inscatter(beta, gamma, h, down, air_sine, distance)
     l1_down = azimuthal_rayleigh(down, sun_y) * i_down
     quadrupole = second_order_quadrupole(i_up, i_down, l1_up, l1_down, mu, weight, sun_y)
-    if ground_lit:
-        t_sun_floor = np.exp(-beta * np.exp(-gamma * floor) / (gamma * air_sine))
-        l1_down = l1_down + t_down * albedo / math.pi * max(sun_y, 0.0) * t_sun_floor
+    t_sun_floor = np.exp(-beta * np.exp(-gamma * floor) / (gamma * air_sine))
+    l1_down = l1_down + t_down * albedo / math.pi * max(sun_y, 0.0) * t_sun_floor
     # orders >= 2 (isotropic in-scattering): J_2 is the mean of the single-scattering field L_1 (sunlit floor
     # included), R_2 the floor lit by the single-scattering sky; then x_{n+1} = M x_n, Psi = sum_n J_n
     a1 = 0.5 * ((l1_up * w).sum(axis=1) + (l1_down * w).sum(axis=1))

@@ -220,8 +220,8 @@ class PathTracing:
 
     ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
     at least twice, for techniques that march single scattering exactly; ``air_by_table`` leaves out the paths
-    whose first event is in the air, whose light the sky pass's multiple-scattering table holds. The media's values (under
-    :data:`MEDIA_CACHE`, shared with the single-scattering march) and majorants go through
+    whose first event is in the air (the sky pass's multiple-scattering table holds their light). The media's
+    values (under :data:`MEDIA_CACHE`, shared with the single-scattering march) and majorants go through
     :func:`warpsky.device_buffers.upload`: the next frame of a batch with the same grids copies nothing; the sums
     and kept paths are :func:`warpsky.device_buffers.reusable` arrays under ``buffer_name``.
 
