@@ -42,7 +42,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,denoise,compare,farm,preview,color]"
+	$(PY) -m pip install --quiet -e ".[dev,denoise,compare,farm,preview,color,textures]"
 	rm -f $(VENV)/.installed-*
 	touch $@
 

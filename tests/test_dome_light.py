@@ -185,6 +185,36 @@ def test_unsupported_texture_format_is_an_error(box, tmp_path):
         StageReader(stage).scene_at(None)
 
 
+def test_radiance_hdr_reads_and_other_formats_are_named(box, tmp_path, capsys):
+    """A Radiance .hdr dome (written by OpenImageIO) reads as the same lat-long map as the EXR; negative texels
+    (filter ringing) are clamped to 0 with one warning naming the prim; a file in a format nothing here reads
+    (RenderMan .tex is not an image OpenImageIO knows) is refused as such, not as a missing file."""
+    oiio = pytest.importorskip("OpenImageIO")
+    rng = np.random.default_rng(2)
+    rgb = rng.random((8, 16, 3)).astype(np.float32) * 4.0
+    hdr = tmp_path / "env.hdr"
+    out = oiio.ImageOutput.create(str(hdr))
+    out.open(str(hdr), oiio.ImageSpec(16, 8, 3, "float"))
+    out.write_image(rgb)
+    out.close()
+    dome = StageReader(add_dome(box(), texture=hdr)).scene_at(None).dome
+    # RGBE: 8-bit mantissas under the pixel's shared exponent
+    assert np.all(np.abs(dome.texture - rgb) <= rgb.max(axis=-1, keepdims=True) / 64.0)
+    ringing = rgb.copy()
+    ringing[0, :3] = -0.2
+    exr = write_latlong(tmp_path / "ringing.exr", ringing)
+    capsys.readouterr()
+    dome = StageReader(add_dome(box(), texture=exr)).scene_at(None).dome
+    assert dome.texture.min() == 0.0 and dome.texture[0, :3].max() == 0.0
+    err = capsys.readouterr().err
+    assert err.count("warning:") == 1 and "/World/Dome" in err and "9 negative" in err
+    tex = tmp_path / "env.tex"
+    tex.write_bytes(b"\x00\x01RenderMan texture, not an image format OpenImageIO reads" * 4)
+    with pytest.raises(SceneError, match=r"/World/Dome\.inputs:texture:file: texture file .*env\.tex is in a "
+                                         r"format warpsky cannot read"):
+        StageReader(add_dome(box(), texture=tex)).scene_at(None)
+
+
 def test_several_distant_lights_are_the_sun_and_extra_suns(box):
     stage = add_distant_light(box(), "Moon", (-0.5, 0.4, 0.2), 0.1)
     scene = StageReader(stage).scene_at(None)

@@ -75,3 +75,35 @@ def test_missing_converter_names_the_package(tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path))
     with pytest.raises(SceneError, match="libnanovdb-tools"):
         load_field(vdb)
+
+
+@needs_tools
+def test_an_empty_grid_is_an_empty_medium(tmp_path, sphere_files, capsys):
+    """A simulation's first frame holds no voxels (Blender and Houdini caches): that frame renders without the
+    medium and says so in one warning line naming the field; the sequence goes on, and info works at that time."""
+    from pxr import Sdf, Usd
+    from conftest import run_cli
+
+    vdb = sphere_files[0]
+    empty = tmp_path / "smoke_000001.vdb"
+    subprocess.run(["vdb_tool", "-sphere", "r=1", "dim=32", "-l2f", "-clip", "bbox=(100,100,100),(101,101,101)",
+                    "-write", str(empty)], check=True, capture_output=True)
+    assert load_field(empty).empty
+    spec = StageSpec(volume_file=vdb, camera_position=(2.0, 3.0, 30.0), extinction_scale=0.8)
+    stage_path = write_stage(tmp_path / "smoke.usda", spec)
+    stage = Usd.Stage.Open(str(stage_path))
+    attr = stage.GetPrimAtPath("/World/Cloud/density").GetAttribute("filePath")
+    attr.Clear()
+    attr.Set(Sdf.AssetPath(str(empty)), 1.0)
+    attr.Set(Sdf.AssetPath(str(vdb)), 2.0)
+    stage.SetStartTimeCode(1.0)
+    stage.SetEndTimeCode(2.0)
+    stage.Save()
+    code, out, err = run_cli(["info", str(stage_path)], capsys)
+    assert code == 0, err
+    assert err.count("warning:") == 1 and "/World/Cloud/density" in err and "no active voxels" in err
+    code, out, err = run_cli(["render", str(stage_path), str(tmp_path / "out" / "f.####.exr"), "--frames", "1:2",
+                              "--res", "16x16", "--technique", "single_scatter"], capsys)
+    assert code == 0, err
+    assert (tmp_path / "out" / "f.0001.exr").is_file() and (tmp_path / "out" / "f.0002.exr").is_file()
+    assert "no active voxels" in err

@@ -51,6 +51,31 @@ def test_exr_refuses_nan_and_writes_nothing(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
+def test_half_float_overflow_is_clamped_with_a_warning(tmp_path, capsys):
+    """Radiance beyond half float's largest value (65504: a frame looking into the sun) is written as 65504 with
+    one warning line, not refused as Inf; 32-bit float keeps it; a color4h RenderVar does the same."""
+    from warpsky.output.products import OutputVar, frame_channels
+
+    rgba, trans, depth = frame()
+    rgba[2, 3, 0] = 1.5e5
+    path = write_exr(tmp_path / "a.exr", rgba, transmittance=trans, depth=depth)
+    image = read_exr(path)
+    assert image.channels["R"][2, 3] == np.float16(65504.0) and np.all(np.isfinite(image.rgba()))
+    err = capsys.readouterr().err
+    assert err.count("warning:") == 1 and "65504" in err and "1 value" in err
+    full = read_exr(write_exr(tmp_path / "b.exr", rgba, half=False))
+    assert full.channels["R"][2, 3] == np.float32(1.5e5)
+
+    class Frame:
+        pass
+
+    f = Frame()
+    f.rgba, f.transmittance, f.depth, f.aovs = rgba, trans, depth, {}
+    channels = frame_channels(f, [OutputVar("", "color", "RGBA", True)])
+    assert channels["R"].dtype == np.float16 and channels["R"][2, 3] == np.float16(65504.0)
+    assert "channel R" in capsys.readouterr().err
+
+
 def test_exr_unwritable_directory(tmp_path):
     blocker = tmp_path / "file.txt"
     blocker.write_text("not a directory")

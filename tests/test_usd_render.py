@@ -318,3 +318,82 @@ def test_info_lists_every_light_with_its_irradiance(stage, capsys):
     assert "light       /World/Moon: distant, elevation 60.00 deg, irradiance 0.25 at normal incidence" in stdout
     assert "0.216506 on a horizontal surface" in stdout  # 0.25 sin 60 deg
     assert "light       /World/Dome: dome, uniform, mean radiance 0.5, 1.5708 on a horizontal surface" in stdout
+
+
+def test_time_sampled_product_name_as_solaris_writes_it(tmp_path, stage, capsys, monkeypatch):
+    """Houdini Solaris writes productName as one literal file name per time sample: those samples are one
+    frame pattern; samples that follow none are refused by name."""
+    from pxr import Usd
+
+    monkeypatch.chdir(tmp_path)
+    add_render(stage, {"Beauty": (None, None, None, [("color", "color", "color4f", "raw")], None)})
+    usd = Usd.Stage.Open(str(stage))
+    attr = usd.GetPrimAtPath("/Render/Beauty").GetAttribute("productName")
+    for frame in (1, 2, 3):
+        attr.Set(f"render/shot_v002.{frame:04d}.exr", float(frame))
+    usd.GetRootLayer().Save()
+    code, _, err = run(["render", stage, "--frames", "1:2", *FAST], capsys)
+    assert code == 0, err
+    assert (tmp_path / "render/shot_v002.0001.exr").is_file() and (tmp_path / "render/shot_v002.0002.exr").is_file()
+    attr.Set("render/other.0002.exr", 2.0)
+    usd.GetRootLayer().Save()
+    code, _, err = run(["render", stage, "--frames", "1", *FAST], capsys)
+    assert code == 2 and "/Render/Beauty.productName" in err and "frame pattern" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_overscan_and_tiles_that_share_an_edge(tmp_path, stage, capsys):
+    """dataWindowNDC outside the unit square renders overscan (a negative data window, as husk writes it) whose
+    image pixels are the plain render's; two tiles split at a pixel centre share no column and miss none."""
+    from conftest import add_atmosphere
+
+    add_atmosphere(stage)
+    add_render(stage, {
+        "Plain": (str(tmp_path / "plain.exr"), None, (64, 16), [("color", "color", "color4f", "raw")], None),
+        "Over": (str(tmp_path / "over.exr"), None, (64, 16), [("color", "color", "color4f", "raw")],
+                 {"dataWindowNDC": (-0.1, -0.1, 1.1, 1.1)}),
+        "Left": (str(tmp_path / "left.exr"), None, (64, 16), [("color", "color", "color4f", "raw")],
+                 {"dataWindowNDC": (0.0, 0.0, 0.3828125, 1.0)}),
+        "Right": (str(tmp_path / "right.exr"), None, (64, 16), [("color", "color", "color4f", "raw")],
+                  {"dataWindowNDC": (0.3828125, 0.0, 1.0, 1.0)}),
+    })
+    for product in ("Plain", "Over", "Left", "Right"):
+        code, _, err = run(["render", stage, "--product", f"/Render/{product}", *FAST], capsys)
+        assert code == 0, err
+    plain, over = read_exr(tmp_path / "plain.exr"), read_exr(tmp_path / "over.exr")
+    lo, hi = over.header["dataWindow"]
+    assert lo.tolist() == [-6, -2] and hi.tolist() == [69, 17]
+    assert over.header["displayWindow"][1].tolist() == [63, 15]
+    inner = over.rgba()[2:18, 6:70]
+    np.testing.assert_allclose(inner, plain.rgba(), rtol=2e-3, atol=1e-6)
+    sky = over.rgba()[:4, :, 2]  # the overscan holds sky, continuing the image's
+    assert sky[:, :6].min() > 0.0 and np.all(np.abs(sky[:, 5] - sky[:, 6]) < 0.05 * sky[:, 6])
+    left, right = read_exr(tmp_path / "left.exr"), read_exr(tmp_path / "right.exr")
+    assert [v.tolist() for v in left.header["dataWindow"]] == [[0, 0], [23, 15]]
+    assert [v.tolist() for v in right.header["dataWindow"]] == [[24, 0], [63, 15]]
+    joined = np.concatenate([left.rgba(), right.rgba()], axis=1)
+    np.testing.assert_array_equal(joined, plain.rgba())
+
+
+def test_husk_tokens_ff_fps_and_a_frame_directory(tmp_path, stage, capsys, monkeypatch):
+    """$FF is the unpadded frame, $FPS the stage's frames per second (neither mangled into a frame token), and
+    a frame placeholder in a directory name puts each frame in its directory and the shot's log beside them."""
+    from pxr import Usd
+
+    from warpsky.scene.usd_render import frame_placeholder
+
+    assert frame_placeholder("img.$FF.exr") == "img.#.exr"
+    assert frame_placeholder("$FPS_a.$F4.exr", 24.0) == "24_a.####.exr"
+    assert frame_placeholder("${F3}_$F.exr") == "###_#.exr"
+    monkeypatch.chdir(tmp_path)
+    usd = Usd.Stage.Open(str(stage))
+    usd.SetFramesPerSecond(25.0)
+    usd.GetRootLayer().Save()
+    add_render(stage, {"A": ("out/$FPS_a.$FF.exr", None, None, [("color", "color", "color4f", "raw")], None),
+                       "B": ("out/dir_$F4/img.exr", None, None, [("color", "color", "color4f", "raw")], None)})
+    for product in ("A", "B"):
+        code, _, err = run(["render", stage, "--frames", "9:10", "--product", f"/Render/{product}", *FAST], capsys)
+        assert code == 0, err
+    assert (tmp_path / "out/25_a.9.exr").is_file() and (tmp_path / "out/25_a.10.exr").is_file()
+    assert (tmp_path / "out/dir_0009/img.exr").is_file() and (tmp_path / "out/dir_0010/img.exr").is_file()
+    assert (tmp_path / "out/dir.log.json").is_file() and not (tmp_path / "out/dir_####").exists()

@@ -226,7 +226,9 @@ def _same_render(planned: list) -> list[list]:
     their channels (outputs) and data window are written from one render."""
     groups: list[tuple[object, list]] = []
     for shot in planned:
-        key = replace(shot[1], outputs=None, data_window=FULL_WINDOW)
+        window = shot[1].data_window
+        inside = min(window[:2]) >= 0.0 and max(window[2:]) <= 1.0  # no overscan: one render serves any window
+        key = replace(shot[1], outputs=None, data_window=FULL_WINDOW if inside else window)
         for group_key, members in groups:
             if group_key == key:
                 members.append(shot)

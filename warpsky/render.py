@@ -26,6 +26,7 @@ from warpsky.output.products import (
     OutputVar,
     default_outputs,
     frame_channels,
+    render_bounds,
     required_channels,
     window_pixels,
 )
@@ -120,6 +121,7 @@ class RenderedImage:
     layer: Layer
     timings: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    origin: tuple[int, int] = (0, 0)  # the frame's first pixel in image pixels (negative with overscan)
 
     @property
     def width(self) -> int:
@@ -238,13 +240,16 @@ def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stag
     memory: composited, converted to the output colour space, its channels cropped to the data window."""
     timings = dict(timings or {})
     started = _time.perf_counter()
-    layer, layers = render_layers(plan, scene)
+    bounds = render_bounds(options.data_window, plan.width, plan.height)
+    layer, layers = render_layers(*overscanned(plan, scene, bounds))
     timings["passes"] = _time.perf_counter() - started
     linear = composite(layers, far=scene.camera.far)
     frame = convert_frame(linear, options.colorspace)
     timings["composite"] = _time.perf_counter() - started - timings["passes"]
-    image = RenderedImage(frame, {}, {}, {}, None, linear.rgba[..., :3], scene, plan, layer, timings,
-                          warnings=gathered_warnings(layers))
+    x, y = -bounds[0], -bounds[1]  # the image's first pixel in the frame
+    preview = linear.rgba[y:y + plan.height, x:x + plan.width, :3]
+    image = RenderedImage(frame, {}, {}, {}, None, preview, scene, plan, layer, timings,
+                          warnings=gathered_warnings(layers), origin=(bounds[0], bounds[1]))
     capped = capped_paths_warning(quality_stats(layer), plan)
     if capped:
         image.warnings.append(capped)
@@ -256,9 +261,17 @@ def output_image(image: RenderedImage, options: RenderOptions, *, stage, time_co
     several RenderProducts that share a camera and resolution are written from one render."""
     scene, plan = image.scene, image.plan
     outputs = options.outputs or default_outputs(sorted(image.frame.aovs), half=options.half)
-    full = tuple(options.data_window) == FULL_WINDOW
+    full = tuple(options.data_window) == FULL_WINDOW and image.origin == (0, 0)
     window = None if full else window_pixels(options.data_window, plan.width, plan.height)
-    channels = frame_channels(image.frame, outputs, window)
+    crop = None
+    if window is not None:
+        x, y = image.origin
+        crop = (window[0] - x, window[1] - y, window[2] - x, window[3] - y)
+        height, width = image.frame.depth.shape
+        if min(crop[:2]) < 0 or crop[2] >= width or crop[3] >= height:
+            raise SceneError(f"dataWindowNDC {tuple(options.data_window)} reaches beyond the frame rendered for "
+                             "the product it shares a render with")
+    channels = frame_channels(image.frame, outputs, crop)
     metadata = _metadata(scene, plan, options, image.layer, stage=stage, time_code=time_code)
     metadata["orderedChannels"] = ",".join(channels)
     if image.warnings:
@@ -266,6 +279,24 @@ def output_image(image: RenderedImage, options: RenderOptions, *, stage, time_co
     attributes = {**colour_attributes(options.colorspace), "pixelAspectRatio": float(options.pixel_aspect)}
     attributes.update(camera_attributes(scene.camera, plan.width, plan.height))
     return replace(image, channels=channels, metadata=metadata, attributes=attributes, window=window)
+
+
+def overscanned(plan: RenderPlan, scene: Scene, bounds: tuple[int, int, int, int]) -> tuple[RenderPlan, Scene]:
+    """``plan`` and ``scene`` rendering the pixel ``bounds`` (x0, y0, x1, y1) of the image, which may reach
+    beyond it (overscan): the camera's film back grown and shifted so the image's pixels stay where they were."""
+    width, height = plan.width, plan.height
+    x0, y0, x1, y1 = bounds
+    if bounds == (0, 0, width - 1, height - 1):
+        return plan, scene
+    wide, tall = x1 - x0 + 1, y1 - y0 + 1
+    camera = scene.camera.conformed(width, height)
+    h_ap, v_ap = camera.horizontal_aperture, camera.vertical_aperture
+    camera = replace(camera, horizontal_aperture=h_ap * wide / width, vertical_aperture=v_ap * tall / height,
+                     horizontal_aperture_offset=camera.horizontal_aperture_offset
+                     + h_ap * ((x0 + 0.5 * wide) / width - 0.5),
+                     vertical_aperture_offset=camera.vertical_aperture_offset
+                     + v_ap * (0.5 - (y0 + 0.5 * tall) / height))
+    return replace(plan, width=wide, height=tall), replace(scene, camera=camera)
 
 
 def _write_image(image: RenderedImage, path: Path) -> Path:

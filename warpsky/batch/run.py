@@ -271,8 +271,14 @@ class BatchResult:
 
 
 def log_path_for(pattern: str) -> Path:
-    """``out/storm.####.exr`` -> ``out/storm.log.json``: one log per shot, next to its frames."""
+    """``out/storm.####.exr`` -> ``out/storm.log.json``: one log per shot, next to its frames; with the frame in a
+    directory name, next to those directories: ``out/shot_####/beauty.exr`` -> ``out/shot.log.json``."""
     path = Path(pattern)
+    parts = path.parts
+    for i, part in enumerate(parts[:-1]):
+        if PLACEHOLDER.search(part):
+            stem = PLACEHOLDER.sub("", part).strip("._-") or "frames"
+            return Path(*parts[:i], f"{stem}.log.json") if i else Path(f"{stem}.log.json")
     stem = PLACEHOLDER.sub("", path.name[: -len(".exr")]).rstrip("._-") or "frames"
     return path.with_name(f"{stem}.log.json")
 

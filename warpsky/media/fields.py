@@ -55,7 +55,8 @@ class FieldGrid:
     """A dense scalar grid as read from a file.
 
     Attributes:
-        values: float32 array indexed ``[x, y, z]``.
+        values: float32 array indexed ``[x, y, z]``; of shape (0, 0, 0) for a grid without active voxels (an
+            empty medium, :attr:`empty`).
         local_from_index: 4x4 affine from index coordinates (voxel centres at integers) to the file's own
             space, or None for ``.npy`` grids, which are placed by the Volume's authored extent.
         source: The file the grid came from.
@@ -66,6 +67,11 @@ class FieldGrid:
     local_from_index: np.ndarray | None
     source: str
     grid_name: str = ""
+
+    @property
+    def empty(self) -> bool:
+        """Whether the grid has no active voxels (nothing to render)."""
+        return self.values.size == 0
 
 
 def sniff_format(path: Path) -> str:
@@ -249,8 +255,8 @@ def _load_nanovdb(path: Path, *, grid_name: str | None, grid_index: int, source:
             )
         raise SceneError(f"grid {name!r} of {source} holds {info.type_str!r} values; expected a float (fog) grid")
     voxels = volume.get_voxels().numpy()
-    if len(voxels) == 0:
-        raise SceneError(f"grid {name!r} of {source} has no voxels")
+    if len(voxels) == 0:  # a simulation's first frame: an empty medium, not an error
+        return FieldGrid(np.zeros((0, 0, 0), dtype=np.float32), np.eye(4), str(source), name)
     lo = voxels.min(axis=0) - 1
     shape = tuple(int(n) for n in voxels.max(axis=0) - lo + 2)
     if np.prod(shape, dtype=np.int64) > 2**31 - 1:

@@ -35,6 +35,27 @@ def _check(name: str, array: np.ndarray | None, shape: tuple) -> np.ndarray | No
     return array
 
 
+#: Half float's largest finite value.
+HALF_MAX = 65504.0
+
+
+def as_half(name: str, values: np.ndarray) -> np.ndarray:
+    """``values`` as float16, finite values beyond +-65504 (half float's largest) clamped to it instead of
+    becoming Inf, with one ``warning:`` line on stderr naming the channel and the count (a frame looking into the
+    sun holds such values; 32-bit float keeps them)."""
+    values = np.asarray(values)
+    over = np.isfinite(values) & (np.abs(values) > HALF_MAX)
+    count = int(np.count_nonzero(over))
+    if count:
+        import sys
+
+        print(f"warpsky: warning: channel {name}: {count} value(s) beyond {HALF_MAX:g}, half float's largest "
+              f"(max {float(np.abs(values[over]).max()):.4g}), written as {HALF_MAX:g}; --float writes 32-bit "
+              "float", file=sys.stderr, flush=True)
+        values = np.clip(values, -HALF_MAX, HALF_MAX)
+    return np.ascontiguousarray(values, dtype=np.float16)
+
+
 def write_exr(
     path: str | os.PathLike,
     rgba: np.ndarray,
@@ -54,7 +75,7 @@ def write_exr(
     _check("RGBA", rgba, rgba.shape)
     transmittance = _check("transmittance", transmittance, (height, width, 3))
     depth = _check("depth.Z", depth, (height, width))
-    channels = {"RGBA": np.ascontiguousarray(rgba, dtype=np.float16 if half else np.float32)}
+    channels = {"RGBA": as_half("RGBA", rgba) if half else np.ascontiguousarray(rgba, dtype=np.float32)}
     if transmittance is not None:
         for i, c in enumerate("RGB"):
             channels[f"transmittance.{c}"] = np.ascontiguousarray(transmittance[..., i], dtype=np.float32)

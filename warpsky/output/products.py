@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpsky.errors import SceneError
+from warpsky.output.exr import as_half
 
 
 @dataclass(frozen=True)
@@ -55,15 +56,26 @@ def required_channels(outputs) -> tuple[str, ...]:
 
 
 def window_pixels(window, width: int, height: int, *, where: str = "dataWindowNDC") -> tuple[int, int, int, int]:
-    """Pixel bounds (x0, y0, x1, y1), inclusive, top-left origin, of the pixels whose centres lie inside the NDC
-    window (xmin, ymin, xmax, ymax; NDC (0, 0) is the image's bottom left, (1, 1) its top right)."""
+    """Pixel bounds (x0, y0, x1, y1), inclusive, top-left origin, of the pixels whose centres the NDC window
+    (xmin, ymin, xmax, ymax; NDC (0, 0) is the image's bottom left, (1, 1) its top right) contains, by the
+    rasterisation rule UsdRender names: a centre on the left or top edge is in, one on the right or bottom edge
+    out, so windows that share an edge share no pixel and leave none out. Outside the unit square the bounds
+    leave the image (overscan: negative or beyond the last pixel), up to one image size on every side."""
     xmin, ymin, xmax, ymax = (float(v) for v in window)
-    x0, x1 = max(0, math.ceil(xmin * width - 0.5)), min(width - 1, math.floor(xmax * width - 0.5))
-    y0 = max(0, math.ceil((1.0 - ymax) * height - 0.5))
-    y1 = min(height - 1, math.floor((1.0 - ymin) * height - 0.5))
+    if min(xmin, ymin) < -1.0 or max(xmax, ymax) > 2.0:
+        raise SceneError(f"{where} {tuple(window)} overscans by more than one image size (the window must lie "
+                         "within -1..2 in NDC)")
+    x0, x1 = math.ceil(xmin * width - 0.5), math.ceil(xmax * width - 0.5) - 1
+    y0, y1 = math.ceil((1.0 - ymax) * height - 0.5), math.ceil((1.0 - ymin) * height - 0.5) - 1
     if x1 < x0 or y1 < y0:
         raise SceneError(f"{where} {tuple(window)} holds no pixel centre of the {width}x{height} image")
     return x0, y0, x1, y1
+
+
+def render_bounds(window, width: int, height: int) -> tuple[int, int, int, int]:
+    """Pixel bounds (x0, y0, x1, y1) a frame renders: the image's, grown to the data ``window``'s overscan."""
+    x0, y0, x1, y1 = window_pixels(window, width, height)
+    return min(x0, 0), min(y0, 0), max(x1, width - 1), max(y1, height - 1)
 
 
 def _source(frame, output: OutputVar) -> np.ndarray:
@@ -90,7 +102,7 @@ def frame_channels(frame, outputs, window: tuple[int, int, int, int] | None = No
         if window is not None:
             x0, y0, x1, y1 = window
             values = values[y0:y1 + 1, x0:x1 + 1]
-        dtype = np.float16 if output.half else np.float32
         for i, name in enumerate(output.channels):
-            channels[name] = np.ascontiguousarray(values[..., i], dtype=dtype)
+            channels[name] = (as_half(name, values[..., i]) if output.half
+                              else np.ascontiguousarray(values[..., i], dtype=np.float32))
     return channels

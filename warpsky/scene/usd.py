@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -107,6 +108,8 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading):
         self.world_from_stage[:3, :3] = self.meters_per_unit * rotation
         self._field_cache: dict[tuple, object] = {}
         self._map_cache: dict[tuple, np.ndarray] = {}
+        #: The ``warning:`` lines printed so far (each once per reader, however many frames repeat it).
+        self.warnings: list[str] = []
 
     # ----------------------------------------------------------------------------------------------- time
     def time_range(self) -> TimeRange:
@@ -205,6 +208,12 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading):
             clip.max * self.meters_per_unit,
             str(token),
         )
+
+    def _warn(self, message: str) -> None:
+        """Print ``warpsky: warning: <message>`` to stderr, once per reader."""
+        if message not in self.warnings:
+            self.warnings.append(message)
+            print(f"warpsky: warning: {message}", file=sys.stderr, flush=True)
 
     # ------------------------------------------------------------------------------------------ atmosphere
     def read_atmosphere(self, time=None):

@@ -22,6 +22,41 @@ from warpsky.scene.usd_prims import StagePrims
 LATLONG_FORMATS = ("automatic", "latlong")
 
 
+#: The first bytes of an OpenEXR file.
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+
+def read_latlong(path: Path, where: str) -> np.ndarray:
+    """(H, W, 3) float32 RGB of the lat-long image at ``path``: an EXR through OpenEXR (a missing Y/A is fine;
+    missing R, G or B is an error), any other format through OpenImageIO (Radiance .hdr, TIFF/.tx, PNG, ...),
+    the first three channels as RGB. A format neither reads is refused by name, not as an unreadable file."""
+    if not path.is_file():
+        raise SceneError(f"{where}: texture file {path} does not exist")
+    with open(path, "rb") as f:
+        head = f.read(4)
+    if head == EXR_MAGIC:
+        return read_latlong_exr(path, where)
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        raise SceneError(f"{where}: texture file {path} is not an EXR; other formats (Radiance .hdr, TIFF/.tx, "
+                         "...) are read through OpenImageIO: pip install 'warpsky[textures]'") from None
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        reason = oiio.geterror().split("?")[0].strip() or "unknown format"
+        raise SceneError(f"{where}: texture file {path} is in a format warpsky cannot read ({reason}); expected a "
+                         "lat-long EXR, Radiance .hdr or another format OpenImageIO reads (RenderMan .tex: convert "
+                         "it with txmake or maketx to .exr/.tx)")
+    try:
+        spec = image.spec()
+        pixels = image.read_image(format="float")
+    finally:
+        image.close()
+    if pixels is None or spec.nchannels < 3:
+        raise SceneError(f"{where}: texture file {path} has {spec.nchannels} channel(s); expected RGB")
+    return np.ascontiguousarray(np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, -1)[..., :3])
+
+
 def read_latlong_exr(path: Path, where: str) -> np.ndarray:
     """(H, W, 3) float32 RGB of the EXR at ``path`` (a missing Y/A is fine; missing R, G or B is an error)."""
     import OpenEXR
@@ -115,13 +150,18 @@ class LightReading(StagePrims):
                 fmt = str(light.GetTextureFormatAttr().Get(tc) or "automatic")
                 if fmt not in LATLONG_FORMATS:
                     raise SceneError(f"{where}: inputs:texture:format {fmt!r} is not supported; expected "
-                                     f"{' or '.join(repr(f) for f in LATLONG_FORMATS)} (a lat-long EXR)")
+                                     f"{' or '.join(repr(f) for f in LATLONG_FORMATS)} (a lat-long image)")
                 resolved = asset.resolvedPath or str(Path(prim.GetStage().GetRootLayer().realPath).parent / asset.path)
                 source = str(resolved)
                 key = ("dome", source, _mtime(Path(source)))
                 if key not in self._map_cache:  # read once for all the frames that show it
-                    self._map_cache[key] = read_latlong_exr(Path(source), f"{where}.inputs:texture:file")
+                    self._map_cache[key] = read_latlong(Path(source), f"{where}.inputs:texture:file")
                 texture = self._map_cache[key]
+                negative = int(np.count_nonzero(texture < 0.0))
+                if negative:  # filtered HDRIs ring below zero around the sun
+                    self._warn(f"{where}.inputs:texture:file: {negative} negative texel value(s) in {source} "
+                               "(filter ringing) clamped to 0")
+                    texture = np.maximum(texture, 0.0)
             dome = Dome(color, texture, rotation, str(prim.GetPath()), source)
             return dome if dome.active else None
         return None

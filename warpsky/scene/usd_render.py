@@ -36,7 +36,11 @@ DATA_TYPES = {
 HALF_TYPES = frozenset({"half", "color3h", "half3", "vector3h", "color4h", "half4"})
 SOURCE_TYPES = ("raw", "lpe")
 CONFORM_POLICY = "expandAperture"
-FRAME_TOKEN = re.compile(r"\$F(\d*)|\$\{F(\d*)\}")
+#: husk's frame tokens: $F, $F4, ${F4} (the frame, zero-padded to the digits) and $FF (the frame, unpadded); a
+#: token ends where no letter or digit follows (an underscore separates), so $FPS is not a frame token.
+FRAME_TOKEN = re.compile(r"\$F(\d*)(?![A-Za-z0-9])|\$\{F(\d*)\}|\$\{FF\}|\$FF(?![A-Za-z0-9])")
+#: husk's frames-per-second token.
+FPS_TOKEN = re.compile(r"\$\{FPS\}|\$FPS(?![A-Za-z0-9])")
 
 
 @dataclass(frozen=True)
@@ -67,8 +71,11 @@ class RenderSpec:
     notes: tuple[str, ...] = ()
 
 
-def frame_placeholder(name: str) -> str:
-    """``productName`` with husk's frame tokens as warpsky's placeholder: ``$F4`` -> ``####``, ``$F`` -> ``#``."""
+def frame_placeholder(name: str, fps: float | None = None) -> str:
+    """``productName`` with husk's frame tokens as warpsky's placeholder (``$F4`` -> ``####``, ``$F`` and ``$FF``
+    -> ``#``) and, given the stage's ``fps``, ``$FPS`` as that number (``24``)."""
+    if fps is not None:
+        name = FPS_TOKEN.sub(lambda m: f"{fps:g}", name)
     return FRAME_TOKEN.sub(lambda m: "#" * max(1, int(m.group(1) or m.group(2) or 1)), name)
 
 
@@ -158,6 +165,28 @@ def base_values(schema, inherited) -> tuple:
     return camera, resolution, aspect, window
 
 
+def sampled_name(attr, times, path: str) -> str:
+    """A time-sampled ``productName`` (Houdini Solaris writes one literal file name per frame) as one pattern:
+    the samples' common value, else the name at the first sample with the run of digits that spells its frame
+    number replaced by as many ``#``, provided that pattern gives every sample's name at its time."""
+    fps = attr.GetPrim().GetStage().GetFramesPerSecond()
+    names = {float(t): frame_placeholder(str(attr.Get(t) or ""), fps) for t in times}
+    distinct = set(names.values())
+    if len(distinct) == 1:
+        return distinct.pop()
+    first_time, first = next(iter(names.items()))
+    candidates = [m for m in re.finditer(r"\d+", first) if float(m.group()) == first_time]
+    for match in reversed(candidates):  # the last run that spells the frame, as in shot_v002.0001.exr
+        width = len(match.group())
+        pattern = first[:match.start()] + "#" * width + first[match.end():]
+        if all(t == int(t) and name == pattern.replace("#" * width, f"{int(t):0{width}d}")
+               for t, name in names.items()):
+            return pattern
+    raise SceneError(f"{path}.productName has {len(names)} time samples that do not follow one frame pattern "
+                     f"(e.g. {first!r} at {first_time:g}); author one name with $F4 or ####, or samples that differ "
+                     "only in the frame number")
+
+
 def _product(stage, product, base, sources: dict[str, str]) -> ProductSpec:
     from pxr import UsdRender
 
@@ -166,10 +195,12 @@ def _product(stage, product, base, sources: dict[str, str]) -> ProductSpec:
     kind = str(product.GetProductTypeAttr().Get() or "raster")
     if kind != "raster":
         raise SceneError(f"{path}.productType {kind!r} is not supported; warpsky writes 'raster' products (EXR)")
-    name = str(product.GetProductNameAttr().Get() or "")
+    attr = product.GetProductNameAttr()
+    times = attr.GetTimeSamples()
+    name = sampled_name(attr, times, path) if times else str(attr.Get() or "")
     if not name:
         raise SceneError(f"{path}.productName is not authored; expected the output file, e.g. out/shot.$F4.exr")
-    name = frame_placeholder(name)
+    name = frame_placeholder(name, stage.GetFramesPerSecond())
     if not name.lower().endswith(".exr"):
         raise SceneError(f"{path}.productName {name!r} must end in .exr (warpsky writes OpenEXR products)")
     values = base_values(product, base)

@@ -101,6 +101,10 @@ class VolumeReading(StagePrims):
             if not field_prim or not field_prim.IsA(UsdVol.OpenVDBAsset):
                 raise SceneError(f"Volume {path}: field:{name} targets {fields[name]}, which is not an OpenVDBAsset")
             grid = self._load_field(field_prim, tc)
+            if grid.empty:
+                self._warn(f"field {field_prim.GetPath()}: grid {grid.grid_name!r} of {grid.source} has no active "
+                           "voxels at this time: an empty medium, nothing rendered for it")
+                continue
             if grid.local_from_index is None:
                 local_from_index = self._extent_placement(prim, tc, grid.values.shape)
             else:
