@@ -81,8 +81,8 @@ def test_missing_converter_names_the_package(tmp_path, monkeypatch):
 def test_an_empty_grid_is_an_empty_medium(tmp_path, sphere_files, capsys):
     """A simulation's first frame holds no voxels (Blender and Houdini caches): that frame renders without the
     medium and says so in one warning line naming the field; the sequence goes on, and info works at that time."""
-    from pxr import Sdf, Usd
     from conftest import run_cli
+    from pxr import Sdf, Usd
 
     vdb = sphere_files[0]
     empty = tmp_path / "smoke_000001.vdb"
