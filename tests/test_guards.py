@@ -230,7 +230,7 @@ def test_ctrl_c_stops_a_long_single_launch_within_two_seconds(tmp_path, box_stag
     code, seconds, err = render.interrupt(within=2.0)
     assert code == 130, err
     assert err.strip() == "warpsky: interrupted"
-    assert files_in(out_dir) == []
+    assert not out_dir.exists()  # nor the directory the run made
     print(f"exited {seconds:.2f} s after SIGINT")
 
 
@@ -250,10 +250,33 @@ def test_ctrl_c_under_workers_shuts_the_cluster_down_quietly(tmp_path, box_stage
     out_dir = tmp_path / "o"
     render = Render([box_stage, out_dir / "f.####.exr", "--frames", "1:2", "--res", "64", "--device", "cpu",
                      "--technique", "path_tracer", "--spp", "50000", "--workers", "1"], tmp_path)
-    render.wait_for(lambda: b"frame/s" in render.err)  # the progress bar: the cluster is up, frames submitted
+    render.wait_for(lambda: b"frames to render" in render.err)  # the cluster is up, frames submitted
     time.sleep(3.0)
     code, seconds, err = render.interrupt(within=30.0)
     assert code == 130, err
     assert "Traceback" not in err and "distributed" not in err and err.rstrip().endswith("warpsky: interrupted")
     assert [name for name in files_in(out_dir) if name.endswith(".exr") or "tmp" in name] == []
     print(f"exited {seconds:.2f} s after SIGINT")
+
+
+def test_first_stumbles_get_one_line_and_leave_nothing(tmp_path, box_stage, capsys, monkeypatch):
+    """A bad flag is one line (the reason, then where --help is), not a usage block; an output under a regular file
+    names that file; a run stopped before its first frame leaves no directory it made."""
+    for flags, named in ((["--res", "abc"], "--res"), (["--technique", "nonsense"], "nonsense")):
+        with pytest.raises(SystemExit) as stop:  # argparse exits itself
+            main(["render", str(box_stage), str(tmp_path / "o.exr"), *flags])
+        err = capsys.readouterr().err
+        assert stop.value.code == 2 and len(err.strip().splitlines()) == 1 and named in err and "--help" in err
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file")
+    code, _, err = run(["render", box_stage, blocker / "sub" / "o.exr", "--res", "8", "--technique", "single_scatter"],
+                       capsys)
+    assert code == 2 and f"{blocker} is a file, not a directory" in err
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("warpsky.cli.run_batch", stopped)
+    out = tmp_path / "new" / "deeper" / "o.exr"
+    code, _, err = run(["render", box_stage, out, "--res", "8", "--technique", "single_scatter"], capsys)
+    assert code == 130 and not (tmp_path / "new").exists()

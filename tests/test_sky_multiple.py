@@ -153,3 +153,24 @@ def test_view_table_split_and_host_agree(device, monkeypatch):
     upward = directions[:, 1] > 0.02
     host = air_multiple.air_radiance(scene, sunlight(scene), 1.0, directions[upward])
     np.testing.assert_allclose(whole.radiance.reshape(-1, 3)[upward], host, rtol=3e-3)
+
+
+def test_the_far_clip_does_not_end_the_air(device):
+    """The far clip bounds what the camera sees of media and surfaces, not the air: a low view traced with a 1 km
+    and a 200 km far clip gives the same paths, bit for bit (the air beyond 1 km holds most of the horizon's
+    light), and matches the sky pass, which never clipped the air."""
+    from warpsky.passes.sky.sky import Sky
+    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+
+    images = []
+    for far in (1.0e3, 2.0e5):
+        camera = Camera("cam", np.array([0.0, 1.0, 0.0]), look_rotation(view_at(3.0, 90.0)), 2000.0, 36.0, 36.0,
+                        far=far)
+        scene = Scene(camera, Sun(sun_at(20.0), np.ones(3), angular_diameter=0.0), atmosphere=Atmosphere())
+        images.append(PathTracer(PathTracerSettings(spp=256, seed=4), device=device).render(scene, 4, 4))
+    np.testing.assert_array_equal(images[0].radiance, images[1].radiance)
+    front, back = Sky(device=device).render(scene, 4, 4)
+    sky = (front.radiance + front.transmittance * back.radiance).reshape(-1, 3).mean(axis=0)
+    traced = images[1].radiance.reshape(-1, 3).mean(axis=0)
+    noise = np.sqrt(images[1].aovs["variance"].reshape(-1, 3).sum(axis=0)) / 16
+    assert np.all(np.abs(sky - traced) < 0.03 * traced + 4.0 * noise)

@@ -19,6 +19,7 @@ from warpsky.batch.run import (
     FrameJob,
     InProcessExecutor,
     check_writable,
+    remove_empty,
     format_summary,
     log_path_for,
     plan_first_frame,
@@ -103,15 +104,22 @@ def settings_help() -> str:
             "true/false for switches; a pass's settings carry its prefix):\n" + "\n".join(sections) + "\n")
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: the reason first, then where --help explains it (not a usage block)."""
+
+    def error(self, message: str):
+        self.exit(2, f"warpsky: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="warpsky",
         description="Render clouds, rain, ice, sky and fog from USD stages to EXR frames with NVIDIA Warp, "
         "on a CUDA GPU or the CPU.",
     )
     parser.add_argument("--version", action="version", version=f"warpsky {__version__}")
     parser.add_argument("--verbose", action="store_true", help="show Warp's own log (compiles, devices)")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
 
     render = sub.add_parser(
         "render", help="render a stage to EXR frames", description="Render STAGE to OUT (or to its "
@@ -269,8 +277,17 @@ def cmd_render(args) -> int:
     far = bool(args.scheduler or args.workers)
     for _, jobs in batches:  # input errors of any product: nothing written
         plan_first_frame(jobs[0], keep_reader=not far)
-    for directory in dict.fromkeys(Path(job.out).parent for _, jobs in batches for job in jobs):
-        check_writable(directory)
+    created: list[Path] = []
+    try:
+        for directory in dict.fromkeys(Path(job.out).parent for _, jobs in batches for job in jobs):
+            check_writable(directory, created)
+        return _run_batches(args, batches, far)
+    finally:  # an interrupted or failed run leaves no empty directory it made
+        remove_empty(created)
+
+
+def _run_batches(args, batches, far: bool) -> int:
+    """Run each shot's frames (their directories made), print the summaries; the command's exit code."""
     if args.scheduler:
         executor = DaskExecutor(address=args.scheduler, timeout=args.scheduler_timeout)
     elif args.workers:

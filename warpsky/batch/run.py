@@ -283,18 +283,42 @@ def log_path_for(pattern: str) -> Path:
     return path.with_name(f"{stem}.log.json")
 
 
-def check_writable(directory: Path) -> None:
-    """The output directory exists (made if needed) and accepts files; else a UsageError naming it."""
+def check_writable(directory: Path, created: list[Path] | None = None) -> None:
+    """The output directory exists (made if needed) and accepts files; else a UsageError naming it. The top-most
+    directory it had to make is appended to ``created`` (for :func:`remove_empty`)."""
+    for parent in (directory, *directory.parents):
+        if parent.exists() and not parent.is_dir():
+            raise UsageError(f"output directory {directory} cannot be created: {parent} is a file, not a directory")
+    top, probe_dir = None, directory
+    while not probe_dir.exists() and probe_dir != probe_dir.parent:
+        top, probe_dir = probe_dir, probe_dir.parent
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UsageError(f"output directory {directory} cannot be created: {exc.strerror or exc}") from None
+    if top is not None and created is not None:
+        created.append(top)
     probe = directory / f".warpsky-write-test-{os.getpid()}"
     try:
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as exc:
-        raise UsageError(f"output directory {directory} is not writable: {exc.strerror or exc}") from None
+        raise UsageError(f"output directory {directory} does not accept files (writing a test file there failed: "
+                         f"{exc.strerror or exc})") from None
+
+
+def remove_empty(directories: list[Path]) -> None:
+    """Remove each of ``directories`` (made by this run) with its subdirectories where none holds a file: an
+    interrupted or failed run leaves no empty output directory behind."""
+    for top in directories:
+        if not top.is_dir():
+            continue
+        for root, _, files in sorted(os.walk(top), key=lambda entry: -len(entry[0])):
+            if not files:
+                try:
+                    os.rmdir(root)
+                except OSError:
+                    pass
 
 
 def prepare_batch(jobs: list[FrameJob]) -> None:
@@ -318,6 +342,13 @@ def prepare_batch(jobs: list[FrameJob]) -> None:
         print(f"warpsky: {notice}", file=sys.stderr, flush=True)
 
 
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
 def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, log: Path) -> BatchResult:
     """Run ``jobs`` on ``executor``, retrying failures; append this run to ``log`` after every frame."""
     from tqdm import tqdm
@@ -329,7 +360,13 @@ def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, l
     history = _read_log(log)
     final: dict[int, FrameRecord] = {}
     pending = list(enumerate(jobs))
-    bar = tqdm(total=len(jobs), unit="frame", disable=len(jobs) < 2, file=sys.stderr, dynamic_ncols=True)
+    # a bar redraws with carriage returns: only on a terminal (a log or a pipe gets the plain per-frame lines)
+    terminal = _is_terminal(sys.stderr)
+    bar = tqdm(total=len(jobs), unit="frame", disable=len(jobs) < 2 or not terminal, file=sys.stderr,
+               dynamic_ncols=True)
+    if len(jobs) > 1 and not terminal:
+        print(f"warpsky: {len(jobs)} frames to render ({executor.name}); each frame's path follows when written",
+              file=sys.stderr, flush=True)
     for attempt in range(1, retries + 2):
         index_of = {id(job): i for i, job in pending}
         retry = []
