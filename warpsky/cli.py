@@ -19,10 +19,10 @@ from warpsky.batch.run import (
     FrameJob,
     InProcessExecutor,
     check_writable,
-    remove_empty,
     format_summary,
     log_path_for,
     plan_first_frame,
+    remove_empty,
     run_batch,
 )
 from warpsky.cli_info import cmd_info
