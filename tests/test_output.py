@@ -117,6 +117,35 @@ def test_png_written(tmp_path):
     path = write_png(tmp_path / "p.png", np.ones((5, 9, 3)), exposure=0.5)
     with Image.open(path) as image:
         assert image.size == (9, 5)
+        assert image.text["warpsky:exposure"] == "0.5" and "sRGB - Display" in image.text["warpsky:view"]
+
+
+def test_previews_go_through_the_filmic_view_with_an_automatic_exposure(tmp_path):
+    """The default view is OpenColorIO's ACES SDR view: monotone, mid grey well below white, highlights rolling off
+    towards it without clipping; the automatic exposure puts the 99.5th-percentile luminance at 3 (87 % of white),
+    so a frame of a bright cloud in a dimmer sky shows the cloud near white with under 1 % of pixels clipped; the
+    simple view is the old curve; an unknown view is refused with the choices."""
+    pytest.importorskip("PyOpenColorIO")
+    from warpsky.errors import UsageError
+    from warpsky.output.png import AUTO_LEVEL, DEFAULT_VIEW, SIMPLE_VIEW, auto_exposure, check_view, encode, views
+
+    assert DEFAULT_VIEW in views() and SIMPLE_VIEW in views()
+    x = np.geomspace(1e-3, 1e3, 200)[:, None, None] * np.ones((1, 1, 3))
+    y = encode(x)[:, 0, 0].astype(int)
+    assert np.all(np.diff(y) >= 0) and y[-1] >= 250
+    assert 70 < encode(np.full((1, 1, 3), 0.18))[0, 0, 0] < 110  # mid grey
+    rng = np.random.default_rng(1)
+    frame = np.broadcast_to([0.02, 0.04, 0.08], (64, 64, 3)).copy()  # a blue sky
+    frame[20:40, 20:40] = rng.uniform(0.5, 1.0, (20, 20, 1)) * np.array([1.0, 1.0, 0.98])  # a sunlit cloud
+    exposure = auto_exposure(frame)
+    lum = frame @ np.array([0.2126, 0.7152, 0.0722])
+    assert exposure * np.percentile(lum, 99.5) == pytest.approx(AUTO_LEVEL)
+    shown = encode(frame, exposure=exposure)
+    assert shown[20:40, 20:40].max() >= 0.85 * 255 and np.mean(shown.max(axis=-1) >= 255) < 0.01
+    assert shown[0, 0, 2] > shown[0, 0, 0] + 20  # the sky stays blue
+    np.testing.assert_array_equal(encode(frame, exposure=2.0, view=SIMPLE_VIEW), tonemap(frame, exposure=2.0))
+    with pytest.raises(UsageError, match="--view 'Filmic'.*choose one of"):
+        check_view("Filmic")
 
 
 @pytest.mark.parametrize("spec,expected", [

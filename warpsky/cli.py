@@ -34,6 +34,7 @@ from warpsky.evaluation.cli import run as run_bench
 from warpsky.interrupt import Interrupted, report_interrupt, sigint_stops_renders
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
+from warpsky.output.png import DEFAULT_VIEW, DISPLAY, check_view
 from warpsky.output.preview import contact_sheet, stage_preview
 from warpsky.output.products import FULL_WINDOW
 from warpsky.registry import DEFAULT_TECHNIQUE, pass_classes, technique_classes
@@ -134,8 +135,12 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--frames", metavar="SPEC", help="frames to render (usdrecord grammar, see below)")
     add_render_options(render)
     render.add_argument("--png", action="store_true", help="also write a tone-mapped PNG preview per frame")
-    render.add_argument("--exposure", type=float, default=0.0, metavar="EV",
-                        help="preview exposure in stops (default 0: a white surface facing the sun maps to ~0.63)")
+    render.add_argument("--exposure", type=float, default=None, metavar="EV",
+                        help="preview exposure in stops over a white surface facing the sun mapped to 1 (default: "
+                        "from the frame, its 99.5th-percentile luminance mapped to 3, 87%% of white)")
+    render.add_argument("--view", default=DEFAULT_VIEW, metavar="VIEW",
+                        help=f"the PNG preview's view of OpenColorIO's {DISPLAY!r} (default {DEFAULT_VIEW!r}; also "
+                        "'Un-tone-mapped', 'Video (colorimetric)', or 'simple', warpsky's own curve)")
     render.add_argument("--float", dest="full_float", action="store_true", help="write RGBA as 32-bit float "
                         "instead of half")
     render.add_argument("--overwrite", action="store_true", help="render frames whose EXR is already up to date")
@@ -177,7 +182,10 @@ def build_parser() -> argparse.ArgumentParser:
     sheet.add_argument("--columns", type=int, default=None, help="tiles per row (default: about 1.5:1 overall)")
     sheet.add_argument("--tile-width", type=int, default=256, help="tile width in pixels (default 256)")
     sheet.add_argument("--exposure", type=float, default=None,
-                       help="linear exposure (default: the frames' preview exposure, else their 99th percentile)")
+                       help="linear exposure (default: the first frame's preview exposure, else its own automatic "
+                       "one)")
+    sheet.add_argument("--view", default=DEFAULT_VIEW, metavar="VIEW",
+                       help=f"the tiles' view of OpenColorIO's {DISPLAY!r} (default {DEFAULT_VIEW!r}, or 'simple')")
 
     add_optics(sub)
 
@@ -319,7 +327,7 @@ def cmd_preview(args) -> int:
 
 def cmd_contact_sheet(args) -> int:
     print(contact_sheet(args.pattern, args.output, columns=args.columns, tile_width=args.tile_width,
-                        exposure=args.exposure))
+                        exposure=args.exposure, view=check_view(args.view)))
     return 0
 
 

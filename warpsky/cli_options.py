@@ -8,6 +8,7 @@ import argparse
 from warpsky.api import render_options
 from warpsky.errors import UsageError
 from warpsky.output.color import COLORSPACES
+from warpsky.output.png import DEFAULT_VIEW, check_view
 from warpsky.registry import DEFAULT_TECHNIQUE, technique_class, technique_classes, technique_names
 from warpsky.resources import parse_size
 from warpsky.settings import field_kinds
@@ -135,7 +136,8 @@ def options_from_args(args) -> object:
         purposes=("default", *args.purposes) if args.purposes else None,
         half=not getattr(args, "full_float", False),
         png=getattr(args, "png", False),
-        exposure=getattr(args, "exposure", 0.0),
+        exposure=getattr(args, "exposure", None),
+        view=check_view(getattr(args, "view", DEFAULT_VIEW)),
         max_memory=args.max_memory,
         work_limit=args.work_limit,
     )

@@ -20,7 +20,7 @@ from warpsky.errors import SceneError
 from warpsky.layer import Layer, gathered_warnings
 from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_frame
 from warpsky.output.exr import write_channels
-from warpsky.output.png import write_png
+from warpsky.output.png import DEFAULT_VIEW, auto_exposure, shown_view, write_png
 from warpsky.output.products import (
     FULL_WINDOW,
     OutputVar,
@@ -62,7 +62,9 @@ class RenderOptions:
         camera: Camera prim path, or None for the default camera.
         half: Write RGBA as half floats (False: 32-bit float).
         png: Also write a tone-mapped PNG preview next to the EXR.
-        exposure: Preview exposure in stops, on top of the automatic sun-based normalisation.
+        exposure: Preview exposure in stops on top of the sun-based normalisation (a white surface facing the sun ->
+            1); None: automatic, from the frame's luminance (:func:`~warpsky.output.png.auto_exposure`).
+        view: The preview's display view (:mod:`warpsky.output.png`).
         max_memory: Most bytes a frame may allocate on the host and on the device each (None: what is free).
         work_limit: Refuse frames whose worst-case work exceeds :mod:`warpsky.resources`' bounds.
         outputs: The channels to write (a RenderProduct's vars), or None for warpsky's default channels.
@@ -79,7 +81,8 @@ class RenderOptions:
     camera: str | None = None
     half: bool = True
     png: bool = False
-    exposure: float = 0.0
+    exposure: float | None = None
+    view: str = DEFAULT_VIEW
     max_memory: int | None = None
     work_limit: bool = True
     outputs: tuple[OutputVar, ...] | None = None
@@ -160,6 +163,14 @@ def capped_paths_warning(quality: dict, plan: RenderPlan) -> str | None:
     cap = getattr(plan.settings, "max_bounces", "max_bounces")
     return (f"{capped:,} of {paths:,} paths ({capped / paths:.2%}) stopped at max_bounces = {cap} scattering events; "
             "their light is missing from the frame (raise it with --set max_bounces=N)")
+
+
+def png_exposure(scene: Scene, options: RenderOptions, preview: np.ndarray) -> float:
+    """The preview's exposure: :func:`preview_exposure` at ``options.exposure`` stops, or without it the frame's
+    own (:func:`~warpsky.output.png.auto_exposure` of the ``preview`` radiance)."""
+    if options.exposure is None:
+        return auto_exposure(preview)
+    return preview_exposure(scene, options.exposure)
 
 
 def preview_exposure(scene: Scene, stops: float = 0.0) -> float:
@@ -274,6 +285,8 @@ def output_image(image: RenderedImage, options: RenderOptions, *, stage, time_co
     channels = frame_channels(image.frame, outputs, crop)
     metadata = _metadata(scene, plan, options, image.layer, stage=stage, time_code=time_code)
     metadata["orderedChannels"] = ",".join(channels)
+    metadata["previewExposure"] = float(png_exposure(scene, options, image.preview))  # contact sheets reuse it
+    metadata["previewView"] = shown_view(options.view)
     if image.warnings:
         metadata["warnings"] = json.dumps(image.warnings)
     attributes = {**colour_attributes(options.colorspace), "pixelAspectRatio": float(options.pixel_aspect)}
@@ -322,7 +335,7 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
     png = None
     if options.png:
         png = write_png(Path(out_path).with_suffix(".png"), image.preview,
-                        exposure=preview_exposure(scene, options.exposure))
+                        exposure=png_exposure(scene, options, image.preview), view=options.view)
     timings["write"] = _time.perf_counter() - started
     quality = quality_stats(layer)
     warnings = image.warnings
@@ -377,7 +390,6 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
         metadata[_camel(key)] = value
     if scene.sun is not None:
         metadata["sun"] = scene.sun.name
-    metadata["previewExposure"] = float(preview_exposure(scene, options.exposure))  # contact sheets reuse it
     parts = layer.stats.get("parts", [layer.stats])
     for runner in plan.pass_runners:
         metadata.update(runner.header(parts))

@@ -17,7 +17,7 @@ import numpy as np
 from warpsky.errors import UsageError
 from warpsky.files import PLACEHOLDER, OutputError, atomic_write
 from warpsky.output.exr import read_exr
-from warpsky.output.png import tonemap
+from warpsky.output.png import DEFAULT_VIEW, auto_exposure, encode
 
 #: Isosurface colour per species (generic density fields are white).
 SPECIES_COLOURS = {"cloud": "#f2f2f2", "rain": "#4f7fd9", "ice": "#8fe3ff", "snow": "#c9b8ff", "air": "#9fc5ff"}
@@ -149,10 +149,10 @@ def frame_paths(pattern: str) -> list[tuple[float, Path]]:
 
 
 def contact_sheet(pattern: str, path: str | os.PathLike, *, columns: int | None = None, tile_width: int = 256,
-                  exposure: float | None = None) -> Path:
-    """Tile the tone-mapped frames matching ``pattern`` with their numbers; unreadable frames show as red tiles.
-    ``exposure`` defaults to the renderer's preview exposure stored in the first frame (``previewExposure``), else
-    to 1 / the first frame's 99th percentile; the whole sheet uses one exposure."""
+                  exposure: float | None = None, view: str = DEFAULT_VIEW) -> Path:
+    """Tile the frames matching ``pattern`` through the display ``view`` with their numbers; unreadable frames show
+    as red tiles. ``exposure`` defaults to the renderer's preview exposure stored in the first frame
+    (``previewExposure``), else to the first frame's automatic one; the whole sheet uses one exposure."""
     from PIL import Image, ImageDraw
 
     frames = frame_paths(pattern)
@@ -168,9 +168,9 @@ def contact_sheet(pattern: str, path: str | os.PathLike, *, columns: int | None 
         images.append((number, rgb, image.metadata))
     if exposure is None:  # one exposure for the whole sheet, so a sequence does not flicker
         number, rgb, metadata = next((entry for entry in images if entry[1] is not None), (0, None, {}))
-        exposure = float(metadata.get("previewExposure", 0.0)) or (
-            1.0 / max(float(np.percentile(rgb, 99)), 1e-12) if rgb is not None else 1.0)
-    tiles = [(number, None if rgb is None else Image.fromarray(tonemap(rgb, exposure=exposure), mode="RGB"))
+        exposure = float(metadata.get("previewExposure", 0.0)) or (auto_exposure(rgb) if rgb is not None else 1.0)
+    tiles = [(number, None if rgb is None else Image.fromarray(encode(rgb, exposure=exposure, view=view),
+                                                               mode="RGB"))
              for number, rgb, _ in images]
     first = next((t for _, t in tiles if t is not None), None)
     aspect = first.height / first.width if first is not None else 0.75
