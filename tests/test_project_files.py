@@ -54,3 +54,16 @@ def test_readme_says_how_long_the_long_targets_take():
     for target in ("make demo", "make test", "make test-fast", "make storm"):
         mentions = re.findall(rf"`{target}`[^\n]*(?:\n  [^\n]*)*", quickstart)  # with a list item's lines
         assert any(re.search(r"\d+ minutes?\b", text) for text in mentions), target
+
+
+def test_make_help_and_the_readme_give_the_same_test_time():
+    """`make help` and the Quickstart state one figure for `make test` (its minutes and its test count), so a
+    re-measured time cannot be changed in one place and left stale in the other."""
+    makefile = (ROOT / "Makefile").read_text()
+    line = next(text for text in makefile.splitlines() if '"make test ' in text)
+    help_count, help_low, help_high = re.search(r"(\d+) tests, (\d+)-(\d+) min", line).groups()
+    readme = (ROOT / "README.md").read_text()
+    quickstart = readme[readme.index("## Quickstart"): readme.index("## Rendering")]
+    item = re.search(r"- `make test`: (\d+)–(\d+) minutes[^(]*\((\d+) tests", quickstart)
+    assert item is not None, "the Quickstart's make test item: '- `make test`: A–B minutes ... (N tests'"
+    assert (help_low, help_high, help_count) == item.groups(), (line, item.group(0))
