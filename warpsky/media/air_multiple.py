@@ -1,30 +1,32 @@
-"""The light the air scatters more than once, as a table: Hillaire 2020's multiple-scattering construction for Riley's
-flat-earth Rayleigh air over a Lambertian floor.
+"""The light the air scatters more than once, as a table, for Riley's flat-earth Rayleigh air over a Lambertian
+floor: Hillaire's (2020, "A scalable and production ready sky and atmosphere rendering technique", §5.5)
+construction with two of its approximations removed.
 
 The analytic sky (:mod:`~warpsky.media.air_analytic`) is the air's single scattering. What it leaves out, light
-scattered two or more times, is added per point y of a view ray as sigma_s(y) E Psi(h(y)), E the sun's irradiance
-at the top of the air and Psi a function of altitude alone for a given sun (the earth is flat: the sun's elevation is
-the same everywhere). Following Hillaire (2020, "A scalable and production ready sky and atmosphere rendering
-technique", §5.5), with the light scattered the second time and later taken as isotropic:
+scattered two or more times, is added per point y of a view ray as sigma_s(y) E Psi(h(y), v), E the sun's
+irradiance at the top of the air and Psi a function of altitude (the earth is flat: the sun's elevation is the same
+everywhere) and, through its second order, of the view v:
 
-* L2(h) = (1 / 4 pi) int L1(h, w) dw: the mean radiance arriving at h after one interaction, L1 the exact
-  single-scattering sky along w (Riley's closed form, Rayleigh phase, :func:`~warpsky.media.air_analytic.inscatter`)
-  plus, looking down, the sunlit floor (albedo rho, rho / pi E mu_s T_sun) through the air between;
-* f(h) = (1 / 4 pi) int [1 - T(h, w)] dw + (1 / 4 pi) int_down T(h, w) rho (1 - T_d) dw: the fraction of an isotropic
-  field of unit radiance that comes back to h after one more interaction, from the air (whose albedo is 1, so the
-  air's own part of a ray is 1 - T) and from the floor, lit by that field through the whole column above it
-  (1 - T_d, T_d = 2 int T(mu) mu dmu its diffuse transmittance). Hillaire's f leaves the floor out; with it the
-  orders that bounce between a bright floor and the air are kept;
-* Psi(h) = L2(h) / (1 - f(h)) (the orders >= 2 as a geometric series), per channel, per unit E.
+* the single-scattering field L_1(h, w): the exact sky along w (Riley's closed form, Rayleigh phase,
+  :func:`~warpsky.media.air_analytic.inscatter`) plus, looking down, the sunlit floor (albedo rho,
+  rho / pi E mu_s T_sun) through the air between;
+* the orders >= 2 with isotropic scattering, solved over altitude (:func:`transport`): the second order's source
+  J_2(h) = (1 / 4 pi) int L_1 dw and the floor lit by the single-scattering sky, R_2 = rho E_1 / pi, then each
+  order's source carried along every direction by the exact transmittance to the next (and to and from the floor),
+  x_{n+1} = M x_n, so Psi = sum_n J_n = (I - M)^{-1} x_2, one linear system per channel. Hillaire instead takes
+  Psi = J_2 / (1 - f) with f the local return fraction (a geometric series with every order at the point's own
+  strength), which at a low sun is 6 % low in blue: the light scattered high up, where the sun is still bright,
+  is what reaches the ground's air;
+* the second order with Rayleigh's phase: its quadrupole (:func:`second_order_quadrupole`), three azimuthal terms
+  about the sun, added per view with its P2 weights (:func:`quadrupole_weights`); orders >= 3 stay isotropic.
 
 Rayleigh's azimuthal mean is closed form, so each sphere integral is a quadrature over mu = w_y alone (Gauss-
 Legendre on [-1, 0] and [0, 1] in u = sqrt(|mu|), dense at the horizon where the flat earth's sky has its cusp),
-in float64 on the host: 48 altitudes x 2 x 96 directions, a few milliseconds, cached per air, floor and sun.
+in float64 on the host: 48 altitudes x 2 x 96 directions, about 40 ms, cached per air, floor and sun.
 
 Along a view ray the integral int sigma_s T Psi dt is taken in s = 1 - T (ds = sigma_s T dt, the air's extinction
 being its scattering): int_0^{1 - T(K)} Psi(h(s)) ds with 8 Gauss-Legendre nodes per channel, h(s) in closed
-form (Riley Eq. 11 inverted), so the multiple-scattering part of a pixel costs 24 table lookups and no march.
-"""
+form (Riley Eq. 11 inverted); for a pinhole camera a per-frame view table holds the whole ray's integrals."""
 
 from __future__ import annotations
 
