@@ -39,6 +39,7 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.media.air_analytic import INFINITE, air_depth, inscatter, rayleigh, transmittance
+from warpsky.numerics import one_minus_exp
 
 #: Table nodes over altitude: h = floor + TOP_SCALE_HEIGHTS H u^2, u uniform in [0, 1].
 NODES = 48
@@ -109,7 +110,7 @@ def build(beta_sea_level, scale_height: float, floor: float, albedo, sun_y: floa
     albedo = np.asarray(albedo, dtype=np.float64)[None, None, :]
     gamma = 1.0 / scale_height
     height = TOP_SCALE_HEIGHTS * scale_height
-    h = (floor + height * np.linspace(0.0, 1.0, NODES) ** 2)[:, None, None]
+    h = node_heights(floor, height)[:, None, None]
     mu, weight = _half_sphere(DIRECTIONS)
     up, down = mu[None, :, None], -mu[None, :, None]
     w = weight[None, :, None]
@@ -183,6 +184,11 @@ def quadrupole_weights(view: np.ndarray, sun: np.ndarray) -> np.ndarray:
                      3.0 * horizontal * horizontal * (2.0 * cos1 * cos1 - 1.0)], axis=-1)
 
 
+def node_heights(floor: float, height: float) -> np.ndarray:
+    """The table's node altitudes [m above sea level]: floor + height u^2, u = linspace(0, 1, NODES)."""
+    return floor + height * np.linspace(0.0, 1.0, NODES) ** 2
+
+
 def _interpolation(altitude: np.ndarray, floor: float, height: float) -> tuple[np.ndarray, np.ndarray]:
     """(node index i, weight of node i + 1) of linear interpolation in u at ``altitude`` (clamped to the nodes)."""
     u = np.sqrt(np.clip((altitude - floor) / height, 0.0, 1.0))
@@ -201,9 +207,8 @@ def transport(beta: float, gamma: float, floor: float, height: float, albedo: fl
 
     each ray integral taken in s = 1 - T with :data:`BUILD_RAY_NODES` Gauss-Legendre nodes and J interpolated
     linearly between the nodes; ``mu``, ``weight`` are the half-sphere quadrature (:func:`_half_sphere`)."""
-    h = floor + height * np.linspace(0.0, 1.0, NODES) ** 2
-    x, wk = np.polynomial.legendre.leggauss(BUILD_RAY_NODES)
-    s, wk = 0.5 * (x + 1.0), 0.5 * wk
+    h = node_heights(floor, height)
+    s, wk = ray_nodes(BUILD_RAY_NODES)
     out = np.zeros((NODES + 1, NODES + 1))
     for sign in (1.0, -1.0):
         view = sign * mu[None, :, None]
@@ -252,9 +257,9 @@ def scene_table(scene, light) -> MultipleTable | None:
                    tuple(float(a) for a in albedo), float(light.direction[1]), float(light.air_sine))
 
 
-def ray_nodes() -> tuple[np.ndarray, np.ndarray]:
-    """(s, weight) of Gauss-Legendre on [0, 1]."""
-    x, w = np.polynomial.legendre.leggauss(RAY_NODES)
+def ray_nodes(count: int = RAY_NODES) -> tuple[np.ndarray, np.ndarray]:
+    """(s, weight) of ``count``-point Gauss-Legendre on [0, 1]."""
+    x, w = np.polynomial.legendre.leggauss(count)
     return 0.5 * (x + 1.0), 0.5 * w
 
 
@@ -356,14 +361,6 @@ class MultipleTerms:
 def combine(terms: MultipleTerms, angular: wp.vec3) -> wp.vec3:
     """The multiple-scattering integral towards a view of ``angular`` weights: Psi's plus the quadrupole's."""
     return terms.psi + terms.q0 * angular[0] + terms.q1 * angular[1] + terms.q2 * angular[2]
-
-
-@wp.func
-def one_minus_exp(x: float) -> float:
-    """1 - e^{-x} without cancellation for small x >= 0."""
-    if x < 1.0e-3:
-        return x * (1.0 - 0.5 * x + x * x / 6.0)
-    return 1.0 - wp.exp(-x)
 
 
 @wp.func
@@ -482,10 +479,5 @@ def multiple_struct(table: MultipleTable | None, device, name: str = "air_multip
     return out
 
 
-def disabled(device) -> AirMultiple:
-    """An off table (the kernels' multiple-scattering term is 0)."""
-    return multiple_struct(None, device, name="air_multiple:off")
-
-
-__all__ = ["INFINITE", "AirMultiple", "MultipleTable", "build", "disabled", "multiple_along", "multiple_inscatter",
+__all__ = ["AirMultiple", "MultipleTable", "air_radiance", "build", "multiple_along", "multiple_inscatter",
            "multiple_struct", "quadrupole_angular", "scene_table", "whole_ray"]
