@@ -272,7 +272,7 @@ def output_image(image: RenderedImage, options: RenderOptions, *, stage, time_co
     several RenderProducts that share a camera and resolution are written from one render."""
     scene, plan = image.scene, image.plan
     outputs = options.outputs or default_outputs(sorted(image.frame.aovs), half=options.half)
-    full = tuple(options.data_window) == FULL_WINDOW and image.origin == (0, 0)
+    full = tuple(options.data_window) == FULL_WINDOW
     window = None if full else window_pixels(options.data_window, plan.width, plan.height)
     crop = None
     if window is not None:
@@ -335,7 +335,7 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
     png = None
     if options.png:
         png = write_png(Path(out_path).with_suffix(".png"), image.preview,
-                        exposure=png_exposure(scene, options, image.preview), view=options.view)
+                        exposure=image.metadata["previewExposure"], view=options.view)
     timings["write"] = _time.perf_counter() - started
     quality = quality_stats(layer)
     warnings = image.warnings

@@ -10,6 +10,7 @@ target directory and renamed into place, so readers never see a partial file.
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,8 +48,6 @@ def as_half(name: str, values: np.ndarray) -> np.ndarray:
     over = np.isfinite(values) & (np.abs(values) > HALF_MAX)
     count = int(np.count_nonzero(over))
     if count:
-        import sys
-
         print(f"warpsky: warning: channel {name}: {count} value(s) beyond {HALF_MAX:g}, half float's largest "
               f"(max {float(np.abs(values[over]).max()):.4g}), written as {HALF_MAX:g}; --float writes 32-bit "
               "float", file=sys.stderr, flush=True)

@@ -93,7 +93,8 @@ def check_view(view: str) -> str:
 def encode(rgb: np.ndarray, *, exposure: float = 1.0, view: str = DEFAULT_VIEW) -> np.ndarray:
     """Linear Rec.709 radiance (H, W, 3) -> display-encoded uint8 (H, W, 3) through ``view``; the default view
     falls back to :data:`SIMPLE_VIEW` where OpenColorIO is not installed."""
-    if view == SIMPLE_VIEW or (view == DEFAULT_VIEW and views() == (SIMPLE_VIEW,)):
+    view = shown_view(view)
+    if view == SIMPLE_VIEW:
         return tonemap(rgb, exposure=exposure)
     check_view(view)
     x = np.nan_to_num(np.asarray(rgb, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)

@@ -154,14 +154,15 @@ class LightReading(StagePrims):
                 resolved = asset.resolvedPath or str(Path(prim.GetStage().GetRootLayer().realPath).parent / asset.path)
                 source = str(resolved)
                 key = ("dome", source, _mtime(Path(source)))
-                if key not in self._map_cache:  # read once for all the frames that show it
-                    self._map_cache[key] = read_latlong(Path(source), f"{where}.inputs:texture:file")
+                if key not in self._map_cache:  # read (and clamped) once for all the frames that show it
+                    texture = read_latlong(Path(source), f"{where}.inputs:texture:file")
+                    negative = int(np.count_nonzero(texture < 0.0))
+                    if negative:  # filtered HDRIs ring below zero around the sun
+                        self._warn(f"{where}.inputs:texture:file: {negative} negative texel value(s) in {source} "
+                                   "(filter ringing) clamped to 0")
+                        texture = np.maximum(texture, 0.0)
+                    self._map_cache[key] = texture
                 texture = self._map_cache[key]
-                negative = int(np.count_nonzero(texture < 0.0))
-                if negative:  # filtered HDRIs ring below zero around the sun
-                    self._warn(f"{where}.inputs:texture:file: {negative} negative texel value(s) in {source} "
-                               "(filter ringing) clamped to 0")
-                    texture = np.maximum(texture, 0.0)
             dome = Dome(color, texture, rotation, str(prim.GetPath()), source)
             return dome if dome.active else None
         return None

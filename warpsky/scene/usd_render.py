@@ -168,9 +168,9 @@ def base_values(schema, inherited) -> tuple:
 def sampled_name(attr, times, path: str) -> str:
     """A time-sampled ``productName`` (Houdini Solaris writes one literal file name per frame) as one pattern:
     the samples' common value, else the name at the first sample with the run of digits that spells its frame
-    number replaced by as many ``#``, provided that pattern gives every sample's name at its time."""
-    fps = attr.GetPrim().GetStage().GetFramesPerSecond()
-    names = {float(t): frame_placeholder(str(attr.Get(t) or ""), fps) for t in times}
+    number replaced by as many ``#``, provided that pattern gives every sample's name at its time (husk's tokens
+    are left for :func:`frame_placeholder`)."""
+    names = {float(t): str(attr.Get(t) or "") for t in times}
     distinct = set(names.values())
     if len(distinct) == 1:
         return distinct.pop()
