@@ -55,8 +55,10 @@ USD render settings and products:
   the camera, resolution, pixelAspectRatio, dataWindowNDC, includedPurposes and renderingColorSpace; each of its
   UsdRenderProducts (all, or those named by --product) is written to its productName ($F4, $F or #### for the
   frame) with the channels its orderedVars name (sourceName color, alpha, transmittance, depth, variance,
-  single_scatter, multiple_scatter). OUT replaces the name of a single product; --camera, --res, --purpose and
-  --colorspace win over the stage. Without RenderProducts, OUT is required and gets warpsky's default channels.
+  single_scatter, multiple_scatter); a RenderVar warpsky cannot write (another light path expression, a primvar,
+  an id) is left out of its product with a warning. OUT replaces the name of a single product; --camera, --res,
+  --purpose and --colorspace win over the stage. Without RenderProducts, OUT is required and gets warpsky's
+  default channels.
 
 batches, resume and farms:
   A frame whose EXR exists, opens, has every channel and carries the same settings hash is skipped (--overwrite

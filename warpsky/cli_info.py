@@ -111,6 +111,7 @@ def cmd_info(args) -> int:
     out += _light_lines(scene)
     out += _render_spec_lines(spec, products)
     out += [f"composition {line}" for line in reader.composition_summary()]
+    out += [f"warning     {line}" for line in (*(spec.warnings if spec else ()), *reader.warnings)]
     out.append("plan:" + (f" (of product {products[0].path})" if products else ""))
     out += ["  " + line for line in plan.describe().splitlines()]
     out += ["  " + line for line in resource_lines(plan, options.max_memory)]

@@ -7,6 +7,10 @@ relationship names ``UsdRenderProduct`` prims. Each product writes one image per
 ratio and data window, and lists its channels as ``orderedVars``: ``UsdRenderVar`` prims whose ``sourceName``
 names a warpsky output (:data:`SOURCES`) and whose ``dataType`` says how many components and what precision.
 
+A RenderVar warpsky cannot write (a light path expression other than the beauty's ``C.*``, a ``primvar`` or
+``intrinsic`` source, an ``id`` or ``N`` that is no warpsky output) is left out of its product with one ``warning:``
+line naming the RenderVar, as husk does; only a product left with no RenderVar at all is an error.
+
 Attributes read here and not acted on (``materialBindingPurposes``: warpsky binds no materials;
 ``disableMotionBlur`` and friends: warpsky renders instants) are reported as notes, not errors.
 
@@ -16,6 +20,7 @@ pxr is imported inside the functions (a heavy import).
 from __future__ import annotations
 
 import re
+import sys
 from dataclasses import dataclass
 
 from warpsky.errors import SceneError
@@ -35,6 +40,10 @@ DATA_TYPES = {
 }
 HALF_TYPES = frozenset({"half", "color3h", "half3", "vector3h", "color4h", "half4"})
 SOURCE_TYPES = ("raw", "lpe")
+
+
+class UnsupportedVar(SceneError):
+    """A RenderVar whose source warpsky does not write: its product is written without it."""
 CONFORM_POLICY = "expandAperture"
 #: husk's frame tokens: $F, $F4, ${F4} (the frame, zero-padded to the digits) and $FF (the frame, unpadded); a
 #: token ends where no letter or digit follows (an underscore separates), so $FPS is not a frame token.
@@ -69,6 +78,7 @@ class RenderSpec:
     colorspace: str | None  # renderingColorSpace, when authored
     products: tuple[ProductSpec, ...]
     notes: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()  # RenderVars left out of their products, one line each
 
 
 def frame_placeholder(name: str, fps: float | None = None) -> str:
@@ -124,13 +134,17 @@ def read_render_spec(stage, settings_path: str | None, meters_per_unit: float = 
     purposes = tuple(str(p) for p in purposes_attr.Get()) if purposes_attr.HasAuthoredValue() else None
     colorspace_attr = prim.GetAttribute("renderingColorSpace")
     colorspace = str(colorspace_attr.Get()) if colorspace_attr and colorspace_attr.HasAuthoredValue() else None
-    products = []
+    products, warnings = [], []
     for target in settings.GetProductsRel().GetTargets():
         product_prim = stage.GetPrimAtPath(target)
         if not product_prim or not product_prim.IsA(UsdRender.Product):
             raise SceneError(f"{prim.GetPath()}.products targets {target}, which is not a RenderProduct prim")
-        products.append(_product(stage, UsdRender.Product(product_prim), base, {**SOURCES, **(aovs or {})}))
-    return RenderSpec(str(prim.GetPath()), *base, purposes, colorspace, tuple(products), tuple(notes))
+        products.append(_product(stage, UsdRender.Product(product_prim), base, {**SOURCES, **(aovs or {})},
+                                 warnings))
+    for line in warnings:  # printed once every product is read: a later product's error is then the only line
+        print(f"warpsky: warning: {line}", file=sys.stderr, flush=True)
+    return RenderSpec(str(prim.GetPath()), *base, purposes, colorspace, tuple(products), tuple(notes),
+                      tuple(warnings))
 
 
 def base_values(schema, inherited) -> tuple:
@@ -187,7 +201,8 @@ def sampled_name(attr, times, path: str) -> str:
                      "only in the frame number")
 
 
-def _product(stage, product, base, sources: dict[str, str]) -> ProductSpec:
+def _product(stage, product, base, sources: dict[str, str], warnings: list[str]) -> ProductSpec:
+    """One RenderProduct; the RenderVars it leaves out are appended to ``warnings``."""
     from pxr import UsdRender
 
     prim = product.GetPrim()
@@ -207,12 +222,20 @@ def _product(stage, product, base, sources: dict[str, str]) -> ProductSpec:
     targets = product.GetOrderedVarsRel().GetTargets()
     if not targets:
         raise SceneError(f"{path}.orderedVars names no RenderVar; expected at least one (e.g. sourceName color)")
-    outputs = []
+    outputs, skipped = [], []
     for target in targets:
         var_prim = stage.GetPrimAtPath(target)
         if not var_prim or not var_prim.IsA(UsdRender.Var):
             raise SceneError(f"{path}.orderedVars targets {target}, which is not a RenderVar prim")
-        outputs.append(read_var(UsdRender.Var(var_prim), sources))
+        try:
+            outputs.append(read_var(UsdRender.Var(var_prim), sources))
+        except UnsupportedVar as exc:
+            skipped.append(str(exc))
+    if not outputs:
+        raise SceneError(f"{skipped[0]}; {path}.orderedVars names no other RenderVar warpsky writes"
+                         if len(skipped) == 1 else f"{path}: none of its {len(skipped)} RenderVars is one warpsky "
+                         f"writes (first: {skipped[0]})")
+    warnings += [f"{reason}; left out of product {path}" for reason in skipped]
     seen: dict[str, str] = {}
     for output in outputs:
         for channel in output.channels:
@@ -225,22 +248,22 @@ def _product(stage, product, base, sources: dict[str, str]) -> ProductSpec:
 
 def read_var(var, sources: dict[str, str] = SOURCES) -> OutputVar:
     """A RenderVar as an :class:`OutputVar`: its source (a key of ``sources``, name -> components), layer name
-    and channel types checked."""
+    and channel types checked; :class:`UnsupportedVar` for a source warpsky does not write."""
     prim = var.GetPrim()
     path = str(prim.GetPath())
     known = ", ".join(sources)
     source_type = str(var.GetSourceTypeAttr().Get() or "raw")
     raw_name = str(var.GetSourceNameAttr().Get() or "")
     if source_type not in SOURCE_TYPES:
-        raise SceneError(f"RenderVar {path}.sourceType {source_type!r} is not supported; warpsky outputs raw "
-                         f"sources ({known}) and the beauty as lpe 'C.*'")
+        raise UnsupportedVar(f"RenderVar {path}.sourceType {source_type!r} is not supported; warpsky outputs raw "
+                             f"sources ({known}) and the beauty as lpe 'C.*'")
     name = raw_name.strip().lower()
     name = ALIASES.get(name, name)
     if source_type == "lpe" and name != "color":
-        raise SceneError(f"RenderVar {path}: light path expression {raw_name!r} is not supported; warpsky writes "
-                         "the beauty for 'C.*' and these raw sources: " + known)
+        raise UnsupportedVar(f"RenderVar {path}: light path expression {raw_name!r} is not supported; warpsky "
+                             "writes the beauty for 'C.*' and these raw sources: " + known)
     if name not in sources:
-        raise SceneError(f"RenderVar {path}.sourceName {raw_name!r} is not a warpsky output; known: {known}")
+        raise UnsupportedVar(f"RenderVar {path}.sourceName {raw_name!r} is not a warpsky output; known: {known}")
     components = sources[name]
     data_type = str(var.GetDataTypeAttr().Get() or "")
     count = next((n for n, types in DATA_TYPES.items() if data_type in types), None)

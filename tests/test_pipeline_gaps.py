@@ -1,0 +1,109 @@
+"""What a pipeline's USD files hold that warpsky does not render, and how it reads them the way husk does: RenderVars
+it cannot write are left out with a warning, RenderMan's channel names, the UsdRender resolution fallback and
+``--res-scale``.
+
+Each stage is a scene layer (written with pxr by :func:`conftest.write_stage`) under a render layer written as text,
+the way a Solaris or RenderMan export puts its ``/Render`` prims in a layer of their own.
+"""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pytest
+from conftest import StageSpec, write_stage
+from conftest import run_cli as run
+
+from warpsky.output.exr import read_exr
+
+FAST = ["--device", "cpu", "--technique", "single_scatter", "--set", "step_length=1"]
+
+
+def render_layer(tmp_path, scene, body: str, *, settings: str = 'uniform int2 resolution = (12, 8)') -> str:
+    """``shot.usda``: ``scene`` as a sublayer under /Render/Settings (with ``settings`` lines) and its product
+    /Render/Products/beauty, whose RenderVars ``body`` defines under /Render/Products/Vars (``orderedVars`` names
+    them in order)."""
+    names = [line.split('"')[1] for line in body.splitlines() if line.strip().startswith("def RenderVar")]
+    targets = ", ".join(f"</Render/Products/Vars/{name}>" for name in names)
+    text = f"""\
+        #usda 1.0
+        (
+            subLayers = [@./{scene.name}@]
+            metersPerUnit = 1
+            upAxis = "Y"
+            renderSettingsPrimPath = "/Render/Settings"
+        )
+
+        def Scope "Render"
+        {{
+            def RenderSettings "Settings"
+            {{
+                rel camera = </World/Camera>
+                {settings}
+                rel products = </Render/Products/beauty>
+            }}
+            def Scope "Products"
+            {{
+                def RenderProduct "beauty"
+                {{
+                    token productName = "{tmp_path / 'out' / 'beauty.$F4.exr'}"
+                    rel orderedVars = [{targets}]
+                }}
+                def Scope "Vars"
+                {{
+{textwrap.indent(textwrap.dedent(body), ' ' * 20)}
+                }}
+            }}
+        }}
+        """
+    path = tmp_path / "shot.usda"
+    path.write_text(textwrap.dedent(text))
+    return str(path)
+
+
+def var(name: str, source: str, data_type: str, source_type: str = "raw") -> str:
+    return (f'def RenderVar "{name}"\n{{\n    uniform string sourceName = "{source}"\n'
+            f'    uniform token dataType = "{data_type}"\n    uniform token sourceType = "{source_type}"\n}}\n')
+
+
+@pytest.fixture
+def scene(tmp_path, homogeneous_npy):
+    return write_stage(tmp_path / "scene.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
+
+
+def warning_lines(err: str) -> list[str]:
+    return [line for line in err.splitlines() if line.startswith("warpsky: warning:")]
+
+
+def test_unsupported_render_vars_are_left_out_with_a_warning_each(tmp_path, scene, capsys):
+    stage = render_layer(tmp_path, scene, var("Ci", "C.*", "color3f", "lpe") + var("a", "a", "float")
+                         + var("diffuse", "C<RD>.*", "color3f", "lpe") + var("N", "N", "normal3f", "primvar")
+                         + var("id", "id", "int") + var("depth", "depth", "float"))
+    code, _, err = run(["render", stage, "--frames", "1", *FAST], capsys)
+    assert code == 0, err
+    lines = warning_lines(err)
+    assert len(lines) == 3, err
+    for name, reason in (("diffuse", "light path expression 'C<RD>.*' is not supported"),
+                         ("N", ".sourceType 'primvar' is not supported"),
+                         ("id", ".sourceName 'id' is not a warpsky output")):
+        (line,) = [line for line in lines if f"RenderVar /Render/Products/Vars/{name}" in line]
+        assert reason in line and line.endswith("left out of product /Render/Products/beauty"), line
+    image = read_exr(tmp_path / "out" / "beauty.0001.exr")
+    assert image.metadata["orderedChannels"].split(",")[-1] == "depth.Z"
+    assert not any(name.startswith(("diffuse", "N.", "id")) for name in image.channels)
+    assert image.channels["depth.Z"].max() > 0.0
+    code, stdout, _ = run(["info", stage, "--device", "cpu"], capsys)
+    assert code == 0
+    listed = [line for line in stdout.splitlines() if line.startswith("warning     RenderVar")]
+    assert len(listed) == 3 and "/Render/Products/Vars/id" in listed[2]
+
+
+def test_a_product_with_no_supported_render_var_is_refused_by_name(tmp_path, scene, capsys):
+    stage = render_layer(tmp_path, scene, var("diffuse", "C<RD>.*", "color3f", "lpe") + var("id", "id", "int"))
+    code, _, err = run(["render", stage, "--frames", "1", *FAST], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "/Render/Products/beauty: none of its 2 RenderVars is one warpsky writes" in err
+    assert "/Render/Products/Vars/diffuse" in err
+    assert not (tmp_path / "out").exists()
+    np.testing.assert_equal(warning_lines(err), [])
