@@ -107,3 +107,29 @@ def test_a_product_with_no_supported_render_var_is_refused_by_name(tmp_path, sce
     assert "/Render/Products/Vars/diffuse" in err
     assert not (tmp_path / "out").exists()
     np.testing.assert_equal(warning_lines(err), [])
+
+
+def test_renderman_channel_names_ci_a_and_z(tmp_path, scene, capsys):
+    """RenderMan's EXR driver writes ``Ci`` as R, G, B and the vars ``a`` and ``z`` as A and Z: the product's
+    channels are those a default render writes as R, G, B, A and depth.Z, pixel for pixel."""
+    stage = render_layer(tmp_path, scene, var("Ci", "Ci", "color3f") + var("a", "a", "float")
+                         + var("z", "z", "float") + var("tau", "transmittance", "color3f"))
+    code, stdout, err = run(["render", stage, "--frames", "1", *FAST], capsys)
+    assert code == 0, err
+    image = read_exr(tmp_path / "out" / "beauty.0001.exr")
+    assert image.metadata["orderedChannels"] == "R,G,B,A,Z,tau.R,tau.G,tau.B"
+    reference = tmp_path / "default.exr"
+    assert run(["render", scene, reference, "--res", "12x8", "--float", *FAST], capsys)[0] == 0
+    plain = read_exr(reference)
+    for ours, theirs in (("R", "R"), ("B", "B"), ("A", "A"), ("Z", "depth.Z"), ("tau.G", "transmittance.G")):
+        np.testing.assert_array_equal(image.channels[ours], plain.channels[theirs], err_msg=ours)
+    assert image.channels["A"].max() > 0.0
+    code, stdout, _ = run(["info", stage, "--device", "cpu"], capsys)
+    assert "/Render/Products/Vars/a: alpha -> A (float)" in stdout
+    assert "/Render/Products/Vars/z: depth -> Z (float)" in stdout
+
+
+def test_a_beauty_with_alpha_and_a_var_a_clash_by_channel(tmp_path, scene, capsys):
+    stage = render_layer(tmp_path, scene, var("Ci", "Ci", "color4f") + var("a", "a", "float"))
+    code, _, err = run(["render", stage, "--frames", "1", *FAST], capsys)
+    assert code == 2 and "both write channel 'A'" in err and "/Render/Products/Vars/a" in err, err

@@ -174,7 +174,7 @@ def test_info_lists_settings_products_and_vars(stage, capsys):
     code, stdout, err = run(["info", stage, "--device", "cpu"], capsys)
     assert code == 0, err
     for text in ("render      /Render/Settings", "product     /Render/Beauty -> b.####.exr",
-                 "/Render/Beauty/color: color -> R, G, B, A (half)", "/Render/Beauty/z: depth -> z.Z (float)"):
+                 "/Render/Beauty/color: color -> R, G, B, A (half)", "/Render/Beauty/z: depth -> Z (float)"):
         assert text in stdout
 
 

@@ -6,6 +6,9 @@ relationship names ``UsdRenderProduct`` prims. Each product writes one image per
 (``$F4``, ``$F`` and ``####`` mark the frame number), may override the settings' camera, resolution, pixel aspect
 ratio and data window, and lists its channels as ``orderedVars``: ``UsdRenderVar`` prims whose ``sourceName``
 names a warpsky output (:data:`SOURCES`) and whose ``dataType`` says how many components and what precision.
+A var's name (``driver:parameters:aov:name``, else the prim's name) is its EXR layer (``depth`` -> ``depth.Z``),
+except for the beauty, whose channels are plain ``R, G, B(, A)``, and the single-channel vars RenderMan names
+``a`` and ``z``, written as ``A`` and ``Z`` (:data:`PLAIN_CHANNELS`).
 
 A RenderVar warpsky cannot write (a light path expression other than the beauty's ``C.*``, a ``primvar`` or
 ``intrinsic`` source, an ``id`` or ``N`` that is no warpsky output) is left out of its product with one ``warning:``
@@ -32,6 +35,9 @@ SOURCES = {"color": "RGBA", "alpha": "A", "transmittance": "RGB", "depth": "Z"}
 #: Other spellings of the same sources: RenderMan's and Karma's beauty, light path expressions for the beauty.
 ALIASES = {"ci": "color", "c": "color", "rgba": "color", "beauty": "color", "c.*": "color", "z": "depth",
            "a": "alpha"}
+#: Single-channel RenderVars named so are written as the plain EXR channel, as RenderMan's EXR driver names them
+#: (``Ci`` + ``a`` + ``z`` -> ``R, G, B, A, Z``), not as a layer (``a.A``); any other var's name is its layer.
+PLAIN_CHANNELS = {"a": "A", "A": "A", "z": "Z", "Z": "Z"}
 #: ``dataType`` tokens by component count, and which of them are half floats.
 DATA_TYPES = {
     1: ("float", "half", "double"),
@@ -277,5 +283,7 @@ def read_var(var, sources: dict[str, str] = SOURCES) -> OutputVar:
     layer_attr = prim.GetAttribute("driver:parameters:aov:name")
     layer = str(layer_attr.Get()) if layer_attr and layer_attr.HasAuthoredValue() else prim.GetName()
     if name == "color":
-        layer = ""  # the beauty: unprefixed R, G, B, A
+        layer = ""  # the beauty (Ci, C.*, color): unprefixed R, G, B, A
+    elif len(components) == 1 and layer in PLAIN_CHANNELS:
+        layer, components = "", PLAIN_CHANNELS[layer]
     return OutputVar(layer, name, components, data_type in HALF_TYPES, path)
