@@ -20,10 +20,11 @@ from warpsky.output.exr import read_exr
 FAST = ["--device", "cpu", "--technique", "single_scatter", "--set", "step_length=1"]
 
 
-def render_layer(tmp_path, scene, body: str, *, settings: str = 'uniform int2 resolution = (12, 8)') -> str:
-    """``shot.usda``: ``scene`` as a sublayer under /Render/Settings (with ``settings`` lines) and its product
-    /Render/Products/beauty, whose RenderVars ``body`` defines under /Render/Products/Vars (``orderedVars`` names
-    them in order)."""
+def render_layer(tmp_path, scene, body: str, *, settings: str = "uniform int2 resolution = (12, 8)",
+                 product: str = "") -> str:
+    """``shot.usda``: ``scene`` as a sublayer under /Render/Settings (with the ``settings`` line) and its product
+    /Render/Products/beauty (with the ``product`` line), whose RenderVars ``body`` defines under
+    /Render/Products/Vars (``orderedVars`` names them in order)."""
     names = [line.split('"')[1] for line in body.splitlines() if line.strip().startswith("def RenderVar")]
     targets = ", ".join(f"</Render/Products/Vars/{name}>" for name in names)
     text = f"""\
@@ -49,6 +50,7 @@ def render_layer(tmp_path, scene, body: str, *, settings: str = 'uniform int2 re
                 {{
                     token productName = "{tmp_path / 'out' / 'beauty.$F4.exr'}"
                     rel orderedVars = [{targets}]
+                    {product}
                 }}
                 def Scope "Vars"
                 {{
@@ -133,3 +135,31 @@ def test_a_beauty_with_alpha_and_a_var_a_clash_by_channel(tmp_path, scene, capsy
     stage = render_layer(tmp_path, scene, var("Ci", "Ci", "color4f") + var("a", "a", "float"))
     code, _, err = run(["render", stage, "--frames", "1", *FAST], capsys)
     assert code == 2 and "both write channel 'A'" in err and "/Render/Products/Vars/a" in err, err
+
+
+def plan_line(stdout: str, name: str) -> str:
+    (line,) = [line.strip() for line in stdout.splitlines() if line.strip().startswith(name)]
+    return line
+
+
+def test_unauthored_resolution_is_the_usdrender_fallback(tmp_path, scene, capsys):
+    """A RenderSettings prim without ``resolution`` renders the schema's fallback 2048 x 1080 (as husk does), and so
+    do its products that author none; ``--res`` still wins, and a stage without RenderSettings keeps 512 wide."""
+    from pxr import Usd, UsdRender
+
+    memory = Usd.Stage.CreateInMemory()
+    assert tuple(UsdRender.Settings.Define(memory, "/S").GetResolutionAttr().Get()) == (2048, 1080)
+    stage = render_layer(tmp_path, scene, var("Ci", "Ci", "color4f"), settings="")
+    code, stdout, err = run(["info", stage, "--device", "cpu"], capsys)
+    assert code == 0, err
+    assert "resolution 2048x1080 (not authored: the UsdRender fallback)" in stdout
+    assert "-> " + str(tmp_path / "out" / "beauty.####.exr") + ": camera /World/Camera, resolution 2048x1080" in stdout
+    assert plan_line(stdout, "resolution") == "resolution  2048 x 1080"
+    code, stdout, _ = run(["info", stage, "--device", "cpu", "--res", "16x10"], capsys)
+    assert plan_line(stdout, "resolution") == "resolution  16 x 10"
+    stage = render_layer(tmp_path, scene, var("Ci", "Ci", "color4f"), settings="",
+                         product="uniform int2 resolution = (20, 10)")
+    code, stdout, _ = run(["info", stage, "--device", "cpu"], capsys)
+    assert plan_line(stdout, "resolution") == "resolution  20 x 10"
+    code, stdout, _ = run(["info", scene, "--device", "cpu"], capsys)
+    assert plan_line(stdout, "resolution") == "resolution  512 x 512"  # the camera's square film back

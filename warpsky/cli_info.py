@@ -46,7 +46,8 @@ def _render_spec_lines(spec, products) -> list[str]:
     """``warpsky info``'s lines on the render settings, their products and each product's vars."""
     if spec is None:
         return ["render      no RenderSettings prim: OUT, --camera and --res decide"]
-    res = "x".join(map(str, spec.resolution)) if spec.resolution else "not authored"
+    res = "x".join(map(str, spec.resolution)) + ("" if spec.resolution_authored else " (not authored: the "
+                                                  "UsdRender fallback)")
     lines = [f"render      {spec.path}: camera {spec.camera or 'not set'}, resolution {res}, pixel aspect "
              f"{spec.pixel_aspect:g}, dataWindowNDC {list(spec.data_window)}"
              + (f", purposes {', '.join(spec.purposes)}" if spec.purposes is not None else "")

@@ -70,7 +70,8 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         "else the first camera)")
     parser.add_argument("--res", type=resolution_arg, metavar="WxH",
                         help="image size; WIDTH alone keeps the camera's aspect (default: the stage's "
-                        "RenderSettings resolution, else 512 wide)")
+                        "RenderSettings or RenderProduct resolution, 2048x1080 where a RenderSettings prim leaves it "
+                        "unauthored; 512 wide without RenderSettings)")
     parser.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
     parser.add_argument("--technique", default=DEFAULT_TECHNIQUE, choices=technique_names(),
                         help=f"rendering technique (default: {DEFAULT_TECHNIQUE})")

@@ -25,7 +25,8 @@ What is read (the README's "USD attributes" section lists the same with units an
 - ``UsdGeomMesh``: opaque Lambertian surfaces such as terrain (:class:`~warpsky.scene.terrain.TerrainMesh`).
 - Prims with ``warpsky:kind = "heightFieldClouds"`` (``warpsky:hf:*``, ``warpsky:haze:*``) and
   ``warpsky:kind = "analyticFog"`` (``warpsky:fog:*``): :mod:`warpsky.scene.usd_scenery`.
-- ``UsdRenderSettings``: ``resolution`` and ``camera`` as defaults for the command line.
+- ``UsdRenderSettings``: ``resolution`` (the schema's 2048 x 1080 when unauthored) and ``camera`` as defaults for
+  the command line.
 """
 
 from __future__ import annotations

@@ -1,11 +1,12 @@
 """UsdRender prims: what a stage asks to be rendered, the way ``husk`` reads it.
 
 A ``UsdRenderSettings`` prim (``--settings PATH``, else the stage's ``renderSettingsPrimPath`` metadata, else the
-first one) gives the camera, resolution, pixel aspect ratio, data window and purposes, and its ``products``
-relationship names ``UsdRenderProduct`` prims. Each product writes one image per frame to its ``productName``
-(``$F4``, ``$F`` and ``####`` mark the frame number), may override the settings' camera, resolution, pixel aspect
-ratio and data window, and lists its channels as ``orderedVars``: ``UsdRenderVar`` prims whose ``sourceName``
-names a warpsky output (:data:`SOURCES`) and whose ``dataType`` says how many components and what precision.
+first one) gives the camera, resolution (UsdRender's fallback 2048 x 1080 when unauthored), pixel aspect ratio,
+data window and purposes, and its ``products`` relationship names ``UsdRenderProduct`` prims. Each product
+writes one image per frame to its ``productName`` (``$F4``, ``$F`` and ``####`` mark the frame number), may
+override the settings' camera, resolution, pixel aspect ratio and data window, and lists its channels as
+``orderedVars``: ``UsdRenderVar`` prims whose ``sourceName`` names a warpsky output (:data:`SOURCES`) and whose
+``dataType`` says how many components and what precision.
 A var's name (``driver:parameters:aov:name``, else the prim's name) is its EXR layer (``depth`` -> ``depth.Z``),
 except for the beauty, whose channels are plain ``R, G, B(, A)``, and the single-channel vars RenderMan names
 ``a`` and ``z``, written as ``A`` and ``Z`` (:data:`PLAIN_CHANNELS`).
@@ -85,6 +86,7 @@ class RenderSpec:
     products: tuple[ProductSpec, ...]
     notes: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()  # RenderVars left out of their products, one line each
+    resolution_authored: bool = True  # False: ``resolution`` is the schema's fallback
 
 
 def frame_placeholder(name: str, fps: float | None = None) -> str:
@@ -150,12 +152,13 @@ def read_render_spec(stage, settings_path: str | None, meters_per_unit: float = 
     for line in warnings:  # printed once every product is read: a later product's error is then the only line
         print(f"warpsky: warning: {line}", file=sys.stderr, flush=True)
     return RenderSpec(str(prim.GetPath()), *base, purposes, colorspace, tuple(products), tuple(notes),
-                      tuple(warnings))
+                      tuple(warnings), settings.GetResolutionAttr().HasAuthoredValue())
 
 
 def base_values(schema, inherited) -> tuple:
     """(camera, resolution, pixel aspect, data window) of a RenderSettingsBase prim; unauthored values come from
-    ``inherited`` (a product inherits its settings')."""
+    ``inherited`` (a product inherits its settings'), else from the schema: a RenderSettings prim without a
+    ``resolution`` renders UsdRender's fallback 2048 x 1080, as husk does."""
     prim = schema.GetPrim()
     path = prim.GetPath()
     camera, resolution, aspect, window = inherited if inherited is not None else (None, None, 1.0, (0.0, 0.0, 1.0, 1.0))
@@ -163,7 +166,7 @@ def base_values(schema, inherited) -> tuple:
     if targets:
         camera = str(targets[0])
     attr = schema.GetResolutionAttr()
-    if attr.HasAuthoredValue():
+    if attr.HasAuthoredValue() or inherited is None:  # unauthored on the settings: the schema's 2048 x 1080
         res = attr.Get()
         if res[0] <= 0 or res[1] <= 0:
             raise SceneError(f"{path}.resolution must be two positive integers, got {tuple(res)}")
