@@ -21,10 +21,10 @@ FAST = ["--device", "cpu", "--technique", "single_scatter", "--set", "step_lengt
 
 
 def render_layer(tmp_path, scene, body: str, *, settings: str = "uniform int2 resolution = (12, 8)",
-                 product: str = "") -> str:
-    """``shot.usda``: ``scene`` as a sublayer under /Render/Settings (with the ``settings`` line) and its product
-    /Render/Products/beauty (with the ``product`` line), whose RenderVars ``body`` defines under
-    /Render/Products/Vars (``orderedVars`` names them in order)."""
+                 product: str = "", name: str = "shot.usda") -> str:
+    """``name`` (a new file each time: USD keeps the layers it has opened): ``scene`` as a sublayer under
+    /Render/Settings (with the ``settings`` line) and its product /Render/Products/beauty (with the ``product``
+    line), whose RenderVars ``body`` defines under /Render/Products/Vars (``orderedVars`` names them in order)."""
     names = [line.split('"')[1] for line in body.splitlines() if line.strip().startswith("def RenderVar")]
     targets = ", ".join(f"</Render/Products/Vars/{name}>" for name in names)
     text = f"""\
@@ -59,7 +59,7 @@ def render_layer(tmp_path, scene, body: str, *, settings: str = "uniform int2 re
             }}
         }}
         """
-    path = tmp_path / "shot.usda"
+    path = tmp_path / name
     path.write_text(textwrap.dedent(text))
     return str(path)
 
@@ -158,8 +158,35 @@ def test_unauthored_resolution_is_the_usdrender_fallback(tmp_path, scene, capsys
     code, stdout, _ = run(["info", stage, "--device", "cpu", "--res", "16x10"], capsys)
     assert plan_line(stdout, "resolution") == "resolution  16 x 10"
     stage = render_layer(tmp_path, scene, var("Ci", "Ci", "color4f"), settings="",
-                         product="uniform int2 resolution = (20, 10)")
+                         product="uniform int2 resolution = (20, 10)", name="product.usda")
     code, stdout, _ = run(["info", stage, "--device", "cpu"], capsys)
     assert plan_line(stdout, "resolution") == "resolution  20 x 10"
     code, stdout, _ = run(["info", scene, "--device", "cpu"], capsys)
     assert plan_line(stdout, "resolution") == "resolution  512 x 512"  # the camera's square film back
+
+
+def test_res_scale_scales_the_authored_fallback_and_given_resolution(tmp_path, scene, capsys):
+    """``--res-scale`` is a percentage, as husk's: of the schema's fallback, of a product's resolution and of
+    ``--res``; each side rounds to the nearest pixel."""
+    stage = render_layer(tmp_path, scene, var("Ci", "Ci", "color4f"), settings="")
+    code, _, err = run(["render", stage, "--frames", "1", "--res-scale", "1", *FAST], capsys)
+    assert code == 0, err
+    image = read_exr(tmp_path / "out" / "beauty.0001.exr")
+    assert (image.width, image.height) == (20, 11)  # 2048 x 1080 at 1 %: 20.48 x 10.8
+    stage = render_layer(tmp_path, scene, var("Ci", "Ci", "color4f"), name="authored.usda")
+    for flags, size in ((["--res-scale", "50"], "6 x 4"), (["--res", "16x10", "--res-scale", "50"], "8 x 5"),
+                        (["--res", "10", "--res-scale", "150"], "15 x 15"), (["--res-scale", "100"], "12 x 8")):
+        code, stdout, err = run(["info", stage, "--device", "cpu", *flags], capsys)
+        assert code == 0 and plan_line(stdout, "resolution") == f"resolution  {size}", (flags, err)
+    code, stdout, _ = run(["info", scene, "--device", "cpu", "--res-scale", "25"], capsys)
+    assert plan_line(stdout, "resolution") == "resolution  128 x 128"  # warpsky's default 512 wide
+
+
+@pytest.mark.parametrize("value", ["0", "-50", "half", "nan", "inf"])
+def test_bad_res_scale_is_one_line_naming_the_flag(tmp_path, scene, capsys, value):
+    with pytest.raises(SystemExit) as stop:
+        run(["render", scene, tmp_path / "x.exr", "--res-scale", value, *FAST], capsys)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "--res-scale" in err and "percentage" in err and repr(value) in err
+    assert not (tmp_path / "x.exr").exists()

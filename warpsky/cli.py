@@ -26,7 +26,13 @@ from warpsky.batch.run import (
     run_batch,
 )
 from warpsky.cli_info import cmd_info
-from warpsky.cli_options import add_render_options, explicit_options, options_from_args, resolution_arg
+from warpsky.cli_options import (
+    add_render_options,
+    explicit_options,
+    options_from_args,
+    resolution_arg,
+    with_res_scale,
+)
 from warpsky.device import init_warp
 from warpsky.errors import UsageError, WarpskyError
 from warpsky.evaluation.cli import add_parser as add_bench
@@ -80,6 +86,7 @@ memory, work and Ctrl-C:
 examples:
   warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
   warpsky render shot.usda out/shot.####.exr --frames 1:48x2 --res 1280x720 --device cuda
+  warpsky render shot.usda --frames 1:48 --res-scale 25
   warpsky render usd_scenes/cumulus.usda out/fine.####.exr --frames 1 --target-error 0.02 --time-budget 60
   warpsky render usd_scenes/cumulus.usda out/fast.####.exr --frames 1 --technique slicing
   warpsky render usd_scenes/cumulus.usda out/ref.####.exr --frames 1 --technique path_tracer --spp 256 --seed 7
@@ -215,12 +222,13 @@ def shots(args) -> tuple[object, list[tuple[str, object]]]:
         if args.output is None:
             raise UsageError(f"OUT is required: {'render settings ' + spec.path if spec else 'the stage'} has no "
                              "RenderProduct to name the output")
-        return reader, [(args.output, options)]
+        return reader, [(args.output, with_res_scale(options, args.res_scale))]
     if args.output is not None and len(products) > 1:
         raise UsageError(f"OUT {args.output!r} names one file but {len(products)} products are rendered "
                          f"({', '.join(p.path for p in products)}); leave OUT out to write each product's "
                          "productName, or pick one with --product")
-    return reader, [(args.output or product.name, with_product(options, product, explicit=explicit_options(args)))
+    return reader, [(args.output or product.name,
+                     with_res_scale(with_product(options, product, explicit=explicit_options(args)), args.res_scale))
                     for product in products]
 
 

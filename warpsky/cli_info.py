@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from warpsky.api import open_stage, with_product
-from warpsky.cli_options import explicit_options, options_from_args
+from warpsky.cli_options import explicit_options, options_from_args, with_res_scale
 from warpsky.light.dome import mean_radiance, upper_hemisphere
 from warpsky.light.sun import has_horizon, sun_sunlight
 from warpsky.render import plan_frame
@@ -72,6 +72,7 @@ def cmd_info(args) -> int:
         products = [p for p in products if p.path in args.products]
     if products:  # the plan of the first product
         options = with_product(options, products[0], explicit=explicit_options(args))
+    options = with_res_scale(options, args.res_scale)
     span = reader.time_range()
     scene, plan = plan_frame(reader, args.time, options, check=False)
     out = [

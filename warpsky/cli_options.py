@@ -4,11 +4,13 @@ technique shorthands, and the :class:`~warpsky.render.RenderOptions` they make."
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 from warpsky.api import render_options
 from warpsky.errors import UsageError
 from warpsky.output.color import COLORSPACES
 from warpsky.output.png import DEFAULT_VIEW, check_view
+from warpsky.plan import DEFAULT_WIDTH
 from warpsky.registry import DEFAULT_TECHNIQUE, technique_class, technique_classes, technique_names
 from warpsky.resources import parse_size
 from warpsky.settings import field_kinds
@@ -51,6 +53,31 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _percent(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 < value < float("inf"):  # NaN fails too
+        raise argparse.ArgumentTypeError(f"expected a positive percentage of the resolution (50 = half the width "
+                                         f"and height), got {text!r}")
+    return value
+
+
+def with_res_scale(options, percent: float | None):
+    """``options`` with their resolution (``--res``, the stage's, else warpsky's default width) scaled by
+    ``percent`` (husk's ``--res-scale``: 50 renders half the width and height), each side rounded to the nearest
+    pixel and at least 1; a width-only resolution stays width-only (the height follows the camera)."""
+    if percent is None or percent == 100.0:
+        return options
+    width, height = options.resolution or (DEFAULT_WIDTH, None)
+
+    def scaled(pixels: int) -> int:
+        return max(1, int(pixels * percent / 100.0 + 0.5))
+
+    return replace(options, resolution=(scaled(width), None if height is None else scaled(height)))
+
+
 def _size(text: str) -> int:
     try:
         return parse_size(text)
@@ -72,6 +99,9 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         help="image size; WIDTH alone keeps the camera's aspect (default: the stage's "
                         "RenderSettings or RenderProduct resolution, 2048x1080 where a RenderSettings prim leaves it "
                         "unauthored; 512 wide without RenderSettings)")
+    parser.add_argument("--res-scale", type=_percent, metavar="PERCENT",
+                        help="scale the resolution (--res, else the stage's, else the default) by PERCENT, as husk's "
+                        "--res-scale: 50 renders half the width and height (default 100)")
     parser.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
     parser.add_argument("--technique", default=DEFAULT_TECHNIQUE, choices=technique_names(),
                         help=f"rendering technique (default: {DEFAULT_TECHNIQUE})")
