@@ -190,3 +190,63 @@ def test_bad_res_scale_is_one_line_naming_the_flag(tmp_path, scene, capsys, valu
     assert stop.value.code == 2 and len(err.strip().splitlines()) == 1, err
     assert "--res-scale" in err and "percentage" in err and repr(value) in err
     assert not (tmp_path / "x.exr").exists()
+
+
+def prim(kind: str, name: str, *lines: str, meta: str = "") -> str:
+    """A usda prim definition with one attribute per line."""
+    body = "".join(f"    {line}\n" for line in lines)
+    return f'def {kind} "{name}"{f" ({meta})" if meta else ""}\n{{\n{body}}}\n'
+
+
+#: A layer over the test scene with what a stage made for another renderer holds besides the sun and the cloud.
+SCENE_EXTRAS = "\n".join([
+    '#usda 1.0\n(\n    subLayers = [@./scene.usda@]\n    metersPerUnit = 1\n    upAxis = "Y"\n)\n',
+    'over "World"\n{',
+    prim("DomeLight", "Sky", "float inputs:intensity = 0.5"),
+    prim("DomeLight", "Fill", "float inputs:intensity = 0.25"),
+    prim("DomeLight", "Off", 'token visibility = "invisible"'),
+    prim("RectLight", "Key", "float inputs:width = 2"),
+    prim("SphereLight", "Bulb", "float inputs:radius = 0.5"),
+    prim("DiskLight", "Spot"), prim("CylinderLight", "Tube"),
+    prim("Cube", "Crate", "double size = 2"), prim("Sphere", "Ball"), prim("Cylinder", "Post"),
+    prim("Sphere", "Guide", 'uniform token purpose = "guide"'),
+    prim("Sphere", "Hidden", 'token visibility = "invisible"'),
+    prim("Plane", "Ground", 'uniform token axis = "Y"'), prim("Plane", "Pond", 'uniform token axis = "Y"'),
+    prim("Xform", "Props", meta="instanceable = true\n    references = </Prototypes/Prop>"),
+    prim("Xform", "Props2", meta="instanceable = true\n    references = </Prototypes/Prop>"),
+    "}\n",
+    'class "Prototypes"\n{', prim("Xform", "Prop", 'def Cone "Cap"\n    {\n    }'), "}\n",
+])
+
+
+def test_lights_and_gprims_warpsky_does_not_render_are_warned_about_once_each(tmp_path, scene, capsys):
+    stage = tmp_path / "extras.usda"
+    stage.write_text(SCENE_EXTRAS)
+    code, _, err = run(["render", stage, tmp_path / "x.####.exr", "--frames", "1:2", "--res", "8", *FAST], capsys)
+    assert code == 0, err
+    lines = warning_lines(err)
+    expected = {
+        "/World/Fill": "DomeLight /World/Fill ignored: only the first visible DomeLight (/World/Sky) lights",
+        "/World/Key": "RectLight /World/Key ignored: warpsky renders DistantLight suns and the first visible DomeLight",
+        "/World/Bulb": "SphereLight /World/Bulb ignored", "/World/Spot": "DiskLight /World/Spot ignored",
+        "/World/Tube": "CylinderLight /World/Tube ignored",
+        "/World/Crate": "Cube /World/Crate ignored: warpsky renders Mesh surfaces, one ground Plane and Volumes",
+        "/World/Ball": "Sphere /World/Ball ignored", "/World/Post": "Cylinder /World/Post ignored",
+        "/World/Pond": "Plane /World/Pond ignored: the first rendered Plane (/World/Ground) is the only ground",
+        "/World/Props/Cap": "Cone /World/Props/Cap ignored",
+    }
+    assert len(lines) == len(expected), "\n".join(lines)  # once each, over two frames and the first frame's plan
+    for path, text in expected.items():
+        (line,) = [line for line in lines if f" {path} " in line]
+        assert text in line, line
+    assert "in every other instance" in expected_line(lines, "/World/Props/Cap")
+    assert not any(name in err for name in ("/World/Off", "/World/Guide", "/World/Hidden", "/World/Props2"))
+    code, stdout, _ = run(["info", stage, "--device", "cpu"], capsys)
+    assert code == 0
+    assert len([line for line in stdout.splitlines() if line.startswith("warning     ")]) == len(expected)
+    assert "warning     RectLight /World/Key ignored" in stdout
+
+
+def expected_line(lines: list[str], path: str) -> str:
+    (line,) = [line for line in lines if f" {path} " in line]
+    return line

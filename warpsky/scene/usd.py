@@ -3,12 +3,11 @@
 Stage units are converted here: ``upAxis`` Y or Z and ``metersPerUnit`` become warpsky's right-handed Y-up metres.
 Every problem is a :class:`SceneError` naming the prim, attribute or file. :class:`StageReader` reads the camera,
 atmosphere and render settings itself; its parts read the rest: :mod:`warpsky.scene.usd_lights` (suns and dome),
-:mod:`warpsky.scene.usd_volumes` (voxel media),
-:mod:`warpsky.scene.usd_surfaces` (ground and stratiform layers), :mod:`warpsky.scene.usd_scenery` (meshes,
-height-field clouds, analytic fog) on :mod:`warpsky.scene.usd_prims` (transforms,
-visibility, typed attributes). :mod:`warpsky.scene.usd_composition` decides how the stage is composed (payloads
-loaded or not, variant selections, which purposes render: :class:`StageOptions`). pxr is imported inside the
-methods (a heavy import).
+:mod:`warpsky.scene.usd_volumes` (voxel media), :mod:`warpsky.scene.usd_surfaces` (ground and stratiform layers),
+:mod:`warpsky.scene.usd_scenery` (meshes, height-field clouds, analytic fog) and :mod:`warpsky.scene.usd_ignored`
+(warnings on what is not rendered), on :mod:`warpsky.scene.usd_prims` (transforms, visibility, typed attributes).
+:mod:`warpsky.scene.usd_composition` decides how the stage is composed (payloads loaded or not, variant selections,
+which purposes render: :class:`StageOptions`). pxr is imported inside the methods (a heavy import).
 
 What is read (the README's "USD attributes" section lists the same with units and defaults):
 
@@ -25,6 +24,8 @@ What is read (the README's "USD attributes" section lists the same with units an
 - ``UsdGeomMesh``: opaque Lambertian surfaces such as terrain (:class:`~warpsky.scene.terrain.TerrainMesh`).
 - Prims with ``warpsky:kind = "heightFieldClouds"`` (``warpsky:hf:*``, ``warpsky:haze:*``) and
   ``warpsky:kind = "analyticFog"`` (``warpsky:fog:*``): :mod:`warpsky.scene.usd_scenery`.
+- Lights and gprims of other kinds (``RectLight``, a second ``DomeLight``, ``Cube``, ``Sphere``, ...): one
+  ``warning:`` line each, :mod:`warpsky.scene.usd_ignored`.
 - ``UsdRenderSettings``: ``resolution`` (the schema's 2048 x 1080 when unauthored) and ``camera`` as defaults for
   the command line.
 """
@@ -42,6 +43,7 @@ import numpy as np
 from warpsky.errors import SceneError
 from warpsky.scene.model import Atmosphere, Camera, Scene
 from warpsky.scene.usd_composition import StageOptions, apply_variants, composition_summary
+from warpsky.scene.usd_ignored import IgnoredReading
 from warpsky.scene.usd_layers import composition_problem, open_layers, tf_message
 from warpsky.scene.usd_lights import LightReading
 from warpsky.scene.usd_scenery import SceneryReading
@@ -60,7 +62,7 @@ class TimeRange:
     authored: bool
 
 
-class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading):
+class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, IgnoredReading):
     """An open stage plus the caches that make reading many frames cheap.
 
     Args:
@@ -263,7 +265,7 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading):
         """Everything warpsky renders, at ``time`` (None: the earliest time sample, like usdrecord)."""
         resolution, _ = self.render_settings()
         suns = self.read_suns(time)
-        return Scene(
+        scene = Scene(
             camera=self.read_camera(camera_path, time),
             sun=suns[0] if suns else None,
             extra_suns=suns[1:],
@@ -280,3 +282,5 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading):
             heightfield_clouds=self.read_heightfield_clouds(time),
             fogs=self.read_fogs(time),
         )
+        self.warn_ignored(time)
+        return scene

@@ -1,0 +1,81 @@
+"""What a stage holds that warpsky does not render, named in one ``warning:`` line per prim instead of left out
+silently (a stage made for another renderer keeps its key light or its proxy spheres, and the TD should hear that
+they are not in the picture).
+
+Warned about, when visible (lights) or visible and of a rendered purpose (geometry):
+
+- a ``DomeLight`` after the first visible one (only that one lights the scene);
+- every other light: ``RectLight``, ``SphereLight``, ``DiskLight``, ``CylinderLight``, ``PortalLight``, ... (any
+  prim with UsdLux's ``LightAPI`` but the ``DistantLight`` suns and the dome), and a ``Mesh`` with
+  ``MeshLightAPI`` (its emission; the mesh itself renders as a surface);
+- gprims other than ``Mesh``, ``Plane`` and ``Volume`` (``Cube``, ``Sphere``, ``Cylinder``, ``Cone``, ``Capsule``,
+  ``Points``, ``BasisCurves``, ...), unless they carry a ``warpsky:kind``, and a ``Plane`` after the first (the
+  first is the ground); a ``PointInstancer``.
+
+Inside instances a prim is warned about once, at its first instance. pxr is imported inside the methods.
+"""
+
+from __future__ import annotations
+
+from warpsky.scene.usd_prims import StagePrims
+
+#: What warpsky renders, for the messages.
+RENDERED_LIGHTS = "DistantLight suns and the first visible DomeLight"
+RENDERED_GEOMETRY = "Mesh surfaces, one ground Plane and Volumes"
+
+
+class IgnoredReading(StagePrims):
+    """The stage reader's warnings about prims it does not render."""
+
+    def warn_ignored(self, time=None) -> None:
+        """One ``warning:`` line (once per reader) for every prim at ``time`` that looks rendered but is not."""
+        tc = self._time(time)
+        first: dict[str, str] = {}  # "dome" / "plane" -> the path of the one that is used
+        prototypes = set()
+        for prim in self._traverse():
+            reason = self._light_reason(prim, tc, first) or self._geometry_reason(prim, tc, first)
+            if reason is None:
+                continue
+            if prim.IsInstanceProxy():
+                key = prim.GetPrimInPrototype().GetPath()
+                if key in prototypes:
+                    continue
+                prototypes.add(key)
+                reason += " (and in every other instance of its prototype)"
+            self._warn(reason)
+
+    def _light_reason(self, prim, tc, first: dict[str, str]) -> str | None:
+        from pxr import UsdGeom, UsdLux
+
+        if not prim.HasAPI(UsdLux.LightAPI) or prim.IsA(UsdLux.DistantLight) or not self._visible(prim, tc):
+            return None
+        path = str(prim.GetPath())
+        if prim.IsA(UsdLux.DomeLight):
+            if "dome" not in first:
+                first["dome"] = path
+                return None
+            return f"DomeLight {path} ignored: only the first visible DomeLight ({first['dome']}) lights the scene"
+        if prim.IsA(UsdGeom.Mesh):
+            return (f"Mesh {path}: its light (MeshLightAPI) is ignored, warpsky's lights are {RENDERED_LIGHTS}; the "
+                    "mesh renders as an unlit surface")
+        kind = prim.GetTypeName() or "light"
+        return f"{kind} {path} ignored: warpsky renders {RENDERED_LIGHTS}"
+
+    def _geometry_reason(self, prim, tc, first: dict[str, str]) -> str | None:
+        from pxr import UsdGeom, UsdVol
+
+        if not (prim.IsA(UsdGeom.Gprim) or prim.IsA(UsdGeom.PointInstancer)):
+            return None
+        if prim.IsA(UsdGeom.Mesh) or prim.IsA(UsdVol.Volume) or not self._rendered(prim, tc):
+            return None
+        path = str(prim.GetPath())
+        if prim.IsA(UsdGeom.Plane):
+            if "plane" not in first:
+                first["plane"] = path
+                return None
+            return f"Plane {path} ignored: the first rendered Plane ({first['plane']}) is the only ground"
+        kind_attr = prim.GetAttribute("warpsky:kind")
+        if kind_attr and kind_attr.HasAuthoredValue():  # read by its kind (a stratiform layer, a fog, ...)
+            return None
+        kind = prim.GetTypeName()
+        return f"{kind} {path} ignored: warpsky renders {RENDERED_GEOMETRY}; make it a Mesh to render it"
