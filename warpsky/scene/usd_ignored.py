@@ -51,10 +51,9 @@ class IgnoredReading(StagePrims):
             return None
         path = str(prim.GetPath())
         if prim.IsA(UsdLux.DomeLight):
-            if "dome" not in first:
-                first["dome"] = path
-                return None
-            return f"DomeLight {path} ignored: only the first visible DomeLight ({first['dome']}) lights the scene"
+            used = first.setdefault("dome", path)
+            return None if used == path else (f"DomeLight {path} ignored: only the first visible DomeLight ({used}) "
+                                              "lights the scene")
         if prim.IsA(UsdGeom.Mesh):
             return (f"Mesh {path}: its light (MeshLightAPI) is ignored, warpsky's lights are {RENDERED_LIGHTS}; the "
                     "mesh renders as an unlit surface")
@@ -70,10 +69,9 @@ class IgnoredReading(StagePrims):
             return None
         path = str(prim.GetPath())
         if prim.IsA(UsdGeom.Plane):
-            if "plane" not in first:
-                first["plane"] = path
-                return None
-            return f"Plane {path} ignored: the first rendered Plane ({first['plane']}) is the only ground"
+            used = first.setdefault("plane", path)
+            return None if used == path else (f"Plane {path} ignored: the first rendered Plane ({used}) is the only "
+                                              "ground")
         kind_attr = prim.GetAttribute("warpsky:kind")
         if kind_attr and kind_attr.HasAuthoredValue():  # read by its kind (a stratiform layer, a fog, ...)
             return None
