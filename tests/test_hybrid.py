@@ -92,6 +92,22 @@ def test_target_error_is_met_and_honest(box, device):
     assert error < 0.2
 
 
+def test_target_reached_with_the_last_paths_is_not_reported_as_missed(box, device):
+    """Seven passes of 4 paths, checks scheduled at passes 2, 4 and 8: a target the first two checks miss and the
+    estimate after the seventh pass meets counts as reached, with no warning (it used to say "4.8%, above the
+    target 5.0%")."""
+    stage = box(extinction_scale=0.3)
+    settings = {"spp": 28, "samples_per_pass": 4, "seed": 3}
+    capped = hybrid(stage, device, 16, target_error=1e-4, **settings)
+    assert capped.stats["stopped_by"] == "spp" and capped.stats["passes"] == 7 and len(capped.warnings) == 1
+    final = capped.stats["error_estimate"]
+    layer = hybrid(stage, device, 16, target_error=final * 1.001, **settings)
+    assert layer.stats["passes"] == 7  # the checks at 2 and 4 missed the target: it is not met early
+    assert layer.stats["stopped_by"] == "target" and layer.stats["error_estimate"] == pytest.approx(final)
+    assert layer.warnings == []
+    np.testing.assert_array_equal(layer.radiance, capped.radiance)
+
+
 def test_time_budget_stops_and_says_so(box, device):
     """The budget stops the paths (after one pass per half at least, so there is an error estimate) and the layer
     carries one warning line saying so."""

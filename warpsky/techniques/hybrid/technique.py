@@ -301,9 +301,12 @@ class MultipleScattering:
         if s.target_error > 0.0 and stop != "target":
             if estimated_at != passes:  # paths were added since the last estimate (or there was none)
                 estimate = self.estimate(single_radiance, coverage, covered) if min(self.counts) > 0 else math.inf
-            reason = "the time budget" if stop == "time_budget" else f"the path cap (spp = {s.spp})"
-            warnings.append(f"hybrid stopped by {reason} after {done} paths per pixel with an estimated error of "
-                            f"{estimate:.1%}, above the target {s.target_error:.1%}")
+            if estimate <= s.target_error:
+                stop = "target"  # reached with the last paths, before the next scheduled check
+            else:
+                reason = "the time budget" if stop == "time_budget" else f"the path cap (spp = {s.spp})"
+                warnings.append(f"hybrid stopped by {reason} after {done} paths per pixel with an estimated error "
+                                f"of {estimate:.1%}, above the target {s.target_error:.1%}")
         stats = {"spp": done, "passes": passes, "stopped_by": stop, "error_estimate": estimate,
                  "target_error": s.target_error, "denoise_seconds": denoise_seconds,
                  "sanitised_values": sanitised, "tracking_steps": film.stats["tracking_steps"],
