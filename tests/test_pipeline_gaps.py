@@ -250,3 +250,38 @@ def test_lights_and_gprims_warpsky_does_not_render_are_warned_about_once_each(tm
 def expected_line(lines: list[str], path: str) -> str:
     (line,) = [line for line in lines if f" {path} " in line]
     return line
+
+
+@pytest.mark.parametrize("name,expected", [
+    ("ACES - ACEScg", "ACEScg"), ("lin_ap1", "ACEScg"), ("scene_linear", "ACEScg"),
+    ("Utility - Linear - sRGB", "lin_rec709"), ("Linear Rec.709 (sRGB)", "lin_rec709"), (" lin_srgb ", "lin_rec709"),
+])
+def test_opencolorio_names_and_aliases_select_the_output_space(tmp_path, scene, capsys, name, expected):
+    """renderingColorSpace by any of OpenColorIO's names, aliases or roles for the two spaces warpsky writes (the
+    built-in CG config: its scene_linear role is ACEScg), and the same names for --colorspace."""
+    stage = render_layer(tmp_path, scene, var("Ci", "C.*", "color3f", "lpe"),
+                         settings=f'uniform int2 resolution = (12, 8)\n                uniform token '
+                                  f'renderingColorSpace = "{name}"')
+    code, _, err = run(["render", stage, "--frames", "1", *FAST], capsys)
+    assert code == 0, err
+    assert read_exr(tmp_path / "out" / "beauty.0001.exr").metadata["colorspace"] == expected
+    out = tmp_path / "flag.exr"
+    code, _, err = run(["render", scene, out, "--res", "8", "--colorspace", name, *FAST], capsys)
+    assert code == 0 and read_exr(out).metadata["colorspace"] == expected, err
+
+
+def test_a_colour_space_warpsky_does_not_write_is_named_as_such(tmp_path, scene, capsys):
+    """Display P3's linear space exists in OpenColorIO but is not written: one line naming the prim, the value and
+    OpenColorIO's name for it; a name nobody knows is refused as unsupported; --colorspace the same, exit 2."""
+    for value, words in (("lin_p3d65", "OpenColorIO's 'Linear P3-D65'"), ("sRGB-ish", "is not supported")):
+        stage = render_layer(tmp_path, scene, var("Ci", "C.*", "color3f", "lpe"), name=f"{value}.usda",
+                             settings=f'uniform int2 resolution = (12, 8)\n                uniform token '
+                                      f'renderingColorSpace = "{value}"')
+        code, _, err = run(["render", stage, "--frames", "1", *FAST], capsys)
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+        assert f"/Render/Settings.renderingColorSpace '{value}'" in err and words in err and "ACEScg" in err
+        assert not (tmp_path / "out").exists()
+    with pytest.raises(SystemExit) as stop:
+        run(["render", scene, tmp_path / "x.exr", "--colorspace", "lin_p3d65", *FAST], capsys)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and len(err.strip().splitlines()) <= 2 and "Linear P3-D65" in err, err

@@ -19,16 +19,11 @@ from dataclasses import replace
 from pathlib import Path
 
 from warpsky.errors import SceneError, UsageError
-from warpsky.output.color import DEFAULT_COLORSPACE, check_colorspace
+from warpsky.output.color import DEFAULT_COLORSPACE, check_colorspace, resolve_colorspace
 from warpsky.output.products import FULL_WINDOW
 from warpsky.registry import DEFAULT_TECHNIQUE, aov_components
 from warpsky.render import RenderedImage, RenderOptions, plan_frame, render_image, write_frame
 from warpsky.scene.usd_render import ProductSpec, RenderSpec, read_render_spec
-
-#: renderingColorSpace tokens (USD's colour space names and OCIO's) and the output colour space they select.
-RENDERING_COLORSPACES = {"lin_rec709": "lin_rec709", "lin_rec709_scene": "lin_rec709",
-                         "linear rec.709 (srgb)": "lin_rec709", "acescg": "ACEScg", "lin_ap1": "ACEScg",
-                         "lin_ap1_scene": "ACEScg"}
 
 
 def render_options(*, technique: str = DEFAULT_TECHNIQUE, resolution=None, camera: str | None = None,
@@ -64,10 +59,12 @@ def with_render_settings(options: RenderOptions, spec: RenderSpec | None, *, exp
     if "purposes" not in explicit and spec.purposes is not None and options.stage is not None:
         changes["stage"] = replace(options.stage, purposes=spec.purposes)
     if "colorspace" not in explicit and spec.colorspace is not None:
-        token = RENDERING_COLORSPACES.get(spec.colorspace.strip().lower())
+        token, other = resolve_colorspace(spec.colorspace)
         if token is None:
-            raise SceneError(f"{spec.path}.renderingColorSpace {spec.colorspace!r} is not supported; expected one "
-                             f"of {', '.join(sorted(set(RENDERING_COLORSPACES)))}")
+            known = f" (OpenColorIO's {other!r}: warpsky does not write it)" if other else " is not supported"
+            raise SceneError(f"{spec.path}.renderingColorSpace {spec.colorspace!r}{known}; expected lin_rec709 or "
+                             "ACEScg, by any of their USD or OpenColorIO names (e.g. 'ACES - ACEScg', 'lin_ap1', "
+                             "'Utility - Linear - sRGB')")
         changes["colorspace"] = token
     return replace(options, **changes)
 

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 from warpsky.api import render_options
 from warpsky.errors import UsageError
-from warpsky.output.color import COLORSPACES
+from warpsky.output.color import colorspace_argument
 from warpsky.output.png import DEFAULT_VIEW, check_view
 from warpsky.plan import DEFAULT_WIDTH
 from warpsky.registry import DEFAULT_TECHNIQUE, technique_class, technique_classes, technique_names
@@ -131,9 +131,11 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     usd.add_argument("--purpose", dest="purposes", action="append", metavar="PURPOSE", help="render prims of "
                      "this purpose (repeatable: render, proxy, guide; prims of purpose default always render; "
                      "default: the settings' includedPurposes, else default and render)")
-    usd.add_argument("--colorspace", choices=tuple(COLORSPACES), default=None, help="primaries of the EXR's "
-                     "colours: lin_rec709 (default; sRGB primaries, D65) or ACEScg (AP1); written into the "
-                     "header's chromaticities (default: the settings' renderingColorSpace, else lin_rec709)")
+    usd.add_argument("--colorspace", type=colorspace_argument, default=None, metavar="NAME", help="primaries of "
+                     "the EXR's colours: lin_rec709 (default; sRGB primaries, D65) or ACEScg (AP1), by these or "
+                     "any of their OpenColorIO names ('ACES - ACEScg', 'lin_ap1', 'Utility - Linear - sRGB'); "
+                     "written into the header's chromaticities (default: the settings' renderingColorSpace, else "
+                     "lin_rec709)")
 
 
 def settings_from_args(args) -> dict[str, str]:

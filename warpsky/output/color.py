@@ -33,10 +33,58 @@ DEFAULT_COLORSPACE = "lin_rec709"
 VARIANCE_SUFFIX = "variance"
 
 
+#: Names USD and OpenColorIO give these spaces without a config at hand (lower case), the rest resolved through
+#: OpenColorIO's built-in CG config (:func:`resolve_colorspace`).
+KNOWN_NAMES = {"lin_rec709": "lin_rec709", "lin_rec709_scene": "lin_rec709", "linear rec.709 (srgb)": "lin_rec709",
+               "lin_srgb": "lin_rec709", "acescg": "ACEScg", "lin_ap1": "ACEScg", "lin_ap1_scene": "ACEScg",
+               "aces - acescg": "ACEScg"}
+
+
 def check_colorspace(name: str) -> str:
     if name not in COLORSPACES:
         raise UsageError(f"--colorspace {name!r}: expected one of {', '.join(COLORSPACES)}")
     return name
+
+
+@functools.cache
+def _builtin_config():
+    import PyOpenColorIO as ocio
+
+    return ocio.Config.CreateFromBuiltinConfig("cg-config-latest")
+
+
+def resolve_colorspace(name: str) -> tuple[str | None, str | None]:
+    """(the output colour space ``name`` selects, None) for any of its names or OpenColorIO aliases and roles in
+    the built-in CG config (``ACES - ACEScg``, ``Utility - Linear - sRGB``, ``scene_linear``, ...), case and
+    surrounding blanks ignored; (None, the config's name for it) for a colour space OpenColorIO knows that
+    warpsky does not write; (None, None) for a name nobody knows."""
+    key = name.strip().lower()
+    if key in KNOWN_NAMES:
+        return KNOWN_NAMES[key], None
+    try:
+        config = _builtin_config()
+    except ImportError:
+        return None, None
+    space = config.getColorSpace(name.strip())
+    if space is None:
+        return None, None
+    canonical = space.getName()
+    for ours, (_, ocio_name) in COLORSPACES.items():
+        if config.getColorSpace(ocio_name).getName() == canonical:
+            return ours, None
+    return None, canonical
+
+
+def colorspace_argument(text: str) -> str:
+    """argparse type of ``--colorspace``: any name :func:`resolve_colorspace` maps to an output colour space."""
+    import argparse
+
+    ours, other = resolve_colorspace(text)
+    if ours is not None:
+        return ours
+    known = f" (OpenColorIO's {other!r}, which warpsky does not write)" if other else ""
+    raise argparse.ArgumentTypeError(f"{text!r}{known}: expected {' or '.join(COLORSPACES)} or one of their "
+                                     "OpenColorIO names, e.g. 'ACES - ACEScg', 'Utility - Linear - sRGB'")
 
 
 @functools.cache
@@ -46,10 +94,9 @@ def matrix_from_rec709(name: str) -> np.ndarray:
     if name == DEFAULT_COLORSPACE:
         return np.eye(3)
     try:
-        import PyOpenColorIO as ocio
+        config = _builtin_config()
     except ImportError:
         raise UsageError(f"--colorspace {name} needs OpenColorIO: pip install 'warpsky[color]'") from None
-    config = ocio.Config.CreateFromBuiltinConfig("cg-config-latest")
     processor = config.getProcessor(COLORSPACES[DEFAULT_COLORSPACE][1], COLORSPACES[name][1])
     cpu = processor.getDefaultCPUProcessor()
     return np.array([cpu.applyRGB([float(v) for v in column]) for column in np.eye(3)], dtype=np.float64).T
