@@ -7,7 +7,7 @@ PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind family family-thick terrain valley-fog sunbeams sundogs
+	cumulus-wind family family-thick terrain valley-fog sunbeams sundogs gallery
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
@@ -34,6 +34,8 @@ help:
 	@echo "                          haze, to out/sunbeams/: frame 1 (exact), 4 drifting frames and a contact sheet,"
 	@echo "                          frame 1 with Max's thickness rule (about 3 min on 2 CPU cores)"
 	@echo "make sundogs            - cirrostratus of oriented plates and columns at sunset: sundogs, arcs, labelled PNG"
+	@echo "make gallery            - every shipped stage's hero frame to docs/gallery/ and docs/gallery.md, with each"
+	@echo "                          command, time and error estimate (about 7 min on 2 CPU cores)"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 
@@ -136,6 +138,12 @@ sunbeams: $(STAMP) data/terrain.usda
 	$(VENV)/bin/warpsky contact-sheet out/sunbeams/drift.####.exr -o out/sunbeams/drift_sheet.png
 	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/max-rule.####.exr --frames 1 --png \
 		--set heightfield.mode=max
+
+# The gallery: one hero frame per shipped stage (tools/make_gallery.py runs each warpsky render command).
+gallery: $(STAMP) data/cumulus.nvdb data/storm/.complete data/terrain.usda
+	$(PY) tools/make_stratocumulus.py --out data
+	$(PY) tools/make_sundogs.py --out data/sundogs
+	$(PY) tools/make_gallery.py
 
 clean:
 	rm -rf out data .pytest_cache

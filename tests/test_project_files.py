@@ -67,3 +67,24 @@ def test_make_help_and_the_readme_give_the_same_test_time():
     item = re.search(r"- `make test`: (\d+)–(\d+) minutes[^(]*\((\d+) tests", quickstart)
     assert item is not None, "the Quickstart's make test item: '- `make test`: A–B minutes ... (N tests'"
     assert (help_low, help_high, help_count) == item.groups(), (line, item.group(0))
+
+
+def test_the_gallery_has_a_shot_of_every_shipped_stage_and_shows_each():
+    """tools/make_gallery.py renders every stage in usd_scenes/ (a new stage cannot be left out of it), and
+    docs/gallery.md shows a picture and the command of every shot, with the figures its last render recorded."""
+    import json
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tools"))
+    from make_gallery import SHOTS, command
+
+    assert {s.stage for s in SHOTS} == {p.name for p in (ROOT / "usd_scenes").glob("*.usda")}
+    assert len({s.name for s in SHOTS}) == len(SHOTS)
+    page = (ROOT / "docs" / "gallery.md").read_text()
+    figures = json.loads((ROOT / "docs" / "gallery" / "figures.json").read_text())
+    for shot in SHOTS:
+        assert (ROOT / "docs" / "gallery" / f"{shot.name}.png").is_file(), shot.name
+        assert f"](gallery/{shot.name}.png)" in page, shot.name
+        assert figures[shot.name]["command"].split()[:3] == command(shot, Path("x"))[:3]
+        assert figures[shot.name]["command"] in page
+        assert f"render {float(figures[shot.name]['seconds']):.1f} s" in page
