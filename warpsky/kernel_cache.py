@@ -1,11 +1,16 @@
 """Whether a technique's Warp kernels were ever compiled on this machine, so a first run can say it is compiling.
 
-Warp compiles a kernel module on its first launch (30-60 s per module on a 2-core CPU) and keeps the result in its
+Warp compiles a kernel module on its first launch (seconds to a minute, by the size of its generated C++; see
+:func:`compile_seconds`) and keeps the result in its
 kernel cache, one ``wp_<module name>_<hash>`` entry per module in ``wp.config.kernel_cache_dir``; without a word
 a first render on a fresh machine spends minutes there. A factory-made kernel's module name carries a hash of its
 code, so an entry under that name means this code was compiled here. The check is coarse on purpose and cheap (no
 code generation): a technique counts as compiled once any variant of its kernel factories is cached, so the first
 run is announced and a later one that compiles one more variant (another scene feature) is not.
+
+The notice says how long: Warp's code generator (no compiler) writes the C++ of one variant of each of the
+technique's kernel factories, and :func:`compile_seconds` turns its size into seconds by a line fitted to
+measured compiles (``benchmarks/bench_compile.py``).
 """
 
 from __future__ import annotations
@@ -53,5 +58,54 @@ def compile_notice(technique: str) -> str | None:
     entries = {p.name for p in cache.iterdir()} if cache.is_dir() else set()
     if not names or any(entry.startswith(f"wp_{name}_") for entry in entries for name in names):
         return None
-    return (f"compiling Warp kernels for {technique} (first run on this machine: 30-60 s per kernel module on 2 "
-            f"CPU cores; then loaded from {cache})")
+    seconds = compile_estimate(technique)
+    how_long = "" if seconds is None else f", about {seconds:.0f} s on this CPU"
+    return f"compiling Warp kernels for {technique} (first run on this machine{how_long}; then loaded from {cache})"
+
+
+#: Compile time of one CPU kernel module with Warp's bundled Clang [s] = intercept + slope * megabytes of its
+#: generated C++, fitted by ``benchmarks/bench_compile.py`` on 2 CPU cores (Warp 1.19): see that file for the
+#: modules, sizes and times. Other CPUs scale both by their speed; a CUDA module compiles with NVRTC instead.
+COMPILE_INTERCEPT_S = 0.0
+COMPILE_SECONDS_PER_MB = 7.9
+
+
+def compile_seconds(source_bytes: int) -> float:
+    """Estimated seconds to compile a module whose generated C++ has ``source_bytes`` bytes, on the CPU."""
+    return COMPILE_INTERCEPT_S + COMPILE_SECONDS_PER_MB * source_bytes / 1e6
+
+
+def module_source_bytes(module) -> int | None:
+    """Bytes of the C++ Warp generates for ``module`` on the CPU (its code generator only; about 0.1-0.5 s), or
+    None where this Warp's code generator cannot be called this way."""
+    import warp as wp
+
+    try:
+        options = module.resolve_options(wp.config) | {"output_arch": None}
+        module.get_module_hash(options.get("block_dim"))
+        return len(module._run_codegen(options, True)[0])
+    except Exception:  # an internal interface of Warp: without it the notice gives no estimate
+        return None
+
+
+def compile_estimate(technique: str) -> float | None:
+    """Estimated seconds of a first frame's compiles of ``technique``: one variant (the first) of each of its kernel
+    factories, each module's :func:`compile_seconds` by its generated size; None without factories or a size."""
+    import importlib
+
+    from warpsky.kernel_variants import registered_factories, variants
+
+    modules = technique_kernel_modules(technique)
+    for module in modules:
+        importlib.import_module(module)
+    total, counted = 0.0, 0
+    for factory, domains in registered_factories():
+        if factory.__module__ not in modules:
+            continue
+        built = factory(**variants(domains)[0])
+        for kernel in built if isinstance(built, tuple) else (built,):
+            size = module_source_bytes(kernel.module)
+            if size is None:
+                return None
+            total, counted = total + compile_seconds(size), counted + 1
+    return total if counted else None
