@@ -285,3 +285,20 @@ def test_a_colour_space_warpsky_does_not_write_is_named_as_such(tmp_path, scene,
         run(["render", scene, tmp_path / "x.exr", "--colorspace", "lin_p3d65", *FAST], capsys)
     err = capsys.readouterr().err
     assert stop.value.code == 2 and len(err.strip().splitlines()) <= 2 and "Linear P3-D65" in err, err
+
+
+def test_a_centimetre_stage_warns_that_extinction_is_per_metre(tmp_path, homogeneous_npy, capsys):
+    """metersPerUnit 0.01: extinction stays per metre, where Hydra renderers read density per stage unit, so one
+    warning names the field and the factor 100 that renders as they do; warpsky info lists it; a metre stage says
+    nothing."""
+    cm = write_stage(tmp_path / "cm.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)),
+                     mpu=0.01)
+    code, stdout, err = run(["info", str(cm), "--device", "cpu"], capsys)
+    lines = [line for line in warning_lines(err) if "per metre" in line]
+    assert code == 0 and len(lines) == 1, err
+    assert "metersPerUnit is 0.01" in lines[0] and "warpsky:extinctionScale = 100" in lines[0]
+    assert "/World/" in lines[0] and any("per metre" in line for line in stdout.splitlines()
+                                          if line.startswith("warning"))
+    metre = write_stage(tmp_path / "m.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
+    code, _, err = run(["info", str(metre), "--device", "cpu"], capsys)
+    assert code == 0 and "per metre" not in err

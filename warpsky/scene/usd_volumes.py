@@ -110,6 +110,7 @@ class VolumeReading(StagePrims):
             else:
                 local_from_index = grid.local_from_index
             species = None if name in ANALYTIC_FIELDS else name
+            self._warn_extinction_unit(field_prim)
             scale = np.full(3, self._float_attr(field_prim, "warpsky:extinctionScale", tc, 1.0))
             quantity = self._token_attr(field_prim, "warpsky:quantity", tc, "extinction")
             if quantity not in QUANTITIES:
@@ -190,6 +191,18 @@ class VolumeReading(StagePrims):
             kwargs["wind"] = tuple((self.world_from_stage[:3, :3] / self.meters_per_unit @ vector).tolist())
         spec = DetailSpec(**kwargs)  # validates ranges; its SceneError names the Volume and the attribute
         return spec if spec.active else None
+
+    def _warn_extinction_unit(self, field_prim) -> None:
+        """One warning per field of a stage whose unit is not the metre: warpsky reads extinction per metre
+        whatever metersPerUnit says (a rescaled stage keeps its optical depths), where Hydra renderers (Karma,
+        Cycles, Storm) read a density per stage unit; it names the extinctionScale that renders as they do."""
+        mpu = self.meters_per_unit
+        if abs(mpu - 1.0) <= 1e-9:
+            return
+        self._warn(f"field {field_prim.GetPath()}: extinction is read per metre (field value x "
+                   f"warpsky:extinctionScale, 1/m) although the stage's metersPerUnit is {mpu:g}; renderers that read "
+                   f"density per stage unit see it {1.0 / mpu:g} times denser: author warpsky:extinctionScale "
+                   f"= {1.0 / mpu:g} (times the current scale) for their look")
 
     def _extent_placement(self, prim, tc, shape) -> np.ndarray:
         """Index-to-local matrix of a dense grid filling the Volume's authored extent, cell-centred."""
