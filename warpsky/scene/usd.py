@@ -101,6 +101,7 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
         self.stage = stage
         self.up_axis = str(UsdGeom.GetStageUpAxis(stage))
         self.meters_per_unit = float(UsdGeom.GetStageMetersPerUnit(stage))
+        self.meters_per_unit_authored = bool(UsdGeom.StageHasAuthoredMetersPerUnit(stage))
         if not (self.meters_per_unit > 0.0 and math.isfinite(self.meters_per_unit)):
             raise SceneError(f"stage {self.path}: metersPerUnit must be positive, got {self.meters_per_unit}")
         if self.up_axis not in ("Y", "Z"):

@@ -194,13 +194,16 @@ class VolumeReading(StagePrims):
 
     def _warn_extinction_unit(self, field_prim) -> None:
         """One warning per field of a stage whose unit is not the metre: warpsky reads extinction per metre
-        whatever metersPerUnit says (a rescaled stage keeps its optical depths), where Hydra renderers (Karma,
-        Cycles, Storm) read a density per stage unit; it names the extinctionScale that renders as they do."""
+        whatever metersPerUnit says (a rescaled stage keeps its optical depths), where a renderer that takes a
+        density per scene unit (Hydra delegates are not told the unit) does not; it names the extinctionScale
+        that renders as such a renderer does."""
         mpu = self.meters_per_unit
         if abs(mpu - 1.0) <= 1e-9:
             return
         self._warn(f"field {field_prim.GetPath()}: extinction is read per metre (field value x "
-                   f"warpsky:extinctionScale, 1/m) although the stage's metersPerUnit is {mpu:g}; renderers that read "
+                   f"warpsky:extinctionScale, 1/m) although the stage's metersPerUnit is {mpu:g}"
+                   f"{'' if self.meters_per_unit_authored else ' (unauthored: USD fallback)'}; "
+                   "renderers that read "
                    f"density per stage unit see it {1.0 / mpu:g} times denser: author warpsky:extinctionScale "
                    f"= {1.0 / mpu:g} (times the current scale) for their look")
 
