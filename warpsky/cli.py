@@ -121,6 +121,22 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"warpsky: error: {message} (see '{self.prog} --help')\n")
 
 
+def add_output_files(render) -> None:
+    """The render options for what is written beside each EXR and in what precision."""
+    render.add_argument("--png", action="store_true", help="also write a tone-mapped PNG preview per frame")
+    render.add_argument("--exposure", type=float, default=None, metavar="EV",
+                        help="preview exposure in stops over a white surface facing the sun mapped to 1 (default: "
+                        "from the frame, its 99.5th-percentile luminance mapped to 3, 87%% of white)")
+    render.add_argument("--view", default=DEFAULT_VIEW, metavar="VIEW",
+                        help=f"the PNG preview's view of OpenColorIO's {DISPLAY!r} (default {DEFAULT_VIEW!r}; also "
+                        "'Un-tone-mapped', 'Video (colorimetric)', or 'simple', warpsky's own curve)")
+    render.add_argument("--float", dest="full_float", action="store_true", help="write RGBA as 32-bit float "
+                        "instead of half")
+    render.add_argument("--deep", action="store_true", help="also write a deep scanline EXR beside each frame "
+                        "(NAME.deep.exr: R, G, B, A, Z, ZBack; a point sample per layer, media, surfaces and sky, "
+                        "that flattens to the frame's beauty)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="warpsky",
@@ -143,15 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: each RenderProduct's productName)")
     render.add_argument("--frames", metavar="SPEC", help="frames to render (usdrecord grammar, see below)")
     add_render_options(render)
-    render.add_argument("--png", action="store_true", help="also write a tone-mapped PNG preview per frame")
-    render.add_argument("--exposure", type=float, default=None, metavar="EV",
-                        help="preview exposure in stops over a white surface facing the sun mapped to 1 (default: "
-                        "from the frame, its 99.5th-percentile luminance mapped to 3, 87%% of white)")
-    render.add_argument("--view", default=DEFAULT_VIEW, metavar="VIEW",
-                        help=f"the PNG preview's view of OpenColorIO's {DISPLAY!r} (default {DEFAULT_VIEW!r}; also "
-                        "'Un-tone-mapped', 'Video (colorimetric)', or 'simple', warpsky's own curve)")
-    render.add_argument("--float", dest="full_float", action="store_true", help="write RGBA as 32-bit float "
-                        "instead of half")
+    add_output_files(render)
     render.add_argument("--overwrite", action="store_true", help="render frames whose EXR is already up to date")
     render.add_argument("--retries", type=int, default=1, metavar="N",
                         help="retry a failed frame N times (default 1; input errors are not retried)")

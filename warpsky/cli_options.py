@@ -169,6 +169,7 @@ def options_from_args(args) -> object:
         purposes=("default", *args.purposes) if args.purposes else None,
         half=not getattr(args, "full_float", False),
         png=getattr(args, "png", False),
+        deep=getattr(args, "deep", False),
         exposure=getattr(args, "exposure", None),
         view=check_view(getattr(args, "view", DEFAULT_VIEW)),
         max_memory=args.max_memory,

@@ -91,7 +91,8 @@ def merge_by_depth(layers: list[Layer], far: float) -> Layer:
         "lookups": int(sum(layer.stats.get("lookups", 0) for layer in layers)),
         "parts": [layer.stats for layer in layers],
     }
-    return Layer(out_radiance, out_trans, out_depth, stats, out_aovs, warnings=gathered_warnings(layers))
+    return Layer(out_radiance, out_trans, out_depth, stats, out_aovs, warnings=gathered_warnings(layers),
+                 parts=list(layers))
 
 
 def pixel_directions(camera, width: int, height: int) -> np.ndarray:

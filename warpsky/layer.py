@@ -22,6 +22,8 @@ class Layer:
         aovs: Extra per-pixel outputs by name, e.g. ``variance`` (H, W, 3) of a Monte Carlo pixel mean.
         warnings: One line each about what the render could not do as asked (a target error not reached, a camera
             under the terrain); the frame gathers them from every layer.
+        parts: The layers a depth merge combined (per pixel in the order of their depths), for deep output; empty
+            for a layer drawn as one.
     """
 
     radiance: np.ndarray
@@ -30,6 +32,7 @@ class Layer:
     stats: dict = field(default_factory=dict)
     aovs: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    parts: list = field(default_factory=list)
 
 
 def gathered_warnings(layers) -> list[str]:

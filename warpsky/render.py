@@ -62,6 +62,7 @@ class RenderOptions:
         camera: Camera prim path, or None for the default camera.
         half: Write RGBA as half floats (False: 32-bit float).
         png: Also write a tone-mapped PNG preview next to the EXR.
+        deep: Also write a deep scanline EXR next to it (:mod:`warpsky.output.deep`).
         exposure: Preview exposure in stops on top of the sun-based normalisation (a white surface facing the sun ->
             1); None: automatic, from the frame's luminance (:func:`~warpsky.output.png.auto_exposure`).
         view: The preview's display view (:mod:`warpsky.output.png`).
@@ -81,6 +82,7 @@ class RenderOptions:
     camera: str | None = None
     half: bool = True
     png: bool = False
+    deep: bool = False
     exposure: float | None = None
     view: str = DEFAULT_VIEW
     max_memory: int | None = None
@@ -125,6 +127,7 @@ class RenderedImage:
     timings: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     origin: tuple[int, int] = (0, 0)  # the frame's first pixel in image pixels (negative with overscan)
+    deep: object = None  # the image's deep samples (DeepPixels) when the options ask for them
 
     @property
     def width(self) -> int:
@@ -231,7 +234,7 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
         {"plan": json.loads(plan.settings_json()), "res": [plan.width, plan.height], "camera": options.camera,
          "half": options.half, "inputs": inputs, "outputs": [list(o.channels) for o in options.outputs or ()],
          "pixelAspect": options.pixel_aspect, "window": list(options.data_window), "colorspace": options.colorspace,
-         "stage": repr(options.stage)},
+         "stage": repr(options.stage), **({"deep": True} if options.deep else {})},
         sort_keys=True,
     )
     return hashlib.sha256(key.encode()).hexdigest()[:16]
@@ -261,10 +264,22 @@ def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stag
     preview = linear.rgba[y:y + plan.height, x:x + plan.width, :3]
     image = RenderedImage(frame, {}, {}, {}, None, preview, scene, plan, layer, timings,
                           warnings=gathered_warnings(layers), origin=(bounds[0], bounds[1]))
+    if options.deep:
+        image.deep = image_deep(layers, scene, options, (x, y, plan.width, plan.height))
     capped = capped_paths_warning(quality_stats(layer), plan)
     if capped:
         image.warnings.append(capped)
     return output_image(image, options, stage=stage, time_code=time_code)
+
+
+def image_deep(layers, scene: Scene, options: RenderOptions, region: tuple[int, int, int, int]):
+    """The deep samples of the image's pixels (``region`` x, y, width, height of the rendered frame) in the output
+    colour space."""
+    from warpsky.output.color import DEFAULT_COLORSPACE, matrix_from_rec709
+    from warpsky.output.deep import deep_from_layers
+
+    matrix = None if options.colorspace == DEFAULT_COLORSPACE else matrix_from_rec709(options.colorspace)
+    return deep_from_layers(layers, scene.camera.far, matrix, region)
 
 
 def output_image(image: RenderedImage, options: RenderOptions, *, stage, time_code) -> RenderedImage:
@@ -328,6 +343,12 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
     timings, layer = image.timings, image.layer
     started = _time.perf_counter()
     exr = _write_image(image, out_path)
+    if image.deep is not None:
+        from warpsky.output.deep import deep_path, write_deep_exr
+        from warpsky.output.exr import header_attributes
+
+        header = header_attributes(image.metadata, {k: v for k, v in image.attributes.items()})
+        write_deep_exr(deep_path(out_path), image.deep, header=header)
     for path, sibling_options in siblings:
         sibling = output_image(image, sibling_options, stage=stage, time_code=time_code)
         sibling.metadata["settingsHash"] = settings_hash(plan, sibling_options, scene)

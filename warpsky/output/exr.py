@@ -87,6 +87,21 @@ def write_exr(
     return write_channels(path, channels, metadata=metadata, compression=compression)
 
 
+def header_attributes(metadata: dict | None, standard: dict | None = None) -> dict:
+    """OpenEXR header attributes: ``standard`` as given, then ``metadata`` under ``warpsky/<key>`` (str, int or
+    float; bools as 0/1)."""
+    header = dict(standard or {})
+    for key, value in (metadata or {}).items():
+        if isinstance(value, (bool, np.bool_)):
+            value = int(value)
+        elif isinstance(value, (np.integer, np.floating)):
+            value = value.item()
+        if not isinstance(value, (str, int, float)):
+            raise OutputError(f"metadata {key!r}: expected str, int or float, got {type(value).__name__}")
+        header[METADATA_PREFIX + key] = value
+    return header
+
+
 def write_channels(
     path: str | os.PathLike,
     channels: dict[str, np.ndarray],
@@ -121,15 +136,7 @@ def write_channels(
         x0, y0 = origin
         header["dataWindow"] = (np.array([x0, y0], np.int32), np.array([x0 + width - 1, y0 + height - 1], np.int32))
         header["displayWindow"] = (np.array([0, 0], np.int32), np.array([display[0] - 1, display[1] - 1], np.int32))
-    header.update(standard or {})
-    for key, value in (metadata or {}).items():
-        if isinstance(value, (bool, np.bool_)):
-            value = int(value)
-        elif isinstance(value, (np.integer, np.floating)):
-            value = value.item()
-        if not isinstance(value, (str, int, float)):
-            raise OutputError(f"metadata {key!r}: expected str, int or float, got {type(value).__name__}")
-        header[METADATA_PREFIX + key] = value
+    header.update(header_attributes(metadata, standard))
     channels = {name: np.ascontiguousarray(values) for name, values in channels.items()}
     return atomic_write(path, lambda tmp: OpenEXR.File(header, channels).write(str(tmp)))
 
