@@ -121,7 +121,7 @@ def render_stage(stage: str | os.PathLike, time: float | None = None, *, product
     ``frame.aovs``, the output's ``channels``, its ``metadata`` and OpenEXR ``attributes``.
     """
     reader, scene, plan, options = _planned(stage, time, product, settings_prim, kwargs)
-    return render_image(scene, plan, options, stage=reader.path, time_code=time)
+    return render_image(scene, plan, options, stage=reader.path, time_code=time, reader=reader)
 
 
 def render_to_exr(stage: str | os.PathLike, out: str | os.PathLike, time: float | None = None, *,
@@ -132,7 +132,7 @@ def render_to_exr(stage: str | os.PathLike, out: str | os.PathLike, time: float 
         raise UsageError(f"output {str(out)!r} must end in .exr")
     reader, scene, plan, options = _planned(stage, time, product, settings_prim, kwargs)
     Path(out).parent.mkdir(parents=True, exist_ok=True)
-    return write_frame(scene, plan, Path(out), options, stage=reader.path, time_code=time).exr
+    return write_frame(scene, plan, Path(out), options, stage=reader.path, time_code=time, reader=reader).exr
 
 
 __all__ = ["FULL_WINDOW", "open_stage", "render_options", "render_stage", "render_to_exr", "with_product",

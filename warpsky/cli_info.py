@@ -8,6 +8,7 @@ from warpsky.api import open_stage, with_product
 from warpsky.cli_options import explicit_options, options_from_args, with_res_scale
 from warpsky.light.dome import mean_radiance, upper_hemisphere
 from warpsky.light.sun import has_horizon, sun_sunlight
+from warpsky.motion import blurs, shutter_interval
 from warpsky.render import plan_frame
 from warpsky.resources import resource_lines
 
@@ -87,6 +88,9 @@ def cmd_info(args) -> int:
         f"camera      {cam.name} ({cam.projection.value}) at {np.round(cam.position, 3).tolist()} m looking "
         f"{np.round(cam.forward, 4).tolist()}, clip {cam.near:g}..{cam.far:g} m"
     )
+    open_, close = shutter_interval(scene, options)
+    out.append(f"motion blur shutter {open_:g} .. {close:g} frames, {options.motion_samples} sub-frames (a frame "
+               f"costs {options.motion_samples})" if blurs(scene, options, 0.0) else "motion blur off (shutter closed)")
     for medium in scene.media:
         lo, hi = medium.world_corners().min(axis=0), medium.world_corners().max(axis=0)
         out.append(f"volume      {medium.name}: {medium.source}")

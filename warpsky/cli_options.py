@@ -4,10 +4,12 @@ technique shorthands, and the :class:`~warpsky.render.RenderOptions` they make."
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import replace
 
 from warpsky.api import render_options
 from warpsky.errors import UsageError
+from warpsky.motion import DEFAULT_SAMPLES
 from warpsky.output.color import colorspace_argument
 from warpsky.output.png import DEFAULT_VIEW, check_view
 from warpsky.plan import DEFAULT_WIDTH
@@ -92,6 +94,28 @@ def _setting(text: str) -> tuple[str, str]:
     return key.strip(), value.strip()
 
 
+def shutter_arg(text: str) -> tuple[float, float]:
+    """argparse type of ``--shutter OPEN:CLOSE``: frames relative to the frame, close at or after open."""
+    try:
+        open_, close = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected OPEN:CLOSE in frames, e.g. --shutter=-0.25:0.25, got "
+                                         f"{text!r}") from None
+    if not (math.isfinite(open_) and math.isfinite(close) and close >= open_):
+        raise argparse.ArgumentTypeError(f"expected finite OPEN:CLOSE with CLOSE >= OPEN, got {text!r}")
+    return open_, close
+
+
+def motion_samples_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 256:
+        raise argparse.ArgumentTypeError(f"expected a whole number of sub-frames from 1 to 256, got {text!r}")
+    return value
+
+
 def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera", metavar="PATH", help="camera prim path (default: render settings' camera, "
                         "else the first camera)")
@@ -115,6 +139,12 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         "(= --set target_error=E; default 0.05)")
     parser.add_argument("--time-budget", type=_seconds, metavar="S",
                         help="hybrid: stop adding paths after S seconds per frame (= --set time_budget=S)")
+    parser.add_argument("--shutter", type=shutter_arg, metavar="OPEN:CLOSE", help="motion blur over this "
+                        "shutter, in frames relative to each frame (e.g. --shutter=-0.25:0.25; default: the camera's "
+                        "shutter:open/close; 0:0 renders without blur)")
+    parser.add_argument("--motion-samples", type=motion_samples_arg, default=DEFAULT_SAMPLES, metavar="N",
+                        help=f"sub-frames averaged over an open shutter (default {DEFAULT_SAMPLES}; a blurred frame "
+                        "costs N frames)")
     parser.add_argument("--max-memory", type=_size, metavar="SIZE", help="most memory a frame may use on the "
                         "host and on a GPU each, e.g. 8G or 512M (default: what is free)")
     parser.add_argument("--no-work-limit", dest="work_limit", action="store_false", help="render frames whose "
@@ -173,6 +203,8 @@ def options_from_args(args) -> object:
         exposure=getattr(args, "exposure", None),
         view=check_view(getattr(args, "view", DEFAULT_VIEW)),
         max_memory=args.max_memory,
+        shutter=args.shutter,
+        motion_samples=args.motion_samples,
         work_limit=args.work_limit,
     )
 

@@ -16,8 +16,17 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.composite import Frame, composite
-from warpsky.errors import SceneError
+from warpsky.errors import SceneError, UsageError
 from warpsky.layer import Layer, gathered_warnings
+from warpsky.motion import (
+    DEFAULT_SAMPLES,
+    add_stats,
+    average_frames,
+    blurs,
+    shutter_interval,
+    sub_frame_options,
+    sub_frame_times,
+)
 from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_frame
 from warpsky.output.exr import write_channels
 from warpsky.output.png import DEFAULT_VIEW, auto_exposure, shown_view, write_png
@@ -63,6 +72,8 @@ class RenderOptions:
         half: Write RGBA as half floats (False: 32-bit float).
         png: Also write a tone-mapped PNG preview next to the EXR.
         deep: Also write a deep scanline EXR next to it (:mod:`warpsky.output.deep`).
+        shutter: (open, close) [frames] overriding the camera's shutter (:mod:`warpsky.motion`); None: the camera's.
+        motion_samples: Sub-frames of a frame whose shutter is open (:mod:`warpsky.motion`).
         exposure: Preview exposure in stops on top of the sun-based normalisation (a white surface facing the sun ->
             1); None: automatic, from the frame's luminance (:func:`~warpsky.output.png.auto_exposure`).
         view: The preview's display view (:mod:`warpsky.output.png`).
@@ -83,6 +94,8 @@ class RenderOptions:
     half: bool = True
     png: bool = False
     deep: bool = False
+    shutter: tuple[float, float] | None = None
+    motion_samples: int = DEFAULT_SAMPLES
     exposure: float | None = None
     view: str = DEFAULT_VIEW
     max_memory: int | None = None
@@ -234,7 +247,9 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
         {"plan": json.loads(plan.settings_json()), "res": [plan.width, plan.height], "camera": options.camera,
          "half": options.half, "inputs": inputs, "outputs": [list(o.channels) for o in options.outputs or ()],
          "pixelAspect": options.pixel_aspect, "window": list(options.data_window), "colorspace": options.colorspace,
-         "stage": repr(options.stage), **({"deep": True} if options.deep else {})},
+         "stage": repr(options.stage), **({"deep": True} if options.deep else {}),
+         **({"shutter": list(shutter_interval(scene, options)), "motionSamples": options.motion_samples}
+            if scene is not None and blurs(scene, options, 0.0) else {})},
         sort_keys=True,
     )
     return hashlib.sha256(key.encode()).hexdigest()[:16]
@@ -245,13 +260,43 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
     started = _time.perf_counter()
     scene, plan = plan_frame(reader, time_code, options)
     timings = {"plan": _time.perf_counter() - started}
-    return write_frame(scene, plan, out_path, options, stage=reader.path, time_code=time_code, timings=timings)
+    return write_frame(scene, plan, out_path, options, stage=reader.path, time_code=time_code, timings=timings,
+                       reader=reader)
 
 
 def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stage, time_code,
-                 timings: dict[str, float] | None = None) -> RenderedImage:
+                 timings: dict[str, float] | None = None, reader=None) -> RenderedImage:
     """Render a planned frame (``plan_frame``'s scene and plan, of the stage at ``stage`` and ``time_code``) into
-    memory: composited, converted to the output colour space, its channels cropped to the data window."""
+    memory: composited, converted to the output colour space, its channels cropped to the data window. With the
+    stage's ``reader`` and an open shutter, the frame is the average of sub-frames (:mod:`warpsky.motion`)."""
+    if reader is not None and blurs(scene, options, time_code):
+        image = blurred_image(reader, scene, plan, options, time_code, timings)
+    else:
+        image = rendered_image(scene, plan, options, timings)
+    return output_image(image, options, stage=stage, time_code=time_code)
+
+
+def blurred_image(reader, scene: Scene, plan: RenderPlan, options: RenderOptions, time_code,
+                  timings) -> RenderedImage:
+    """The average of the frame's sub-frames over its shutter (:mod:`warpsky.motion`), as the frame at
+    ``time_code`` (its scene and plan: camera matrices and metadata)."""
+    if options.deep:
+        raise UsageError("--deep with motion blur (an open shutter) is not supported; render with --shutter 0:0")
+    seeded = "seed" in json.loads(plan.settings_json())
+    images = []
+    for k, t in enumerate(sub_frame_times(time_code, shutter_interval(scene, options), options.motion_samples)):
+        sub = sub_frame_options(options, k, seeded)
+        images.append(rendered_image(*plan_frame(reader, t, sub), sub, None))
+    warnings = [line for image in images for line in image.warnings]
+    layer = replace(images[0].layer, stats=add_stats([image.layer for image in images]))
+    spent = {key: sum(image.timings.get(key, 0.0) for image in images) for key in images[0].timings}
+    return replace(images[0], frame=average_frames([image.frame for image in images]), scene=scene, plan=plan,
+                   preview=np.mean([image.preview for image in images], axis=0), layer=layer,
+                   timings={**dict(timings or {}), **spent}, warnings=list(dict.fromkeys(warnings)))
+
+
+def rendered_image(scene: Scene, plan: RenderPlan, options: RenderOptions, timings) -> RenderedImage:
+    """The frame at the scene's time, composited and converted, before its output channels are chosen."""
     timings = dict(timings or {})
     started = _time.perf_counter()
     bounds = render_bounds(options.data_window, plan.width, plan.height)
@@ -269,7 +314,7 @@ def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stag
     capped = capped_paths_warning(quality_stats(layer), plan)
     if capped:
         image.warnings.append(capped)
-    return output_image(image, options, stage=stage, time_code=time_code)
+    return image
 
 
 def image_deep(layers, scene: Scene, options: RenderOptions, region: tuple[int, int, int, int]):
@@ -335,11 +380,11 @@ def _write_image(image: RenderedImage, path: Path) -> Path:
 
 
 def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderOptions, *, stage, time_code,
-                timings: dict[str, float] | None = None, siblings=()) -> FrameResult:
+                timings: dict[str, float] | None = None, siblings=(), reader=None) -> FrameResult:
     """Render a planned frame (``plan_frame``'s scene and plan, of the stage at ``stage`` and ``time_code``) and
     write ``out_path`` atomically, plus the PNG preview when asked; ``siblings`` ((path, options) pairs of
     products with the same camera and resolution) are written from the same render."""
-    image = render_image(scene, plan, options, stage=stage, time_code=time_code, timings=timings)
+    image = render_image(scene, plan, options, stage=stage, time_code=time_code, timings=timings, reader=reader)
     timings, layer = image.timings, image.layer
     started = _time.perf_counter()
     exr = _write_image(image, out_path)
@@ -409,6 +454,9 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
     }
     for key, value in quality_stats(layer).items():
         metadata[_camel(key)] = value
+    if blurs(scene, options, time_code):
+        metadata["shutterOpen"], metadata["shutterClose"] = (float(v) for v in shutter_interval(scene, options))
+        metadata["motionSamples"] = int(options.motion_samples)
     if scene.sun is not None:
         metadata["sun"] = scene.sun.name
     parts = layer.stats.get("parts", [layer.stats])

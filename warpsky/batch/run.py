@@ -129,7 +129,7 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
         if _hook_fails(job.time_code, attempt):
             raise RuntimeError(f"{FAIL_FRAMES_ENV} asks frame {job.time_code:g} to fail (test hook)")
         result = write_frame(scene, plan, Path(job.out), job.options, stage=reader.path, time_code=job.time_code,
-                             siblings=[(Path(out), options) for out, options in job.siblings])
+                             siblings=[(Path(out), options) for out, options in job.siblings], reader=reader)
         record.timings.update(result.timings)
         record.timings["technique"] = result.render_seconds
         record.quality = result.quality

@@ -45,6 +45,8 @@ class Camera:
         projection: :class:`Projection`, perspective by default (USD ``token projection``).
         pixel_aspect: Width / height of an image pixel as displayed (RenderSettings ``pixelAspectRatio``): the
             film back is conformed to ``width * pixel_aspect / height``.
+        shutter: (open, close) of the shutter in frames relative to the frame's time code (USD's
+            ``shutter:open`` / ``shutter:close``; equal: no motion blur).
     """
 
     name: str
@@ -59,6 +61,7 @@ class Camera:
     far: float = 1.0e6
     projection: Projection = Projection.PERSPECTIVE
     pixel_aspect: float = 1.0
+    shutter: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self):
         object.__setattr__(self, "position", _vec3(self.position, f"camera {self.name}: position"))

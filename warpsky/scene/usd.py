@@ -211,7 +211,16 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
             clip.min * self.meters_per_unit,
             clip.max * self.meters_per_unit,
             str(token),
+            shutter=self._shutter(usd_camera, path, tc),
         )
+
+    @staticmethod
+    def _shutter(usd_camera, path, tc) -> tuple[float, float]:
+        """The camera's (shutter:open, shutter:close) [frames]; close before open is an error naming both."""
+        shutter = (float(usd_camera.GetShutterOpenAttr().Get(tc)), float(usd_camera.GetShutterCloseAttr().Get(tc)))
+        if not (all(math.isfinite(v) for v in shutter) and shutter[1] >= shutter[0]):
+            raise SceneError(f"camera {path}: shutter:close must be at or after shutter:open, got {shutter}")
+        return shutter
 
     def _warn(self, message: str) -> None:
         """Print ``warpsky: warning: <message>`` to stderr, once per reader."""
