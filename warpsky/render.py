@@ -387,13 +387,12 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
     image = render_image(scene, plan, options, stage=stage, time_code=time_code, timings=timings, reader=reader)
     timings, layer = image.timings, image.layer
     started = _time.perf_counter()
-    exr = _write_image(image, out_path)
-    if image.deep is not None:
+    if image.deep is not None:  # first: the flat frame, written last, is what marks the frame finished
         from warpsky.output.deep import deep_path, write_deep_exr
         from warpsky.output.exr import header_attributes
 
-        header = header_attributes(image.metadata, {k: v for k, v in image.attributes.items()})
-        write_deep_exr(deep_path(out_path), image.deep, header=header)
+        write_deep_exr(deep_path(out_path), image.deep, header=header_attributes(image.metadata, image.attributes))
+    exr = _write_image(image, out_path)
     for path, sibling_options in siblings:
         sibling = output_image(image, sibling_options, stage=stage, time_code=time_code)
         sibling.metadata["settingsHash"] = settings_hash(plan, sibling_options, scene)
