@@ -27,6 +27,8 @@ class PinholeCamera:
     width: int
     height: int
     orthographic: int  # 1: parallel rays from the view window, 0: rays from the eye
+    opaque: wp.array2d(dtype=float)  # per pixel, the depth [m along the view axis] of the nearest opaque surface
+    has_opaque: int  # 1: camera rays end at ``opaque`` (a surface another pass draws), 0: at the far clip
 
 def pinhole_camera(camera: Camera, width: int, height: int) -> PinholeCamera:
     """Kernel view of a camera already conformed to (width, height)."""
@@ -42,6 +44,10 @@ def pinhole_camera(camera: Camera, width: int, height: int) -> PinholeCamera:
     cam.width = int(width)
     cam.height = int(height)
     cam.orthographic = int(camera.projection is Projection.ORTHOGRAPHIC)
+    opaque = camera.opaque_depth
+    if opaque is not None and tuple(opaque.shape) == (int(height), int(width)):
+        cam.opaque = opaque
+        cam.has_opaque = 1
     return cam
 
 
@@ -99,4 +105,6 @@ def primary_ray(cam: PinholeCamera, row: int, col: int, fx: float, fy: float) ->
     out.cos_axis = wp.dot(out.direction, camera_forward(cam))
     out.t_near = cam.near / out.cos_axis
     out.t_far = cam.far / out.cos_axis
+    if cam.has_opaque != 0:
+        out.t_far = wp.max(wp.min(cam.far, cam.opaque[row, col]), cam.near) / out.cos_axis
     return out

@@ -67,6 +67,11 @@ def media_scene(frame):
         drawn["ground"] = None
         if scene.atmosphere is None:
             drawn["sun"] = visible_sun(scene.sun)
+    if frame.limit is not None:  # an opaque surface drawn in front of the media: camera rays end there
+        import warp as wp
+
+        opaque = wp.array(np.ascontiguousarray(frame.limit, dtype=np.float32), dtype=float, device=frame.device)
+        drawn["camera"] = dataclasses.replace(scene.camera, opaque_depth=opaque)
     if drawn:
         scene = dataclasses.replace(scene, **drawn)
     return frame.light.lit_at_media(scene) if frame.light.through_air else scene

@@ -5,6 +5,7 @@ World space is warpsky's: Y up, metres (the stage's up axis and units already co
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 from dataclasses import dataclass
@@ -47,6 +48,9 @@ class Camera:
             film back is conformed to ``width * pixel_aspect / height``.
         shutter: (open, close) of the shutter in frames relative to the frame's time code (USD's
             ``shutter:open`` / ``shutter:close``; equal: no motion blur).
+        opaque_depth: None, or a Warp (height, width) array of the depth [m along the view axis] of the nearest
+            opaque surface per pixel, which a pass in front of the media drew: camera rays of the kernels end there
+            (:func:`~warpsky.camera_rays.primary_ray`). Set for one frame by the media pass; not compared.
     """
 
     name: str
@@ -62,6 +66,7 @@ class Camera:
     projection: Projection = Projection.PERSPECTIVE
     pixel_aspect: float = 1.0
     shutter: tuple[float, float] = (0.0, 0.0)
+    opaque_depth: object = dataclasses.field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         object.__setattr__(self, "position", _vec3(self.position, f"camera {self.name}: position"))
@@ -104,11 +109,7 @@ class Camera:
             v_ap = h_ap / aspect
         else:
             h_ap = v_ap * aspect
-        return Camera(
-            self.name, self.position, self.rotation, self.focal_length, h_ap, v_ap,
-            self.horizontal_aperture_offset, self.vertical_aperture_offset, self.near, self.far, self.projection,
-            self.pixel_aspect,
-        )
+        return dataclasses.replace(self, horizontal_aperture=h_ap, vertical_aperture=v_ap)
 
     def pixel_direction(self, x: float, y: float, width: int, height: int) -> np.ndarray:
         """World-space unit ray direction through image position (x, y) in pixels (row 0 at the top).

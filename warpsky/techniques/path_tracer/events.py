@@ -28,10 +28,12 @@ from warpsky.techniques.path_tracer.tracking import Transmittance, reduced_with_
 
 oriented_mixture_correction = oriented_correction_function(medium_phase)[1]
 
-#: What ends a ray before the far distance: nothing, the ground plane, or sea level (the air's floor).
+#: What ends a ray before the far distance: nothing, the ground plane, sea level (the air's floor), or an opaque
+#: surface another pass draws behind the media (a mesh: the camera ray ends there, the path with nothing more).
 SURFACE_NONE = wp.constant(0)
 SURFACE_GROUND = wp.constant(1)
 SURFACE_SEA = wp.constant(2)
+SURFACE_OPAQUE = wp.constant(3)
 #: "No end": flights after the first bounce and rays toward the sun run this far [m].
 UNBOUNDED = wp.constant(1.0e30)
 #: A ground plane at sea level and sea level itself are one surface: distances within this relative difference
@@ -192,8 +194,8 @@ def surface_functions(has_ground: bool):
                 if reaches_ground(ground, origin, d):
                     out.t = ground_distance(ground, origin, d)
                     out.surface = SURFACE_GROUND
-        elif first.surface == SURFACE_GROUND:
-            out.surface = SURFACE_GROUND
+        elif first.surface == SURFACE_GROUND or first.surface == SURFACE_OPAQUE:
+            out.surface = first.surface
         if air.enabled != 0 and d[1] < 0.0:
             t_sea = sea_level_distance(air, origin, d)
             if t_sea < out.t * (1.0 - SURFACE_TIE):

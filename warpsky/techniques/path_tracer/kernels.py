@@ -34,6 +34,7 @@ from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.events import (
     SURFACE_GROUND,
     SURFACE_NONE,
+    SURFACE_OPAQUE,
     UNBOUNDED,
     PathState,
     RayEnd,
@@ -178,10 +179,12 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
             if bounce == 0:
                 lit = sun_on and settings.multiple_only == 0
             if flight.scattered == 0 and end.surface != SURFACE_GROUND:
-                path.radiance = path.radiance + escaped_radiance(air, sun, settings.environment, path.direction,
-                                                                 path.throughput, bounce, lit)
-                if wp.static(has_dome):
-                    path.radiance = path.radiance + escaped_dome(air, dome, path.direction, path.throughput, bounce)
+                if end.surface != SURFACE_OPAQUE:  # the surface's pass draws what lies there and beyond
+                    path.radiance = path.radiance + escaped_radiance(air, sun, settings.environment,
+                                                                     path.direction, path.throughput, bounce, lit)
+                    if wp.static(has_dome):
+                        path.radiance = path.radiance + escaped_dome(air, dome, path.direction, path.throughput,
+                                                                     bounce)
                 break
             p = path.origin + flight.t * path.direction
             if bounce == 0:
@@ -239,6 +242,10 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
         if air.enabled != 0:
             t_end = UNBOUNDED
         first = primary_end(air, ground, origin, view, t_end)
+        if cam.has_opaque != 0:  # a surface drawn by another pass ends the camera ray (primary_ray's t_far)
+            if cam.opaque[row, col] < cam.far and ray.t_far - ray.t_near <= first.t:
+                first.t = ray.t_far - ray.t_near
+                first.surface = SURFACE_OPAQUE
         out = SampleResult()
         steps = int(0)
         tracked = int(0)
