@@ -119,3 +119,16 @@ def test_merged_layers_are_samples_of_their_own_in_depth_order_and_the_air_spans
     np.testing.assert_allclose(flatten(deep), composite(layers, FAR).rgba, rtol=1e-5, atol=1e-7)
     alone = deep_from_layers([air, sky], FAR)  # nothing bounded: the air is a point at the far clip
     np.testing.assert_allclose(alone.channels["Z"], FAR)
+
+
+def test_a_missing_deep_file_renders_the_frame_again(tmp_path, homogeneous_npy, capsys):
+    """A batch with --deep resumes a frame whose flat EXR is up to date but whose deep EXR is gone."""
+    stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
+    args = ["render", stage, tmp_path / "f.####.exr", "--frames", "1", "--res", "8", "--deep", *FAST]
+    code, _, err = run(args, capsys)
+    deep = tmp_path / "f.0001.deep.exr"
+    assert code == 0 and deep.is_file(), err
+    stamp = (tmp_path / "f.0001.exr").stat().st_mtime_ns
+    deep.unlink()
+    code, _, err = run(args, capsys)
+    assert code == 0 and deep.is_file() and (tmp_path / "f.0001.exr").stat().st_mtime_ns != stamp, err

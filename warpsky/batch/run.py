@@ -149,7 +149,12 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
 
 
 def _up_to_date(job: FrameJob, scene, plan) -> bool:
-    """Whether the job's EXR and its siblings' exist, open, hold their channels and carry their settings hash."""
+    """Whether the job's EXR and its siblings' exist, open, hold their channels and carry their settings hash (and
+    the deep EXR beside the job's exists, when it is asked for)."""
+    from warpsky.output.deep import deep_path
+
+    if job.options.deep and not Path(deep_path(job.out)).is_file():
+        return False
     outputs = [(job.out, job.options, plan.settings_hash)]
     outputs += [(out, options, settings_hash(plan, options, scene)) for out, options in job.siblings]
     return all(validate_exr(out, required_channels=options.required_channels,
