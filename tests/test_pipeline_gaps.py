@@ -302,3 +302,40 @@ def test_a_centimetre_stage_warns_that_extinction_is_per_metre(tmp_path, homogen
     metre = write_stage(tmp_path / "m.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
     code, _, err = run(["info", str(metre), "--device", "cpu"], capsys)
     assert code == 0 and "per metre" not in err
+
+
+def test_a_stage_without_a_camera_is_framed_by_a_free_camera(tmp_path, homogeneous_npy, capsys):
+    """No Camera prim and no RenderSettings camera (OpenUSD's DomeLight test stages, made for usdview's free
+    camera): as usdrecord does, a free camera frames the stage's bounds, its bounding sphere filling the frame's
+    height with a 50 mm lens on 36 x 24 mm, looking along -Z; one warning names the stage and the camera."""
+    import math
+
+    stage = tmp_path / "nocam.usda"
+    stage.write_text(f"""#usda 1.0
+(
+    metersPerUnit = 1
+    upAxis = "Y"
+)
+
+def Volume "Cloud"
+{{
+    float3[] extent = [(0, -10, -10), (20, 10, 10)]
+    rel field:density = </Cloud/density>
+
+    def OpenVDBAsset "density"
+    {{
+        asset filePath = @{homogeneous_npy}@
+        float warpsky:extinctionScale = 0.05
+    }}
+}}
+""")
+    out = tmp_path / "x.exr"
+    code, _, err = run(["render", stage, out, "--res", "12x8", *FAST], capsys)
+    assert code == 0 and out.is_file(), err
+    lines = [line for line in warning_lines(err) if "free camera" in line]
+    assert len(lines) == 1 and str(stage) in lines[0] and "as usdrecord does" in lines[0]
+    distance = math.sqrt(3.0) * 10.0 / math.sin(math.atan(12.0 / 50.0))
+    code, stdout, _ = run(["info", stage, "--device", "cpu"], capsys)
+    camera_line = next(line for line in stdout.splitlines() if line.startswith("camera "))
+    assert f"[10.0, 0.0, {round(distance, 3)}]" in camera_line, camera_line
+    assert read_exr(out).channels["A"].astype(np.float64).max() > 0.1  # the volume is in view

@@ -172,6 +172,8 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
     def read_camera(self, camera_path: str | None = None, time=None) -> Camera:
         from pxr import UsdGeom
 
+        if camera_path is None and self.render_settings()[1] is None and not self.camera_paths():
+            return self._free_camera(self._time(time))
         path = self.resolve_camera_path(camera_path)
         prim = self.stage.GetPrimAtPath(path)
         tc = self._time(time)
@@ -221,6 +223,28 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
         if not (all(math.isfinite(v) for v in shutter) and shutter[1] >= shutter[0]):
             raise SceneError(f"camera {path}: shutter:close must be at or after shutter:open, got {shutter}")
         return shutter
+
+    def _free_camera(self, tc) -> Camera:
+        """A stage without a camera is seen as usdrecord sees it, through a free camera framing the bounds of what
+        it renders: a 50 mm lens on a 36 x 24 mm back, looking along warpsky's -Z at the bounds' centre from where
+        their bounding sphere fills the height of the frame (one warning says so)."""
+        from pxr import UsdGeom
+
+        cache = UsdGeom.BBoxCache(tc, [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], useExtentsHint=True)
+        box = cache.ComputeWorldBound(self.stage.GetPseudoRoot()).ComputeAlignedRange()
+        if box.IsEmpty():
+            raise SceneError(f"stage {self.path} has no camera (UsdGeomCamera prim) and no bounds to frame; add a "
+                             "camera or pass --camera")
+        corners = np.array([[*box.GetMin(), 1.0], [*box.GetMax(), 1.0]]) @ self.world_from_stage.T
+        centre = 0.5 * (corners[0, :3] + corners[1, :3])
+        radius = max(0.5 * float(np.linalg.norm(corners[1, :3] - corners[0, :3])), 1e-3)
+        distance = radius / math.sin(math.atan(12.0 / 50.0))
+        position = centre + np.array([0.0, 0.0, distance])
+        self._warn(f"stage {self.path} has no camera: rendering through a free camera framing its bounds, as "
+                   f"usdrecord does (at {np.round(position, 3).tolist()} m looking along -Z, 50 mm); add a Camera or "
+                   "pass --camera to choose the view")
+        return Camera("free camera", position, np.eye(3), 50.0, 36.0, 24.0, near=max(1e-3 * distance, 1e-3),
+                      far=distance + 10.0 * radius)
 
     def _warn(self, message: str) -> None:
         """Print ``warpsky: warning: <message>`` to stderr, once per reader."""
