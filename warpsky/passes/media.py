@@ -68,9 +68,10 @@ def media_scene(frame):
         if scene.atmosphere is None:
             drawn["sun"] = visible_sun(scene.sun)
     if frame.limit is not None:  # an opaque surface drawn in front of the media: camera rays end there
-        import warp as wp
+        from warpsky import device_buffers
 
-        opaque = wp.array(np.ascontiguousarray(frame.limit, dtype=np.float32), dtype=float, device=frame.device)
+        # kept by contents, so a batch's frames with the same view keep its address (and slicing its CUDA graph)
+        opaque = device_buffers.upload("media:opaque", np.asarray(frame.limit, dtype=np.float32), float, frame.device)
         drawn["camera"] = dataclasses.replace(scene.camera, opaque_depth=opaque)
     if drawn:
         scene = dataclasses.replace(scene, **drawn)
