@@ -339,3 +339,28 @@ def Volume "Cloud"
     camera_line = next(line for line in stdout.splitlines() if line.startswith("camera "))
     assert f"[10.0, 0.0, {round(distance, 3)}]" in camera_line, camera_line
     assert read_exr(out).channels["A"].astype(np.float64).max() > 0.1  # the volume is in view
+
+
+def test_many_ignored_prims_of_one_type_are_counted_in_one_line(tmp_path, scene, capsys):
+    """Twelve Spheres (OpenUSD's sphereGrid has a hundred): five lines name the first five, one more counts the
+    other seven with the first and last of their paths; warpsky info lists the same six."""
+    from warpsky.scene.usd_ignored import WARNED_PER_TYPE
+
+    spheres = "\n".join(f'    def Sphere "S{k:02d}"\n    {{\n        double radius = 1\n    }}' for k in range(12))
+    stage = tmp_path / "grid.usda"
+    stage.write_text(f"""#usda 1.0
+(
+    subLayers = [@./{scene.name}@]
+)
+
+over "World"
+{{
+{spheres}
+}}
+""")
+    code, _, err = run(["render", stage, tmp_path / "x.exr", "--res", "8", *FAST], capsys)
+    lines = [line for line in warning_lines(err) if "Sphere" in line]
+    assert code == 0 and len(lines) == WARNED_PER_TYPE + 1, err
+    assert lines[-1].endswith("7 more Sphere prims ignored as the 5 above (/World/S05 .. /World/S11)"), lines[-1]
+    code, stdout, _ = run(["info", stage, "--device", "cpu"], capsys)
+    assert len([line for line in stdout.splitlines() if line.startswith("warning") and "Sphere" in line]) == 6

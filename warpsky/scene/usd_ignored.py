@@ -12,13 +12,17 @@ Warned about, when visible (lights) or visible and of a rendered purpose (geomet
   ``Points``, ``BasisCurves``, ...), unless they carry a ``warpsky:kind``, and a ``Plane`` after the first (the
   first is the ground); a ``PointInstancer``.
 
-Inside instances a prim is warned about once, at its first instance. pxr is imported inside the methods.
+Inside instances a prim is warned about once, at its first instance. Past :data:`WARNED_PER_TYPE` prims of one
+type, the rest are counted in one line (a grid of a hundred spheres gives six lines, not a hundred). pxr is
+imported inside the methods.
 """
 
 from __future__ import annotations
 
 from warpsky.scene.usd_prims import StagePrims
 
+#: Lines naming prims of one type; the rest of that type are counted in one more line.
+WARNED_PER_TYPE = 5
 #: What warpsky renders, for the messages.
 RENDERED_LIGHTS = "DistantLight suns and the first visible DomeLight"
 RENDERED_GEOMETRY = "Mesh surfaces, one ground Plane and Volumes"
@@ -32,6 +36,8 @@ class IgnoredReading(StagePrims):
         tc = self._time(time)
         first: dict[str, str] = {}  # "dome" / "plane" -> the path of the one that is used
         prototypes = set()
+        named: dict[str, int] = {}  # prim type -> lines so far
+        more: dict[str, list[str]] = {}  # prim type -> the paths past WARNED_PER_TYPE
         for prim in self._traverse():
             reason = self._light_reason(prim, tc, first) or self._geometry_reason(prim, tc, first)
             if reason is None:
@@ -42,7 +48,15 @@ class IgnoredReading(StagePrims):
                     continue
                 prototypes.add(key)
                 reason += " (and in every other instance of its prototype)"
-            self._warn(reason)
+            kind = prim.GetTypeName() or "typeless"
+            named[kind] = named.get(kind, 0) + 1
+            if named[kind] > WARNED_PER_TYPE:
+                more.setdefault(kind, []).append(str(prim.GetPath()))
+            else:
+                self._warn(reason)
+        for kind, paths in more.items():
+            self._warn(f"{len(paths)} more {kind} prims ignored as the {WARNED_PER_TYPE} above ({paths[0]} .. "
+                       f"{paths[-1]})")
 
     def _light_reason(self, prim, tc, first: dict[str, str]) -> str | None:
         from pxr import UsdGeom, UsdLux
