@@ -13,7 +13,7 @@ frame costs N frames; Monte Carlo techniques may take N times fewer paths per su
 seed differing per sub-frame (``seed + k``) so the sub-frames' noise does not repeat.
 
 Not modelled: blur from a velocity field inside a frame (a simulation's ``vel`` grid); a deep EXR of a blurred
-frame is refused.
+frame is refused; a render without a time code (the API's ``time=None``, the stage's earliest time) is not blurred.
 """
 
 from __future__ import annotations
