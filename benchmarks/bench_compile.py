@@ -32,23 +32,16 @@ sys.path.insert(0, str(ROOT))
 
 def modules_to_time() -> list[tuple[str, object]]:
     """(label, Warp module): first and last variant of every technique's kernel factories, each module once."""
-    import importlib
-
-    from warpsky.kernel_cache import technique_kernel_modules
-    from warpsky.kernel_variants import registered_factories, variants
+    from warpsky.kernel_cache import built_kernels, technique_factories
+    from warpsky.kernel_variants import variants
     from warpsky.registry import technique_names
 
-    wanted = {m for name in technique_names() for m in technique_kernel_modules(name)}
-    for module in sorted(wanted):
-        importlib.import_module(module)
+    factories = {id(f): (f, d) for name in technique_names() for f, d in technique_factories(name)}
     out, seen = [], set()
-    for factory, domains in registered_factories():
-        if factory.__module__ not in wanted:
-            continue
+    for factory, domains in factories.values():
         options = variants(domains)
         for flags in {id(o): o for o in (options[0], options[-1])}.values():
-            built = factory(**flags)
-            for kernel in built if isinstance(built, tuple) else (built,):
+            for kernel in built_kernels(factory, flags):
                 if kernel.module.name not in seen:
                     seen.add(kernel.module.name)
                     label = f"{factory.__name__}({', '.join(f'{k}={v}' for k, v in flags.items())})"

@@ -26,23 +26,32 @@ def technique_kernel_modules(technique: str) -> tuple[str, ...]:
     return tuple(technique_class(technique).kernel_modules) if technique in TECHNIQUES else ()
 
 
-def variant_module_names(technique: str) -> list[str]:
-    """Warp module names of every variant of the kernel factories ``technique`` uses (builds kernel objects, does
-    not compile them)."""
+def technique_factories(technique: str) -> list[tuple[object, dict]]:
+    """(factory, flag domains) of every kernel factory ``technique`` uses, its modules imported (which registers
+    them)."""
     import importlib
 
-    from warpsky.kernel_variants import registered_factories, variants
+    from warpsky.kernel_variants import registered_factories
 
     modules = technique_kernel_modules(technique)
     for module in modules:
-        importlib.import_module(module)  # registers its factories
-    names = []
-    for factory, domains in registered_factories():
-        if factory.__module__ in modules:
-            for flags in variants(domains):
-                built = factory(**flags)
-                names += [kernel.module.name for kernel in (built if isinstance(built, tuple) else (built,))]
-    return names
+        importlib.import_module(module)
+    return [(factory, domains) for factory, domains in registered_factories() if factory.__module__ in modules]
+
+
+def built_kernels(factory, flags: dict) -> tuple:
+    """The kernels ``factory`` builds for ``flags`` (a factory returns one kernel or a tuple of them)."""
+    built = factory(**flags)
+    return built if isinstance(built, tuple) else (built,)
+
+
+def variant_module_names(technique: str) -> list[str]:
+    """Warp module names of every variant of the kernel factories ``technique`` uses (builds kernel objects, does
+    not compile them)."""
+    from warpsky.kernel_variants import variants
+
+    return [kernel.module.name for factory, domains in technique_factories(technique)
+            for flags in variants(domains) for kernel in built_kernels(factory, flags)]
 
 
 def compile_notice(technique: str) -> str | None:
@@ -91,19 +100,11 @@ def module_source_bytes(module) -> int | None:
 def compile_estimate(technique: str) -> float | None:
     """Estimated seconds of a first frame's compiles of ``technique``: one variant (the first) of each of its kernel
     factories, each module's :func:`compile_seconds` by its generated size; None without factories or a size."""
-    import importlib
+    from warpsky.kernel_variants import variants
 
-    from warpsky.kernel_variants import registered_factories, variants
-
-    modules = technique_kernel_modules(technique)
-    for module in modules:
-        importlib.import_module(module)
     total, counted = 0.0, 0
-    for factory, domains in registered_factories():
-        if factory.__module__ not in modules:
-            continue
-        built = factory(**variants(domains)[0])
-        for kernel in built if isinstance(built, tuple) else (built,):
+    for factory, domains in technique_factories(technique):
+        for kernel in built_kernels(factory, variants(domains)[0]):
             size = module_source_bytes(kernel.module)
             if size is None:
                 return None
