@@ -81,8 +81,8 @@ def test_table_builds_fast_and_vanishes_with_the_air():
     scattering comes from near the horizon): at least 250x."""
     scene = sky_scene(30.0, 0.3)
     light = sunlight(scene)
-    table = air_multiple.build(scene.atmosphere.beta_sea_level, 8000.0, 0.0, np.full(3, 0.3),
-                               float(light.direction[1]), float(light.air_sine))
+    table = air_multiple.build(scene.atmosphere, 0.0, np.full(3, 0.3), float(light.direction[1]),
+                               float(light.air_sine))
     assert table.seconds < 1.0
     assert np.all(np.isfinite(table.values)) and table.values.min() > 0.0
     zenith = np.array([[0.0, 1.0, 0.0]])
@@ -151,7 +151,7 @@ def test_view_table_split_and_host_agree(device, monkeypatch):
     front, back = Sky(device=device).render(scene, width, height, media_depth=depth)
     joined = front.radiance + front.transmittance * back.radiance
     np.testing.assert_allclose(joined, whole.radiance, rtol=2e-3)
-    monkeypatch.setattr(sky_module, "view_rays", lambda scene, camera: None)
+    monkeypatch.setattr(sky_module, "view_rays", lambda scene, camera, light: None)
     direct, _ = Sky(device=device).render(scene, width, height)
     np.testing.assert_allclose(direct.radiance, whole.radiance, rtol=2e-3)
     direct_front, direct_back = Sky(device=device).render(scene, width, height, media_depth=depth)

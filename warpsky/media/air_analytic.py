@@ -158,9 +158,17 @@ INFINITE = wp.constant(1.0e30)
 class AnalyticAir:
     """The air of Riley's sky as kernels see it."""
 
-    beta_sea_level: wp.vec3  # scattering (= extinction) coefficient at sea level [1/m], RGB
+    beta_sea_level: wp.vec3  # the Rayleigh gas's scattering (= extinction) coefficient at sea level [1/m], RGB
     gamma: float  # 1 / scale height [1/m]
     camera_altitude: float  # the eye's altitude above sea level [m]
+    mixed: int  # 1: aerosols or ozone too (:mod:`~warpsky.media.air_mixture`), 0: Riley's closed form alone
+    mie_extinction: wp.vec3  # the aerosols' at sea level [1/m]
+    mie_albedo: wp.vec3  # their single-scattering albedo
+    mie_gamma: float  # 1 / their scale height [1/m]
+    mie_g: float  # their Henyey-Greenstein g
+    ozone: wp.vec3  # the ozone layer's peak absorption [1/m]
+    ozone_altitude: float  # [m above sea level]
+    ozone_width: float  # [m]
 
 
 def analytic_air(atmosphere, camera_position) -> AnalyticAir:
@@ -169,6 +177,16 @@ def analytic_air(atmosphere, camera_position) -> AnalyticAir:
     out.beta_sea_level = wp.vec3(*np.asarray(atmosphere.beta_sea_level, dtype=np.float64).tolist())
     out.gamma = float(atmosphere.gamma)
     out.camera_altitude = float(camera_position[1] + atmosphere.altitude)
+    out.mixed = int(atmosphere.mixed)
+    extinction = atmosphere.mie_scattering + atmosphere.mie_absorption
+    out.mie_extinction = wp.vec3(*extinction.tolist())
+    out.mie_albedo = wp.vec3(*np.divide(atmosphere.mie_scattering, extinction, out=np.zeros(3),
+                                        where=extinction > 0.0).tolist())
+    out.mie_gamma = float(1.0 / atmosphere.mie_scale_height)
+    out.mie_g = float(atmosphere.mie_g)
+    out.ozone = wp.vec3(*atmosphere.ozone_absorption.tolist())
+    out.ozone_altitude = float(atmosphere.ozone_altitude)
+    out.ozone_width = float(atmosphere.ozone_width)
     return out
 
 

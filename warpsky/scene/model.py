@@ -294,9 +294,24 @@ class Atmosphere:
                                                                                            (Hillaire 2020 table);
                                                                                            false: Riley's single-
                                                                                            scattering sky exactly
+    ``...:mieScattering``     ``mie_scattering``            1/m    0 (none)                aerosols' scattering
+    color3f                                                        (Earth: 3.996e-6)       coefficient at sea level
+    ``...:mieAbsorption``     ``mie_absorption``            1/m    0                       aerosols' absorption at
+    color3f                                                        (Earth: 4.44e-7)        sea level
+    ``...:mieScaleHeight``    ``mie_scale_height``          m      1200                    aerosols' scale height
+    ``...:mieAnisotropy``     ``mie_g``                     --     0.8                     Henyey-Greenstein g of
+                                                                                           the aerosols' phase
+    ``...:ozoneAbsorption``   ``ozone_absorption``          1/m    0 (none)                ozone's absorption at its
+    color3f                                                        (Earth: 6.5e-7,         peak altitude
+                                                                   1.881e-6, 8.5e-8)
+    ``...:ozoneAltitude``     ``ozone_altitude``            m      25000                   the layer's peak; its
+    ``...:ozoneWidth``        ``ozone_width``               m      15000                   density falls linearly
+                                                                                           to 0 this far above and
+                                                                                           below
     ========================= ============================= ====== ======================= ========================
 
-    The sun's irradiance is the DistantLight's, taken as outside the atmosphere.
+    The Earth values are Bruneton's (2017) and Hillaire's (2020) reference atmosphere; the defaults keep Riley's
+    pure Rayleigh air. The sun's irradiance is the DistantLight's, taken as outside the atmosphere.
     """
 
     beta_sea_level: np.ndarray = field(default_factory=lambda: np.array([5.8e-6, 1.35e-5, 3.31e-5]))
@@ -304,6 +319,13 @@ class Atmosphere:
     altitude: float = 0.0
     name: str = "atmosphere"
     multiple_scattering: bool = True
+    mie_scattering: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    mie_absorption: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    mie_scale_height: float = 1200.0
+    mie_g: float = 0.8
+    ozone_absorption: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    ozone_altitude: float = 25000.0
+    ozone_width: float = 15000.0
 
     def __post_init__(self):
         beta = _vec3(self.beta_sea_level, f"atmosphere {self.name}: betaSeaLevel")
@@ -315,11 +337,40 @@ class Atmosphere:
                              f"got {self.scale_height}")
         if not math.isfinite(self.altitude):
             raise SceneError(f"atmosphere {self.name}: altitude must be finite [m], got {self.altitude}")
+        for key, attr in (("mie_scattering", "mieScattering"), ("mie_absorption", "mieAbsorption"),
+                          ("ozone_absorption", "ozoneAbsorption")):
+            value = _vec3(getattr(self, key), f"atmosphere {self.name}: {attr}")
+            if np.any(value < 0.0) or not np.all(np.isfinite(value)):
+                raise SceneError(f"atmosphere {self.name}: {attr} must be finite and >= 0 [1/m], got {value.tolist()}")
+            object.__setattr__(self, key, value)
+        for key, attr in (("mie_scale_height", "mieScaleHeight"), ("ozone_width", "ozoneWidth")):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and value > 0.0):
+                raise SceneError(f"atmosphere {self.name}: {attr} must be a positive length [m], got {value}")
+        if not (math.isfinite(self.ozone_altitude) and self.ozone_altitude >= 0.0):
+            raise SceneError(f"atmosphere {self.name}: ozoneAltitude must be a length >= 0 [m], "
+                             f"got {self.ozone_altitude}")
+        if not (math.isfinite(self.mie_g) and -1.0 < self.mie_g < 1.0):
+            raise SceneError(f"atmosphere {self.name}: mieAnisotropy must lie in (-1, 1), got {self.mie_g}")
 
     @property
     def gamma(self) -> float:
         """γ = 1 / scale height [1/m]."""
         return 1.0 / self.scale_height
+
+    @property
+    def has_aerosols(self) -> bool:
+        return bool(np.any(self.mie_scattering > 0.0) or np.any(self.mie_absorption > 0.0))
+
+    @property
+    def has_ozone(self) -> bool:
+        return bool(np.any(self.ozone_absorption > 0.0))
+
+    @property
+    def mixed(self) -> bool:
+        """Whether the air holds more than Riley's Rayleigh gas (aerosols or ozone): its sky is then integrated
+        numerically instead of in Riley's closed form."""
+        return self.has_aerosols or self.has_ozone
 
 
 @dataclass(frozen=True)

@@ -261,9 +261,10 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
             names = [a.GetName() for a in prim.GetAttributes() if a.GetName().startswith("warpsky:atmosphere:")]
             if not names or not self._rendered(prim, tc):
                 continue
-            known = {"warpsky:atmosphere:betaSeaLevel", "warpsky:atmosphere:scaleHeight",
-                     "warpsky:atmosphere:altitude", "warpsky:atmosphere:enabled",
-                     "warpsky:atmosphere:multipleScattering"}
+            known = {f"warpsky:atmosphere:{n}" for n in (
+                "betaSeaLevel", "scaleHeight", "altitude", "enabled", "multipleScattering", "mieScattering",
+                "mieAbsorption", "mieScaleHeight", "mieAnisotropy", "ozoneAbsorption", "ozoneAltitude",
+                "ozoneWidth")}
             unknown = sorted(set(names) - known)
             if unknown:
                 raise SceneError(f"atmosphere {prim.GetPath()}: unknown attribute(s) {', '.join(unknown)}; known: "
@@ -272,17 +273,24 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
             if enabled and enabled.HasAuthoredValue() and not bool(enabled.Get(tc)):
                 return None
             kwargs = {"name": str(prim.GetPath())}
-            beta = self._color_attr(prim, "warpsky:atmosphere:betaSeaLevel", tc)
-            if beta is not None:
-                kwargs["beta_sea_level"] = beta
+            for attr, key in (("betaSeaLevel", "beta_sea_level"), ("mieScattering", "mie_scattering"),
+                              ("mieAbsorption", "mie_absorption"), ("ozoneAbsorption", "ozone_absorption")):
+                value = self._color_attr(prim, f"warpsky:atmosphere:{attr}", tc)
+                if value is not None:
+                    kwargs[key] = value
             for attr, key, scale in (("scaleHeight", "scale_height", self.meters_per_unit),
-                                     ("altitude", "altitude", self.meters_per_unit)):
+                                     ("altitude", "altitude", self.meters_per_unit),
+                                     ("mieScaleHeight", "mie_scale_height", self.meters_per_unit),
+                                     ("mieAnisotropy", "mie_g", 1.0),
+                                     ("ozoneAltitude", "ozone_altitude", self.meters_per_unit),
+                                     ("ozoneWidth", "ozone_width", self.meters_per_unit)):
                 a = prim.GetAttribute(f"warpsky:atmosphere:{attr}")
                 if a and a.HasAuthoredValue():
                     value = a.Get(tc)
                     if not isinstance(value, (int, float)):
-                        raise SceneError(f"atmosphere {prim.GetPath()}: warpsky:atmosphere:{attr} must be a float "
-                                         f"[scene units], got {value!r}")
+                        unit = "" if attr == "mieAnisotropy" else " [scene units]"
+                        raise SceneError(f"atmosphere {prim.GetPath()}: warpsky:atmosphere:{attr} must be a float"
+                                         f"{unit}, got {value!r}")
                     kwargs[key] = float(value) * scale
             multiple = prim.GetAttribute("warpsky:atmosphere:multipleScattering")
             if multiple and multiple.HasAuthoredValue():

@@ -1,5 +1,6 @@
 """The sky pass: per pixel, air in front of the media's midplane, air behind it, and the sun's disk (Riley §4):
-Riley's single scattering in closed form plus the light scattered more than once (:mod:`~warpsky.media.air_multiple`).
+Riley's single scattering in closed form (with aerosols or ozone, :mod:`~warpsky.media.air_mixture_kernels`) plus
+the light scattered more than once (:mod:`~warpsky.media.air_multiple`).
 """
 
 from __future__ import annotations
@@ -8,10 +9,11 @@ import warp as wp
 
 from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.light.sun import Sun
-from warpsky.media.air_analytic import INFINITE, AnalyticAir, air_depth, air_inscatter, air_ray
-from warpsky.media.air_multiple import AirMultiple, multiple_along, quadrupole_angular, whole_ray
+from warpsky.media.air_analytic import INFINITE, AnalyticAir, air_ray
+from warpsky.media.air_mixture_kernels import AirScatter, air_optical_depth, air_scatter
+from warpsky.media.air_multiple import AirMultiple, multiple_along_air, quadrupole_angular, whole_ray, whole_single
 from warpsky.numerics import exp3
-from warpsky.optics.phase import phase_rayleigh
+from warpsky.optics.phase import phase_hg, phase_rayleigh
 from warpsky.surfaces.plane import Ground
 
 
@@ -35,22 +37,27 @@ def sky_kernel(
     altitude = along.altitude
     t_end = along.t_end
     split = along.split
-    beta_sl = air.beta_sea_level
-    gamma = air.gamma
     sun_dir = sun.direction
     cos_theta = wp.dot(sun_dir, view)  # light travels along -sun, leaves towards the eye along -view
     phase = phase_rayleigh(cos_theta)
+    phase_mie = phase_hg(cos_theta, air.mie_g)
     sun_y = sun.air_sine  # the sun's optical depth at height h is the vertical column over air_sine
-    front = air_inscatter(beta_sl, gamma, altitude, view[1], sun_y, split) * phase
-    front_depth = air_depth(beta_sl, gamma, altitude, view[1], split)
+    whole = ms.view_nodes > 0 and split >= t_end  # the frame's view table holds the whole ray's integrals
+    single = AirScatter()
+    if whole and air.mixed != 0:
+        single = whole_single(ms, view[1])
+    else:
+        single = air_scatter(air, altitude, view[1], sun_y, split)
+    front = single.rayleigh * phase + single.mie * phase_mie
+    front_depth = air_optical_depth(air, altitude, view[1], split)
     t_front = exp3(front_depth)
     # the light scattered more than once: from the frame's view table for a whole ray, else integrated
     angular = quadrupole_angular(view, sun_dir)
     front_ms = wp.vec3(0.0)
-    if ms.view_nodes > 0 and split >= t_end:
+    if whole:
         front_ms = whole_ray(ms, view[1], angular)
     else:
-        front_ms = multiple_along(ms, beta_sl, gamma, altitude, view[1], angular, front_depth)
+        front_ms = multiple_along_air(ms, air, altitude, view[1], angular, split)
     front_radiance[row, col] = wp.cw_mul(sun.irradiance, front + front_ms)
     front_transmittance[row, col] = t_front
     back = wp.vec3(0.0)
@@ -59,7 +66,8 @@ def sky_kernel(
         rest = t_end
         if t_end < INFINITE:
             rest = t_end - split
-        back = air_inscatter(beta_sl, gamma, h_split, view[1], sun_y, rest) * phase
+        rest_single = air_scatter(air, h_split, view[1], sun_y, rest)
+        back = rest_single.rayleigh * phase + rest_single.mie * phase_mie
         if ms.view_nodes > 0:
             # the whole ray's less the front's, seen from the split: (whole - front) / T_front
             rest_ms = whole_ray(ms, view[1], angular) - front_ms
@@ -67,14 +75,13 @@ def sky_kernel(
                 if t_front[c] > 1.0e-30:
                     back[c] += wp.max(rest_ms[c], 0.0) / t_front[c]
         else:
-            back += multiple_along(ms, beta_sl, gamma, h_split, view[1], angular,
-                                   air_depth(beta_sl, gamma, h_split, view[1], rest))
+            back += multiple_along_air(ms, air, h_split, view[1], angular, rest)
         back = wp.cw_mul(sun.irradiance, back)
     # the sun's disk, behind everything, through the air beyond the split (to the top of the atmosphere); the
     # horizon clips it where the view ray ends on the ground or at sea level
     if t_end >= INFINITE and wp.dot(sun.disk_direction, view) >= sun.cos_radius and sun.lit != 0:
         beyond = wp.vec3(1.0)  # no media: the front layer's transmittance already holds all the air
         if split < INFINITE:
-            beyond = exp3(air_depth(beta_sl, gamma, altitude + view[1] * split, view[1], INFINITE))
+            beyond = exp3(air_optical_depth(air, altitude + view[1] * split, view[1], INFINITE))
         back += wp.cw_mul(sun.disk_radiance, beyond)
     back_radiance[row, col] = back

@@ -28,8 +28,9 @@ BELOW = (0.0, -1.0, 0.0)
 OUTPUTS = ("front", "front_transmittance", "back")
 
 
-def view_rays(scene: Scene, camera):
-    """(atmosphere, eye altitude, floor altitude) [m above sea level] for the sky pass's view table when every
+def view_rays(scene: Scene, camera, light):
+    """(atmosphere, eye altitude, floor altitude [m above sea level], the sun's air sine) for the sky pass's view
+    table when every
     camera ray starts at the eye (a pinhole), else None; the floor is where :func:`~warpsky.media.air_analytic.
     air_ray` ends a downward ray: the ground plane below the eye, else sea level."""
     if camera.projection != Projection.PERSPECTIVE:
@@ -39,7 +40,7 @@ def view_rays(scene: Scene, camera):
     floor = 0.0
     if scene.ground is not None and scene.ground.height < camera.position[1]:
         floor = max(float(scene.ground.height) + atm.altitude, 0.0)
-    return atm, altitude, floor
+    return atm, altitude, floor, float(light.air_sine) if light is not None and light.lit else 0.0
 
 
 class Sky:
@@ -68,7 +69,7 @@ class Sky:
             wp.launch(sky_kernel, dim=shape, inputs=[
                 pinhole_camera(camera, width, height), analytic_air(atm, camera.position),
                 multiple_struct(scene_table(scene, light), self.device, name="sky:multiple",
-                                views=view_rays(scene, camera)),
+                                views=view_rays(scene, camera, light)),
                 sun_struct(light, unlit_direction=BELOW),
                 int(scene.ground is not None), ground_struct(scene.ground, camera.position),
                 depth_in, front, front_t, back,
