@@ -124,9 +124,10 @@ def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.
     atmosphere = scene.atmosphere
     if through_air and atmosphere is not None:
         from warpsky.media.air_analytic import air_sine
+        from warpsky.media.air_mixture import column as air_column
 
         altitude = float(scene.camera.position[1]) + atmosphere.altitude
-        column = atmosphere.beta_sea_level * np.exp(-atmosphere.gamma * altitude) / atmosphere.gamma
+        column = air_column(atmosphere, altitude)
         sine = air_sine(directions[..., 1], atmosphere.gamma)[..., None]
         radiance = np.where(directions[..., 1:2] > 0.0, radiance * np.exp(-column / sine), 0.0)
     return radiance.astype(np.float32)

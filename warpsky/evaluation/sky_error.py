@@ -16,7 +16,7 @@ import numpy as np
 
 from warpsky.light.sky import sky_light
 from warpsky.light.sun import sunlight
-from warpsky.media.air_analytic import sun_transmittance
+from warpsky.media.air_mixture import sunlight_transmittance
 from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
 
 #: Sun elevations [deg] of the grid, down to the horizon (a flat earth's air is dark once the disk has set).
@@ -100,7 +100,7 @@ def ground_case(sun_elevation: float, albedo: float, *, spp: int, device: str = 
         light = sunlight(s)
         atm = s.atmosphere
         direct = (light.irradiance * max(light.direction[1], 0.0)
-                  * sun_transmittance(atm.beta_sea_level, atm.gamma, atm.altitude, light.direction[1]))
+                  * sunlight_transmittance(atm, atm.altitude, light.direction[1]))
         sky = sky_light(s, analytic=True)[1] * math.pi  # E / pi -> E
         out[name] = (albedo / math.pi * (direct + sky)).tolist()
     return {"kind": "ground", "sun": sun_elevation, "view": [-90.0, 0.0], "albedo": albedo, "traced": mean.tolist(),

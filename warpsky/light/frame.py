@@ -24,7 +24,7 @@ import numpy as np
 
 from warpsky.light.sky import sky_light
 from warpsky.light.sun import light_elevation_sine
-from warpsky.media.air_analytic import sun_transmittance
+from warpsky.media.air_mixture import sunlight_transmittance
 
 
 def media_altitude(scene) -> float:
@@ -73,8 +73,7 @@ class FrameLight:
         if not self.through_air or scene.atmosphere is None or scene.sun is None:
             return np.ones(3)
         atm = scene.atmosphere
-        return sun_transmittance(atm.beta_sea_level, atm.gamma, sea_level_altitude(atm),
-                                 light_elevation_sine(scene.sun))
+        return sunlight_transmittance(atm, sea_level_altitude(atm), light_elevation_sine(scene.sun))
 
     def lit_at_media(self, scene=None):
         """``scene`` (default the frame's) with its sun's transmittance down to the media."""

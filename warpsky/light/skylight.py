@@ -49,7 +49,7 @@ import warp as wp
 from warpsky.light.dome import ambient_radiance, hemisphere_directions, upper_hemisphere
 from warpsky.light.frame import media_altitude
 from warpsky.light.sun import above_air, sunlight
-from warpsky.media.air_analytic import transmittance
+from warpsky.media.air_mixture import transmittance as air_transmittance
 from warpsky.media.air_multiple import air_radiance
 from warpsky.media.voxel import MediaPoint, VoxelMedia
 from warpsky.optics.tables import mean_cosine
@@ -107,7 +107,7 @@ def _upper_radiance(scene, atmosphere, light, directions: np.ndarray, altitude: 
     if dome is not None:
         dome = dome.radiance(directions)
         if atmosphere is not None:
-            dome = dome * transmittance(atmosphere.beta_sea_level[None, :], atmosphere.gamma, altitude, up, np.inf)
+            dome = dome * air_transmittance(atmosphere, altitude, up[:, 0], np.inf)
         out = out + dome
     if light is not None:
         out = out + air_radiance(scene, light, altitude, directions)
@@ -145,12 +145,10 @@ def media_environment(scene, *, traces_air: bool = False, samples: int = SAMPLES
         floor = scene.ground.height + atmosphere.altitude if scene.ground is not None else 0.0
         upper = _upper_radiance(scene, atmosphere, light, up, altitude)
         ground_sky = 2.0 * (_upper_radiance(scene, atmosphere, light, up, floor) * up[:, 1:2]).mean(axis=0)
-        beta = atmosphere.beta_sea_level[None, :]
-        distance = max(altitude - floor, 0.0) / -down[:, 1:2]
+        distance = max(altitude - floor, 0.0) / -down[:, 1]
         lower = np.zeros((len(down), 3))
         if albedo is not None:
-            lower = lower + albedo * ground_sky * transmittance(beta, atmosphere.gamma, altitude, down[:, 1:2],
-                                                                distance)
+            lower = lower + albedo * ground_sky * air_transmittance(atmosphere, altitude, down[:, 1], distance)
         if light is not None:
             lower = lower + air_radiance(scene, light, altitude, down, distance)
     upper_mean, upper_moment = projection(upper, up)

@@ -35,7 +35,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.camera_rays import PinholeCamera, PrimaryRay
-from warpsky.numerics import exp3, one_minus_exp_over_x
+from warpsky.numerics import one_minus_exp_over_x
 from warpsky.surfaces.plane import Ground
 
 #: Riley 2004 Table 3: sea-level scattering coefficients [1/m] at 680, 550, 440 nm (our R, G, B).
@@ -261,10 +261,3 @@ def air_ray(air: AnalyticAir, cam: PinholeCamera, ray: PrimaryRay, has_ground: i
     if media_depth < cam.far:
         out.split = wp.min(media_depth / ray.cos_axis, out.t_end)
     return out
-
-
-@wp.func
-def split_transmittance(air: AnalyticAir, along: AirRay, view_y: float) -> wp.vec3:
-    """Transmittance of the air from the ray's start to its split (the front air), RGB, along a ray of elevation
-    sine ``view_y``."""
-    return exp3(air_depth(air.beta_sea_level, air.gamma, along.altitude, view_y, along.split))

@@ -12,7 +12,8 @@ import numpy as np
 import warp as wp
 
 from warpsky.camera_rays import PinholeCamera, pinhole_camera, primary_ray
-from warpsky.media.air_analytic import AnalyticAir, air_ray, analytic_air, split_transmittance
+from warpsky.media.air_analytic import AnalyticAir, air_ray, analytic_air
+from warpsky.media.air_mixture_kernels import split_transmittance
 from warpsky.surfaces.plane import Ground, ground_struct
 
 

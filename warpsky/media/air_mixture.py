@@ -23,7 +23,8 @@ import math
 
 import numpy as np
 
-from warpsky.media.air_analytic import _depth, inscatter
+from warpsky.media.air_analytic import _depth, air_sine, inscatter
+from warpsky.media.air_analytic import sun_transmittance as riley_sun_transmittance
 
 #: Gauss-Legendre nodes per scattering constituent of the host's ray integrals.
 HOST_NODES = 48
@@ -110,6 +111,14 @@ def optical_depth(atm, h0, view_y, distance) -> np.ndarray:
 
 def transmittance(atm, h0, view_y, distance) -> np.ndarray:
     return np.exp(-optical_depth(atm, h0, view_y, distance))
+
+
+def sunlight_transmittance(atm, h, sun_y) -> np.ndarray:
+    """(..., 3) transmittance of sunlight from elevation sine ``sun_y`` down to altitude ``h``: the column over
+    :func:`~warpsky.media.air_analytic.air_sine` (Riley's Eq. 12 for air without aerosols or ozone)."""
+    if not atm.mixed:
+        return riley_sun_transmittance(atm.beta_sea_level, atm.gamma, h, sun_y)
+    return sun_transmittance(atm, h, float(air_sine(sun_y, atm.gamma)))
 
 
 def sun_transmittance(atm, h, air_sine: float) -> np.ndarray:

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warpsky.media.air_analytic import X_CUT_WP, AnalyticAir, air_depth, air_inscatter
-from warpsky.numerics import one_minus_exp, one_minus_exp_over_x
+from warpsky.media.air_analytic import X_CUT_WP, AirRay, AnalyticAir, air_depth, air_inscatter
+from warpsky.numerics import exp3, one_minus_exp, one_minus_exp_over_x
 
 #: Gauss-Legendre nodes per scattering constituent of a ray's single-scattering integral.
 SCATTER_NODES = 12
@@ -186,3 +186,10 @@ def air_scatter(air: AnalyticAir, h0: float, view_y: float, sun_y: float, distan
         out.rayleigh[c] = channel_scatter(air, 0, c, h0, view_y, sun_y, d)
         out.mie[c] = air.mie_albedo[c] * channel_scatter(air, 1, c, h0, view_y, sun_y, d)
     return out
+
+
+@wp.func
+def split_transmittance(air: AnalyticAir, along: AirRay, view_y: float) -> wp.vec3:
+    """Transmittance of the air from the ray's start to its split (the front air), RGB, along a ray of elevation
+    sine ``view_y``."""
+    return exp3(air_optical_depth(air, along.altitude, view_y, along.split))
