@@ -24,6 +24,7 @@ import functools
 
 import warp as wp
 
+from warpsky.media.air import AirPart, part_pdf, part_phase, part_sample_cos, part_total
 from warpsky.media.voxel import MediaPoint, VoxelMedia
 from warpsky.numerics import mean3
 from warpsky.optics.kernels import TABLE_KIND, medium_phase, sample_table, scattering_angle
@@ -32,10 +33,7 @@ from warpsky.optics.oriented_sampling import directional_sample, directional_val
 from warpsky.optics.phase import (
     phase_eval,
     phase_pdf,
-    phase_rayleigh,
     phase_sample_cos,
-    rayleigh_pdf,
-    rayleigh_sample_cos,
 )
 from warpsky.optics.phase_sampling import (
     SAMPLED_CHANNEL,
@@ -47,10 +45,10 @@ from warpsky.optics.phase_sampling import (
 
 
 @wp.func
-def per_unit_scattering(point: MediaPoint, rayleigh: wp.vec3, value: wp.vec3) -> wp.vec3:
-    """``value`` [1/(m sr)] divided by the scattering coefficient at ``point``, the media's plus ``rayleigh`` [1/m]
-    of air, per channel (0 where nothing scatters): a sum over components in Riley Eq. 6 made a phase [1/sr]."""
-    total = rayleigh + point.scattering
+def per_unit_scattering(point: MediaPoint, air_s: AirPart, value: wp.vec3) -> wp.vec3:
+    """``value`` [1/(m sr)] divided by the scattering coefficient at ``point``, the media's plus the air's
+    ``air_s``, per channel (0 where nothing scatters): a sum over components in Riley Eq. 6 made a phase [1/sr]."""
+    total = part_total(air_s) + point.scattering
     out = wp.vec3(0.0)
     for c in range(3):
         if total[c] > 0.0:
@@ -92,13 +90,13 @@ def oriented_correction_function(sample_phase):
 
     @wp.func
     def oriented_mixture_correction(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float),
-                                    phases: OrientedPhases, rayleigh: wp.vec3, look: wp.vec3,
+                                    phases: OrientedPhases, air_s: AirPart, look: wp.vec3,
                                     theta: float) -> wp.vec3:
-        """The same for a mixture phase (Riley Eq. 6, normalised by the summed scattering, ``rayleigh`` [1/m] of
-        air included): the correction divided by that sum [1/sr]."""
+        """The same for a mixture phase (Riley Eq. 6, normalised by the summed scattering, the air's ``air_s``
+        included): the correction divided by that sum [1/sr]."""
         if phases.count == 0:
             return wp.vec3(0.0)
-        return per_unit_scattering(point, rayleigh, oriented_correction(media, point, tables, phases, look, theta))
+        return per_unit_scattering(point, air_s, oriented_correction(media, point, tables, phases, look, theta))
 
     return oriented_correction, oriented_mixture_correction
 
@@ -168,17 +166,17 @@ def phase_sum_function(has_tables: bool):
 
 @functools.cache
 def mixture_phase_function(has_tables: bool):
-    """``mixture_phase(media, point, tables, rayleigh, theta) -> vec3`` (see :func:`mixture_functions`)."""
+    """``mixture_phase(media, point, tables, air_s, theta) -> vec3`` (see :func:`mixture_functions`)."""
 
     scattered_phase = phase_sum_function(has_tables)
 
     @wp.func
-    def mixture_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), rayleigh: wp.vec3,
+    def mixture_phase(media: VoxelMedia, point: MediaPoint, tables: wp.array(dtype=float), air_s: AirPart,
                       theta: float) -> wp.vec3:
-        """Riley Eq. 6: the scattering-weighted phase [1/sr] at scattering angle ``theta`` of the Rayleigh component
-        of scattering ``rayleigh`` [1/m] and every medium at ``point``, summed in that order."""
-        num = scattered_phase(media, point, tables, rayleigh * phase_rayleigh(wp.cos(theta)), theta)
-        den = rayleigh
+        """Riley Eq. 6: the scattering-weighted phase [1/sr] at scattering angle ``theta`` of the air's
+        constituents (scattering ``air_s``) and every medium at ``point``, summed in that order."""
+        num = scattered_phase(media, point, tables, part_phase(air_s, wp.cos(theta)), theta)
+        den = part_total(air_s)
         for m in range(media.count):
             value = point.density[m]
             if value > 0.0:
@@ -207,19 +205,20 @@ def chosen_medium(media: VoxelMedia, point: MediaPoint, air_weight: float, targe
 
 @functools.cache
 def mixture_functions(has_tables: bool):
-    """``(mixture_phase, sample_mixture)`` over the media at a point plus one Rayleigh component (the air; zero
+    """``(mixture_phase, sample_mixture)`` over the media at a point plus the air's components (zero
     scattering for none), specialised on whether any medium uses a phase table."""
 
     mixture_phase = mixture_phase_function(has_tables)
 
     @wp.func
-    def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, rayleigh: wp.vec3, d: wp.vec3,
+    def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, air_s: AirPart, d: wp.vec3,
                        hero: int, ratio: wp.vec3, state: wp.uint32) -> PhaseSample:
-        """New direction after scattering at ``point`` from direction ``d``: pick the Rayleigh component or a medium
-        by mean scattering, sample its phase (Rayleigh: uniformly; a table by the path's ``hero`` channel), weight
-        by the mixture's phase over the mixture's pdf (with tables: over the path's density ratios ``ratio`` mixed
-        over the heroes, see the module docstring). Three random draws: the component, cos θ, the azimuth."""
-        air_w = mean3(rayleigh)
+        """New direction after scattering at ``point`` from direction ``d``: pick one of the air's constituents or a
+        medium by mean scattering, sample its phase (Rayleigh: uniformly; aerosols: Henyey-Greenstein; a table by
+        the path's ``hero`` channel), weight by the mixture's phase over the mixture's pdf (with tables: over the
+        path's density ratios ``ratio`` mixed over the heroes, see the module docstring). Three random draws: the
+        component, cos θ, the azimuth."""
+        air_w = mean3(part_total(air_s))
         total = air_w
         for m in range(media.count):
             total += mean3(media.grids[m].scattering) * point.density[m]
@@ -227,7 +226,7 @@ def mixture_functions(has_tables: bool):
         use_air = target < air_w or media.count == 0
         chosen = chosen_medium(media, point, air_w, target)
         u = wp.randf(state)
-        cos_theta = rayleigh_sample_cos(u)
+        cos_theta = part_sample_cos(air_s, target, u)
         oriented = int(-1)
         if not use_air:
             grid = media.grids[chosen]
@@ -249,24 +248,24 @@ def mixture_functions(has_tables: bool):
         out.state = state
         out.weight = wp.vec3(0.0)
         if wp.static(has_tables):
-            pdf3 = wp.vec3(air_w * rayleigh_pdf(wp.cos(theta)))
+            pdf3 = wp.vec3(part_pdf(air_s, wp.cos(theta)))
             for m in range(media.count):
                 grid = media.grids[m]
                 w = mean3(grid.scattering) * point.density[m]
                 if w > 0.0:
                     pdf3 += medium_pdf3(tables.cdf, grid.phase_kind, grid.phase_g, theta) * w
-            phase = mixture_phase(media, point, tables.values, rayleigh, theta)
+            phase = mixture_phase(media, point, tables.values, air_s, theta)
             if tables.continuation.count > 0:
                 terms = continuation_terms(media, point, tables, d, out.direction, theta)
                 pdf3 += terms.pdf
-                phase += per_unit_scattering(point, rayleigh, terms.phase)
+                phase += per_unit_scattering(point, air_s, terms.phase)
             path_pdf = wp.cw_mul(ratio, wp.max(pdf3, wp.vec3(0.0)) / wp.max(total, 1.0e-30))
             mixed = mean3(path_pdf)
             if mixed > 0.0:
                 out.weight = wp.max(phase, wp.vec3(0.0)) * (mean3(ratio) / mixed)
                 out.ratio = path_pdf / wp.max(wp.max(path_pdf[0], path_pdf[1]), path_pdf[2])
         else:
-            pdf = air_w * rayleigh_pdf(wp.cos(theta))
+            pdf = part_pdf(air_s, wp.cos(theta))
             for m in range(media.count):
                 grid = media.grids[m]
                 w = mean3(grid.scattering) * point.density[m]
@@ -274,7 +273,7 @@ def mixture_functions(has_tables: bool):
                     pdf += w * phase_pdf(grid.phase_kind, grid.phase_g, wp.cos(theta))
             pdf = pdf / wp.max(total, 1.0e-30)
             if pdf > 0.0:
-                out.weight = wp.max(mixture_phase(media, point, tables.values, rayleigh, theta), wp.vec3(0.0)) / pdf
+                out.weight = wp.max(mixture_phase(media, point, tables.values, air_s, theta), wp.vec3(0.0)) / pdf
         return out
 
     return mixture_phase, sample_mixture

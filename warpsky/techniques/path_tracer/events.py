@@ -15,12 +15,25 @@ import warp as wp
 
 from warpsky.light.dome import DomeLight, dome_radiance
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air, air_coefficient, air_scattering, no_air, sea_level_distance
+from warpsky.media.air import (
+    Air,
+    AirPart,
+    air_coefficient,
+    air_part,
+    air_scattering,
+    as_analytic,
+    no_air,
+    part_phase,
+    part_total,
+    scaled_part,
+    sea_level_distance,
+)
+from warpsky.media.air_mixture_kernels import air_column
 from warpsky.media.phase_mixture import mixture_functions, oriented_correction_function
 from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.numerics import exp3
 from warpsky.optics.kernels import medium_phase, scattering_angle
-from warpsky.optics.phase import isotropic_sample_cos, phase_rayleigh
+from warpsky.optics.phase import isotropic_sample_cos
 from warpsky.optics.phase_sampling import PhaseTables, rotate_about
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.majorants import Majorants
@@ -44,13 +57,14 @@ ROULETTE_BOUNCE = wp.constant(3)
 
 
 @wp.func
-def reduced_mixture(air_part: wp.vec3, media_part: wp.vec3, total: wp.vec3, cos_theta: float) -> wp.vec3:
-    """The phase [1/sr] of air (Rayleigh, scattering ``air_part``) mixed with isotropic media (``media_part``),
-    per channel; 0 where nothing scatters."""
+def reduced_mixture(air_s: AirPart, media_part: wp.vec3, total: wp.vec3, cos_theta: float) -> wp.vec3:
+    """The phase [1/sr] of air (its constituents' scattering ``air_s``) mixed with isotropic media
+    (``media_part``), per channel; 0 where nothing scatters."""
     out = wp.vec3(0.0)
+    air_phase = part_phase(air_s, cos_theta)
     for c in range(3):
         if total[c] > 0.0:
-            out[c] = (air_part[c] * phase_rayleigh(cos_theta) + media_part[c] / (4.0 * wp.pi)) / total[c]
+            out[c] = (air_phase[c] + media_part[c] / (4.0 * wp.pi)) / total[c]
     return out
 
 
@@ -236,7 +250,10 @@ def air_to_sun(air: Air, sun: Sun, p: wp.vec3) -> wp.vec3:
     ``p`` over ``air_sine``."""
     out = wp.vec3(1.0)
     if air.enabled != 0:
-        out = exp3(air_coefficient(air, p[1]) / (air.gamma * sun.air_sine))
+        if air.mixed == 0:
+            out = exp3(air_coefficient(air, p[1]) / (air.gamma * sun.air_sine))
+        else:
+            out = exp3(air_column(as_analytic(air), air.camera_altitude + p[1]) / sun.air_sine)
     return out
 
 
@@ -274,21 +291,21 @@ def reduced_event_function(has_detail: bool):
         coefficients beside the air's Rayleigh phase; the sun through the reduced media times that mixture, then a
         direction drawn uniformly over the sphere (two random draws) weighted by the mixture over 1 / (4 pi)."""
         out = path
-        air_part = air_scattering(air, p[1])
+        air_s = air_part(air, p[1])
         media_part = reduced_with_air(media, sample_media(media, p), no_air(), p[1]).scattering
-        total = air_part + media_part
+        total = part_total(air_s) + media_part
         if sun_on:
             tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 1)
             out.state = tr_sun.state
             out.steps = out.steps + tr_sun.steps
             out.shadow_steps = out.shadow_steps + tr_sun.steps
-            phase = reduced_mixture(air_part, media_part, total, wp.dot(sun.direction, out.direction))
+            phase = reduced_mixture(air_s, media_part, total, wp.dot(sun.direction, out.direction))
             out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, phase),
                                                     wp.cw_mul(sun.irradiance, tr_sun.value))
         state = out.state
         cos_theta = isotropic_sample_cos(wp.randf(state))
         direction = rotate_about(out.direction, cos_theta, 2.0 * wp.pi * wp.randf(state))
-        out.throughput = wp.cw_mul(out.throughput, reduced_mixture(air_part, media_part, total, cos_theta)
+        out.throughput = wp.cw_mul(out.throughput, reduced_mixture(air_s, media_part, total, cos_theta)
                                    * (4.0 * wp.pi))
         out.state = state
         out.direction = direction
@@ -312,10 +329,10 @@ def media_first_function(has_detail: bool):
         media's share of the event exactly (one random draw when 0 < q < 1). The path then scatters with the
         media's phase alone (``air_weight`` 0)."""
         out = path
-        rayleigh = air_scattering(air, p[1])
+        air_s = air_scattering(air, p[1])
         media_part = sample_media(media, p).scattering
-        total = rayleigh + media_part
-        q = (rayleigh[0] + rayleigh[1] + rayleigh[2]) / wp.max(total[0] + total[1] + total[2], 1.0e-30)
+        total = air_s + media_part
+        q = (air_s[0] + air_s[1] + air_s[2]) / wp.max(total[0] + total[1] + total[2], 1.0e-30)
         if q <= 0.0:
             return out
         state = out.state
@@ -349,20 +366,20 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
         media scatter alone, after :func:`media_first`)."""
         out = path
         point = sample_media(media, p)
-        rayleigh = air_scattering(air, p[1]) * air_weight
+        air_s = scaled_part(air_part(air, p[1]), air_weight)
         if sun_on:
             tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 0)
             out.state = tr_sun.state
             out.steps = out.steps + tr_sun.steps
             out.shadow_steps = out.shadow_steps + tr_sun.steps
             theta = scattering_angle(sun.direction, out.direction)
-            phase = mixture_phase(media, point, tables.values, rayleigh, theta)
+            phase = mixture_phase(media, point, tables.values, air_s, theta)
             if wp.static(has_tables):  # oriented crystals are ice, a tabulated species: their sunlit phase
-                phase += oriented_mixture_correction(media, point, tables.values, tables.oriented, rayleigh,
+                phase += oriented_mixture_correction(media, point, tables.values, tables.oriented, air_s,
                                                      out.direction, theta)
             out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, phase),
                                                     wp.cw_mul(sun.irradiance, tr_sun.value))
-        ps = sample_mixture(media, point, tables, rayleigh, out.direction, out.hero, out.ratio, out.state)
+        ps = sample_mixture(media, point, tables, air_s, out.direction, out.hero, out.ratio, out.state)
         out.state = ps.state
         out.ratio = ps.ratio
         out.throughput = wp.cw_mul(out.throughput, ps.weight)

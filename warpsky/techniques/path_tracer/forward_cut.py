@@ -32,7 +32,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air, air_scattering, no_air
+from warpsky.media.air import Air, air_part, no_air
 from warpsky.media.phase_mixture import mixture_functions
 from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import scattering_angle
@@ -161,7 +161,7 @@ def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
             found = hit.found
             if found != 0:
                 point = sample_media(media, p + t * d)
-                reduced = media_sums(cut.media, point, wp.vec3(0.0), 0).extinction
+                reduced = media_sums(cut.media, point, wp.vec3(0.0), wp.vec3(0.0), 0).extinction
                 exact = wp.cw_mul(exact, positive(wp.vec3(1.0) - point.extinction / hit.majorant))
                 through_cut = wp.cw_mul(through_cut, positive(wp.vec3(1.0) - reduced / hit.majorant))
                 largest = wp.max(through_cut)
@@ -195,7 +195,7 @@ def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
                     wp.max(sun.direction[1], 0.0) / wp.pi)
         else:
             point = sample_media(media, p)
-            phase = mixture_phase(media, point, tables.values, air_scattering(air, p[1]),
+            phase = mixture_phase(media, point, tables.values, air_part(air, p[1]),
                                   scattering_angle(sun.direction, direction))
             out.radiance = wp.cw_mul(wp.cw_mul(throughput, phase), gained)
         return out

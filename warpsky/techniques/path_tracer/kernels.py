@@ -25,8 +25,8 @@ from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import DomeLight
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air, no_air
-from warpsky.media.air_analytic import air_depth
+from warpsky.media.air import Air, as_analytic, no_air
+from warpsky.media.air_mixture_kernels import air_optical_depth
 from warpsky.media.voxel import VoxelMedia
 from warpsky.numerics import exp3
 from warpsky.optics.phase_sampling import PhaseTables
@@ -98,7 +98,7 @@ def air_transmittance(air: Air, origin: wp.vec3, view: wp.vec3, distance: float)
     ones without air): the primary ray's air is not tracked, its majorant bands would cost a step every 800 m."""
     if air.enabled == 0:
         return wp.vec3(1.0)
-    return exp3(air_depth(air.beta_sl, air.gamma, air.camera_altitude + origin[1], view[1], distance))
+    return exp3(air_optical_depth(as_analytic(air), air.camera_altitude + origin[1], view[1], distance))
 
 
 @functools.cache

@@ -12,7 +12,7 @@ import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
-from warpsky.media.air import Air, air_coefficient
+from warpsky.media.air import Air, air_bound, air_coefficient
 from warpsky.media.detail import detail_factor_bound
 from warpsky.media.voxel import VoxelMedia, grid_interval, reduced_coefficients
 from warpsky.scene.model import VoxelMedium
@@ -59,15 +59,17 @@ def air_segment(air: Air, origin: wp.vec3, direction: wp.vec3, t: float, t_max: 
         y = origin[1] + t * direction[1]
         dy = direction[1]
         if dy == 0.0:
-            out.majorant = wp.max(air_coefficient(air, y)) * MAJORANT_MARGIN
+            out.majorant = air_bound(air, y, y) * MAJORANT_MARGIN
         else:
             remaining = wp.max(air_coefficient(air, y)) / (air.gamma * wp.max(dy, 1.0e-30))
             if dy < 0.0 or remaining > 1.0e-6:
                 stretch = air.band / wp.abs(dy)
                 lowest = y
+                highest = y + dy * wp.min(stretch, t_max - t)
                 if dy < 0.0:
-                    lowest = y + dy * wp.min(stretch, t_max - t)
-                out.majorant = wp.max(air_coefficient(air, lowest)) * MAJORANT_MARGIN
+                    lowest = highest
+                    highest = y
+                out.majorant = air_bound(air, lowest, highest) * MAJORANT_MARGIN
                 out.end = wp.min(out.end, t + stretch)
     return out
 

@@ -28,7 +28,7 @@ import functools
 
 import warp as wp
 
-from warpsky.media.air import Air, air_coefficient
+from warpsky.media.air import Air, air_coefficient, air_scattering
 from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
 from warpsky.techniques.path_tracer.majorants import Majorants, majorant_segment
 
@@ -56,23 +56,28 @@ def with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointM
     out.scattering = point.scattering
     if air.enabled != 0:
         coefficient = air_coefficient(air, y)
+        scattering = coefficient
+        if air.mixed != 0:
+            scattering = air_scattering(air, y)
         if media.count <= 1:
             # one medium: air + (0 + x) is the same float sum as (air + x)
             out.extinction = coefficient + point.extinction
-            out.scattering = coefficient + point.scattering
+            out.scattering = scattering + point.scattering
         else:
-            out = media_sums(media, point, coefficient, 0)
+            out = media_sums(media, point, coefficient, scattering, 0)
     return out
 
 
 @wp.func
-def media_sums(media: VoxelMedia, point: MediaPoint, start: wp.vec3, reduced: int) -> PointMedia:
-    """``start`` (the air's coefficient, or zero) plus each medium's extinction and scattering at the densities of
+def media_sums(media: VoxelMedia, point: MediaPoint, start: wp.vec3, start_scattering: wp.vec3,
+               reduced: int) -> PointMedia:
+    """``start`` and ``start_scattering`` (the air's extinction and scattering, or zeros) plus each medium's
+    extinction and scattering at the densities of
     ``point``, in medium order; with ``reduced`` their coefficients after high-order similarity. ``media`` may
     hold other coefficients for the same fields than the ones ``point`` was sampled from (the cut media)."""
     out = PointMedia()
     out.extinction = start
-    out.scattering = start
+    out.scattering = start_scattering
     for m in range(media.count):
         value = point.density[m]
         if value > 0.0:
@@ -91,9 +96,11 @@ def reduced_with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -
     """:func:`with_air` after high-order similarity: the media's reduced extinction and scattering at ``point``
     (the air's are unchanged)."""
     start = wp.vec3(0.0)
+    scattering = wp.vec3(0.0)
     if air.enabled != 0:
         start = air_coefficient(air, y)
-    return media_sums(media, point, start, 1)
+        scattering = air_scattering(air, y)
+    return media_sums(media, point, start, scattering, 1)
 
 
 @wp.struct
