@@ -43,3 +43,42 @@ def slab_radiance(phase, tau: float, albedo: float, view_mu, *, nodes: int = 64,
     beam[nodes] = 1.0 / (2 * np.pi * weight[nodes])  # E = 1 along mu = 1
     reflected, transmitted = r @ beam, t @ beam
     return reflected[nodes + 1 :], transmitted[nodes + 1 :]
+
+
+def _layer(phase, tau: float, albedo: float, mu: np.ndarray, weight: np.ndarray, doublings: int):
+    """(R, T) of one homogeneous layer on the nodes ``mu`` (see :func:`slab_radiance`)."""
+    doublings = max(int(np.ceil(np.log2(max(tau, 1e-30) / 1e-7))), 1) if doublings is None else doublings
+    delta = tau / 2.0**doublings
+    back = azimuth_kernel(phase, mu, mu, same_hemisphere=False)
+    forward = azimuth_kernel(phase, mu, mu, same_hemisphere=True)
+    r = albedo * delta / mu[:, None] * back * weight[None, :]
+    t = np.diag(np.exp(-delta / mu)) + albedo * delta / mu[:, None] * forward * weight[None, :]
+    eye = np.eye(len(mu))
+    for _ in range(doublings):
+        inverse = np.linalg.solve(eye - r @ r, t)
+        r, t = r + t @ r @ inverse, t @ inverse
+    return r, t
+
+
+def stack_radiance(layers, view_mu, *, nodes: int = 64, doublings=None):
+    """Diffusely transmitted radiance at the bottom of a stack of homogeneous layers (top first), each
+    ``(phase, tau, albedo)``, per unit beam irradiance at normal incidence, at the view cosines: each layer's R and
+    T by doubling, then added top down, R = R1 + T1 R2 (1 - R1 R2)^-1 T1, T = T2 (1 - R1 R2)^-1 T1 (homogeneous
+    layers reflect alike from both sides)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    extra = np.concatenate([[1.0], np.atleast_1d(np.asarray(view_mu, dtype=np.float64))])
+    mu = np.concatenate([0.5 * (x + 1.0), extra])
+    weight = np.concatenate([0.5 * w, np.full(len(extra), 1e-9)])
+    eye = np.eye(len(mu))
+    r_total, t_total = None, None
+    for phase, tau, albedo in layers:
+        r, t = _layer(phase, tau, albedo, mu, weight, doublings)
+        if r_total is None:
+            r_total, t_total = r, t
+            continue
+        inverse = np.linalg.solve(eye - r_total @ r, t_total)
+        # seen from above the new layer's top: the stack so far on top of it
+        r_total, t_total = r_total + t_total @ r @ inverse, t @ inverse
+    beam = np.zeros(len(mu))
+    beam[nodes] = 1.0 / (2 * np.pi * weight[nodes])
+    return (t_total @ beam)[nodes + 1 :]

@@ -17,7 +17,7 @@ import numpy as np
 from warpsky.light.sky import sky_light
 from warpsky.light.sun import sunlight
 from warpsky.media.air_mixture import sunlight_transmittance
-from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
+from warpsky.scene.model import EARTH_AEROSOLS, EARTH_OZONE, Atmosphere, Camera, Ground, Scene, Sun
 
 #: Sun elevations [deg] of the grid, down to the horizon (a flat earth's air is dark once the disk has set).
 SUN_ELEVATIONS = (90.0, 60.0, 30.0, 10.0, 5.0, 2.0, 0.0)
@@ -25,6 +25,9 @@ SUN_ELEVATIONS = (90.0, 60.0, 30.0, 10.0, 5.0, 2.0, 0.0)
 VIEWS = ((90.0, 0.0), (45.0, 0.0), (45.0, 180.0), (10.0, 90.0), (10.0, 180.0), (2.0, 45.0), (2.0, 90.0),
          (2.0, 180.0))
 ALBEDOS = (0.0, 0.3, 0.9)
+#: The airs compared: Riley's Rayleigh gas alone, with Bruneton's and Hillaire's Earth aerosols, and with their
+#: ozone too (:data:`~warpsky.scene.model.EARTH_AEROSOLS`, :data:`~warpsky.scene.model.EARTH_OZONE`).
+AIRS = {"rayleigh": {}, "aerosols": EARTH_AEROSOLS, "earth": {**EARTH_AEROSOLS, **EARTH_OZONE}}
 #: Pixels across a case's frame and the frame's width [deg].
 PIXELS = 8
 FIELD_DEG = 1.0
@@ -52,14 +55,15 @@ def clear_of_the_sun(sun_elevation: float, view: tuple[float, float]) -> bool:
     return math.degrees(math.acos(min(max(cos, -1.0), 1.0))) > 2.0 * FIELD_DEG
 
 
-def case_scene(sun_elevation: float, view: np.ndarray, albedo: float, *, multiple: bool = True) -> Scene:
-    """The scene of one case: Riley's air (flat earth), a sun of unit irradiance, a ground of ``albedo`` (none for
-    0: the path tracer's black sea level), the camera 1 m up looking along ``view``."""
+def case_scene(sun_elevation: float, view: np.ndarray, albedo: float, *, multiple: bool = True,
+               air: str = "rayleigh") -> Scene:
+    """The scene of one case: the air ``air`` of :data:`AIRS` (flat earth), a sun of unit irradiance, a ground of
+    ``albedo`` (none for 0: the path tracer's black sea level), the camera 1 m up looking along ``view``."""
     focal = 0.5 * 36.0 / math.tan(math.radians(0.5 * FIELD_DEG))
     camera = Camera("cam", np.array([0.0, 1.0, 0.0]), _rotation(view), focal, 36.0, 36.0)
     ground = Ground(0.0, albedo=np.full(3, albedo)) if albedo > 0.0 else None
     return Scene(camera, Sun(direction(sun_elevation, 0.0), np.ones(3)), ground=ground,
-                 atmosphere=Atmosphere(multiple_scattering=multiple))
+                 atmosphere=Atmosphere(multiple_scattering=multiple, **AIRS[air]))
 
 
 def traced(scene: Scene, spp: int, device: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -73,38 +77,40 @@ def traced(scene: Scene, spp: int, device: str, seed: int) -> tuple[np.ndarray, 
 
 
 def sky_case(sun_elevation: float, view: tuple[float, float], albedo: float, *, spp: int, device: str = "cpu",
-             seed: int = 7) -> dict:
+             seed: int = 7, air: str = "rayleigh") -> dict:
     """One sky case: the sky pass with and without its multiple scattering against the path tracer."""
     from warpsky.passes.sky.sky import Sky
 
     v = direction(*view)
-    scene = case_scene(sun_elevation, v, albedo)
+    scene = case_scene(sun_elevation, v, albedo, air=air)
     mean, error = traced(scene, spp, device, seed)
     table = Sky(device=device).render(scene, PIXELS, PIXELS)[0].radiance.reshape(-1, 3).mean(axis=0)
-    single = Sky(device=device).render(case_scene(sun_elevation, v, albedo, multiple=False), PIXELS,
+    single = Sky(device=device).render(case_scene(sun_elevation, v, albedo, multiple=False, air=air), PIXELS,
                                        PIXELS)[0].radiance.reshape(-1, 3).mean(axis=0)
-    return {"kind": "sky", "sun": sun_elevation, "view": list(view), "albedo": albedo, "traced": mean.tolist(),
+    return {"kind": "sky", "air": air, "sun": sun_elevation, "view": list(view), "albedo": albedo,
+            "traced": mean.tolist(),
             "noise": error.tolist(), "table": table.astype(np.float64).tolist(),
             "single": single.astype(np.float64).tolist()}
 
 
-def ground_case(sun_elevation: float, albedo: float, *, spp: int, device: str = "cpu", seed: int = 7) -> dict:
+def ground_case(sun_elevation: float, albedo: float, *, spp: int, device: str = "cpu", seed: int = 7,
+                air: str = "rayleigh") -> dict:
     """One ground case: albedo / pi (sunlight through the air + the sky irradiance the passes take) against the
     path-traced ground seen from 1 m above it."""
     down = np.array([0.0, -1.0, 0.0])
-    scene = case_scene(sun_elevation, down, albedo)
+    scene = case_scene(sun_elevation, down, albedo, air=air)
     mean, error = traced(scene, spp, device, seed)
     out = {}
     for name, multiple in (("table", True), ("single", False)):
-        s = case_scene(sun_elevation, down, albedo, multiple=multiple)
+        s = case_scene(sun_elevation, down, albedo, multiple=multiple, air=air)
         light = sunlight(s)
         atm = s.atmosphere
         direct = (light.irradiance * max(light.direction[1], 0.0)
                   * sunlight_transmittance(atm, atm.altitude, light.direction[1]))
         sky = sky_light(s, analytic=True)[1] * math.pi  # E / pi -> E
         out[name] = (albedo / math.pi * (direct + sky)).tolist()
-    return {"kind": "ground", "sun": sun_elevation, "view": [-90.0, 0.0], "albedo": albedo, "traced": mean.tolist(),
-            "noise": error.tolist(), **out}
+    return {"kind": "ground", "air": air, "sun": sun_elevation, "view": [-90.0, 0.0], "albedo": albedo,
+            "traced": mean.tolist(), "noise": error.tolist(), **out}
 
 
 def relative_errors(case: dict, key: str = "table") -> tuple[np.ndarray, np.ndarray]:

@@ -276,6 +276,14 @@ class Ground:
         object.__setattr__(self, "albedo", albedo)
 
 
+#: Bruneton's (2017) and Hillaire's (2020) Earth aerosols: sea-level scattering and absorption [1/m], scale height
+#: [m], Henyey-Greenstein g; and ozone's peak absorption [1/m] at 680 / 550 / 440 nm with its layer.
+EARTH_AEROSOLS = {"mie_scattering": np.full(3, 3.996e-6), "mie_absorption": np.full(3, 4.44e-7),
+                  "mie_scale_height": 1200.0, "mie_g": 0.8}
+EARTH_OZONE = {"ozone_absorption": np.array([6.5e-7, 1.881e-6, 8.5e-8]), "ozone_altitude": 25000.0,
+               "ozone_width": 15000.0}
+
+
 @dataclass(frozen=True)
 class Atmosphere:
     """Air as Riley 2004 §4.1 models it: Rayleigh scattering, density falling exponentially with altitude.
