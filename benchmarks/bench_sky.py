@@ -73,7 +73,8 @@ def main(argv=None) -> int:
 
     packed = np.array([(h, v, s, 1e30 if np.isinf(d) else d) for h, v, s, d in table], dtype=np.float32)
     out = wp.zeros(len(table), dtype=wp.vec3, device="cpu")
-    wp.launch(evaluate, dim=len(table), inputs=[wp.array(packed, dtype=wp.vec4), wp.vec3(*BETA.tolist()), GAMMA, out])
+    wp.launch(evaluate, dim=len(table), inputs=[wp.array(packed, dtype=wp.vec4, device="cpu"),
+                                                wp.vec3(*BETA.tolist()), GAMMA, out], device="cpu")
     got32 = out.numpy().astype(np.float64)
     got64 = np.array([sky.inscatter(BETA, GAMMA, *c) for c in table])
     scale = np.maximum(want.max(axis=1, keepdims=True), 1e-12)

@@ -148,6 +148,21 @@ def test_previews_go_through_the_filmic_view_with_an_automatic_exposure(tmp_path
         check_view("Filmic")
 
 
+def test_the_default_view_needs_no_opencolorio(monkeypatch):
+    """Without OpenColorIO the default view is accepted (shown through the simple curve, so ``warpsky info`` and a
+    render without --view work on a machine without the color extra); OpenColorIO's other views are refused."""
+    from warpsky.errors import UsageError
+    from warpsky.output import png
+
+    monkeypatch.setattr(png, "views", lambda: (png.SIMPLE_VIEW,))
+    assert png.check_view(png.DEFAULT_VIEW) == png.DEFAULT_VIEW
+    assert png.shown_view(png.DEFAULT_VIEW) == png.SIMPLE_VIEW
+    frame = np.full((2, 2, 3), 0.3)
+    np.testing.assert_array_equal(png.encode(frame), tonemap(frame))
+    with pytest.raises(UsageError, match="OpenColorIO is not installed"):
+        png.check_view("Un-tone-mapped")
+
+
 @pytest.mark.parametrize("spec,expected", [
     ("1", [1.0]), ("1:5", [1.0, 2.0, 3.0, 4.0, 5.0]), ("1:6x2", [1.0, 3.0, 5.0]), ("1:2x0.5", [1.0, 1.5, 2.0]),
     ("1,3,5:6", [1.0, 3.0, 5.0, 6.0]), ("-2:0", [-2.0, -1.0, 0.0]),

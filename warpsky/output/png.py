@@ -81,9 +81,10 @@ def _processor(view: str):
 
 
 def check_view(view: str) -> str:
-    """``view`` when a preview can take it, else a UsageError naming the choices."""
+    """``view`` when a preview can take it, else a UsageError naming the choices. The default view is always
+    accepted: without OpenColorIO :func:`encode` shows it through :data:`SIMPLE_VIEW`."""
     choices = views()
-    if view not in choices:
+    if view != DEFAULT_VIEW and view not in choices:
         missing = "" if len(choices) > 1 else " (OpenColorIO is not installed: pip install 'warpsky[color]')"
         raise UsageError(f"--view {view!r} is not a view of {DISPLAY!r}; choose one of "
                          f"{', '.join(repr(v) for v in choices)}{missing}")
