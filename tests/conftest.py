@@ -138,7 +138,11 @@ def add_atmosphere(stage_path, **attributes):
     prim = stage.DefinePrim("/World/Atmosphere", "Scope")
     types = {"scaleHeight": Sdf.ValueTypeNames.Float, "altitude": Sdf.ValueTypeNames.Float,
              "betaSeaLevel": Sdf.ValueTypeNames.Color3f, "enabled": Sdf.ValueTypeNames.Bool,
-             "scaleHight": Sdf.ValueTypeNames.Float, "multipleScattering": Sdf.ValueTypeNames.Bool}
+             "scaleHight": Sdf.ValueTypeNames.Float, "multipleScattering": Sdf.ValueTypeNames.Bool,
+             "mieScattering": Sdf.ValueTypeNames.Color3f, "mieAbsorption": Sdf.ValueTypeNames.Color3f,
+             "mieScaleHeight": Sdf.ValueTypeNames.Float, "mieAnisotropy": Sdf.ValueTypeNames.Float,
+             "ozoneAbsorption": Sdf.ValueTypeNames.Color3f, "ozoneAltitude": Sdf.ValueTypeNames.Float,
+             "ozoneWidth": Sdf.ValueTypeNames.Float}
     for name, value in attributes.items():
         prim.CreateAttribute(f"warpsky:atmosphere:{name}", types[name]).Set(value)
     if not attributes:
