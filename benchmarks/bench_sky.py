@@ -30,6 +30,9 @@ def main(argv=None) -> int:
     parser.add_argument("--air", default="rayleigh",
                         help="comma-separated airs of the comparison: rayleigh (Riley's gas), aerosols (with "
                              "Bruneton's and Hillaire's Earth aerosols), earth (aerosols and ozone)")
+    parser.add_argument("--earth", default="flat",
+                        help="comma-separated earths of the comparison: flat (Riley's), round (the Earth's radius; "
+                             "adds suns in twilight, down to -6 deg)")
     args = parser.parse_args(argv)
 
     import numpy as np
@@ -89,7 +92,8 @@ def main(argv=None) -> int:
     print(f"{'evaluation':<20} {'max':>10} {'mean':>10}")
     print(f"{'float64 (numpy)':<20} {err64.max():>10.2e} {err64.mean():>10.2e}")
     print(f"{'float32 (kernel)':<20} {err32.max():>10.2e} {err32.mean():>10.2e}")
-    cases = [] if args.no_error else [c for air in args.air.split(",") for c in error_table(args.spp, air)]
+    cases = [] if args.no_error else [c for earth in args.earth.split(",") for air in args.air.split(",")
+                                      for c in error_table(args.spp, air, earth)]
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps({"machine": platform.platform(), "rows": rows,
                                      "error_float64": {"max": float(err64.max()), "mean": float(err64.mean())},
@@ -99,7 +103,7 @@ def main(argv=None) -> int:
     return 0
 
 
-def error_table(spp: int, air: str = "rayleigh") -> list[dict]:
+def error_table(spp: int, air: str = "rayleigh", earth: str = "flat") -> list[dict]:
     """Every sky and ground case of :mod:`warpsky.evaluation.sky_error` for the air ``air``, printed per (sun,
     albedo)."""
     import numpy as np
@@ -108,16 +112,17 @@ def error_table(spp: int, air: str = "rayleigh") -> list[dict]:
 
     started = time.perf_counter()
     cases = []
-    print(f"\nsky against the path tracer (flat earth, air '{air}', {spp} paths per pixel, 8x8 pixels 1 deg across)")
+    print(f"\nsky against the path tracer ({earth} earth, air '{air}', {spp} paths per pixel, 8x8 pixels 1 deg "
+          "across)")
     print("per (sun, albedo): the worst view's |error| per channel net of 2 sigma of the tracer's noise; "
           "'ground': the ground's radiance (sun + sky irradiance)")
     print(f"{'sun':>5} {'albedo':>6}  {'table sky':>10} {'single sky':>10} {'table ground':>12} "
           f"{'single ground':>13} {'noise':>6}")
-    for sun in se.SUN_ELEVATIONS:
+    for sun in se.sun_elevations(earth):
         for albedo in se.ALBEDOS:
-            group = [se.sky_case(sun, view, albedo, spp=spp, air=air) for view in se.VIEWS
+            group = [se.sky_case(sun, view, albedo, spp=spp, air=air, earth=earth) for view in se.VIEWS
                      if se.clear_of_the_sun(sun, view)]
-            ground = se.ground_case(sun, albedo, spp=spp, air=air) if albedo > 0.0 else None
+            ground = se.ground_case(sun, albedo, spp=spp, air=air, earth=earth) if albedo > 0.0 else None
             cases.extend(group + ([ground] if ground else []))
             noise = max(float(np.max(se.relative_errors(c)[1])) for c in group)
             g = (f"{se.net(ground):>12.1%} {se.net(ground, 'single'):>13.1%}" if ground

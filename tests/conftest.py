@@ -142,7 +142,7 @@ def add_atmosphere(stage_path, **attributes):
              "mieScattering": Sdf.ValueTypeNames.Color3f, "mieAbsorption": Sdf.ValueTypeNames.Color3f,
              "mieScaleHeight": Sdf.ValueTypeNames.Float, "mieAnisotropy": Sdf.ValueTypeNames.Float,
              "ozoneAbsorption": Sdf.ValueTypeNames.Color3f, "ozoneAltitude": Sdf.ValueTypeNames.Float,
-             "ozoneWidth": Sdf.ValueTypeNames.Float}
+             "ozoneWidth": Sdf.ValueTypeNames.Float, "planetRadius": Sdf.ValueTypeNames.Float}
     for name, value in attributes.items():
         prim.CreateAttribute(f"warpsky:atmosphere:{name}", types[name]).Set(value)
     if not attributes:

@@ -122,7 +122,14 @@ def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.
     directions = pixel_directions(scene.camera, width, height)
     radiance = scene.dome.radiance(directions)
     atmosphere = scene.atmosphere
-    if through_air and atmosphere is not None:
+    if through_air and atmosphere is not None and atmosphere.round:
+        from warpsky.media import air_round_host
+
+        altitude = float(scene.camera.position[1]) + atmosphere.altitude
+        through = air_round_host.space_transmittance(atmosphere, air_round_host.scene_floor(scene), altitude,
+                                                     directions.reshape(-1, 3))
+        radiance = radiance * through.reshape(directions.shape)
+    elif through_air and atmosphere is not None:
         from warpsky.media.air_analytic import air_sine
         from warpsky.media.air_mixture import column as air_column
 

@@ -17,10 +17,14 @@ import numpy as np
 from warpsky.light.sky import sky_light
 from warpsky.light.sun import sunlight
 from warpsky.media.air_mixture import sunlight_transmittance
-from warpsky.scene.model import EARTH_AEROSOLS, EARTH_OZONE, Atmosphere, Camera, Ground, Scene, Sun
+from warpsky.scene.model import EARTH_AEROSOLS, EARTH_OZONE, EARTH_RADIUS, Atmosphere, Camera, Ground, Scene, Sun
 
-#: Sun elevations [deg] of the grid, down to the horizon (a flat earth's air is dark once the disk has set).
+#: Sun elevations [deg] of the grid, down to the horizon (a flat earth's air is dark once the disk has set) and, on
+#: a round earth, through civil twilight.
 SUN_ELEVATIONS = (90.0, 60.0, 30.0, 10.0, 5.0, 2.0, 0.0)
+TWILIGHT_ELEVATIONS = (-2.0, -4.0, -6.0)
+#: The earths compared: Riley's flat one and a round one of the Earth's radius.
+EARTHS = {"flat": 0.0, "round": EARTH_RADIUS}
 #: Views (elevation, azimuth from the sun) [deg], all >= 2 deg above the horizon.
 VIEWS = ((90.0, 0.0), (45.0, 0.0), (45.0, 180.0), (10.0, 90.0), (10.0, 180.0), (2.0, 45.0), (2.0, 90.0),
          (2.0, 180.0))
@@ -55,15 +59,21 @@ def clear_of_the_sun(sun_elevation: float, view: tuple[float, float]) -> bool:
     return math.degrees(math.acos(min(max(cos, -1.0), 1.0))) > 2.0 * FIELD_DEG
 
 
+def sun_elevations(earth: str) -> tuple[float, ...]:
+    """The grid's sun elevations for ``earth`` (a round one adds twilight)."""
+    return SUN_ELEVATIONS + (TWILIGHT_ELEVATIONS if EARTHS[earth] > 0.0 else ())
+
+
 def case_scene(sun_elevation: float, view: np.ndarray, albedo: float, *, multiple: bool = True,
-               air: str = "rayleigh") -> Scene:
-    """The scene of one case: the air ``air`` of :data:`AIRS` (flat earth), a sun of unit irradiance, a ground of
-    ``albedo`` (none for 0: the path tracer's black sea level), the camera 1 m up looking along ``view``."""
+               air: str = "rayleigh", earth: str = "flat") -> Scene:
+    """The scene of one case: the air ``air`` of :data:`AIRS` on the earth ``earth`` of :data:`EARTHS`, a sun of
+    unit irradiance, a ground of ``albedo`` (none for 0: the path tracer's black sea level), the camera 1 m up
+    looking along ``view``."""
     focal = 0.5 * 36.0 / math.tan(math.radians(0.5 * FIELD_DEG))
     camera = Camera("cam", np.array([0.0, 1.0, 0.0]), _rotation(view), focal, 36.0, 36.0)
     ground = Ground(0.0, albedo=np.full(3, albedo)) if albedo > 0.0 else None
     return Scene(camera, Sun(direction(sun_elevation, 0.0), np.ones(3)), ground=ground,
-                 atmosphere=Atmosphere(multiple_scattering=multiple, **AIRS[air]))
+                 atmosphere=Atmosphere(multiple_scattering=multiple, planet_radius=EARTHS[earth], **AIRS[air]))
 
 
 def traced(scene: Scene, spp: int, device: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -77,39 +87,50 @@ def traced(scene: Scene, spp: int, device: str, seed: int) -> tuple[np.ndarray, 
 
 
 def sky_case(sun_elevation: float, view: tuple[float, float], albedo: float, *, spp: int, device: str = "cpu",
-             seed: int = 7, air: str = "rayleigh") -> dict:
+             seed: int = 7, air: str = "rayleigh", earth: str = "flat") -> dict:
     """One sky case: the sky pass with and without its multiple scattering against the path tracer."""
     from warpsky.passes.sky.sky import Sky
 
     v = direction(*view)
-    scene = case_scene(sun_elevation, v, albedo, air=air)
+    scene = case_scene(sun_elevation, v, albedo, air=air, earth=earth)
     mean, error = traced(scene, spp, device, seed)
     table = Sky(device=device).render(scene, PIXELS, PIXELS)[0].radiance.reshape(-1, 3).mean(axis=0)
-    single = Sky(device=device).render(case_scene(sun_elevation, v, albedo, multiple=False, air=air), PIXELS,
-                                       PIXELS)[0].radiance.reshape(-1, 3).mean(axis=0)
-    return {"kind": "sky", "air": air, "sun": sun_elevation, "view": list(view), "albedo": albedo,
+    single = Sky(device=device).render(case_scene(sun_elevation, v, albedo, multiple=False, air=air, earth=earth),
+                                       PIXELS, PIXELS)[0].radiance.reshape(-1, 3).mean(axis=0)
+    return {"kind": "sky", "air": air, "earth": earth, "sun": sun_elevation, "view": list(view), "albedo": albedo,
             "traced": mean.tolist(),
             "noise": error.tolist(), "table": table.astype(np.float64).tolist(),
             "single": single.astype(np.float64).tolist()}
 
 
+def direct_sun(scene) -> np.ndarray:
+    """Irradiance of the sunlight through the air on the case's horizontal ground, RGB."""
+    from warpsky.light.frame import FrameLight
+
+    light = sunlight(scene)
+    atm = scene.atmosphere
+    if atm.round:
+        transmittance = FrameLight(scene, True).transmittance_at(0.0)
+    else:
+        transmittance = sunlight_transmittance(atm, atm.altitude, light.direction[1])
+    return light.irradiance * max(light.direction[1], 0.0) * transmittance
+
+
 def ground_case(sun_elevation: float, albedo: float, *, spp: int, device: str = "cpu", seed: int = 7,
-                air: str = "rayleigh") -> dict:
+                air: str = "rayleigh", earth: str = "flat") -> dict:
     """One ground case: albedo / pi (sunlight through the air + the sky irradiance the passes take) against the
     path-traced ground seen from 1 m above it."""
     down = np.array([0.0, -1.0, 0.0])
-    scene = case_scene(sun_elevation, down, albedo, air=air)
+    scene = case_scene(sun_elevation, down, albedo, air=air, earth=earth)
     mean, error = traced(scene, spp, device, seed)
     out = {}
     for name, multiple in (("table", True), ("single", False)):
-        s = case_scene(sun_elevation, down, albedo, multiple=multiple, air=air)
-        light = sunlight(s)
-        atm = s.atmosphere
-        direct = (light.irradiance * max(light.direction[1], 0.0)
-                  * sunlight_transmittance(atm, atm.altitude, light.direction[1]))
+        s = case_scene(sun_elevation, down, albedo, multiple=multiple, air=air, earth=earth)
+        direct = direct_sun(s)
         sky = sky_light(s, analytic=True)[1] * math.pi  # E / pi -> E
         out[name] = (albedo / math.pi * (direct + sky)).tolist()
-    return {"kind": "ground", "air": air, "sun": sun_elevation, "view": [-90.0, 0.0], "albedo": albedo,
+    return {"kind": "ground", "air": air, "earth": earth, "sun": sun_elevation, "view": [-90.0, 0.0],
+            "albedo": albedo,
             "traced": mean.tolist(), "noise": error.tolist(), **out}
 
 

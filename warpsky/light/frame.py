@@ -73,6 +73,12 @@ class FrameLight:
         if not self.through_air or scene.atmosphere is None or scene.sun is None:
             return np.ones(3)
         atm = scene.atmosphere
+        if atm.round:
+            from warpsky.media import air_round_host
+
+            return air_round_host.sunlight_transmittance(
+                atm, air_round_host.scene_floor(scene), sea_level_altitude(atm), float(scene.sun.direction[1]),
+                air_round_host.sun_radius(scene.sun.angular_diameter))
         return sunlight_transmittance(atm, sea_level_altitude(atm), light_elevation_sine(scene.sun))
 
     def lit_at_media(self, scene=None):

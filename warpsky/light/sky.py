@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from warpsky.light.dome import hemisphere_directions, upper_hemisphere
-from warpsky.light.sun import sunlight
+from warpsky.light.sun import lights_air, sunlight
 from warpsky.media.air_multiple import air_radiance
 
 
@@ -22,7 +22,7 @@ def sky_hemisphere(scene, samples: int = 64) -> tuple[np.ndarray, np.ndarray]:
     without an atmosphere or with the sun set (the night sky is black, as the sky pass draws it)."""
     light = sunlight(scene)
     atmosphere = scene.atmosphere
-    if atmosphere is None or light is None or not light.lit or light.air_sine <= 0.0:
+    if atmosphere is None or not lights_air(atmosphere, light):
         return np.zeros(3), np.zeros(3)
     directions = hemisphere_directions(samples, upper=True).reshape(-1, 3)
     altitude = float(scene.camera.position[1]) + atmosphere.altitude

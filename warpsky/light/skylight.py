@@ -48,7 +48,7 @@ import warp as wp
 
 from warpsky.light.dome import ambient_radiance, hemisphere_directions, upper_hemisphere
 from warpsky.light.frame import media_altitude
-from warpsky.light.sun import above_air, sunlight
+from warpsky.light.sun import above_air, lights_air, sunlight
 from warpsky.media.air_mixture import transmittance as air_transmittance
 from warpsky.media.air_multiple import air_radiance
 from warpsky.media.voxel import MediaPoint, VoxelMedia
@@ -84,8 +84,7 @@ def has_sky_light(scene, *, traces_air: bool = False) -> bool:
     a sun above the horizon."""
     if scene.atmosphere is None or traces_air:
         return False
-    light = sunlight(above_air(scene))
-    return light is not None and light.lit and light.air_sine > 0.0
+    return lights_air(scene.atmosphere, sunlight(above_air(scene)))
 
 
 def projection(radiance: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -106,7 +105,12 @@ def _upper_radiance(scene, atmosphere, light, directions: np.ndarray, altitude: 
     dome = scene.dome
     if dome is not None:
         dome = dome.radiance(directions)
-        if atmosphere is not None:
+        if atmosphere is not None and atmosphere.round:
+            from warpsky.media import air_round_host
+
+            dome = dome * air_round_host.space_transmittance(atmosphere, air_round_host.scene_floor(scene), altitude,
+                                                             directions)
+        elif atmosphere is not None:
             dome = dome * air_transmittance(atmosphere, altitude, up[:, 0], np.inf)
         out = out + dome
     if light is not None:
@@ -147,10 +151,16 @@ def media_environment(scene, *, traces_air: bool = False, samples: int = SAMPLES
         ground_sky = 2.0 * (_upper_radiance(scene, atmosphere, light, up, floor) * up[:, 1:2]).mean(axis=0)
         distance = max(altitude - floor, 0.0) / -down[:, 1]
         lower = np.zeros((len(down), 3))
-        if albedo is not None:
+        if albedo is not None and atmosphere.round:
+            from warpsky.media import air_round_host
+
+            lower = lower + albedo * ground_sky * air_round_host.floor_transmittance(
+                atmosphere, air_round_host.scene_floor(scene), altitude, down)
+        elif albedo is not None:
             lower = lower + albedo * ground_sky * air_transmittance(atmosphere, altitude, down[:, 1], distance)
         if light is not None:
-            lower = lower + air_radiance(scene, light, altitude, down, distance)
+            # a round earth's air ends at the floor's sphere, or beyond the horizon at the top of the air
+            lower = lower + air_radiance(scene, light, altitude, down, np.inf if atmosphere.round else distance)
     upper_mean, upper_moment = projection(upper, up)
     lower_mean, lower_moment = projection(lower, down)
     return Environment(upper_mean, upper_moment, lower_mean, lower_moment, ground_sky,

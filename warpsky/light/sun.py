@@ -115,9 +115,21 @@ def has_horizon(scene) -> bool:
 
 
 def sunlight(scene) -> Sunlight | None:
-    """The :class:`Sunlight` of ``scene`` (None without a sun)."""
-    gamma = scene.atmosphere.gamma if scene.atmosphere is not None else None
+    """The :class:`Sunlight` of ``scene`` (None without a sun); over a round earth the whole disk, each point of the
+    air taking its own horizon's share (:func:`~warpsky.media.air_round_host.round_sunlight`)."""
+    atmosphere = scene.atmosphere
+    if atmosphere is not None and atmosphere.round:
+        from warpsky.media.air_round_host import round_sunlight, scene_floor
+
+        return round_sunlight(scene.sun, atmosphere, scene_floor(scene))
+    gamma = atmosphere.gamma if atmosphere is not None else None
     return sun_sunlight(scene.sun, horizon=has_horizon(scene), gamma=gamma)
+
+
+def lights_air(atmosphere, light: Sunlight | None) -> bool:
+    """Whether ``light`` lights the air of ``atmosphere``: a lit sun, above the flat earth's horizon (a round
+    earth's high air sees the sun after it has set: :func:`sunlight` says so there)."""
+    return light is not None and light.lit and (atmosphere.round or light.air_sine > 0.0)
 
 
 def light_elevation_sine(sun) -> float:

@@ -12,9 +12,26 @@ import numpy as np
 import warp as wp
 
 from warpsky.camera_rays import PinholeCamera, pinhole_camera, primary_ray
+from warpsky.light.sun import Sun
 from warpsky.media.air_analytic import AnalyticAir, air_ray, analytic_air
 from warpsky.media.air_mixture_kernels import split_transmittance
+from warpsky.media.air_round import RoundAir
+from warpsky.media.air_round_light import RoundMultiple
+from warpsky.numerics import exp3
+from warpsky.passes.sky.round_kernels import RoundView, front_light, round_ray
 from warpsky.surfaces.plane import Ground, ground_struct
+
+
+@wp.kernel
+def round_front_kernel(cam: PinholeCamera, air: AnalyticAir, ra: RoundAir, ms: RoundMultiple, view_table: RoundView,
+                       sun: Sun, sun_radius: float, media_depth: wp.array2d(dtype=float),
+                       transmittance: wp.array2d(dtype=wp.vec3)):
+    """:func:`front_transmittance_kernel` on a round earth, through the same functions as
+    :func:`~warpsky.passes.sky.round_kernels.round_sky_kernel`."""
+    row, col = wp.tid()
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    along = round_ray(air, ra, cam, ray.origin[1], ray.direction, ray.cos_axis, media_depth[row, col])
+    transmittance[row, col] = exp3(front_light(air, ra, ms, view_table, along, ray.direction, sun, sun_radius).depth)
 
 
 @wp.kernel
@@ -37,6 +54,12 @@ def front_air_transmittance(scene, width: int, height: int, media_depth: np.ndar
     with wp.ScopedDevice(device):
         depth = wp.array(np.ascontiguousarray(media_depth, dtype=np.float32), dtype=float, device=device)
         out = wp.zeros((height, width), dtype=wp.vec3, device=device)
+        if scene.atmosphere.round:
+            from warpsky.passes.sky.round_sky import round_front_inputs
+
+            wp.launch(round_front_kernel, dim=(height, width), device=device,
+                      inputs=[*round_front_inputs(scene, camera, width, height, device), depth, out])
+            return out.numpy()
         wp.launch(front_transmittance_kernel, dim=(height, width), inputs=[
             pinhole_camera(camera, width, height), analytic_air(scene.atmosphere, camera.position),
             int(scene.ground is not None), ground_struct(scene.ground, camera.position), depth, out,

@@ -100,6 +100,10 @@ def air_radiance(scene, light, altitude: float, directions: np.ndarray, distance
     (above the air): the single scattering E (P_R I_R + P_M I_M) (:func:`~warpsky.media.air_mixture.scatter_parts`)
     plus, unless the atmosphere turns it off, the table's multiple scattering. The same light the sky pass draws."""
     atmosphere = scene.atmosphere
+    if atmosphere.round:
+        from warpsky.media import air_round_host
+
+        return air_round_host.radiance(scene, light, altitude, directions, distance)
     directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     distance = np.broadcast_to(np.asarray(distance, dtype=np.float64).reshape(-1) if np.ndim(distance)
                                else np.asarray(distance, dtype=np.float64), (len(directions),))

@@ -282,6 +282,10 @@ EARTH_AEROSOLS = {"mie_scattering": np.full(3, 3.996e-6), "mie_absorption": np.f
                   "mie_scale_height": 1200.0, "mie_g": 0.8}
 EARTH_OZONE = {"ozone_absorption": np.array([6.5e-7, 1.881e-6, 8.5e-8]), "ozone_altitude": 25000.0,
                "ozone_width": 15000.0}
+#: Bruneton's (2017) Earth radius at sea level [m].
+EARTH_RADIUS = 6_360_000.0
+#: The smallest round planet [m]: its air (tens of km thick) must stay thin beside its radius.
+MIN_PLANET_RADIUS = 1.0e6
 
 
 @dataclass(frozen=True)
@@ -316,6 +320,10 @@ class Atmosphere:
     ``...:ozoneWidth``        ``ozone_width``               m      15000                   density falls linearly
                                                                                            to 0 this far above and
                                                                                            below
+    ``...:planetRadius``      ``planet_radius``             m      0 (flat earth)          radius of sea level; > 0:
+    float                                                          (Earth: 6.36e6)         a round earth (air mass
+                                                                                           and horizon of a sphere,
+                                                                                           twilight after sunset)
     ========================= ============================= ====== ======================= ========================
 
     The Earth values are Bruneton's (2017) and Hillaire's (2020) reference atmosphere; the defaults keep Riley's
@@ -334,6 +342,7 @@ class Atmosphere:
     ozone_absorption: np.ndarray = field(default_factory=lambda: np.zeros(3))
     ozone_altitude: float = 25000.0
     ozone_width: float = 15000.0
+    planet_radius: float = 0.0
 
     def __post_init__(self):
         beta = _vec3(self.beta_sea_level, f"atmosphere {self.name}: betaSeaLevel")
@@ -360,6 +369,10 @@ class Atmosphere:
                              f"got {self.ozone_altitude}")
         if not (math.isfinite(self.mie_g) and -1.0 < self.mie_g < 1.0):
             raise SceneError(f"atmosphere {self.name}: mieAnisotropy must lie in (-1, 1), got {self.mie_g}")
+        if not (math.isfinite(self.planet_radius) and (self.planet_radius == 0.0
+                                                       or self.planet_radius >= MIN_PLANET_RADIUS)):
+            raise SceneError(f"atmosphere {self.name}: planetRadius must be 0 (a flat earth) or a radius >= "
+                             f"{MIN_PLANET_RADIUS:g} m, got {self.planet_radius}")
 
     @property
     def gamma(self) -> float:
@@ -373,6 +386,11 @@ class Atmosphere:
     @property
     def has_ozone(self) -> bool:
         return bool(np.any(self.ozone_absorption > 0.0))
+
+    @property
+    def round(self) -> bool:
+        """Whether the earth is a sphere (``planet_radius`` > 0) rather than Riley's flat earth."""
+        return self.planet_radius > 0.0
 
     @property
     def mixed(self) -> bool:

@@ -264,7 +264,7 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
             known = {f"warpsky:atmosphere:{n}" for n in (
                 "betaSeaLevel", "scaleHeight", "altitude", "enabled", "multipleScattering", "mieScattering",
                 "mieAbsorption", "mieScaleHeight", "mieAnisotropy", "ozoneAbsorption", "ozoneAltitude",
-                "ozoneWidth")}
+                "ozoneWidth", "planetRadius")}
             unknown = sorted(set(names) - known)
             if unknown:
                 raise SceneError(f"atmosphere {prim.GetPath()}: unknown attribute(s) {', '.join(unknown)}; known: "
@@ -283,7 +283,8 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
                                      ("mieScaleHeight", "mie_scale_height", self.meters_per_unit),
                                      ("mieAnisotropy", "mie_g", 1.0),
                                      ("ozoneAltitude", "ozone_altitude", self.meters_per_unit),
-                                     ("ozoneWidth", "ozone_width", self.meters_per_unit)):
+                                     ("ozoneWidth", "ozone_width", self.meters_per_unit),
+                                     ("planetRadius", "planet_radius", self.meters_per_unit)):
                 a = prim.GetAttribute(f"warpsky:atmosphere:{attr}")
                 if a and a.HasAuthoredValue():
                     value = a.Get(tc)

@@ -15,6 +15,7 @@ from warpsky.media.air_analytic import analytic_air
 from warpsky.media.air_multiple import floor_of, multiple_struct, scene_table
 from warpsky.passes.base import Pass
 from warpsky.passes.sky.kernels import sky_kernel
+from warpsky.passes.sky.round_sky import launch_round_sky, round_description
 from warpsky.resources import MemoryEstimate
 from warpsky.scene.model import Projection, Scene
 from warpsky.surfaces.plane import ground_struct
@@ -43,6 +44,22 @@ def view_rays(scene: Scene, camera, light):
     return atm, altitude, floor, float(light.air_sine) if light is not None and light.lit else 0.0
 
 
+def air_summary(atm) -> str:
+    """The air's constituents and the earth's shape, in one line."""
+    parts = [f"Rayleigh gas betaSeaLevel {np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, scale height "
+             f"{atm.scale_height:g} m"]
+    if atm.has_aerosols:
+        extinction = atm.mie_scattering + atm.mie_absorption
+        albedo = atm.mie_scattering / np.maximum(extinction, 1e-30)
+        parts.append(f"aerosols {np.round(extinction * 1e6, 3).tolist()} /Mm (albedo {np.round(albedo, 3).tolist()}), "
+                     f"scale height {atm.mie_scale_height:g} m, g {atm.mie_g:g}")
+    if atm.has_ozone:
+        parts.append(f"ozone {np.round(atm.ozone_absorption * 1e6, 3).tolist()} /Mm at {atm.ozone_altitude:g} "
+                     f"+- {atm.ozone_width:g} m")
+    earth = f"round earth (radius {atm.planet_radius / 1e3:g} km)" if atm.round else "flat earth"
+    return "; ".join(parts) + f"; {earth}, altitude {atm.altitude:g} m"
+
+
 class Sky:
     """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk), drawn
     from Riley's closed form (:mod:`warpsky.media.air_analytic`) with the sun above the air, plus the multiple-
@@ -66,14 +83,17 @@ class Sky:
             depth_in = device_buffers.reusable("sky:media_depth", shape, float, self.device)
             depth_in.assign(np.ascontiguousarray(depth, dtype=np.float32))
             light = sunlight(scene)
-            wp.launch(sky_kernel, dim=shape, inputs=[
-                pinhole_camera(camera, width, height), analytic_air(atm, camera.position),
-                multiple_struct(scene_table(scene, light), self.device, name="sky:multiple",
-                                views=view_rays(scene, camera, light)),
-                sun_struct(light, unlit_direction=BELOW),
-                int(scene.ground is not None), ground_struct(scene.ground, camera.position),
-                depth_in, front, front_t, back,
-            ])
+            if atm.round:
+                launch_round_sky(scene, camera, width, height, depth_in, outputs, self.device)
+            else:
+                wp.launch(sky_kernel, dim=shape, inputs=[
+                    pinhole_camera(camera, width, height), analytic_air(atm, camera.position),
+                    multiple_struct(scene_table(scene, light), self.device, name="sky:multiple",
+                                    views=view_rays(scene, camera, light)),
+                    sun_struct(light, unlit_direction=BELOW),
+                    int(scene.ground is not None), ground_struct(scene.ground, camera.position),
+                    depth_in, front, front_t, back,
+                ])
             images = [device_buffers.download(f"sky:{name}", array) for name, array in zip(OUTPUTS, outputs,
                                                                                            strict=True)]
             front_layer = Layer(images[0], images[1], np.full(shape, far, np.float32))
@@ -100,13 +120,15 @@ class SkyPass(Pass):
         atm = scene.atmosphere
         night = scene.sun is None or scene.sun.direction[1] <= 0.0
         how = (f"traced by {technique.name} as a participating medium, with the sun disk" if technique.traces_air
-               else "Riley's single-scattering sky in closed form"
-               + (" plus the multiple-scattering table (Hillaire 2020, with the floor's bounces)"
+               else ("single scattering by quadrature along each ray" if atm.round
+                     else "Riley's single-scattering sky in closed form")
+               + (" plus the multiple-scattering table (every order, with the floor's bounces)"
                   if atm.multiple_scattering else " (multiple scattering off)")
                + ", aerial perspective and sun disk")
-        out = {"sky": f"{atm.name}: {how}; betaSeaLevel {np.round(atm.beta_sea_level * 1e6, 3).tolist()} /Mm, "
-                      f"scale height {atm.scale_height:g} m, altitude {atm.altitude:g} m, flat earth, Rayleigh air"
-                      + ("; sun below the horizon: night (black sky)" if night else "")}
+        out = {"sky": f"{atm.name}: {how}; {air_summary(atm)}"
+                      + ("; sun below the horizon: night (black sky)" if night and not atm.round else "")}
+        if atm.round:
+            return {**out, **round_description(scene, technique, how)}
         table = None if technique.traces_air else scene_table(scene, sunlight(scene))
         if table is not None:
             floor, albedo = floor_of(scene)

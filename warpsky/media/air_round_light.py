@@ -1,0 +1,153 @@
+"""The light a round earth's air sends along a ray, on the device: single scattering of the sun (its transmittance
+from the table of optical depths, its disk clipped by each point's own horizon) and the light scattered more than
+once (the table of :mod:`~warpsky.media.air_round_multiple`), by the panel quadrature of
+:mod:`~warpsky.media.air_round`.
+
+Along a straight ray from altitude h0 with elevation sine mu0, towards a sun of elevation sine mu_s0 at the start,
+nu = cos(view, sun) is constant and a point at distance t sees the sun at elevation sine (r0 mu_s0 + t nu) / r
+(Bruneton 2017), so the phase functions factor out of the integrals:
+
+    S_c = int sigma_s,c T T_sun dt (c: the Rayleigh gas, the aerosols),   M = int sigma_s T Psi(h, mu_s) dt,
+
+and the radiance is E (P_R(nu) S_R + P_M(nu) S_M + M).
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from warpsky.media.air_analytic import AnalyticAir
+from warpsky.media.air_round import (
+    PANEL_NODES,
+    PANEL_S,
+    PANEL_W,
+    RoundAir,
+    extinction_at,
+    make_line,
+    panel_bound,
+    panel_node,
+    side,
+    sun_transmittance,
+)
+
+_nodes = wp.types.vector(length=PANEL_NODES, dtype=float)
+
+
+@wp.struct
+class RoundMultiple:
+    """The multiple-scattering table Psi(h, mu_s) as kernels see it (``enabled`` 0: single scattering only)."""
+
+    enabled: int
+    psi: wp.array3d(dtype=wp.vec3)  # (heights, suns, 4): Psi, Q_uu, Q_hh, Q_uh per unit irradiance, RGB
+    floor: float  # altitude of the first row [m above sea level]
+    height: float  # the rows span floor + height u^2, u uniform in [0, 1]
+
+
+@wp.struct
+class MultipleAt:
+    """The table at one point of a view ray: the isotropic Psi (for every scatterer) and the second order's
+    anisotropic part towards the view (for the Rayleigh gas), per unit irradiance, RGB."""
+
+    isotropic: wp.vec3
+    rayleigh: wp.vec3
+
+
+@wp.func
+def multiple_terms(ms: RoundMultiple, h: float, mu_s: float, mu: float, nu: float) -> MultipleAt:
+    """The table at altitude ``h`` for a sun of elevation sine ``mu_s`` there, towards a view of elevation sine
+    ``mu`` there and cos(view, sun) ``nu``: bilinear in u = sqrt((h - floor) / height) and in
+    v = sign(mu_s) sqrt(|mu_s|) (rows dense near the floor, columns near the horizon)."""
+    u = wp.sqrt(wp.clamp((h - ms.floor) / ms.height, 0.0, 1.0)) * float(ms.psi.shape[0] - 1)
+    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))
+    s = wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(ms.psi.shape[1] - 1)
+    i = wp.min(int(u), ms.psi.shape[0] - 2)
+    j = wp.min(int(s), ms.psi.shape[1] - 2)
+    a = u - float(i)
+    b = s - float(j)
+    # the view in the point's frame: up, towards the sun's azimuth, across
+    sun_across = wp.sqrt(wp.max(1.0 - mu_s * mu_s, 0.0))
+    v_h = float(0.0)
+    if sun_across > 1.0e-6:
+        v_h = wp.clamp((nu - mu * mu_s) / sun_across, -1.0, 1.0)
+    v_s2 = wp.max(1.0 - mu * mu - v_h * v_h, 0.0)
+    weights = wp.vec4(1.0, mu * mu - v_s2, v_h * v_h - v_s2, 2.0 * mu * v_h) * (3.0 / (16.0 * wp.pi))
+    out = MultipleAt()
+    for term in range(4):
+        value = ((ms.psi[i, j, term] * (1.0 - b) + ms.psi[i, j + 1, term] * b) * (1.0 - a)
+                 + (ms.psi[i + 1, j, term] * (1.0 - b) + ms.psi[i + 1, j + 1, term] * b) * a)
+        if term == 0:
+            out.isotropic = value
+        else:
+            out.rayleigh += value * weights[term]
+    return out
+
+
+@wp.struct
+class RoundLight:
+    """Integrals along one ray (multiply the first three by E, the single-scattering ones by their phase)."""
+
+    rayleigh: wp.vec3  # int sigma_s,R T T_sun dt
+    mie: wp.vec3  # int sigma_s,M T T_sun dt
+    multiple: wp.vec3  # int sigma_s T Psi dt
+    depth: wp.vec3  # the ray's optical depth
+
+
+@wp.struct
+class SunGeometry:
+    """The sun as a ray sees it: its elevation sine at the ray's start, cos(view, sun), its disk's radius."""
+
+    mu_s0: float
+    nu: float
+    radius: float  # [rad]
+
+
+@wp.func
+def round_light(air: AnalyticAir, ra: RoundAir, ms: RoundMultiple, h0: float, mu0: float, sun: SunGeometry,
+                distance: float) -> RoundLight:
+    """The single- and multiple-scattering integrals and the optical depth over ``distance`` [m] of the ray from
+    altitude ``h0`` [m above sea level] of elevation sine ``mu0`` (staying above the floor)."""
+    line = make_line(ra, h0, mu0)
+    out = RoundLight()
+    tau = wp.vec3(0.0)
+    for piece in range(2):
+        t_a = float(0.0)
+        t_b = wp.min(distance, line.tp)
+        if piece == 1:
+            t_a = wp.max(line.tp, 0.0)
+            t_b = distance
+        if t_b > t_a:
+            s = side(ra, line, t_a, t_b)
+            for k in range(s.count):
+                h_a = panel_bound(ra, line, s, k)
+                h_b = panel_bound(ra, line, s, k + 1)
+                # the panel's integrand in its own variable, for the optical depth up to each node
+                fr = _nodes()
+                fg = _nodes()
+                fb = _nodes()
+                for j in range(PANEL_NODES):
+                    node = panel_node(line, s, h_a, h_b, j)
+                    e = extinction_at(air, node.h) * (node.dt / PANEL_W[j])
+                    fr[j] = e[0]
+                    fg[j] = e[1]
+                    fb[j] = e[2]
+                for j in range(PANEL_NODES):
+                    node = panel_node(line, s, h_a, h_b, j)
+                    at = tau + wp.vec3(wp.dot(PANEL_S[j], fr), wp.dot(PANEL_S[j], fg), wp.dot(PANEL_S[j], fb))
+                    t_view = wp.vec3(wp.exp(-at[0]), wp.exp(-at[1]), wp.exp(-at[2]))
+                    r = ra.radius + node.h
+                    mu_s = wp.clamp((line.r0 * sun.mu_s0 + node.t * sun.nu) / r, -1.0, 1.0)
+                    rayleigh = air.beta_sea_level * wp.exp(-air.gamma * node.h)
+                    mie = wp.vec3(0.0)
+                    if air.mixed != 0:
+                        mie = wp.cw_mul(air.mie_extinction, air.mie_albedo) * wp.exp(-air.mie_gamma * node.h)
+                    lit = wp.cw_mul(t_view, sun_transmittance(ra, node.h, mu_s, sun.radius)) * node.dt
+                    out.rayleigh += wp.cw_mul(rayleigh, lit)
+                    out.mie += wp.cw_mul(mie, lit)
+                    if ms.enabled != 0:
+                        mu = wp.clamp((line.r0 * mu0 + node.t) / r, -1.0, 1.0)
+                        terms = multiple_terms(ms, node.h, mu_s, mu, sun.nu)
+                        out.multiple += wp.cw_mul(t_view, wp.cw_mul(rayleigh + mie, terms.isotropic)
+                                                  + wp.cw_mul(rayleigh, terms.rayleigh)) * node.dt
+                tau += wp.vec3(wp.dot(PANEL_W, fr), wp.dot(PANEL_W, fg), wp.dot(PANEL_W, fb))
+    out.depth = tau
+    return out

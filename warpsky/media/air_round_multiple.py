@@ -1,0 +1,288 @@
+"""The light a round earth's air scatters more than once, as a table Psi(h, mu_s) built on the device.
+
+A round earth lit by parallel sunlight is symmetric about the axis through its centre towards the sun, so the
+isotropic part of any order's source at a point depends on two numbers only: its altitude h and the sun's elevation
+sine mu_s there. The table solves the orders >= 2 with isotropic scattering exactly on that grid, as the flat
+earth's table (:mod:`~warpsky.media.air_multiple`) does over altitude alone:
+
+* J_2(h, mu_s) = (1 / 4 pi) int L_1 dw, the single-scattering field (each constituent's phase, the sun's disk
+  clipped by each point's horizon: :func:`~warpsky.media.air_round_light.round_light`'s integrand) plus, looking
+  down, the sunlit floor (albedo rho, rho / pi mu_s T_sun) through the air;
+* R_2(mu_s) = rho / pi E_1, the floor lit by the single-scattering sky;
+* each order's source carried along every direction to the next, x_{n+1} = M x_n (the ray integrals of
+  sigma_s T J_n, J_n bilinear on the grid, plus the floor's radiance R_n seen through the air, and R_{n+1} from the
+  floor's irradiance), so Psi = sum_{n >= 2} J_n = (I - M)^{-1} x_2, one dense system per channel on the host.
+
+The second order keeps Rayleigh's phase, as the flat table's does: Rayleigh's phase is (1 + P_2(cos) / 2) / 4 pi,
+so its anisotropic part adds (3 / 16 pi) v^T Q v along a view v, Q = int L_1 (w w^T - I / 3) dw the
+single-scattering field's second moments in the point's frame (up, towards the sun's azimuth, across; mirror
+symmetry leaves Q_uu, Q_hh, Q_uh), tabulated beside Psi; orders >= 3 are isotropic.
+
+Rows: h = floor + height u^2 (u uniform, :data:`HEIGHTS` of them); columns: v = sign(mu_s) sqrt(|mu_s|) uniform on
+[-1, 1] (:data:`SUNS`), dense near the horizon where twilight lives. Directions: Gauss-Legendre in sqrt(|mu|) on
+each hemisphere (:data:`ELEVATIONS`) times :data:`AZIMUTHS` midpoints on [0, pi] (the other half by symmetry).
+Unlike Hillaire (2020, §5.5), whose table takes the same two numbers, it does not assume each order as strong as the
+point's own (his geometric series) and keeps the floor's bounces between orders.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from warpsky import device_buffers
+from warpsky.media.air_analytic import AnalyticAir, analytic_air
+from warpsky.media.air_round import (
+    PANEL_NODES,
+    PANEL_S,
+    PANEL_W,
+    RoundAir,
+    air_key,
+    extinction_at,
+    floor_distance,
+    horizon_sine,
+    make_line,
+    panel_bound,
+    panel_node,
+    round_struct,
+    side,
+    sun_transmittance,
+    top_distance,
+)
+from warpsky.media.air_round_light import RoundMultiple
+from warpsky.optics.phase import phase_hg, phase_rayleigh
+
+#: Table rows (altitudes) and columns (sun elevation sines).
+HEIGHTS = 24
+SUNS = 32
+#: Directions of the build: Gauss-Legendre nodes per hemisphere, azimuths on [0, pi].
+ELEVATIONS = 10
+AZIMUTHS = 8
+#: The sun's angular radius [rad] the table is built for (the real sun's; the disk matters only at the horizon).
+SUN_RADIUS = 0.5 * math.radians(0.53)
+
+_nodes = wp.types.vector(length=PANEL_NODES, dtype=float)
+
+
+@dataclass(frozen=True)
+class RoundTable:
+    """Psi on the grid, per unit sun irradiance [1/sr], RGB: ``values`` (HEIGHTS, SUNS, 4, 3), per node Psi then
+    the single-scattering field's second moments Q_uu, Q_hh, Q_uh (:func:`~warpsky.media.air_round_light.
+    multiple_at`); the rows span ``floor`` + ``height`` u^2 [m above sea level]; ``seconds`` the build's time."""
+
+    values: np.ndarray
+    floor: float
+    height: float
+    seconds: float
+
+
+def directions() -> np.ndarray:
+    """(count, 4): mu, cos(phi), sin(phi), weight (summing to 4 pi) of the build's sphere."""
+    x, w = np.polynomial.legendre.leggauss(ELEVATIONS)
+    u, wu = 0.5 * (x + 1.0), 0.5 * w
+    mu, wmu = u * u, wu * 2.0 * u  # int_0^1 f(mu) dmu in u = sqrt(mu)
+    phi = (np.arange(AZIMUTHS) + 0.5) * math.pi / AZIMUTHS
+    rows = [(sign * m, math.cos(p), math.sin(p), wm * 2.0 * math.pi / AZIMUTHS)
+            for sign in (1.0, -1.0) for m, wm in zip(mu, wmu, strict=True) for p in phi]
+    return np.array(rows, dtype=np.float64)
+
+
+@wp.struct
+class Grid:
+    """The table's grid and the floor's albedo."""
+
+    floor: float
+    height: float
+    albedo: wp.vec3
+
+
+@wp.func
+def grid_cell(grid: Grid, h: float, mu_s: float) -> wp.vec4:
+    """(row, column, row weight, column weight) of bilinear interpolation on the grid (row + 1, column + 1 take
+    the weights)."""
+    u = wp.sqrt(wp.clamp((h - grid.floor) / grid.height, 0.0, 1.0)) * float(HEIGHTS - 1)
+    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))
+    s = wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(SUNS - 1)
+    i = wp.min(int(u), HEIGHTS - 2)
+    j = wp.min(int(s), SUNS - 2)
+    return wp.vec4(float(i), float(j), u - float(i), s - float(j))
+
+
+@wp.func
+def add_cell(m: wp.array3d(dtype=float), row: int, cell: wp.vec4, value: wp.vec3):
+    """Spread ``value`` (per channel) over the four grid nodes of ``cell`` in row ``row`` of ``m``."""
+    i = int(cell[0])
+    j = int(cell[1])
+    for di in range(2):
+        for dj in range(2):
+            w = (1.0 - cell[2]) * (1.0 - cell[3])
+            if di == 1 and dj == 0:
+                w = cell[2] * (1.0 - cell[3])
+            elif di == 0 and dj == 1:
+                w = (1.0 - cell[2]) * cell[3]
+            elif di == 1 and dj == 1:
+                w = cell[2] * cell[3]
+            column = (i + di) * SUNS + j + dj
+            for c in range(3):
+                wp.atomic_add(m, c, row, column, w * value[c])
+
+
+@wp.func
+def add_floor(m: wp.array3d(dtype=float), row: int, mu_s: float, value: wp.vec3):
+    """Spread ``value`` over the floor's two unknowns about ``mu_s`` in row ``row`` of ``m``."""
+    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))
+    s = wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(SUNS - 1)
+    j = wp.min(int(s), SUNS - 2)
+    b = s - float(j)
+    for c in range(3):
+        wp.atomic_add(m, c, row, HEIGHTS * SUNS + j, (1.0 - b) * value[c])
+        wp.atomic_add(m, c, row, HEIGHTS * SUNS + j + 1, b * value[c])
+
+
+@wp.kernel
+def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(dtype=wp.vec4),
+                     m: wp.array3d(dtype=float), x2: wp.array(dtype=wp.vec3), quad: wp.array2d(dtype=wp.vec3)):
+    """Row (i, j) of the system, direction k: the ray from altitude h_i towards direction k under a sun of
+    elevation sine mu_s_j, its share of M and of J_2 (and for the floor's row, i = 0 looking up, of R)."""
+    row, k = wp.tid()
+    i = row // SUNS
+    j = row - i * SUNS
+    u = float(i) / float(HEIGHTS - 1)
+    h0 = grid.floor + grid.height * u * u
+    v = 2.0 * float(j) / float(SUNS - 1) - 1.0
+    mu_s0 = wp.sign(v) * v * v
+    d = dirs[k]
+    mu0 = d[0]
+    nu = wp.sqrt(wp.max(1.0 - mu0 * mu0, 0.0)) * d[1] * wp.sqrt(wp.max(1.0 - mu_s0 * mu_s0, 0.0)) + mu0 * mu_s0
+    share = d[3] / (4.0 * wp.pi)
+    floor_row = HEIGHTS * SUNS + j
+    up_from_floor = i == 0 and mu0 > 0.0
+    flux = d[3] * mu0 / wp.pi  # the floor's radiance per unit irradiance-weighted radiance, times albedo below
+    # the second moments of the direction in the point's frame (up, towards the sun's azimuth, across), less 1/3
+    across = wp.sqrt(wp.max(1.0 - mu0 * mu0, 0.0))
+    moments = wp.vec3(mu0 * mu0 - 1.0 / 3.0, across * across * d[1] * d[1] - 1.0 / 3.0, mu0 * across * d[1])
+    first = wp.vec3(0.0)
+    distance = floor_distance(ra, h0, mu0)
+    hits = distance >= 0.0
+    if not hits:
+        distance = top_distance(ra, h0, mu0)
+    phase_r = phase_rayleigh(nu)
+    phase_m = phase_hg(nu, air.mie_g)
+    line = make_line(ra, h0, mu0)
+    tau = wp.vec3(0.0)
+    for piece in range(2):
+        t_a = float(0.0)
+        t_b = wp.min(distance, line.tp)
+        if piece == 1:
+            t_a = wp.max(line.tp, 0.0)
+            t_b = distance
+        if t_b > t_a:
+            s = side(ra, line, t_a, t_b)
+            for p in range(s.count):
+                h_a = panel_bound(ra, line, s, p)
+                h_b = panel_bound(ra, line, s, p + 1)
+                fr = _nodes()
+                fg = _nodes()
+                fb = _nodes()
+                for n in range(PANEL_NODES):
+                    node = panel_node(line, s, h_a, h_b, n)
+                    e = extinction_at(air, node.h) * (node.dt / PANEL_W[n])
+                    fr[n] = e[0]
+                    fg[n] = e[1]
+                    fb[n] = e[2]
+                for n in range(PANEL_NODES):
+                    node = panel_node(line, s, h_a, h_b, n)
+                    at = tau + wp.vec3(wp.dot(PANEL_S[n], fr), wp.dot(PANEL_S[n], fg), wp.dot(PANEL_S[n], fb))
+                    t_view = wp.vec3(wp.exp(-at[0]), wp.exp(-at[1]), wp.exp(-at[2]))
+                    mu_s = wp.clamp((line.r0 * mu_s0 + node.t * nu) / (ra.radius + node.h), -1.0, 1.0)
+                    rayleigh = air.beta_sea_level * wp.exp(-air.gamma * node.h)
+                    mie = wp.vec3(0.0)
+                    if air.mixed != 0:
+                        mie = wp.cw_mul(air.mie_extinction, air.mie_albedo) * wp.exp(-air.mie_gamma * node.h)
+                    carried = wp.cw_mul(rayleigh + mie, t_view) * node.dt
+                    single = wp.cw_mul(wp.cw_mul(rayleigh * phase_r + mie * phase_m, t_view),
+                                       sun_transmittance(ra, node.h, mu_s, SUN_RADIUS)) * node.dt
+                    cell = grid_cell(grid, node.h, mu_s)
+                    add_cell(m, row, cell, carried * share)
+                    wp.atomic_add(x2, row, single * share)
+                    first += single
+                    if up_from_floor:
+                        add_cell(m, floor_row, cell, wp.cw_mul(grid.albedo, carried) * flux)
+                        wp.atomic_add(x2, floor_row, wp.cw_mul(grid.albedo, single) * flux)
+                tau += wp.vec3(wp.dot(PANEL_W, fr), wp.dot(PANEL_W, fg), wp.dot(PANEL_W, fb))
+    if hits:
+        # the floor seen through the air: its radiance R_n (unknown) and, for J_2, the sunlit floor
+        t_floor = wp.vec3(wp.exp(-tau[0]), wp.exp(-tau[1]), wp.exp(-tau[2]))
+        mu_g = wp.clamp((line.r0 * mu_s0 + distance * nu) / (ra.radius + ra.floor), -1.0, 1.0)
+        add_floor(m, row, mu_g, t_floor * share)
+        sunlit = wp.cw_mul(grid.albedo, sun_transmittance(ra, ra.floor, mu_g, SUN_RADIUS)) * (
+            wp.max(mu_g, 0.0) / wp.pi)
+        wp.atomic_add(x2, row, wp.cw_mul(t_floor, sunlit) * share)
+        first += wp.cw_mul(t_floor, sunlit)
+    for term in range(3):
+        wp.atomic_add(quad, row, term, first * (moments[term] * d[3]))
+
+
+def build(atm, floor: float, albedo, device) -> RoundTable:
+    """The table of the round earth's air ``atm`` over a Lambertian floor of ``albedo`` (RGB) at ``floor`` [m above
+    sea level], built on ``device`` (the system solved on the host in float64)."""
+    started = time.perf_counter()
+    ra = round_struct(atm, floor, device)
+    grid = Grid()
+    grid.floor = float(floor)
+    grid.height = float(ra.top - floor)
+    grid.albedo = wp.vec3(*np.asarray(albedo, dtype=np.float64).tolist())
+    count = HEIGHTS * SUNS + SUNS
+    sphere = directions()
+    with wp.ScopedDevice(device):
+        dirs = wp.array(sphere.astype(np.float32), dtype=wp.vec4)
+        m = wp.zeros((3, count, count), dtype=float)
+        x2 = wp.zeros(count, dtype=wp.vec3)
+        quad = wp.zeros((HEIGHTS * SUNS, 3), dtype=wp.vec3)
+        wp.launch(transport_kernel, dim=(HEIGHTS * SUNS, len(sphere)),
+                  inputs=[analytic_air(atm, np.zeros(3)), ra, grid, dirs, m, x2, quad])
+        matrix = m.numpy().astype(np.float64)
+        source = x2.numpy().astype(np.float64)
+        moments = quad.numpy().astype(np.float64)
+    values = np.zeros((HEIGHTS * SUNS, 3))
+    for c in range(3):
+        values[:, c] = np.linalg.solve(np.eye(count) - matrix[c], source[:, c])[:HEIGHTS * SUNS]
+    terms = np.concatenate([np.maximum(values, 0.0)[:, None, :], moments], axis=1)
+    return RoundTable(terms.reshape(HEIGHTS, SUNS, 4, 3), float(floor), float(grid.height),
+                      time.perf_counter() - started)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached(key: tuple, albedo: tuple, device: str) -> RoundTable:
+    atm, floor = _KEYED[key]
+    return build(atm, floor, np.array(albedo), device)
+
+
+_KEYED: dict = {}
+
+
+def round_table(atm, floor: float, albedo, device) -> RoundTable:
+    """The table for ``atm`` over a floor at ``floor`` of ``albedo``, built once per air, floor and device (it
+    holds every sun elevation: a sunrise builds it once)."""
+    key = air_key(atm, floor)
+    _KEYED.setdefault(key, (atm, float(floor)))
+    return _cached(key, tuple(float(a) for a in np.asarray(albedo, dtype=np.float64)), str(wp.get_device(device)))
+
+
+def multiple_struct(table: RoundTable | None, device, name: str = "round_multiple") -> RoundMultiple:
+    """Kernel view of ``table`` (None: off, a zero table)."""
+    out = RoundMultiple()
+    out.enabled = int(table is not None)
+    values = table.values if table is not None else np.zeros((2, 2, 4, 3))
+    out.psi = device_buffers.upload(f"{name}:psi", values.astype(np.float32), wp.vec3, device)
+    out.floor = float(table.floor) if table is not None else 0.0
+    out.height = float(table.height) if table is not None else 1.0
+    return out
+
+
+__all__ = ["RoundTable", "build", "horizon_sine", "multiple_struct", "round_table"]
