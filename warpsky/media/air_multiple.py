@@ -55,6 +55,7 @@ from warpsky.media.air_multiple_build import (  # noqa: F401 (the table's build,
     _half_sphere,
     _interpolation,
     build,
+    dipole_weights,
     floor_of,
     node_heights,
     quadrupole_weights,
@@ -67,10 +68,10 @@ from warpsky.numerics import one_minus_exp
 def multiple_inscatter(table: MultipleTable, atm, h0, view_y, distance, angular=None) -> np.ndarray:
     """int_0^K sigma_s T Psi dt per channel (multiply by E): the multiple-scattering radiance of the air ``atm``
     along a view ray of elevation sine ``view_y`` from ``h0`` over ``distance`` (inf: to the end of the air,
-    upward), with the second order's Rayleigh part for the views' ``angular`` weights (:func:`quadrupole_weights`,
-    (..., 3); None: the isotropic part alone); (..., 3) float64 for arrays broadcasting to (...). Each scattering
-    constituent's part is taken in its own s = 1 - T (:data:`RAY_NODES` Gauss-Legendre nodes), times its albedo
-    and the other constituents' transmittance; the quadrupole belongs to the Rayleigh gas's."""
+    upward), with the second order's anisotropic parts for the views' ``angular`` weights
+    (:func:`quadrupole_weights` then :func:`dipole_weights`, (..., 5); None: the isotropic part alone); (..., 3)
+    float64 for arrays broadcasting to (...). Each scattering constituent's part is taken in its own s = 1 - T
+    (:data:`RAY_NODES` Gauss-Legendre nodes), times its albedo and the other constituents' transmittance."""
     h0 = np.asarray(h0, dtype=np.float64)[..., None]
     view_y = np.asarray(view_y, dtype=np.float64)[..., None]
     distance = np.asarray(distance, dtype=np.float64)[..., None]
@@ -88,7 +89,7 @@ def multiple_inscatter(table: MultipleTable, atm, h0, view_y, distance, angular=
                 others = sum(p for i, p in enumerate(at) if i != index)
                 weight = wk * np.exp(-np.diagonal(others, axis1=-2, axis2=-1))
             for c in range(3):
-                psi = table.at(altitude[..., c], angular if index == 0 else None)[..., c]
+                psi = table.at(altitude[..., c], angular, aerosol=index == 1)[..., c]
                 total[..., c] += (weight[..., c] if np.ndim(weight) else weight) * psi
         out = out + omega * span * total
     return out
@@ -115,8 +116,9 @@ def air_radiance(scene, light, altitude: float, directions: np.ndarray, distance
         out = out + parts[1] * hg(cos_theta, atmosphere.mie_g)[:, None]
     table = scene_table(scene, light)
     if table is not None:
-        angular = quadrupole_weights(directions, light.direction)
-        out = out + multiple_inscatter(table, atmosphere, altitude, view_y, distance, angular)
+        angular = np.concatenate([quadrupole_weights(directions, light.direction),
+                                  dipole_weights(directions, light.direction)], axis=-1)
+        out = out + np.maximum(multiple_inscatter(table, atmosphere, altitude, view_y, distance, angular), 0.0)
     return np.asarray(light.irradiance, dtype=np.float64)[None, :] * out
 
 
@@ -136,42 +138,57 @@ class AirMultiple:
     elevation sine (``view_nodes`` > 0 where every camera ray starts at the eye)."""
 
     enabled: int
-    values: wp.array2d(dtype=wp.vec3)  # (NODES, 4): Psi, then the quadrupole's q_0, q_1, q_2, RGB each
+    values: wp.array2d(dtype=wp.vec3)  # (NODES, 9): Psi, the Rayleigh quadrupole's q_0..q_2, the aerosols' 5 terms
     floor: float  # [m above sea level]
     height: float  # [m]
     view_nodes: int  # entries of ``views`` (0: none; integrate each ray)
-    views: wp.array2d(dtype=wp.vec3)  # (view_nodes, 6): per term, int sigma_s T term dt over the whole ray, then
-    # (air with aerosols or ozone) the single-scattering integrals of the Rayleigh gas and the aerosols
+    views: wp.array2d(dtype=wp.vec3)  # (view_nodes, 11): int sigma_s T term dt over the whole ray of Psi, q_0..q_2,
+    # then (air with aerosols or ozone) the single-scattering integrals of the Rayleigh gas and the aerosols, then
+    # the aerosols' five terms
+
+
+#: A view's weights of the second order's anisotropic terms: P2(mu_v), P2^1(mu_v) cos(dphi), P2^2(mu_v) cos(2 dphi),
+#: then mu_v and sqrt(1 - mu_v^2) cos(dphi).
+vec5 = wp.types.vector(length=5, dtype=float)
 
 
 @wp.func
-def quadrupole_angular(view: wp.vec3, sun: wp.vec3) -> wp.vec3:
-    """P2(mu_v), P2^1(mu_v) cos(dphi), P2^2(mu_v) cos(2 dphi) of the unit ``view`` and the sun's unit direction
-    (dphi their azimuth difference; 0 where either is vertical), as :func:`quadrupole_weights`."""
+def quadrupole_angular(view: wp.vec3, sun: wp.vec3) -> vec5:
+    """The weights of the unit ``view`` and the sun's unit direction (dphi their azimuth difference; 0 where either
+    is vertical), as :func:`quadrupole_weights` and :func:`dipole_weights`."""
     mu = view[1]
     horizontal = wp.sqrt(wp.max(1.0 - mu * mu, 0.0))
     sun_h = wp.sqrt(sun[0] * sun[0] + sun[2] * sun[2])
     cos1 = float(0.0)
     if horizontal > 1.0e-9 and sun_h > 1.0e-9:
         cos1 = wp.clamp((view[0] * sun[0] + view[2] * sun[2]) / (horizontal * sun_h), -1.0, 1.0)
-    return wp.vec3(0.5 * (3.0 * mu * mu - 1.0), 3.0 * mu * horizontal * cos1,
-                   3.0 * horizontal * horizontal * (2.0 * cos1 * cos1 - 1.0))
+    return vec5(0.5 * (3.0 * mu * mu - 1.0), 3.0 * mu * horizontal * cos1,
+                3.0 * horizontal * horizontal * (2.0 * cos1 * cos1 - 1.0), mu, horizontal * cos1)
 
 
 @wp.struct
 class MultipleTerms:
-    """Ray integrals of the table's four terms (Psi, q_0, q_1, q_2), RGB each."""
+    """Ray integrals of the table's terms (Psi, the Rayleigh gas's q_0..q_2, the aerosols' five), RGB each."""
 
     psi: wp.vec3
     q0: wp.vec3
     q1: wp.vec3
     q2: wp.vec3
+    a0: wp.vec3
+    a1: wp.vec3
+    a2: wp.vec3
+    a3: wp.vec3
+    a4: wp.vec3
 
 
 @wp.func
-def combine(terms: MultipleTerms, angular: wp.vec3) -> wp.vec3:
-    """The multiple-scattering integral towards a view of ``angular`` weights: Psi's plus the quadrupole's."""
-    return terms.psi + terms.q0 * angular[0] + terms.q1 * angular[1] + terms.q2 * angular[2]
+def combine(terms: MultipleTerms, angular: vec5) -> wp.vec3:
+    """The multiple-scattering integral towards a view of ``angular`` weights: Psi's plus the second order's
+    anisotropic parts (not below 0)."""
+    out = (terms.psi + terms.q0 * angular[0] + terms.q1 * angular[1] + terms.q2 * angular[2]
+           + terms.a0 * angular[0] + terms.a1 * angular[1] + terms.a2 * angular[2] + terms.a3 * angular[3]
+           + terms.a4 * angular[4])
+    return wp.vec3(wp.max(out[0], 0.0), wp.max(out[1], 0.0), wp.max(out[2], 0.0))
 
 
 @wp.func
@@ -208,7 +225,7 @@ def multiple_terms(ms: AirMultiple, beta_sl: wp.vec3, gamma: float, h0: float, v
 
 
 @wp.func
-def multiple_along(ms: AirMultiple, beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, angular: wp.vec3,
+def multiple_along(ms: AirMultiple, beta_sl: wp.vec3, gamma: float, h0: float, view_y: float, angular: vec5,
                    depth: wp.vec3) -> wp.vec3:
     """int sigma_s T Psi dt over a view ray (see :func:`multiple_terms`) towards a view of ``angular`` weights
     (:func:`quadrupole_angular`); 0 when the table is off."""
@@ -232,6 +249,12 @@ def add_terms(out: MultipleTerms, ms: AirMultiple, c: int, h: float, a: float, r
         r.q0[c] += a * ((1.0 - w) * ms.values[i, 1][c] + w * ms.values[i + 1, 1][c])
         r.q1[c] += a * ((1.0 - w) * ms.values[i, 2][c] + w * ms.values[i + 1, 2][c])
         r.q2[c] += a * ((1.0 - w) * ms.values[i, 3][c] + w * ms.values[i + 1, 3][c])
+    else:
+        r.a0[c] += a * ((1.0 - w) * ms.values[i, 4][c] + w * ms.values[i + 1, 4][c])
+        r.a1[c] += a * ((1.0 - w) * ms.values[i, 5][c] + w * ms.values[i + 1, 5][c])
+        r.a2[c] += a * ((1.0 - w) * ms.values[i, 6][c] + w * ms.values[i + 1, 6][c])
+        r.a3[c] += a * ((1.0 - w) * ms.values[i, 7][c] + w * ms.values[i + 1, 7][c])
+        r.a4[c] += a * ((1.0 - w) * ms.values[i, 8][c] + w * ms.values[i + 1, 8][c])
     return r
 
 
@@ -267,7 +290,7 @@ def mixed_terms(ms: AirMultiple, air: AnalyticAir, h0: float, view_y: float, d: 
 
 
 @wp.func
-def multiple_along_air(ms: AirMultiple, air: AnalyticAir, h0: float, view_y: float, angular: wp.vec3,
+def multiple_along_air(ms: AirMultiple, air: AnalyticAir, h0: float, view_y: float, angular: vec5,
                        distance: float) -> wp.vec3:
     """int sigma_s T Psi dt from ``h0`` over ``distance`` towards a view of ``angular`` weights, for any air; 0
     when the table is off."""
@@ -290,18 +313,22 @@ def view_index(view_y: float, count: int) -> float:
 
 
 @wp.func
-def whole_ray(ms: AirMultiple, view_y: float, angular: wp.vec3) -> wp.vec3:
+def whole_ray(ms: AirMultiple, view_y: float, angular: vec5) -> wp.vec3:
     """The view table's multiple-scattering integral over a whole camera ray of elevation sine ``view_y``."""
     x = view_index(view_y, ms.view_nodes)
     i = wp.min(int(x), ms.view_nodes - 2)
     w = x - float(i)
-    out = wp.vec3(0.0)
-    for term in range(4):
-        weight = float(1.0)
-        if term > 0:
-            weight = angular[term - 1]
-        out += (ms.views[i, term] * (1.0 - w) + ms.views[i + 1, term] * w) * weight
-    return out
+    terms = MultipleTerms()
+    terms.psi = ms.views[i, 0] * (1.0 - w) + ms.views[i + 1, 0] * w
+    terms.q0 = ms.views[i, 1] * (1.0 - w) + ms.views[i + 1, 1] * w
+    terms.q1 = ms.views[i, 2] * (1.0 - w) + ms.views[i + 1, 2] * w
+    terms.q2 = ms.views[i, 3] * (1.0 - w) + ms.views[i + 1, 3] * w
+    terms.a0 = ms.views[i, 6] * (1.0 - w) + ms.views[i + 1, 6] * w
+    terms.a1 = ms.views[i, 7] * (1.0 - w) + ms.views[i + 1, 7] * w
+    terms.a2 = ms.views[i, 8] * (1.0 - w) + ms.views[i + 1, 8] * w
+    terms.a3 = ms.views[i, 9] * (1.0 - w) + ms.views[i + 1, 9] * w
+    terms.a4 = ms.views[i, 10] * (1.0 - w) + ms.views[i + 1, 10] * w
+    return combine(terms, angular)
 
 
 @wp.func
@@ -346,6 +373,11 @@ def view_table_kernel(ms: AirMultiple, air: AnalyticAir, sun_y: float, altitude:
     out[i, 1] = terms.q0
     out[i, 2] = terms.q1
     out[i, 3] = terms.q2
+    out[i, 6] = terms.a0
+    out[i, 7] = terms.a1
+    out[i, 8] = terms.a2
+    out[i, 9] = terms.a3
+    out[i, 10] = terms.a4
 
 
 def multiple_struct(table: MultipleTable | None, device, name: str = "air_multiple", *, views=None) -> AirMultiple:
@@ -354,18 +386,20 @@ def multiple_struct(table: MultipleTable | None, device, name: str = "air_multip
     start at the eye)."""
     out = AirMultiple()
     out.enabled = int(table is not None)
-    values = np.zeros((NODES, 4, 3))
+    values = np.zeros((NODES, 9, 3))
     if table is not None:
-        values[:, 0], values[:, 1:] = table.values, table.quadrupole
+        values[:, 0], values[:, 1:4] = table.values, table.quadrupole
+        if table.aerosol is not None:
+            values[:, 4:] = table.aerosol
     out.values = device_buffers.upload(f"{name}:values", values.astype(np.float32), wp.vec3, device)
     out.floor = float(table.floor) if table is not None else 0.0
     out.height = float(table.height) if table is not None else 1.0
     out.view_nodes = 0
     if table is None or views is None:
-        out.views = device_buffers.reusable(f"{name}:no views", (2, 6), wp.vec3, device)
+        out.views = device_buffers.reusable(f"{name}:no views", (2, 11), wp.vec3, device)
     else:
         atmosphere, altitude, floor, air_sine = views
-        out.views = device_buffers.reusable(f"{name}:views", (VIEW_NODES, 6), wp.vec3, device)
+        out.views = device_buffers.reusable(f"{name}:views", (VIEW_NODES, 11), wp.vec3, device)
         air = analytic_air(atmosphere, np.zeros(3))
         wp.launch(view_table_kernel, dim=VIEW_NODES, inputs=[out, air, float(air_sine), float(altitude),
                                                              float(floor), out.views], device=device)

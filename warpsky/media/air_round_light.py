@@ -38,7 +38,8 @@ class RoundMultiple:
     """The multiple-scattering table Psi(h, mu_s) as kernels see it (``enabled`` 0: single scattering only)."""
 
     enabled: int
-    psi: wp.array3d(dtype=wp.vec3)  # (heights, suns, 4): Psi, Q_uu, Q_hh, Q_uh per unit irradiance, RGB
+    psi: wp.array3d(dtype=wp.vec3)  # (heights, suns, 7): Psi, J_2, Q_uu, Q_hh, Q_uh, F_u, F_h per unit irradiance
+    mie_g: float  # the aerosols' Henyey-Greenstein g
     floor: float  # altitude of the first row [m above sea level]
     height: float  # the rows span floor + height u^2, u uniform in [0, 1]
 
@@ -46,10 +47,11 @@ class RoundMultiple:
 @wp.struct
 class MultipleAt:
     """The table at one point of a view ray: the isotropic Psi (for every scatterer) and the second order's
-    anisotropic part towards the view (for the Rayleigh gas), per unit irradiance, RGB."""
+    anisotropic parts towards the view for the Rayleigh gas and for the aerosols, per unit irradiance, RGB."""
 
     isotropic: wp.vec3
     rayleigh: wp.vec3
+    mie: wp.vec3
 
 
 @wp.func
@@ -70,15 +72,31 @@ def multiple_terms(ms: RoundMultiple, h: float, mu_s: float, mu: float, nu: floa
     if sun_across > 1.0e-6:
         v_h = wp.clamp((nu - mu * mu_s) / sun_across, -1.0, 1.0)
     v_s2 = wp.max(1.0 - mu * mu - v_h * v_h, 0.0)
-    weights = wp.vec4(1.0, mu * mu - v_s2, v_h * v_h - v_s2, 2.0 * mu * v_h) * (3.0 / (16.0 * wp.pi))
-    out = MultipleAt()
-    for term in range(4):
+    quadratic = wp.vec3(mu * mu - v_s2, v_h * v_h - v_s2, 2.0 * mu * v_h)
+    values = MultipleAt()
+    form = wp.vec3(0.0)
+    for term in range(7):
         value = ((ms.psi[i, j, term] * (1.0 - b) + ms.psi[i, j + 1, term] * b) * (1.0 - a)
                  + (ms.psi[i + 1, j, term] * (1.0 - b) + ms.psi[i + 1, j + 1, term] * b) * a)
         if term == 0:
-            out.isotropic = value
+            values.isotropic = value
+        elif term == 1:
+            values.mie = value  # J_2 for now
+        elif term < 5:
+            form += value * quadratic[term - 2]
+        elif term == 5:
+            values.rayleigh = value * mu  # F . v for now
         else:
-            out.rayleigh += value * weights[term]
+            values.rayleigh += value * v_h
+    g = ms.mie_g
+    dipole = values.rayleigh
+    j2 = values.mie
+    out = MultipleAt()
+    out.isotropic = values.isotropic
+    out.rayleigh = form * (3.0 / (16.0 * wp.pi))
+    aerosol = (dipole * (3.0 * g) + form * (7.5 * g * g)) / (4.0 * wp.pi)
+    for c in range(3):
+        out.mie[c] = wp.max(aerosol[c], -j2[c])
     return out
 
 
@@ -147,7 +165,8 @@ def round_light(air: AnalyticAir, ra: RoundAir, ms: RoundMultiple, h0: float, mu
                         mu = wp.clamp((line.r0 * mu0 + node.t) / r, -1.0, 1.0)
                         terms = multiple_terms(ms, node.h, mu_s, mu, sun.nu)
                         out.multiple += wp.cw_mul(t_view, wp.cw_mul(rayleigh + mie, terms.isotropic)
-                                                  + wp.cw_mul(rayleigh, terms.rayleigh)) * node.dt
+                                                  + wp.cw_mul(rayleigh, terms.rayleigh)
+                                                  + wp.cw_mul(mie, terms.mie)) * node.dt
                 tau += wp.vec3(wp.dot(PANEL_W, fr), wp.dot(PANEL_W, fg), wp.dot(PANEL_W, fb))
     out.depth = tau
     return out

@@ -13,10 +13,13 @@ earth's table (:mod:`~warpsky.media.air_multiple`) does over altitude alone:
   sigma_s T J_n, J_n bilinear on the grid, plus the floor's radiance R_n seen through the air, and R_{n+1} from the
   floor's irradiance), so Psi = sum_{n >= 2} J_n = (I - M)^{-1} x_2, one dense system per channel on the host.
 
-The second order keeps Rayleigh's phase, as the flat table's does: Rayleigh's phase is (1 + P_2(cos) / 2) / 4 pi,
-so its anisotropic part adds (3 / 16 pi) v^T Q v along a view v, Q = int L_1 (w w^T - I / 3) dw the
-single-scattering field's second moments in the point's frame (up, towards the sun's azimuth, across; mirror
-symmetry leaves Q_uu, Q_hh, Q_uh), tabulated beside Psi; orders >= 3 are isotropic.
+The second order keeps its phase functions to their quadrupole: Rayleigh's phase is (1 + P_2(cos) / 2) / 4 pi, so
+its anisotropic part adds (3 / 16 pi) v^T Q v along a view v, Q = int L_1 (w w^T - I / 3) dw the single-scattering
+field's second moments in the point's frame (up, towards the sun's azimuth, across; mirror symmetry leaves Q_uu,
+Q_hh, Q_uh); the aerosols' Henyey-Greenstein phase (1 + 3 g P_1 + 5 g^2 P_2 + ...) / 4 pi adds
+(3 g F . v + (15 / 2) g^2 v^T Q v) / 4 pi, F = int L_1 w dw (F_u, F_h), the sum with J_2 kept >= 0: a strongly
+forward phase sends little of the bright floor's upward light back down. These moments and J_2 are tabulated beside
+Psi; orders >= 3 are isotropic.
 
 Rows: h = floor + height u^2 (u uniform, :data:`HEIGHTS` of them); columns: v = sign(mu_s) sqrt(|mu_s|) uniform on
 [-1, 1] (:data:`SUNS`), dense near the horizon where twilight lives. Directions: Gauss-Legendre in sqrt(|mu|) on
@@ -57,9 +60,10 @@ from warpsky.media.air_round import (
 from warpsky.media.air_round_light import RoundMultiple
 from warpsky.optics.phase import phase_hg, phase_rayleigh
 
-#: Table rows (altitudes) and columns (sun elevation sines).
+#: Table rows (altitudes) and columns (sun elevation sines), and terms per node.
 HEIGHTS = 24
 SUNS = 32
+TERMS = 7
 #: Directions of the build: Gauss-Legendre nodes per hemisphere, azimuths on [0, pi].
 ELEVATIONS = 10
 AZIMUTHS = 8
@@ -71,14 +75,16 @@ _nodes = wp.types.vector(length=PANEL_NODES, dtype=float)
 
 @dataclass(frozen=True)
 class RoundTable:
-    """Psi on the grid, per unit sun irradiance [1/sr], RGB: ``values`` (HEIGHTS, SUNS, 4, 3), per node Psi then
-    the single-scattering field's second moments Q_uu, Q_hh, Q_uh (:func:`~warpsky.media.air_round_light.
-    multiple_at`); the rows span ``floor`` + ``height`` u^2 [m above sea level]; ``seconds`` the build's time."""
+    """Psi on the grid, per unit sun irradiance [1/sr], RGB: ``values`` (HEIGHTS, SUNS, TERMS, 3), per node Psi,
+    the second order's isotropic source J_2, the single-scattering field's second moments Q_uu, Q_hh, Q_uh and
+    first moments F_u, F_h (:func:`~warpsky.media.air_round_light.multiple_terms`); the rows span ``floor`` +
+    ``height`` u^2 [m above sea level]; ``seconds`` the build's time."""
 
     values: np.ndarray
     floor: float
     height: float
     seconds: float
+    mie_g: float = 0.0
 
 
 def directions() -> np.ndarray:
@@ -163,9 +169,11 @@ def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(
     floor_row = HEIGHTS * SUNS + j
     up_from_floor = i == 0 and mu0 > 0.0
     flux = d[3] * mu0 / wp.pi  # the floor's radiance per unit irradiance-weighted radiance, times albedo below
-    # the second moments of the direction in the point's frame (up, towards the sun's azimuth, across), less 1/3
+    # the direction's second moments in the point's frame (up, towards the sun's azimuth, across) less 1/3, and
+    # its components
     across = wp.sqrt(wp.max(1.0 - mu0 * mu0, 0.0))
     moments = wp.vec3(mu0 * mu0 - 1.0 / 3.0, across * across * d[1] * d[1] - 1.0 / 3.0, mu0 * across * d[1])
+    components = wp.vec2(mu0, across * d[1])
     first = wp.vec3(0.0)
     distance = floor_distance(ra, h0, mu0)
     hits = distance >= 0.0
@@ -226,6 +234,8 @@ def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(
         first += wp.cw_mul(t_floor, sunlit)
     for term in range(3):
         wp.atomic_add(quad, row, term, first * (moments[term] * d[3]))
+    for term in range(2):
+        wp.atomic_add(quad, row, 3 + term, first * (components[term] * d[3]))
 
 
 def build(atm, floor: float, albedo, device) -> RoundTable:
@@ -243,7 +253,7 @@ def build(atm, floor: float, albedo, device) -> RoundTable:
         dirs = wp.array(sphere.astype(np.float32), dtype=wp.vec4)
         m = wp.zeros((3, count, count), dtype=float)
         x2 = wp.zeros(count, dtype=wp.vec3)
-        quad = wp.zeros((HEIGHTS * SUNS, 3), dtype=wp.vec3)
+        quad = wp.zeros((HEIGHTS * SUNS, 5), dtype=wp.vec3)
         wp.launch(transport_kernel, dim=(HEIGHTS * SUNS, len(sphere)),
                   inputs=[analytic_air(atm, np.zeros(3)), ra, grid, dirs, m, x2, quad])
         matrix = m.numpy().astype(np.float64)
@@ -252,9 +262,9 @@ def build(atm, floor: float, albedo, device) -> RoundTable:
     values = np.zeros((HEIGHTS * SUNS, 3))
     for c in range(3):
         values[:, c] = np.linalg.solve(np.eye(count) - matrix[c], source[:, c])[:HEIGHTS * SUNS]
-    terms = np.concatenate([np.maximum(values, 0.0)[:, None, :], moments], axis=1)
-    return RoundTable(terms.reshape(HEIGHTS, SUNS, 4, 3), float(floor), float(grid.height),
-                      time.perf_counter() - started)
+    terms = np.concatenate([np.maximum(values, 0.0)[:, None, :], source[:HEIGHTS * SUNS, None, :], moments], axis=1)
+    return RoundTable(terms.reshape(HEIGHTS, SUNS, TERMS, 3), float(floor), float(grid.height),
+                      time.perf_counter() - started, float(atm.mie_g))
 
 
 @functools.lru_cache(maxsize=32)
@@ -278,10 +288,11 @@ def multiple_struct(table: RoundTable | None, device, name: str = "round_multipl
     """Kernel view of ``table`` (None: off, a zero table)."""
     out = RoundMultiple()
     out.enabled = int(table is not None)
-    values = table.values if table is not None else np.zeros((2, 2, 4, 3))
+    values = table.values if table is not None else np.zeros((2, 2, TERMS, 3))
     out.psi = device_buffers.upload(f"{name}:psi", values.astype(np.float32), wp.vec3, device)
     out.floor = float(table.floor) if table is not None else 0.0
     out.height = float(table.height) if table is not None else 1.0
+    out.mie_g = float(table.mie_g) if table is not None else 0.0
     return out
 
 

@@ -74,7 +74,7 @@ def round_description(scene, technique, how: str) -> dict[str, str]:
         return out
     out["sky table"] = (f"round earth: optical depth to the top {DEPTH_RADII} x {DEPTH_MUS} (altitude x direction), "
                         + (f"multiple scattering {HEIGHTS} altitudes x {SUNS} sun elevations (every order, "
-                           f"isotropic after the first, floor albedo {np.round(albedo, 3).tolist()}), "
+                           f"isotropic after the second, floor albedo {np.round(albedo, 3).tolist()}), "
                            if atm.multiple_scattering else "multiple scattering off, ")
                         + "both built on the render device once per air and floor; a view table per frame")
     return out
