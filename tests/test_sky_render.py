@@ -121,7 +121,7 @@ def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
 def test_front_air_transmittance_is_the_sky_passs_bit_for_bit(device, projection):
     """The front-air kernel and the sky pass share the ray's air: same transmittance to the last bit, looking up
     and down at a ground plane, with media at random depths in some pixels and none in others."""
-    from warpsky.media.air_front import front_air_transmittance
+    from warpsky.passes.sky.front import front_air_transmittance
     from warpsky.passes.sky.sky import Sky
     from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
 

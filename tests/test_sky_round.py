@@ -129,7 +129,7 @@ def test_twilight_is_finite_continuous_and_decays_to_black():
 def test_hybrids_front_transmittance_is_the_sky_passs():
     """The front air's transmittance hybrid divides by is the sky pass's, bit for bit, with and without media
     (a depth map with a near and a far half)."""
-    from warpsky.media.air_front import front_air_transmittance
+    from warpsky.passes.sky.front import front_air_transmittance
     from warpsky.passes.sky.sky import Sky
 
     scene = se.case_scene(8.0, se.direction(3.0, 40.0), 0.3, air="earth", earth="round")

@@ -29,6 +29,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.media.air_analytic import air_sine
+from warpsky.media.air_round_host import air_lit, scene_floor
 
 
 def visible_fraction(elevation: float, radius: float) -> float:
@@ -109,6 +110,19 @@ def sun_sunlight(sun, *, horizon: bool, gamma: float | None = None) -> Sunlight 
     return Sunlight(light, irradiance * visible, visible, direction, irradiance, float(sun.angular_diameter), sine)
 
 
+def round_sunlight(sun, atm, floor: float) -> Sunlight | None:
+    """The :class:`Sunlight` of ``sun`` over a round earth: the whole disk along its centre, lit while any of it
+    stands above the horizon seen from the top of the air (:func:`~warpsky.media.air_round_host.air_lit`; each point
+    takes its own horizon's share in its transmittance)."""
+    if sun is None:
+        return None
+    direction = np.asarray(sun.direction, dtype=np.float64)
+    irradiance = np.asarray(sun.irradiance, dtype=np.float64) * sun.transmittance
+    visible = 1.0 if air_lit(atm, floor, sun.elevation, 0.5 * float(sun.angular_diameter)) else 0.0
+    return Sunlight(direction, irradiance * visible, visible, direction, irradiance, float(sun.angular_diameter),
+                    float(direction[1]))
+
+
 def has_horizon(scene) -> bool:
     """Whether something hides a sun below the horizon: a ground plane, or air."""
     return scene.ground is not None or scene.atmosphere is not None
@@ -116,11 +130,9 @@ def has_horizon(scene) -> bool:
 
 def sunlight(scene) -> Sunlight | None:
     """The :class:`Sunlight` of ``scene`` (None without a sun); over a round earth the whole disk, each point of the
-    air taking its own horizon's share (:func:`~warpsky.media.air_round_host.round_sunlight`)."""
+    air taking its own horizon's share (:func:`round_sunlight`)."""
     atmosphere = scene.atmosphere
     if atmosphere is not None and atmosphere.round:
-        from warpsky.media.air_round_host import round_sunlight, scene_floor
-
         return round_sunlight(scene.sun, atmosphere, scene_floor(scene))
     gamma = atmosphere.gamma if atmosphere is not None else None
     return sun_sunlight(scene.sun, horizon=has_horizon(scene), gamma=gamma)

@@ -3,14 +3,23 @@
 Riley's gas scatters with beta(h) = beta_sl e^{-gamma h} [1/m] (Riley 2004, Eq. 10), extinction = scattering
 (albedo 1), Rayleigh phase; aerosols (where the atmosphere has any) scatter and absorb with their own scale height
 and a Henyey-Greenstein phase, an ozone layer absorbs (its tent profile, :mod:`~warpsky.media.air_mixture`).
-Kernels see it as :class:`Air`, in camera-relative heights, and a point's scattering as :class:`AirPart`.
+Kernels see it as :class:`Air`, at camera-relative points, and a point's scattering as :class:`AirPart`.
+
+The earth is Riley's flat one (``round`` 0: altitude = camera altitude + y) or a sphere of sea level
+(``round`` 1, :class:`~warpsky.media.air_round.RoundAir`): its centre lies at (0, -(R + camera altitude), 0) from
+the camera, a point's local vertical points away from it, and its altitude is a + s^2 / (sqrt((R + a)^2 + s^2) +
+R + a), a its height above the camera's sea level and s its horizontal distance from the camera, without the
+cancellation of |p - centre| - R in float32. The round air ends below at its floor's sphere and above at its top.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import warp as wp
 
+from warpsky import device_buffers
 from warpsky.media.air_analytic import AnalyticAir
+from warpsky.media.air_round import RoundAir, round_struct, top_distance
 from warpsky.numerics import mean3
 from warpsky.optics.phase import hg_pdf, hg_sample_cos, phase_hg, phase_rayleigh, rayleigh_pdf, rayleigh_sample_cos
 
@@ -19,10 +28,11 @@ from warpsky.optics.phase import hg_pdf, hg_sample_cos, phase_hg, phase_rayleigh
 class Air:
     """Riley's exponential atmosphere as a medium of the path tracer (enabled = 0: no air).
 
-    Extinction = scattering = beta_sl e^{-gamma h} [1/m] with h = camera_altitude + y (camera-relative y), Rayleigh
-    phase. Its majorant over a stretch of ray is the density at the stretch's lowest point; stretches span ``band``
-    metres of height. Above the height where the remaining optical depth to space falls below 1e-6 the air is
-    treated as vacuum (a relative bias below 1e-6), so upward rays end.
+    Extinction = scattering = beta_sl e^{-gamma h} [1/m] with h the altitude of a camera-relative point
+    (:func:`altitude`), Rayleigh phase. Its majorant over a stretch of ray is the density at the stretch's lowest
+    point; stretches span about ``band`` metres of height. On a flat earth the air above the height where the
+    remaining optical depth to space falls below 1e-6 is treated as vacuum (a relative bias below 1e-6), on a round
+    one the air above ``planet.top``, so upward rays end.
     """
 
     enabled: int
@@ -38,6 +48,9 @@ class Air:
     ozone: wp.vec3  # peak absorption [1/m]
     ozone_altitude: float  # [m above sea level]
     ozone_width: float
+    round: int  # 1: a round earth (``planet``), 0: Riley's flat earth
+    planet: RoundAir  # the round earth's shell and its optical depths to the top (a placeholder on a flat earth)
+    floor_ground: int  # 1: the round earth's floor is the scene's ground plane (its albedo), 0: a black sea level
 
 
 @wp.struct
@@ -71,6 +84,7 @@ def no_air() -> Air:
     """Air that is off: the media tracked alone."""
     out = Air()
     out.enabled = 0
+    out.round = 0
     return out
 
 
@@ -81,9 +95,27 @@ def ozone_profile(air: Air, h: float) -> float:
 
 
 @wp.func
-def air_coefficient(air: Air, y: float) -> wp.vec3:
-    """Air's extinction at camera-relative height y [1/m] (the Rayleigh gas's alone: its scattering)."""
-    h = air.camera_altitude + y
+def altitude(air: Air, p: wp.vec3) -> float:
+    """Altitude [m above sea level] of the camera-relative point ``p``."""
+    a = air.camera_altitude + p[1]
+    if air.round == 0:
+        return a
+    s2 = p[0] * p[0] + p[2] * p[2]
+    r = air.planet.radius + a
+    return a + s2 / (wp.sqrt(r * r + s2) + r)
+
+
+@wp.func
+def vertical(air: Air, p: wp.vec3) -> wp.vec3:
+    """The unit local vertical at the camera-relative point ``p`` (+y on a flat earth)."""
+    if air.round == 0:
+        return wp.vec3(0.0, 1.0, 0.0)
+    return wp.normalize(wp.vec3(p[0], p[1] + (air.planet.radius + air.camera_altitude), p[2]))
+
+
+@wp.func
+def coefficient_at(air: Air, h: float) -> wp.vec3:
+    """Air's extinction at altitude ``h`` [m above sea level] [1/m]."""
     out = air.beta_sl * wp.exp(-air.gamma * h)
     if air.mixed != 0:
         out += air.mie_extinction * wp.exp(-air.mie_gamma * h) + air.ozone * ozone_profile(air, h)
@@ -91,29 +123,34 @@ def air_coefficient(air: Air, y: float) -> wp.vec3:
 
 
 @wp.func
+def air_coefficient(air: Air, p: wp.vec3) -> wp.vec3:
+    """Air's extinction at the camera-relative point ``p`` [1/m] (the Rayleigh gas's alone: its scattering)."""
+    return coefficient_at(air, altitude(air, p))
+
+
+@wp.func
 def air_bound(air: Air, lowest: float, highest: float) -> float:
-    """The largest extinction [1/m] of any channel between camera-relative heights ``lowest`` and ``highest``: the
-    exponential constituents' at the lowest point, plus the ozone layer's largest density over the stretch."""
-    out = wp.max(air_coefficient(air, lowest))
+    """The largest extinction [1/m] of any channel between altitudes ``lowest`` and ``highest`` [m above sea
+    level]: the exponential constituents' at the lowest point, plus the ozone layer's largest density over the
+    stretch."""
+    out = wp.max(coefficient_at(air, lowest))
     if air.mixed != 0:
-        lo = air.camera_altitude + lowest
-        hi = air.camera_altitude + highest
-        peak = wp.max(ozone_profile(air, lo), ozone_profile(air, hi))
-        if lo <= air.ozone_altitude and hi >= air.ozone_altitude:
+        peak = wp.max(ozone_profile(air, lowest), ozone_profile(air, highest))
+        if lowest <= air.ozone_altitude and highest >= air.ozone_altitude:
             peak = 1.0
         out += wp.max(air.ozone) * peak
     return out
 
 
 @wp.func
-def air_part(air: Air, y: float) -> AirPart:
-    """Air's scattering at camera-relative height y per constituent; zero without air."""
+def air_part(air: Air, p: wp.vec3) -> AirPart:
+    """Air's scattering at the camera-relative point ``p`` per constituent; zero without air."""
     out = AirPart()
     out.rayleigh = wp.vec3(0.0)
     out.mie = wp.vec3(0.0)
     out.g = air.mie_g
     if air.enabled != 0:
-        h = air.camera_altitude + y
+        h = altitude(air, p)
         out.rayleigh = air.beta_sl * wp.exp(-air.gamma * h)
         if air.mixed != 0:
             out.mie = air.mie_scattering * wp.exp(-air.mie_gamma * h)
@@ -156,9 +193,9 @@ def part_sample_cos(part: AirPart, target: float, u: float) -> float:
 
 
 @wp.func
-def air_scattering(air: Air, y: float) -> wp.vec3:
-    """Air's scattering coefficient at camera-relative height y [1/m]; zero without air."""
-    return part_total(air_part(air, y))
+def air_scattering(air: Air, p: wp.vec3) -> wp.vec3:
+    """Air's scattering coefficient at the camera-relative point ``p`` [1/m]; zero without air."""
+    return part_total(air_part(air, p))
 
 
 @wp.func
@@ -171,23 +208,80 @@ def sea_level_distance(air: Air, origin: wp.vec3, direction: wp.vec3) -> float:
 BAND_SCALE_HEIGHTS = 0.1
 
 
-def air_struct(atmosphere, camera_position) -> Air:
-    """Kernel view of a :class:`~warpsky.scene.model.Atmosphere` seen from ``camera_position`` (None: no air)."""
-    air = Air()
-    air.enabled = int(atmosphere is not None)
+def air_floor(scene) -> tuple[float, bool]:
+    """(altitude [m above sea level], whether it is the ground plane) of what ends ``scene``'s air below: the ground
+    plane where it lies at or above sea level, else sea level."""
+    ground, atmosphere = scene.ground, scene.atmosphere
+    if ground is not None and ground.height + atmosphere.altitude >= 0.0:
+        return float(ground.height + atmosphere.altitude), True
+    return 0.0, False
+
+
+def no_planet(device) -> RoundAir:
+    """A placeholder :class:`RoundAir` for a flat earth (a one-entry table kept on ``device``)."""
+    out = RoundAir()
+    out.depth = device_buffers.upload("air:no_planet", np.zeros((1, 1, 3), np.float32), wp.vec3, device)
+    return out
+
+
+def air_struct(scene, camera_position, device, *, air: bool = True) -> Air:
+    """Kernel view of ``scene``'s :class:`~warpsky.scene.model.Atmosphere` seen from ``camera_position`` on
+    ``device`` (no air without one, or when ``air`` is False); a round earth's shell and optical depth table are
+    built there once per air and floor (:func:`~warpsky.media.air_round.round_struct`)."""
+    atmosphere = scene.atmosphere if air else None
+    out = Air()
+    out.enabled = int(atmosphere is not None)
+    out.round = 0
+    out.floor_ground = 0
+    out.planet = no_planet(device)
     if atmosphere is not None:
-        air.beta_sl = wp.vec3(*atmosphere.beta_sea_level.tolist())
-        air.gamma = float(atmosphere.gamma)
-        air.camera_altitude = float(camera_position[1] + atmosphere.altitude)
-        air.band = float(BAND_SCALE_HEIGHTS * min(atmosphere.scale_height, atmosphere.mie_scale_height
+        out.beta_sl = wp.vec3(*atmosphere.beta_sea_level.tolist())
+        out.gamma = float(atmosphere.gamma)
+        out.camera_altitude = float(camera_position[1] + atmosphere.altitude)
+        out.band = float(BAND_SCALE_HEIGHTS * min(atmosphere.scale_height, atmosphere.mie_scale_height
                                                   if atmosphere.has_aerosols else atmosphere.scale_height))
-        air.mixed = int(atmosphere.mixed)
+        out.mixed = int(atmosphere.mixed)
         extinction = atmosphere.mie_scattering + atmosphere.mie_absorption
-        air.mie_scattering = wp.vec3(*atmosphere.mie_scattering.tolist())
-        air.mie_extinction = wp.vec3(*extinction.tolist())
-        air.mie_gamma = float(1.0 / atmosphere.mie_scale_height)
-        air.mie_g = float(atmosphere.mie_g)
-        air.ozone = wp.vec3(*atmosphere.ozone_absorption.tolist())
-        air.ozone_altitude = float(atmosphere.ozone_altitude)
-        air.ozone_width = float(atmosphere.ozone_width)
-    return air
+        out.mie_scattering = wp.vec3(*atmosphere.mie_scattering.tolist())
+        out.mie_extinction = wp.vec3(*extinction.tolist())
+        out.mie_gamma = float(1.0 / atmosphere.mie_scale_height)
+        out.mie_g = float(atmosphere.mie_g)
+        out.ozone = wp.vec3(*atmosphere.ozone_absorption.tolist())
+        out.ozone_altitude = float(atmosphere.ozone_altitude)
+        out.ozone_width = float(atmosphere.ozone_width)
+        if atmosphere.round:
+            floor, is_ground = air_floor(scene)
+            out.round = 1
+            out.floor_ground = int(is_ground)
+            out.planet = round_struct(atmosphere, floor, device)
+    return out
+
+
+@wp.func
+def top_entry(ra: RoundAir, h0: float, mu0: float) -> float:
+    """Distance [m] along a ray from altitude ``h0`` of elevation sine ``mu0`` to where it enters the top of a round
+    earth's air: 0 from inside it, -1 when it never does."""
+    if h0 <= ra.top:
+        return 0.0
+    if mu0 >= 0.0:
+        return -1.0
+    r0 = ra.radius + h0
+    c = (h0 - ra.top) * (2.0 * ra.radius + h0 + ra.top)  # r0^2 - r_top^2 > 0
+    disc = r0 * r0 * mu0 * mu0 - c
+    if disc < 0.0:
+        return -1.0
+    return c / (-r0 * mu0 + wp.sqrt(disc))
+
+
+@wp.func
+def top_exit(ra: RoundAir, h0: float, mu0: float) -> float:
+    """Distance [m] along a ray from altitude ``h0`` of elevation sine ``mu0`` to where it leaves a round earth's
+    air through its top for good (0 when it never is inside)."""
+    if h0 <= ra.top:
+        return top_distance(ra, h0, mu0)
+    entry = top_entry(ra, h0, mu0)
+    if entry < 0.0:
+        return 0.0
+    r0 = ra.radius + h0
+    c = (h0 - ra.top) * (2.0 * ra.radius + h0 + ra.top)
+    return -r0 * mu0 + wp.sqrt(wp.max(r0 * r0 * mu0 * mu0 - c, 0.0))

@@ -318,6 +318,52 @@ def panel_node(line: Line, s: Panels, h_a: float, h_b: float, j: int) -> Node:
     return out
 
 
+_nodes = wp.types.vector(length=PANEL_NODES, dtype=float)
+
+
+@wp.struct
+class PanelExtinction:
+    """The air's extinction at a panel's nodes times dt/dx (x the panel's Gauss-Legendre variable on [-1, 1]), per
+    channel: the integrand whose integral up to each node is that node's optical depth from the panel's start."""
+
+    r: _nodes
+    g: _nodes
+    b: _nodes
+
+
+@wp.func
+def panel_extinction(air: AnalyticAir, line: Line, s: Panels, h_a: float, h_b: float) -> PanelExtinction:
+    out = PanelExtinction()
+    for j in range(PANEL_NODES):
+        node = panel_node(line, s, h_a, h_b, j)
+        e = extinction_at(air, node.h) * (node.dt / PANEL_W[j])
+        out.r[j] = e[0]
+        out.g[j] = e[1]
+        out.b[j] = e[2]
+    return out
+
+
+@wp.func
+def depth_to_node(panel: PanelExtinction, j: int) -> wp.vec3:
+    """Optical depth from the panel's start to its node ``j`` (the spectral integration matrix)."""
+    return wp.vec3(wp.dot(PANEL_S[j], panel.r), wp.dot(PANEL_S[j], panel.g), wp.dot(PANEL_S[j], panel.b))
+
+
+@wp.func
+def panel_depth(panel: PanelExtinction) -> wp.vec3:
+    """The panel's whole optical depth."""
+    return wp.vec3(wp.dot(PANEL_W, panel.r), wp.dot(PANEL_W, panel.g), wp.dot(PANEL_W, panel.b))
+
+
+@wp.func
+def piece_bounds(line: Line, piece: int, distance: float) -> wp.vec2:
+    """[t_a, t_b] of side ``piece`` (0: before the perigee, 1: after it) of the ray's first ``distance`` metres
+    (t_b <= t_a: empty)."""
+    if piece == 0:
+        return wp.vec2(0.0, wp.min(distance, line.tp))
+    return wp.vec2(wp.max(line.tp, 0.0), distance)
+
+
 @wp.func
 def ray_depth(air: AnalyticAir, ra: RoundAir, h0: float, mu0: float, distance: float) -> wp.vec3:
     """Optical depth of the air from altitude ``h0`` over ``distance`` [m] along elevation sine ``mu0`` (a ray
@@ -325,19 +371,12 @@ def ray_depth(air: AnalyticAir, ra: RoundAir, h0: float, mu0: float, distance: f
     line = make_line(ra, h0, mu0)
     out = wp.vec3(0.0)
     for piece in range(2):
-        t_a = float(0.0)
-        t_b = wp.min(distance, line.tp)
-        if piece == 1:
-            t_a = wp.max(line.tp, 0.0)
-            t_b = distance
-        if t_b > t_a:
-            s = side(ra, line, t_a, t_b)
+        bounds = piece_bounds(line, piece, distance)
+        if bounds[1] > bounds[0]:
+            s = side(ra, line, bounds[0], bounds[1])
             for k in range(s.count):
-                h_a = panel_bound(ra, line, s, k)
-                h_b = panel_bound(ra, line, s, k + 1)
-                for j in range(PANEL_NODES):
-                    node = panel_node(line, s, h_a, h_b, j)
-                    out += extinction_at(air, node.h) * node.dt
+                out += panel_depth(panel_extinction(air, line, s, panel_bound(ra, line, s, k),
+                                                    panel_bound(ra, line, s, k + 1)))
     return out
 
 

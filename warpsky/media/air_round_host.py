@@ -49,20 +49,6 @@ def air_lit(atm, floor: float, elevation: float, radius: float) -> bool:
     return elevation + radius > -dip
 
 
-def round_sunlight(sun, atm, floor: float):
-    """The :class:`~warpsky.light.sun.Sunlight` of ``sun`` over a round earth: the whole disk along its centre,
-    lit while :func:`air_lit` (each point takes its own horizon's share in its transmittance)."""
-    from warpsky.light.sun import Sunlight
-
-    if sun is None:
-        return None
-    direction = np.asarray(sun.direction, dtype=np.float64)
-    irradiance = np.asarray(sun.irradiance, dtype=np.float64) * sun.transmittance
-    visible = 1.0 if air_lit(atm, floor, sun.elevation, sun_radius(sun.angular_diameter)) else 0.0
-    return Sunlight(direction, irradiance * visible, visible, direction, irradiance, float(sun.angular_diameter),
-                    float(direction[1]))
-
-
 def scene_floor(scene) -> float:
     """Altitude [m above sea level] where ``scene``'s air ends below (the ground at or above sea level, else sea
     level)."""

@@ -17,20 +17,21 @@ from __future__ import annotations
 import warp as wp
 
 from warpsky.media.air_analytic import AnalyticAir
+from warpsky.media.air_mixture_kernels import AirScatter
 from warpsky.media.air_round import (
     PANEL_NODES,
-    PANEL_S,
-    PANEL_W,
     RoundAir,
-    extinction_at,
+    depth_to_node,
     make_line,
     panel_bound,
+    panel_depth,
+    panel_extinction,
     panel_node,
+    piece_bounds,
     side,
     sun_transmittance,
 )
-
-_nodes = wp.types.vector(length=PANEL_NODES, dtype=float)
+from warpsky.numerics import exp3
 
 
 @wp.struct
@@ -100,6 +101,16 @@ def multiple_terms(ms: RoundMultiple, h: float, mu_s: float, mu: float, nu: floa
     return out
 
 
+@wp.func
+def scattering_at(air: AnalyticAir, h: float) -> AirScatter:
+    """The Rayleigh gas's and the aerosols' scattering coefficients [1/m] at altitude ``h``."""
+    out = AirScatter()
+    out.rayleigh = air.beta_sea_level * wp.exp(-air.gamma * h)
+    if air.mixed != 0:
+        out.mie = wp.cw_mul(air.mie_extinction, air.mie_albedo) * wp.exp(-air.mie_gamma * h)
+    return out
+
+
 @wp.struct
 class RoundLight:
     """Integrals along one ray (multiply the first three by E, the single-scattering ones by their phase)."""
@@ -128,45 +139,28 @@ def round_light(air: AnalyticAir, ra: RoundAir, ms: RoundMultiple, h0: float, mu
     out = RoundLight()
     tau = wp.vec3(0.0)
     for piece in range(2):
-        t_a = float(0.0)
-        t_b = wp.min(distance, line.tp)
-        if piece == 1:
-            t_a = wp.max(line.tp, 0.0)
-            t_b = distance
-        if t_b > t_a:
-            s = side(ra, line, t_a, t_b)
+        bounds = piece_bounds(line, piece, distance)
+        if bounds[1] > bounds[0]:
+            s = side(ra, line, bounds[0], bounds[1])
             for k in range(s.count):
                 h_a = panel_bound(ra, line, s, k)
                 h_b = panel_bound(ra, line, s, k + 1)
-                # the panel's integrand in its own variable, for the optical depth up to each node
-                fr = _nodes()
-                fg = _nodes()
-                fb = _nodes()
+                panel = panel_extinction(air, line, s, h_a, h_b)
                 for j in range(PANEL_NODES):
                     node = panel_node(line, s, h_a, h_b, j)
-                    e = extinction_at(air, node.h) * (node.dt / PANEL_W[j])
-                    fr[j] = e[0]
-                    fg[j] = e[1]
-                    fb[j] = e[2]
-                for j in range(PANEL_NODES):
-                    node = panel_node(line, s, h_a, h_b, j)
-                    at = tau + wp.vec3(wp.dot(PANEL_S[j], fr), wp.dot(PANEL_S[j], fg), wp.dot(PANEL_S[j], fb))
-                    t_view = wp.vec3(wp.exp(-at[0]), wp.exp(-at[1]), wp.exp(-at[2]))
+                    t_view = exp3(tau + depth_to_node(panel, j))
                     r = ra.radius + node.h
                     mu_s = wp.clamp((line.r0 * sun.mu_s0 + node.t * sun.nu) / r, -1.0, 1.0)
-                    rayleigh = air.beta_sea_level * wp.exp(-air.gamma * node.h)
-                    mie = wp.vec3(0.0)
-                    if air.mixed != 0:
-                        mie = wp.cw_mul(air.mie_extinction, air.mie_albedo) * wp.exp(-air.mie_gamma * node.h)
+                    parts = scattering_at(air, node.h)
                     lit = wp.cw_mul(t_view, sun_transmittance(ra, node.h, mu_s, sun.radius)) * node.dt
-                    out.rayleigh += wp.cw_mul(rayleigh, lit)
-                    out.mie += wp.cw_mul(mie, lit)
+                    out.rayleigh += wp.cw_mul(parts.rayleigh, lit)
+                    out.mie += wp.cw_mul(parts.mie, lit)
                     if ms.enabled != 0:
                         mu = wp.clamp((line.r0 * mu0 + node.t) / r, -1.0, 1.0)
                         terms = multiple_terms(ms, node.h, mu_s, mu, sun.nu)
-                        out.multiple += wp.cw_mul(t_view, wp.cw_mul(rayleigh + mie, terms.isotropic)
-                                                  + wp.cw_mul(rayleigh, terms.rayleigh)
-                                                  + wp.cw_mul(mie, terms.mie)) * node.dt
-                tau += wp.vec3(wp.dot(PANEL_W, fr), wp.dot(PANEL_W, fg), wp.dot(PANEL_W, fb))
+                        out.multiple += wp.cw_mul(t_view, wp.cw_mul(parts.rayleigh + parts.mie, terms.isotropic)
+                                                  + wp.cw_mul(parts.rayleigh, terms.rayleigh)
+                                                  + wp.cw_mul(parts.mie, terms.mie)) * node.dt
+                tau += panel_depth(panel)
     out.depth = tau
     return out

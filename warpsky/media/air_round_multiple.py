@@ -42,22 +42,24 @@ from warpsky import device_buffers
 from warpsky.media.air_analytic import AnalyticAir, analytic_air
 from warpsky.media.air_round import (
     PANEL_NODES,
-    PANEL_S,
-    PANEL_W,
     RoundAir,
     air_key,
-    extinction_at,
+    depth_to_node,
     floor_distance,
     horizon_sine,
     make_line,
     panel_bound,
+    panel_depth,
+    panel_extinction,
     panel_node,
+    piece_bounds,
     round_struct,
     side,
     sun_transmittance,
     top_distance,
 )
-from warpsky.media.air_round_light import RoundMultiple
+from warpsky.media.air_round_light import RoundMultiple, scattering_at
+from warpsky.numerics import exp3
 from warpsky.optics.phase import phase_hg, phase_rayleigh
 
 #: Table rows (altitudes) and columns (sun elevation sines), and terms per node.
@@ -69,8 +71,6 @@ ELEVATIONS = 10
 AZIMUTHS = 8
 #: The sun's angular radius [rad] the table is built for (the real sun's; the disk matters only at the horizon).
 SUN_RADIUS = 0.5 * math.radians(0.53)
-
-_nodes = wp.types.vector(length=PANEL_NODES, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -150,6 +150,20 @@ def add_floor(m: wp.array3d(dtype=float), row: int, mu_s: float, value: wp.vec3)
         wp.atomic_add(m, c, row, HEIGHTS * SUNS + j + 1, b * value[c])
 
 
+@wp.func
+def floor_seen(ra: RoundAir, grid: Grid, m: wp.array3d(dtype=float), x2: wp.array(dtype=wp.vec3), row: int,
+               t_floor: wp.vec3, mu_g: float, share: float) -> wp.vec3:
+    """A build ray that ends on the floor (through the air's transmittance ``t_floor``, where the sun's elevation
+    sine is ``mu_g``): the floor's radiance R_n (unknown) in M, the sunlit floor in J_2; returns the sunlit
+    floor's radiance through the air (its share of L_1)."""
+    mu = wp.clamp(mu_g, -1.0, 1.0)
+    add_floor(m, row, mu, t_floor * share)
+    sunlit = wp.cw_mul(grid.albedo, sun_transmittance(ra, ra.floor, mu, SUN_RADIUS)) * (wp.max(mu, 0.0) / wp.pi)
+    seen = wp.cw_mul(t_floor, sunlit)
+    wp.atomic_add(x2, row, seen * share)
+    return seen
+
+
 @wp.kernel
 def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(dtype=wp.vec4),
                      m: wp.array3d(dtype=float), x2: wp.array(dtype=wp.vec3), quad: wp.array2d(dtype=wp.vec3)):
@@ -184,36 +198,20 @@ def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(
     line = make_line(ra, h0, mu0)
     tau = wp.vec3(0.0)
     for piece in range(2):
-        t_a = float(0.0)
-        t_b = wp.min(distance, line.tp)
-        if piece == 1:
-            t_a = wp.max(line.tp, 0.0)
-            t_b = distance
-        if t_b > t_a:
-            s = side(ra, line, t_a, t_b)
+        bounds = piece_bounds(line, piece, distance)
+        if bounds[1] > bounds[0]:
+            s = side(ra, line, bounds[0], bounds[1])
             for p in range(s.count):
                 h_a = panel_bound(ra, line, s, p)
                 h_b = panel_bound(ra, line, s, p + 1)
-                fr = _nodes()
-                fg = _nodes()
-                fb = _nodes()
+                panel = panel_extinction(air, line, s, h_a, h_b)
                 for n in range(PANEL_NODES):
                     node = panel_node(line, s, h_a, h_b, n)
-                    e = extinction_at(air, node.h) * (node.dt / PANEL_W[n])
-                    fr[n] = e[0]
-                    fg[n] = e[1]
-                    fb[n] = e[2]
-                for n in range(PANEL_NODES):
-                    node = panel_node(line, s, h_a, h_b, n)
-                    at = tau + wp.vec3(wp.dot(PANEL_S[n], fr), wp.dot(PANEL_S[n], fg), wp.dot(PANEL_S[n], fb))
-                    t_view = wp.vec3(wp.exp(-at[0]), wp.exp(-at[1]), wp.exp(-at[2]))
+                    t_view = exp3(tau + depth_to_node(panel, n))
                     mu_s = wp.clamp((line.r0 * mu_s0 + node.t * nu) / (ra.radius + node.h), -1.0, 1.0)
-                    rayleigh = air.beta_sea_level * wp.exp(-air.gamma * node.h)
-                    mie = wp.vec3(0.0)
-                    if air.mixed != 0:
-                        mie = wp.cw_mul(air.mie_extinction, air.mie_albedo) * wp.exp(-air.mie_gamma * node.h)
-                    carried = wp.cw_mul(rayleigh + mie, t_view) * node.dt
-                    single = wp.cw_mul(wp.cw_mul(rayleigh * phase_r + mie * phase_m, t_view),
+                    parts = scattering_at(air, node.h)
+                    carried = wp.cw_mul(parts.rayleigh + parts.mie, t_view) * node.dt
+                    single = wp.cw_mul(wp.cw_mul(parts.rayleigh * phase_r + parts.mie * phase_m, t_view),
                                        sun_transmittance(ra, node.h, mu_s, SUN_RADIUS)) * node.dt
                     cell = grid_cell(grid, node.h, mu_s)
                     add_cell(m, row, cell, carried * share)
@@ -222,16 +220,10 @@ def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(
                     if up_from_floor:
                         add_cell(m, floor_row, cell, wp.cw_mul(grid.albedo, carried) * flux)
                         wp.atomic_add(x2, floor_row, wp.cw_mul(grid.albedo, single) * flux)
-                tau += wp.vec3(wp.dot(PANEL_W, fr), wp.dot(PANEL_W, fg), wp.dot(PANEL_W, fb))
+                tau += panel_depth(panel)
     if hits:
-        # the floor seen through the air: its radiance R_n (unknown) and, for J_2, the sunlit floor
-        t_floor = wp.vec3(wp.exp(-tau[0]), wp.exp(-tau[1]), wp.exp(-tau[2]))
-        mu_g = wp.clamp((line.r0 * mu_s0 + distance * nu) / (ra.radius + ra.floor), -1.0, 1.0)
-        add_floor(m, row, mu_g, t_floor * share)
-        sunlit = wp.cw_mul(grid.albedo, sun_transmittance(ra, ra.floor, mu_g, SUN_RADIUS)) * (
-            wp.max(mu_g, 0.0) / wp.pi)
-        wp.atomic_add(x2, row, wp.cw_mul(t_floor, sunlit) * share)
-        first += wp.cw_mul(t_floor, sunlit)
+        first += floor_seen(ra, grid, m, x2, row, exp3(tau), (line.r0 * mu_s0 + distance * nu) / (ra.radius + ra.floor),
+                            share)
     for term in range(3):
         wp.atomic_add(quad, row, term, first * (moments[term] * d[3]))
     for term in range(2):

@@ -35,7 +35,7 @@ from warpsky import device_buffers
 from warpsky.device import is_cpu
 from warpsky.layer import Layer
 from warpsky.light.sun import above_air
-from warpsky.media.air_front import front_air_transmittance
+from warpsky.passes.sky.front import front_air_transmittance
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
 from warpsky.settings import Settings, documented, setting
@@ -237,7 +237,7 @@ def behind_front_air(scene: Scene, width: int, height: int, depth: np.ndarray, m
     """Multiple scattering traced through the air already carries the air between the camera and each event;
     the frame's composite multiplies the media's layer by the sky pass's front transmittance T_f, so the layer
     holds multiple / T_f (and its variance / T_f^2). T_f is the sky pass's own, at the media's depth
-    (:func:`~warpsky.media.air_front.front_air_transmittance`)."""
+    (:func:`~warpsky.passes.sky.front.front_air_transmittance`)."""
     t_front = np.maximum(front_air_transmittance(scene, width, height, depth, device), 1e-4)
     return (multiple / t_front).astype(np.float32), (variance / t_front**2).astype(np.float32)
 

@@ -5,6 +5,10 @@ part, :mod:`warpsky.light.sun`; ratio-tracked transmittance times the media's mi
 new direction from that mixture. On the Lambertian ground it takes the sun through the media, then a
 cosine-weighted bounce. A path that leaves every medium gains the uniform environment and the dome (after a
 bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black sea level.
+
+On a round earth (``air.round``) the air ends below at its floor's sphere: the ground plane, when the scene has one
+at or above sea level, is that sphere (its albedo, the local vertical its normal), else it is a black sea level; a
+path that leaves the top of the air escapes, whichever way it points, when it misses the planet.
 """
 
 from __future__ import annotations
@@ -18,25 +22,30 @@ from warpsky.light.sun import Sun
 from warpsky.media.air import (
     Air,
     AirPart,
-    air_coefficient,
     air_part,
     air_scattering,
-    as_analytic,
     no_air,
     part_phase,
     part_total,
     scaled_part,
     sea_level_distance,
+    vertical,
 )
-from warpsky.media.air_mixture_kernels import air_column
 from warpsky.media.phase_mixture import mixture_functions, oriented_correction_function
 from warpsky.media.voxel import VoxelMedia, media_functions
-from warpsky.numerics import exp3
 from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.phase import isotropic_sample_cos
 from warpsky.optics.phase_sampling import PhaseTables, rotate_about
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.majorants import Majorants
+from warpsky.techniques.path_tracer.planet import (
+    air_to_sun,
+    cosine_about,
+    cosine_up,
+    floor_hit,
+    ground_cosine,
+    ground_point,
+)
 from warpsky.techniques.path_tracer.tracking import Transmittance, reduced_with_air, tracking_functions
 
 oriented_mixture_correction = oriented_correction_function(medium_phase)[1]
@@ -127,18 +136,27 @@ def ground_distance(ground: Ground, origin: wp.vec3, d: wp.vec3) -> float:
 
 
 @wp.func
+def floor_surface(air: Air) -> int:
+    """What a round earth's floor is: the ground (the scene's plane at or above sea level) or a black sea level."""
+    if air.floor_ground != 0:
+        return SURFACE_GROUND
+    return SURFACE_SEA
+
+
+@wp.func
 def escaped_radiance(air: Air, sun: Sun, environment: wp.vec3, d: wp.vec3, throughput: wp.vec3, bounce: int,
                      sun_on: bool) -> wp.vec3:
     """Light a path of ``throughput`` gains when its flight along ``d`` leaves every medium: none at a black sea
-    level (with air, downward), the environment after a bounce, the sun's disk seen directly with air (then the
-    path tracer draws it itself: the sky pass is not used)."""
+    level (with a flat earth's air, downward), the environment after a bounce, the sun's disk seen directly with
+    air (then the path tracer draws it itself: the sky pass is not used). A round earth's path gets here only when
+    it left the top of the air, above the planet's horizon."""
     out = wp.vec3(0.0)
-    if air.enabled != 0 and d[1] < 0.0:
+    if air.enabled != 0 and air.round == 0 and d[1] < 0.0:
         return out
     if bounce > 0:
         out = wp.cw_mul(throughput, environment)
     elif air.enabled != 0 and sun_on and wp.dot(d, sun.disk_direction) >= sun.cos_radius:
-        out = wp.cw_mul(throughput, sun.disk_radiance)  # the horizon clips the disk: d[1] >= 0 here
+        out = wp.cw_mul(throughput, sun.disk_radiance)  # the horizon (the planet) clips the disk: the ray missed it
     return out
 
 
@@ -146,9 +164,10 @@ def escaped_radiance(air: Air, sun: Sun, environment: wp.vec3, d: wp.vec3, throu
 def escaped_dome(air: Air, dome: DomeLight, d: wp.vec3, throughput: wp.vec3, bounce: int) -> wp.vec3:
     """The dome's light on a path of ``throughput`` that escapes along ``d`` after a bounce (with air: upward, out
     of the air). A camera ray that escapes (bounce 0) gains nothing here: the frame's composite draws the dome
-    behind the layer's transmittance, as it draws it behind every technique's."""
+    behind the layer's transmittance, as it draws it behind every technique's. A round earth's path gets here only
+    when it left the top of the air."""
     out = wp.vec3(0.0)
-    if bounce > 0 and not (air.enabled != 0 and d[1] < 0.0):
+    if bounce > 0 and not (air.enabled != 0 and air.round == 0 and d[1] < 0.0):
         out = wp.cw_mul(throughput, dome_radiance(dome, d))
     return out
 
@@ -176,9 +195,26 @@ def surface_functions(has_ground: bool):
     """``(primary_end, flight_end, sun_reaches)``, specialised on a ground plane."""
 
     @wp.func
+    def round_end(air: Air, origin: wp.vec3, d: wp.vec3, t_end: float) -> RayEnd:
+        """Where a ray ends on a round earth: at ``t_end``, else at the floor's sphere where it is nearer."""
+        out = RayEnd()
+        out.t = t_end
+        out.surface = SURFACE_NONE
+        t_floor = floor_hit(air, origin, d)
+        if t_floor >= 0.0 and t_floor < t_end:
+            out.t = t_floor
+            out.surface = SURFACE_SEA
+            if wp.static(has_ground):
+                out.surface = floor_surface(air)
+        return out
+
+    @wp.func
     def primary_end(air: Air, ground: Ground, origin: wp.vec3, view: wp.vec3, t_end: float) -> RayEnd:
         """Where a camera ray from the near plane ends: the far plane at ``t_end``, else sea level, else the
-        ground (the nearer wins; a ground at sea level wins within ``SURFACE_TIE`` of the distance)."""
+        ground (the nearer wins; a ground at sea level wins within ``SURFACE_TIE`` of the distance); on a round
+        earth the floor's sphere."""
+        if air.enabled != 0 and air.round != 0:
+            return round_end(air, origin, view, t_end)
         out = RayEnd()
         out.t = t_end
         out.surface = SURFACE_NONE
@@ -198,7 +234,12 @@ def surface_functions(has_ground: bool):
     @wp.func
     def flight_end(air: Air, ground: Ground, origin: wp.vec3, d: wp.vec3, bounce: int, first: RayEnd) -> RayEnd:
         """Where the flight of bounce ``bounce`` ends: the camera ray's end ``first`` for bounce 0, else the ground
-        (or no end), then sea level where it is nearer (within ``SURFACE_TIE`` the ground)."""
+        (or no end), then sea level where it is nearer (within ``SURFACE_TIE`` the ground); on a round earth the
+        camera ray's end, else the floor's sphere (or no end)."""
+        if air.enabled != 0 and air.round != 0:
+            if bounce == 0:
+                return first
+            return round_end(air, origin, d, UNBOUNDED)
         out = RayEnd()
         out.t = first.t
         out.surface = SURFACE_NONE
@@ -226,37 +267,6 @@ def surface_functions(has_ground: bool):
     return primary_end, flight_end, sun_reaches
 
 
-@wp.struct
-class DirectionSample:
-    direction: wp.vec3
-    state: wp.uint32
-
-
-@wp.func
-def cosine_up(state: wp.uint32) -> DirectionSample:
-    """A cosine-weighted direction about +y (two random draws: radius, then azimuth)."""
-    u1 = wp.randf(state)
-    phi = 2.0 * wp.pi * wp.randf(state)
-    rr = wp.sqrt(u1)
-    out = DirectionSample()
-    out.direction = wp.vec3(rr * wp.cos(phi), wp.sqrt(wp.max(1.0 - u1, 0.0)), rr * wp.sin(phi))
-    out.state = state
-    return out
-
-
-@wp.func
-def air_to_sun(air: Air, sun: Sun, p: wp.vec3) -> wp.vec3:
-    """The air's transmittance from ``p`` to the sun in closed form (ones without air): its vertical column above
-    ``p`` over ``air_sine``."""
-    out = wp.vec3(1.0)
-    if air.enabled != 0:
-        if air.mixed == 0:
-            out = exp3(air_coefficient(air, p[1]) / (air.gamma * sun.air_sine))
-        else:
-            out = exp3(air_column(as_analytic(air), air.camera_altitude + p[1]) / sun.air_sine)
-    return out
-
-
 @functools.cache
 def sun_transmittance_function(has_detail: bool):
     """``transmittance_to_sun(media, majorants, air, sun, p, state, reduced) -> Transmittance``, specialised on
@@ -269,9 +279,17 @@ def sun_transmittance_function(has_detail: bool):
         """Transmittance from ``p`` to the sun (with ``reduced``, through the media after high-order similarity):
         the media ratio-tracked, the air in closed form, its vertical column above ``p`` over ``air_sine`` (exact
         for the flat earth's ray above the grazing elevations, and there the finite grazing air mass every other
-        technique uses). Tracking the air instead crossed a majorant band every 800 m of height up to 114 km."""
+        technique uses), or a round earth's from its table (none of the media tracked where the planet hides the
+        sun). Tracking the air instead crossed a majorant band every 800 m of height up to 114 km."""
+        through_air = air_to_sun(air, sun, p)
+        if air.round != 0 and wp.max(through_air) <= 0.0:
+            out = Transmittance()
+            out.value = through_air
+            out.steps = 0
+            out.state = state
+            return out
         out = ratio_track(media, majorants, no_air(), p, sun.direction, UNBOUNDED, state, reduced)
-        out.value = wp.cw_mul(out.value, air_to_sun(air, sun, p))
+        out.value = wp.cw_mul(out.value, through_air)
         return out
 
     return transmittance_to_sun
@@ -291,8 +309,8 @@ def reduced_event_function(has_detail: bool):
         coefficients beside the air's Rayleigh phase; the sun through the reduced media times that mixture, then a
         direction drawn uniformly over the sphere (two random draws) weighted by the mixture over 1 / (4 pi)."""
         out = path
-        air_s = air_part(air, p[1])
-        media_part = reduced_with_air(media, sample_media(media, p), no_air(), p[1]).scattering
+        air_s = air_part(air, p)
+        media_part = reduced_with_air(media, sample_media(media, p), no_air(), p).scattering
         total = part_total(air_s) + media_part
         if sun_on:
             tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 1)
@@ -329,7 +347,7 @@ def media_first_function(has_detail: bool):
         media's share of the event exactly (one random draw when 0 < q < 1). The path then scatters with the
         media's phase alone (``air_weight`` 0)."""
         out = path
-        air_s = air_scattering(air, p[1])
+        air_s = air_scattering(air, p)
         media_part = sample_media(media, p).scattering
         total = air_s + media_part
         q = (air_s[0] + air_s[1] + air_s[2]) / wp.max(total[0] + total[1] + total[2], 1.0e-30)
@@ -366,7 +384,7 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
         media scatter alone, after :func:`media_first`)."""
         out = path
         point = sample_media(media, p)
-        air_s = scaled_part(air_part(air, p[1]), air_weight)
+        air_s = scaled_part(air_part(air, p), air_weight)
         if sun_on:
             tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 0)
             out.state = tr_sun.state
@@ -390,11 +408,11 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
     @wp.func
     def ground_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, ground: Ground, sun_on: bool,
                      path: PathState, p: wp.vec3, reduced: int) -> PathState:
-        """Lambertian ground under ``p``: the sun through the media (with ``reduced``, after high-order
-        similarity), then a cosine-weighted bounce."""
+        """Lambertian ground under ``p`` (on a round earth its floor, the local vertical its normal): the sun
+        through the media (with ``reduced``, after high-order similarity), then a cosine-weighted bounce."""
         out = path
         if wp.static(has_ground):
-            q = wp.vec3(p[0], ground.offset, p[2])
+            q = ground_point(air, ground, p)
             if sun_on:
                 tr_sun = transmittance_to_sun(media, majorants, air, sun, q, out.state, reduced)
                 out.state = tr_sun.state
@@ -402,13 +420,20 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
                 out.shadow_steps = out.shadow_steps + tr_sun.steps
                 lit_ground = wp.cw_mul(sun.irradiance, tr_sun.value)
                 out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, ground.albedo), lit_ground) * (
-                    wp.max(sun.direction[1], 0.0) / wp.pi
+                    ground_cosine(air, sun, q) / wp.pi
                 )
             out.throughput = wp.cw_mul(out.throughput, ground.albedo)
-            bounce = cosine_up(out.state)
-            out.direction = bounce.direction
-            out.state = bounce.state
-            out.origin = q + wp.vec3(0.0, 1.0e-4, 0.0)
+            if air.round != 0:
+                normal = vertical(air, q)
+                bounce = cosine_about(normal, out.state)
+                out.direction = bounce.direction
+                out.state = bounce.state
+                out.origin = q + normal * 1.0e-4
+            else:
+                bounce = cosine_up(out.state)
+                out.direction = bounce.direction
+                out.state = bounce.state
+                out.origin = q + wp.vec3(0.0, 1.0e-4, 0.0)
         return out
 
     return scatter_event, reduced_event_function(has_detail), ground_event

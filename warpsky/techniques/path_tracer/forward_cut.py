@@ -41,8 +41,9 @@ from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.optics.tables import phase_table
 from warpsky.scene.model import VoxelMedium
 from warpsky.surfaces.plane import Ground
-from warpsky.techniques.path_tracer.events import UNBOUNDED, air_to_sun
+from warpsky.techniques.path_tracer.events import UNBOUNDED
 from warpsky.techniques.path_tracer.majorants import Majorants
+from warpsky.techniques.path_tracer.planet import air_to_sun, ground_cosine
 from warpsky.techniques.path_tracer.tracking import ROULETTE_TRANSMITTANCE, media_sums, next_collision, positive
 
 
@@ -192,10 +193,10 @@ def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
         if on_ground != 0:
             if wp.static(has_ground):
                 out.radiance = wp.cw_mul(wp.cw_mul(throughput, ground.albedo), gained) * (
-                    wp.max(sun.direction[1], 0.0) / wp.pi)
+                    ground_cosine(air, sun, p) / wp.pi)
         else:
             point = sample_media(media, p)
-            phase = mixture_phase(media, point, tables.values, air_part(air, p[1]),
+            phase = mixture_phase(media, point, tables.values, air_part(air, p),
                                   scattering_angle(sun.direction, direction))
             out.radiance = wp.cw_mul(wp.cw_mul(throughput, phase), gained)
         return out

@@ -25,8 +25,9 @@ from warpsky.camera_rays import PinholeCamera, primary_ray
 from warpsky.kernel_variants import kernel_variants
 from warpsky.light.dome import DomeLight
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air, as_analytic, no_air
+from warpsky.media.air import Air, altitude, as_analytic, no_air, top_exit, vertical
 from warpsky.media.air_mixture_kernels import air_optical_depth
+from warpsky.media.air_round import ray_depth
 from warpsky.media.voxel import VoxelMedia
 from warpsky.numerics import exp3
 from warpsky.optics.phase_sampling import PhaseTables
@@ -35,6 +36,7 @@ from warpsky.techniques.path_tracer.events import (
     SURFACE_GROUND,
     SURFACE_NONE,
     SURFACE_OPAQUE,
+    SURFACE_SEA,
     UNBOUNDED,
     PathState,
     RayEnd,
@@ -48,6 +50,7 @@ from warpsky.techniques.path_tracer.events import (
 )
 from warpsky.techniques.path_tracer.forward_cut import CutMedia, peak_light_function
 from warpsky.techniques.path_tracer.majorants import Majorants
+from warpsky.techniques.path_tracer.planet import ground_point
 from warpsky.techniques.path_tracer.tracking import tracking_functions
 
 #: Samples of one pixel seed their streams ``seed + sample * SAMPLE_STRIDE`` (the pixel is the stream offset).
@@ -95,9 +98,15 @@ class SampleResult:
 @wp.func
 def air_transmittance(air: Air, origin: wp.vec3, view: wp.vec3, distance: float) -> wp.vec3:
     """Transmittance of the air from ``origin`` over ``distance`` [m] along ``view`` in closed form (Riley Eq. 11;
-    ones without air): the primary ray's air is not tracked, its majorant bands would cost a step every 800 m."""
+    ones without air), on a round earth by quadrature up to where the ray leaves the air: the primary ray's air is
+    not tracked, its majorant bands would cost a step every 800 m."""
     if air.enabled == 0:
         return wp.vec3(1.0)
+    if air.round != 0:
+        h0 = altitude(air, origin)
+        mu0 = wp.dot(view, vertical(air, origin))
+        length = wp.min(distance, top_exit(air.planet, h0, mu0))
+        return exp3(ray_depth(as_analytic(air), air.planet, h0, mu0, length))
     return exp3(air_optical_depth(as_analytic(air), air.camera_altitude + origin[1], view[1], distance))
 
 
@@ -119,7 +128,7 @@ def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool):
         if settings.forward_cut != 0 and sun_on:
             q = p
             if scattered == 0:
-                q = wp.vec3(p[0], ground.offset, p[2])
+                q = ground_point(air, ground, p)
             peak = first_event_peak_light(media, majorants, cut, phase_tables, air, sun, ground, out.throughput,
                                           out.direction, q, 1 - scattered, out.state)
             out.radiance = out.radiance + peak.radiance
@@ -179,7 +188,8 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
             if bounce == 0:
                 lit = sun_on and settings.multiple_only == 0
             if flight.scattered == 0 and end.surface != SURFACE_GROUND:
-                if end.surface != SURFACE_OPAQUE:  # the surface's pass draws what lies there and beyond
+                # a black sea gives nothing; an opaque surface's pass draws what lies there and beyond
+                if end.surface != SURFACE_OPAQUE and end.surface != SURFACE_SEA:
                     path.radiance = path.radiance + escaped_radiance(air, sun, settings.environment,
                                                                      path.direction, path.throughput, bounce, lit)
                     if wp.static(has_dome):

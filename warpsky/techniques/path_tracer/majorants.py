@@ -3,7 +3,9 @@
 Every medium carries a coarse grid of upper bounds on its extinction (one value per block of voxels,
 :class:`MajorantGrid`), and a ray advances from block boundary to block boundary with the sum of the bounds of the
 blocks it is in, so thin regions are crossed in a few steps and a thick core does not slow the rest of the cloud
-down. The air's majorant over a stretch of ray is its density at the stretch's lowest point.
+down. The air's majorant over a stretch of ray is its density at the stretch's lowest point: on a flat earth the
+stretch's lower end, on a round one its end or the ray's point nearest the planet's centre (its perigee) when that
+lies inside it.
 """
 
 from __future__ import annotations
@@ -12,13 +14,24 @@ import numpy as np
 import warp as wp
 
 from warpsky import device_buffers
-from warpsky.media.air import Air, air_bound, air_coefficient
+from warpsky.media.air import Air, air_bound, altitude, coefficient_at, top_entry, vertical
+from warpsky.media.air_round import Line, altitude_at, make_line
 from warpsky.media.detail import detail_factor_bound
 from warpsky.media.voxel import VoxelMedia, grid_interval, reduced_coefficients
 from warpsky.scene.model import VoxelMedium
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
 MAJORANT_MARGIN = wp.constant(1.0001)
+#: On a round earth a stretch of ray is doubled (at most :data:`STRETCH_DOUBLINGS` times) while its majorant crosses
+#: at most this optical depth over it: in the thin high air few stretches, each with few null collisions on average.
+STRETCH_DEPTH = wp.constant(0.25)
+STRETCH_DOUBLINGS = wp.constant(16)
+#: A round earth's majorant is taken this much lower [m] than a stretch's lowest point: the float32 rounding of a
+#: point's altitude far from the camera (centimetres at 1000 km).
+ALTITUDE_SLACK = wp.constant(0.5)
+#: A ray above a round earth's air crosses in one step to where it enters the top when that is farther than this [m]
+#: (nearer, float32 rounding has put a point just inside above it).
+ENTRY_STEP = wp.constant(1.0)
 
 
 @wp.struct
@@ -49,6 +62,64 @@ class Segment:
     end: float
 
 
+@wp.struct
+class Stretch:
+    """A stretch of ray from a point, its length [m] and its air's majorant [1/m]."""
+
+    length: float
+    majorant: float
+
+
+@wp.func
+def round_stretch(air: Air, line: Line, length: float, t_left: float) -> Stretch:
+    """The stretch of ``length`` [m] along ``line`` from its start (its bound taken over at most ``t_left``): the
+    air's majorant at its lowest point, the start, the end or the perigee between them."""
+    span = wp.min(length, t_left)
+    h_end = altitude_at(line, span)
+    lowest = wp.min(line.h0, h_end)
+    if line.tp > 0.0 and line.tp < span:
+        lowest = line.hp
+    out = Stretch()
+    out.length = length
+    out.majorant = air_bound(air, lowest - ALTITUDE_SLACK, wp.max(line.h0, h_end)) * MAJORANT_MARGIN
+    return out
+
+
+@wp.func
+def round_air_segment(air: Air, origin: wp.vec3, direction: wp.vec3, t: float, t_max: float) -> Segment:
+    """:func:`air_segment` on a round earth: vacuum above the top of the air (a ray that rises there ends, one
+    that will enter the air crosses to its entry in one step), else a stretch over which the altitude changes by
+    about ``band`` (``band`` / |mu| long, at most the sqrt(2 r band) in which a ray leaving its perigee rises by
+    ``band``) with the density at its lowest point, doubled while its majorant crosses at most
+    :data:`STRETCH_DEPTH` optical depths (the thin high air: few stretches, few null collisions each)."""
+    out = Segment()
+    out.majorant = 0.0
+    out.end = t_max
+    ra = air.planet
+    p = origin + t * direction
+    h = altitude(air, p)
+    mu = wp.dot(direction, vertical(air, p))
+    entry = top_entry(ra, h, mu)
+    if entry < 0.0:
+        return out
+    if entry > ENTRY_STEP:
+        out.end = wp.min(out.end, t + entry)
+        return out
+    line = make_line(ra, h, mu)
+    band = wp.min(air.band / wp.max(wp.abs(mu), 1.0e-30), wp.sqrt(2.0 * (ra.radius + h) * air.band))
+    stretch = round_stretch(air, line, band, t_max - t)
+    for _k in range(STRETCH_DOUBLINGS):
+        if 2.0 * stretch.majorant * stretch.length > STRETCH_DEPTH or stretch.length >= t_max - t:
+            break
+        longer = round_stretch(air, line, 2.0 * stretch.length, t_max - t)
+        if longer.majorant * longer.length > STRETCH_DEPTH:
+            break
+        stretch = longer
+    out.majorant = stretch.majorant
+    out.end = wp.min(out.end, t + stretch.length)
+    return out
+
+
 @wp.func
 def air_segment(air: Air, origin: wp.vec3, direction: wp.vec3, t: float, t_max: float) -> Segment:
     """The air's majorant at ``origin + t * direction`` and where it changes (``t_max`` and 0 without air)."""
@@ -56,12 +127,15 @@ def air_segment(air: Air, origin: wp.vec3, direction: wp.vec3, t: float, t_max: 
     out.majorant = 0.0
     out.end = t_max
     if air.enabled != 0:
+        if air.round != 0:
+            return round_air_segment(air, origin, direction, t, t_max)
         y = origin[1] + t * direction[1]
         dy = direction[1]
+        h = air.camera_altitude + y
         if dy == 0.0:
-            out.majorant = air_bound(air, y, y) * MAJORANT_MARGIN
+            out.majorant = air_bound(air, h, h) * MAJORANT_MARGIN
         else:
-            remaining = wp.max(air_coefficient(air, y)) / (air.gamma * wp.max(dy, 1.0e-30))
+            remaining = wp.max(coefficient_at(air, h)) / (air.gamma * wp.max(dy, 1.0e-30))
             if dy < 0.0 or remaining > 1.0e-6:
                 stretch = air.band / wp.abs(dy)
                 lowest = y
@@ -69,7 +143,8 @@ def air_segment(air: Air, origin: wp.vec3, direction: wp.vec3, t: float, t_max: 
                 if dy < 0.0:
                     lowest = highest
                     highest = y
-                out.majorant = air_bound(air, lowest, highest) * MAJORANT_MARGIN
+                out.majorant = air_bound(air, air.camera_altitude + lowest, air.camera_altitude + highest) * (
+                    MAJORANT_MARGIN)
                 out.end = wp.min(out.end, t + stretch)
     return out
 

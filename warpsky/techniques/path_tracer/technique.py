@@ -281,7 +281,7 @@ class PathTracing:
         continuation = continuation_tables(scene, device, cache="path_tracer")
         self._keep = (tables, media, dome, oriented, continuation, cut_struct)  # the structs below point into these
         self.fixed = [media.media, majorants, cut_struct, phase_tables_struct(tables, oriented, continuation),
-                      air_struct(scene.atmosphere if air else None, camera.position), sun_struct(sunlight(scene)),
+                      air_struct(scene, camera.position, device, air=air), sun_struct(sunlight(scene)),
                       pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position), dome]
 
     def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:

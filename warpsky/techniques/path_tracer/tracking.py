@@ -48,17 +48,17 @@ class PointMedia:
 
 
 @wp.func
-def with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointMedia:
-    """Coefficients of the air at camera-relative height ``y`` plus the media at ``point``, summed air first and
+def with_air(media: VoxelMedia, point: MediaPoint, air: Air, p: wp.vec3) -> PointMedia:
+    """Coefficients of the air at the camera-relative point ``p`` plus the media at ``point``, summed air first and
     then each medium in order (the order fixes the float32 rounding every tracking decision sees)."""
     out = PointMedia()
     out.extinction = point.extinction
     out.scattering = point.scattering
     if air.enabled != 0:
-        coefficient = air_coefficient(air, y)
+        coefficient = air_coefficient(air, p)
         scattering = coefficient
         if air.mixed != 0:
-            scattering = air_scattering(air, y)
+            scattering = air_scattering(air, p)
         if media.count <= 1:
             # one medium: air + (0 + x) is the same float sum as (air + x)
             out.extinction = coefficient + point.extinction
@@ -92,14 +92,14 @@ def media_sums(media: VoxelMedia, point: MediaPoint, start: wp.vec3, start_scatt
 
 
 @wp.func
-def reduced_with_air(media: VoxelMedia, point: MediaPoint, air: Air, y: float) -> PointMedia:
+def reduced_with_air(media: VoxelMedia, point: MediaPoint, air: Air, p: wp.vec3) -> PointMedia:
     """:func:`with_air` after high-order similarity: the media's reduced extinction and scattering at ``point``
     (the air's are unchanged)."""
     start = wp.vec3(0.0)
     scattering = wp.vec3(0.0)
     if air.enabled != 0:
-        start = air_coefficient(air, y)
-        scattering = air_scattering(air, y)
+        start = air_coefficient(air, p)
+        scattering = air_scattering(air, p)
     return media_sums(media, point, start, scattering, 1)
 
 
@@ -191,8 +191,8 @@ def media_at_function(has_detail: bool):
         ``reduced``, after high-order similarity)."""
         point = sample_media(media, p)
         if reduced != 0:
-            return reduced_with_air(media, point, air, p[1])
-        return with_air(media, point, air, p[1])
+            return reduced_with_air(media, point, air, p)
+        return with_air(media, point, air, p)
 
     return media_at
 

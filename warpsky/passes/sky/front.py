@@ -1,4 +1,5 @@
-"""The transmittance of the air in front of the media, per pixel, as the sky pass takes it (without its radiance).
+"""The transmittance of the air in front of the media, per pixel, as the sky pass takes it (without its radiance),
+on a flat or a round earth.
 
 A technique that traces the air itself (hybrid's multiple scattering) carries the air between the camera and each
 event, while the frame's composite multiplies the media's layer by the sky pass's front transmittance; dividing by
@@ -19,6 +20,7 @@ from warpsky.media.air_round import RoundAir
 from warpsky.media.air_round_light import RoundMultiple
 from warpsky.numerics import exp3
 from warpsky.passes.sky.round_kernels import RoundView, front_light, round_ray
+from warpsky.passes.sky.round_sky import round_front_inputs
 from warpsky.surfaces.plane import Ground, ground_struct
 
 
@@ -55,8 +57,6 @@ def front_air_transmittance(scene, width: int, height: int, media_depth: np.ndar
         depth = wp.array(np.ascontiguousarray(media_depth, dtype=np.float32), dtype=float, device=device)
         out = wp.zeros((height, width), dtype=wp.vec3, device=device)
         if scene.atmosphere.round:
-            from warpsky.passes.sky.round_sky import round_front_inputs
-
             wp.launch(round_front_kernel, dim=(height, width), device=device,
                       inputs=[*round_front_inputs(scene, camera, width, height, device), depth, out])
             return out.numpy()
