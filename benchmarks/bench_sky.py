@@ -119,10 +119,12 @@ def error_table(spp: int, air: str = "rayleigh", earth: str = "flat") -> list[di
     print(f"{'sun':>5} {'albedo':>6}  {'table sky':>10} {'single sky':>10} {'table ground':>12} "
           f"{'single ground':>13} {'noise':>6}")
     for sun in se.sun_elevations(earth):
+        # few paths reach the sunlit air of a low sun: more paths keep the tracer's noise near the others'
+        paths = spp * (se.LOW_SUN_PATHS if sun <= 0.0 else 1)
         for albedo in se.ALBEDOS:
-            group = [se.sky_case(sun, view, albedo, spp=spp, air=air, earth=earth) for view in se.VIEWS
+            group = [se.sky_case(sun, view, albedo, spp=paths, air=air, earth=earth) for view in se.VIEWS
                      if se.clear_of_the_sun(sun, view)]
-            ground = se.ground_case(sun, albedo, spp=spp, air=air, earth=earth) if albedo > 0.0 else None
+            ground = se.ground_case(sun, albedo, spp=paths, air=air, earth=earth) if albedo > 0.0 else None
             cases.extend(group + ([ground] if ground else []))
             noise = max(float(np.max(se.relative_errors(c)[1])) for c in group)
             g = (f"{se.net(ground):>12.1%} {se.net(ground, 'single'):>13.1%}" if ground

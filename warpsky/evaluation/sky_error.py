@@ -23,6 +23,8 @@ from warpsky.scene.model import EARTH_AEROSOLS, EARTH_OZONE, EARTH_RADIUS, Atmos
 #: a round earth, through civil twilight.
 SUN_ELEVATIONS = (90.0, 60.0, 30.0, 10.0, 5.0, 2.0, 0.0)
 TWILIGHT_ELEVATIONS = (-2.0, -4.0, -6.0)
+#: Suns at or below the horizon are traced with this many times the paths (few reach the sunlit air).
+LOW_SUN_PATHS = 8
 #: The earths compared: Riley's flat one and a round one of the Earth's radius.
 EARTHS = {"flat": 0.0, "round": EARTH_RADIUS}
 #: Views (elevation, azimuth from the sun) [deg], all >= 2 deg above the horizon.

@@ -128,8 +128,36 @@ def altitude_at(line: Line, t: float) -> float:
 @wp.func
 def horizon_sine(ra: RoundAir, h: float) -> float:
     """Elevation sine of the floor's horizon seen from altitude ``h`` (0 at the floor, negative above it)."""
-    x = wp.max(h - ra.floor, 0.0) * (2.0 * ra.radius + h + ra.floor)
-    return -wp.sqrt(x) / (ra.radius + h)
+    return horizon_of(ra.radius, ra.floor, h)
+
+
+@wp.func
+def horizon_of(radius: float, floor: float, h: float) -> float:
+    """:func:`horizon_sine` of a planet of sea-level ``radius`` whose air ends at ``floor``."""
+    x = wp.max(h - floor, 0.0) * (2.0 * radius + h + floor)
+    return -wp.sqrt(x) / (radius + h)
+
+
+@wp.func
+def sun_coordinate(radius: float, floor: float, h: float, mu_s: float) -> float:
+    """The sun's coordinate v in [-1, 1] at altitude ``h``: its elevation sine above the floor's horizon seen from
+    there, scaled to [0, 1] above and [-1, 0] below, square-rooted (dense where the sun meets the horizon: a
+    point's twilight starts at its own horizon, lower for higher points)."""
+    mu_h = horizon_of(radius, floor, h)
+    x = (mu_s - mu_h) / (1.0 - mu_h)
+    if mu_s < mu_h:
+        x = (mu_s - mu_h) / (1.0 + mu_h)
+    return wp.sign(x) * wp.sqrt(wp.min(wp.abs(x), 1.0))
+
+
+@wp.func
+def sun_at_coordinate(radius: float, floor: float, h: float, v: float) -> float:
+    """The sun's elevation sine whose :func:`sun_coordinate` at altitude ``h`` is ``v``."""
+    mu_h = horizon_of(radius, floor, h)
+    x = wp.sign(v) * v * v
+    if x >= 0.0:
+        return mu_h + x * (1.0 - mu_h)
+    return mu_h + x * (1.0 + mu_h)
 
 
 @wp.func

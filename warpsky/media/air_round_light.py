@@ -29,9 +29,13 @@ from warpsky.media.air_round import (
     panel_node,
     piece_bounds,
     side,
+    sun_coordinate,
     sun_transmittance,
 )
 from warpsky.numerics import exp3
+
+#: The multiple-scattering table's logarithms are of the values plus this (:mod:`~warpsky.media.air_round_multiple`).
+LOG_FLOOR_WP = wp.constant(1.0e-30)
 
 
 @wp.struct
@@ -41,6 +45,7 @@ class RoundMultiple:
     enabled: int
     psi: wp.array3d(dtype=wp.vec3)  # (heights, suns, 7): Psi, J_2, Q_uu, Q_hh, Q_uh, F_u, F_h per unit irradiance
     mie_g: float  # the aerosols' Henyey-Greenstein g
+    radius: float  # the planet's at sea level [m]
     floor: float  # altitude of the first row [m above sea level]
     height: float  # the rows span floor + height u^2, u uniform in [0, 1]
 
@@ -58,10 +63,11 @@ class MultipleAt:
 @wp.func
 def multiple_terms(ms: RoundMultiple, h: float, mu_s: float, mu: float, nu: float) -> MultipleAt:
     """The table at altitude ``h`` for a sun of elevation sine ``mu_s`` there, towards a view of elevation sine
-    ``mu`` there and cos(view, sun) ``nu``: bilinear in u = sqrt((h - floor) / height) and in
-    v = sign(mu_s) sqrt(|mu_s|) (rows dense near the floor, columns near the horizon)."""
+    ``mu`` there and cos(view, sun) ``nu``: bilinear in u = sqrt((h - floor) / height) and in the sun's
+    :func:`~warpsky.media.air_round.sun_coordinate` (rows dense near the floor, columns near the point's horizon),
+    Psi and J_2 through their logarithms, the moments as fractions of J_2."""
     u = wp.sqrt(wp.clamp((h - ms.floor) / ms.height, 0.0, 1.0)) * float(ms.psi.shape[0] - 1)
-    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))
+    v = sun_coordinate(ms.radius, ms.floor, h, mu_s)
     s = wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(ms.psi.shape[1] - 1)
     i = wp.min(int(u), ms.psi.shape[0] - 2)
     j = wp.min(int(s), ms.psi.shape[1] - 2)
@@ -74,31 +80,38 @@ def multiple_terms(ms: RoundMultiple, h: float, mu_s: float, mu: float, nu: floa
         v_h = wp.clamp((nu - mu * mu_s) / sun_across, -1.0, 1.0)
     v_s2 = wp.max(1.0 - mu * mu - v_h * v_h, 0.0)
     quadratic = wp.vec3(mu * mu - v_s2, v_h * v_h - v_s2, 2.0 * mu * v_h)
-    values = MultipleAt()
+    terms = MultipleAt()
     form = wp.vec3(0.0)
+    dipole = wp.vec3(0.0)
     for term in range(7):
         value = ((ms.psi[i, j, term] * (1.0 - b) + ms.psi[i, j + 1, term] * b) * (1.0 - a)
                  + (ms.psi[i + 1, j, term] * (1.0 - b) + ms.psi[i + 1, j + 1, term] * b) * a)
         if term == 0:
-            values.isotropic = value
+            terms.isotropic = from_log(value)
         elif term == 1:
-            values.mie = value  # J_2 for now
+            terms.mie = from_log(value)  # J_2 for now
         elif term < 5:
             form += value * quadratic[term - 2]
         elif term == 5:
-            values.rayleigh = value * mu  # F . v for now
+            dipole += value * mu
         else:
-            values.rayleigh += value * v_h
+            dipole += value * v_h
     g = ms.mie_g
-    dipole = values.rayleigh
-    j2 = values.mie
+    j2 = terms.mie
     out = MultipleAt()
-    out.isotropic = values.isotropic
-    out.rayleigh = form * (3.0 / (16.0 * wp.pi))
-    aerosol = (dipole * (3.0 * g) + form * (7.5 * g * g)) / (4.0 * wp.pi)
+    out.isotropic = terms.isotropic
+    out.rayleigh = wp.cw_mul(j2, form) * (3.0 / (16.0 * wp.pi))
+    aerosol = wp.cw_mul(j2, dipole * (3.0 * g) + form * (7.5 * g * g)) / (4.0 * wp.pi)
     for c in range(3):
         out.mie[c] = wp.max(aerosol[c], -j2[c])
     return out
+
+
+@wp.func
+def from_log(value: wp.vec3) -> wp.vec3:
+    """exp(value) - LOG_FLOOR per channel, not below 0 (the table's logarithms)."""
+    return wp.vec3(wp.max(wp.exp(value[0]) - LOG_FLOOR_WP, 0.0), wp.max(wp.exp(value[1]) - LOG_FLOOR_WP, 0.0),
+                   wp.max(wp.exp(value[2]) - LOG_FLOOR_WP, 0.0))
 
 
 @wp.func

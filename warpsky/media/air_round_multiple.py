@@ -21,8 +21,11 @@ Q_hh, Q_uh); the aerosols' Henyey-Greenstein phase (1 + 3 g P_1 + 5 g^2 P_2 + ..
 forward phase sends little of the bright floor's upward light back down. These moments and J_2 are tabulated beside
 Psi; orders >= 3 are isotropic.
 
-Rows: h = floor + height u^2 (u uniform, :data:`HEIGHTS` of them); columns: v = sign(mu_s) sqrt(|mu_s|) uniform on
-[-1, 1] (:data:`SUNS`), dense near the horizon where twilight lives. Directions: Gauss-Legendre in sqrt(|mu|) on
+Rows: h = floor + height u^2 (u uniform, :data:`HEIGHTS` of them); columns: the sun's elevation sine above each
+row's own horizon, square-rooted (:func:`~warpsky.media.air_round.sun_coordinate`, :data:`SUNS` uniform on [-1, 1]),
+so the shadow of the planet, which reaches higher points at lower suns, falls on the same columns at every height
+(with the plain sine, interpolating across that diagonal left the twilight sky 5-10 % dark in blue); the floor's
+unknowns take the plain sine (its horizon is level). Directions: Gauss-Legendre in sqrt(|mu|) on
 each hemisphere (:data:`ELEVATIONS`) times :data:`AZIMUTHS` midpoints on [0, pi] (the other half by symmetry).
 Unlike Hillaire (2020, §5.5), whose table takes the same two numbers, it does not assume each order as strong as the
 point's own (his geometric series) and keeps the floor's bounces between orders.
@@ -55,6 +58,8 @@ from warpsky.media.air_round import (
     piece_bounds,
     round_struct,
     side,
+    sun_at_coordinate,
+    sun_coordinate,
     sun_transmittance,
     top_distance,
 )
@@ -62,29 +67,34 @@ from warpsky.media.air_round_light import RoundMultiple, scattering_at
 from warpsky.numerics import exp3
 from warpsky.optics.phase import phase_hg, phase_rayleigh
 
+#: Psi and J_2 are tabulated as logarithms of themselves plus this (both fall by orders of magnitude across twilight,
+#: where linear interpolation between nodes 2.4 deg apart doubled them).
+LOG_FLOOR = 1.0e-30
 #: Table rows (altitudes) and columns (sun elevation sines), and terms per node.
 HEIGHTS = 24
-SUNS = 32
+SUNS = 48
 TERMS = 7
 #: Directions of the build: Gauss-Legendre nodes per hemisphere, azimuths on [0, pi].
-ELEVATIONS = 10
-AZIMUTHS = 8
+ELEVATIONS = 8
+AZIMUTHS = 6
 #: The sun's angular radius [rad] the table is built for (the real sun's; the disk matters only at the horizon).
 SUN_RADIUS = 0.5 * math.radians(0.53)
 
 
 @dataclass(frozen=True)
 class RoundTable:
-    """Psi on the grid, per unit sun irradiance [1/sr], RGB: ``values`` (HEIGHTS, SUNS, TERMS, 3), per node Psi,
-    the second order's isotropic source J_2, the single-scattering field's second moments Q_uu, Q_hh, Q_uh and
-    first moments F_u, F_h (:func:`~warpsky.media.air_round_light.multiple_terms`); the rows span ``floor`` +
-    ``height`` u^2 [m above sea level]; ``seconds`` the build's time."""
+    """Psi on the grid, per unit sun irradiance [1/sr], RGB: ``values`` (HEIGHTS, SUNS, TERMS, 3), per node
+    ln(Psi + LOG_FLOOR), ln(J_2 + LOG_FLOOR) (the second order's isotropic source), the single-scattering field's
+    second moments Q_uu, Q_hh, Q_uh and first moments F_u, F_h over J_2
+    (:func:`~warpsky.media.air_round_light.multiple_terms`); the rows span ``floor`` + ``height`` u^2 [m above sea
+    level]; ``seconds`` the build's time."""
 
     values: np.ndarray
     floor: float
     height: float
     seconds: float
     mie_g: float = 0.0
+    radius: float = 0.0
 
 
 def directions() -> np.ndarray:
@@ -105,6 +115,7 @@ class Grid:
     floor: float
     height: float
     albedo: wp.vec3
+    radius: float  # of sea level [m]
 
 
 @wp.func
@@ -112,7 +123,7 @@ def grid_cell(grid: Grid, h: float, mu_s: float) -> wp.vec4:
     """(row, column, row weight, column weight) of bilinear interpolation on the grid (row + 1, column + 1 take
     the weights)."""
     u = wp.sqrt(wp.clamp((h - grid.floor) / grid.height, 0.0, 1.0)) * float(HEIGHTS - 1)
-    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))
+    v = sun_coordinate(grid.radius, grid.floor, h, mu_s)
     s = wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(SUNS - 1)
     i = wp.min(int(u), HEIGHTS - 2)
     j = wp.min(int(s), SUNS - 2)
@@ -141,7 +152,7 @@ def add_cell(m: wp.array3d(dtype=float), row: int, cell: wp.vec4, value: wp.vec3
 @wp.func
 def add_floor(m: wp.array3d(dtype=float), row: int, mu_s: float, value: wp.vec3):
     """Spread ``value`` over the floor's two unknowns about ``mu_s`` in row ``row`` of ``m``."""
-    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))
+    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))  # the floor's own horizon is level
     s = wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(SUNS - 1)
     j = wp.min(int(s), SUNS - 2)
     b = s - float(j)
@@ -175,7 +186,7 @@ def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(
     u = float(i) / float(HEIGHTS - 1)
     h0 = grid.floor + grid.height * u * u
     v = 2.0 * float(j) / float(SUNS - 1) - 1.0
-    mu_s0 = wp.sign(v) * v * v
+    mu_s0 = sun_at_coordinate(grid.radius, grid.floor, h0, v)
     d = dirs[k]
     mu0 = d[0]
     nu = wp.sqrt(wp.max(1.0 - mu0 * mu0, 0.0)) * d[1] * wp.sqrt(wp.max(1.0 - mu_s0 * mu_s0, 0.0)) + mu0 * mu_s0
@@ -239,6 +250,7 @@ def build(atm, floor: float, albedo, device) -> RoundTable:
     grid.floor = float(floor)
     grid.height = float(ra.top - floor)
     grid.albedo = wp.vec3(*np.asarray(albedo, dtype=np.float64).tolist())
+    grid.radius = float(atm.planet_radius)
     count = HEIGHTS * SUNS + SUNS
     sphere = directions()
     with wp.ScopedDevice(device):
@@ -254,9 +266,12 @@ def build(atm, floor: float, albedo, device) -> RoundTable:
     values = np.zeros((HEIGHTS * SUNS, 3))
     for c in range(3):
         values[:, c] = np.linalg.solve(np.eye(count) - matrix[c], source[:, c])[:HEIGHTS * SUNS]
-    terms = np.concatenate([np.maximum(values, 0.0)[:, None, :], source[:HEIGHTS * SUNS, None, :], moments], axis=1)
+    j2 = source[:HEIGHTS * SUNS]
+    ratios = np.divide(moments, j2[:, None, :], out=np.zeros_like(moments), where=j2[:, None, :] > LOG_FLOOR)
+    terms = np.concatenate([np.log(np.maximum(values, 0.0) + LOG_FLOOR)[:, None, :],
+                            np.log(np.maximum(j2, 0.0) + LOG_FLOOR)[:, None, :], ratios], axis=1)
     return RoundTable(terms.reshape(HEIGHTS, SUNS, TERMS, 3), float(floor), float(grid.height),
-                      time.perf_counter() - started, float(atm.mie_g))
+                      time.perf_counter() - started, float(atm.mie_g), float(atm.planet_radius))
 
 
 @functools.lru_cache(maxsize=32)
@@ -280,11 +295,12 @@ def multiple_struct(table: RoundTable | None, device, name: str = "round_multipl
     """Kernel view of ``table`` (None: off, a zero table)."""
     out = RoundMultiple()
     out.enabled = int(table is not None)
-    values = table.values if table is not None else np.zeros((2, 2, TERMS, 3))
+    values = table.values if table is not None else np.full((2, 2, TERMS, 3), math.log(LOG_FLOOR))
     out.psi = device_buffers.upload(f"{name}:psi", values.astype(np.float32), wp.vec3, device)
     out.floor = float(table.floor) if table is not None else 0.0
     out.height = float(table.height) if table is not None else 1.0
     out.mie_g = float(table.mie_g) if table is not None else 0.0
+    out.radius = float(table.radius) if table is not None else 1.0e7
     return out
 
 
