@@ -73,6 +73,9 @@ LOG_FLOOR = 1.0e-30
 #: Table rows (altitudes) and columns (sun elevation sines), and terms per node.
 HEIGHTS = 24
 SUNS = 48
+#: The floor's unknowns: its radiance against the sun's elevation sine there (finer: in twilight it falls by orders
+#: of magnitude within a few degrees, and it enters the system linearly).
+FLOOR_SUNS = 144
 TERMS = 7
 #: Directions of the build: Gauss-Legendre nodes per hemisphere, azimuths on [0, pi].
 ELEVATIONS = 8
@@ -150,11 +153,18 @@ def add_cell(m: wp.array3d(dtype=float), row: int, cell: wp.vec4, value: wp.vec3
 
 
 @wp.func
+def floor_column(mu_s: float) -> float:
+    """Fractional column of the floor's unknowns for a sun of elevation sine ``mu_s`` there (sign(mu_s)
+    sqrt(|mu_s|) uniform on [-1, 1]: the floor's horizon is level)."""
+    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))
+    return wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(FLOOR_SUNS - 1)
+
+
+@wp.func
 def add_floor(m: wp.array3d(dtype=float), row: int, mu_s: float, value: wp.vec3):
     """Spread ``value`` over the floor's two unknowns about ``mu_s`` in row ``row`` of ``m``."""
-    v = wp.sign(mu_s) * wp.sqrt(wp.abs(mu_s))  # the floor's own horizon is level
-    s = wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(SUNS - 1)
-    j = wp.min(int(s), SUNS - 2)
+    s = floor_column(mu_s)
+    j = wp.min(int(s), FLOOR_SUNS - 2)
     b = s - float(j)
     for c in range(3):
         wp.atomic_add(m, c, row, HEIGHTS * SUNS + j, (1.0 - b) * value[c])
@@ -175,39 +185,34 @@ def floor_seen(ra: RoundAir, grid: Grid, m: wp.array3d(dtype=float), x2: wp.arra
     return seen
 
 
-@wp.kernel
-def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(dtype=wp.vec4),
-                     m: wp.array3d(dtype=float), x2: wp.array(dtype=wp.vec3), quad: wp.array2d(dtype=wp.vec3)):
-    """Row (i, j) of the system, direction k: the ray from altitude h_i towards direction k under a sun of
-    elevation sine mu_s_j, its share of M and of J_2 (and for the floor's row, i = 0 looking up, of R)."""
-    row, k = wp.tid()
-    i = row // SUNS
-    j = row - i * SUNS
-    u = float(i) / float(HEIGHTS - 1)
-    h0 = grid.floor + grid.height * u * u
-    v = 2.0 * float(j) / float(SUNS - 1) - 1.0
-    mu_s0 = sun_at_coordinate(grid.radius, grid.floor, h0, v)
-    d = dirs[k]
-    mu0 = d[0]
-    nu = wp.sqrt(wp.max(1.0 - mu0 * mu0, 0.0)) * d[1] * wp.sqrt(wp.max(1.0 - mu_s0 * mu_s0, 0.0)) + mu0 * mu_s0
-    share = d[3] / (4.0 * wp.pi)
-    floor_row = HEIGHTS * SUNS + j
-    up_from_floor = i == 0 and mu0 > 0.0
-    flux = d[3] * mu0 / wp.pi  # the floor's radiance per unit irradiance-weighted radiance, times albedo below
-    # the direction's second moments in the point's frame (up, towards the sun's azimuth, across) less 1/3, and
-    # its components
-    across = wp.sqrt(wp.max(1.0 - mu0 * mu0, 0.0))
-    moments = wp.vec3(mu0 * mu0 - 1.0 / 3.0, across * across * d[1] * d[1] - 1.0 / 3.0, mu0 * across * d[1])
-    components = wp.vec2(mu0, across * d[1])
-    first = wp.vec3(0.0)
-    distance = floor_distance(ra, h0, mu0)
+@wp.struct
+class BuildRay:
+    """One ray of the build: from altitude ``h0`` along elevation sine ``mu0`` under a sun of elevation sine
+    ``mu_s0`` at its start, cos(ray, sun) ``nu``; its row of the system, and the weight of its contributions there
+    (1 / 4 pi of its solid angle for a source row, albedo / pi times its projected solid angle for a floor row)."""
+
+    h0: float
+    mu0: float
+    mu_s0: float
+    nu: float
+    row: int
+    weight: wp.vec3
+
+
+@wp.func
+def trace_build_ray(air: AnalyticAir, ra: RoundAir, grid: Grid, ray: BuildRay, m: wp.array3d(dtype=float),
+                    x2: wp.array(dtype=wp.vec3)) -> wp.vec3:
+    """Add ``ray``'s share of M and of x_2 (the air it crosses, and the floor where it ends there) to its row;
+    returns the single-scattering radiance it brings (L_1, the sunlit floor included)."""
+    distance = floor_distance(ra, ray.h0, ray.mu0)
     hits = distance >= 0.0
     if not hits:
-        distance = top_distance(ra, h0, mu0)
-    phase_r = phase_rayleigh(nu)
-    phase_m = phase_hg(nu, air.mie_g)
-    line = make_line(ra, h0, mu0)
+        distance = top_distance(ra, ray.h0, ray.mu0)
+    phase_r = phase_rayleigh(ray.nu)
+    phase_m = phase_hg(ray.nu, air.mie_g)
+    line = make_line(ra, ray.h0, ray.mu0)
     tau = wp.vec3(0.0)
+    first = wp.vec3(0.0)
     for piece in range(2):
         bounds = piece_bounds(line, piece, distance)
         if bounds[1] > bounds[0]:
@@ -219,26 +224,59 @@ def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(
                 for n in range(PANEL_NODES):
                     node = panel_node(line, s, h_a, h_b, n)
                     t_view = exp3(tau + depth_to_node(panel, n))
-                    mu_s = wp.clamp((line.r0 * mu_s0 + node.t * nu) / (ra.radius + node.h), -1.0, 1.0)
+                    mu_s = wp.clamp((line.r0 * ray.mu_s0 + node.t * ray.nu) / (ra.radius + node.h), -1.0, 1.0)
                     parts = scattering_at(air, node.h)
                     carried = wp.cw_mul(parts.rayleigh + parts.mie, t_view) * node.dt
                     single = wp.cw_mul(wp.cw_mul(parts.rayleigh * phase_r + parts.mie * phase_m, t_view),
                                        sun_transmittance(ra, node.h, mu_s, SUN_RADIUS)) * node.dt
-                    cell = grid_cell(grid, node.h, mu_s)
-                    add_cell(m, row, cell, carried * share)
-                    wp.atomic_add(x2, row, single * share)
+                    add_cell(m, ray.row, grid_cell(grid, node.h, mu_s), wp.cw_mul(carried, ray.weight))
+                    wp.atomic_add(x2, ray.row, wp.cw_mul(single, ray.weight))
                     first += single
-                    if up_from_floor:
-                        add_cell(m, floor_row, cell, wp.cw_mul(grid.albedo, carried) * flux)
-                        wp.atomic_add(x2, floor_row, wp.cw_mul(grid.albedo, single) * flux)
                 tau += panel_depth(panel)
     if hits:
-        first += floor_seen(ra, grid, m, x2, row, exp3(tau), (line.r0 * mu_s0 + distance * nu) / (ra.radius + ra.floor),
-                            share)
-    for term in range(3):
-        wp.atomic_add(quad, row, term, first * (moments[term] * d[3]))
-    for term in range(2):
-        wp.atomic_add(quad, row, 3 + term, first * (components[term] * d[3]))
+        mu_g = (line.r0 * ray.mu_s0 + distance * ray.nu) / (ra.radius + ra.floor)
+        first += floor_seen(ra, grid, m, x2, ray.row, exp3(tau), mu_g, ray.weight[0])
+    return first
+
+
+@wp.kernel
+def transport_kernel(air: AnalyticAir, ra: RoundAir, grid: Grid, dirs: wp.array(dtype=wp.vec4),
+                     m: wp.array3d(dtype=float), x2: wp.array(dtype=wp.vec3), quad: wp.array2d(dtype=wp.vec3)):
+    """Row ``row`` of the system, direction k. Rows below HEIGHTS * SUNS: the source J at node (i, j), the ray
+    from altitude h_i towards direction k under a sun of column j: its share of M and of J_2, and the single-
+    scattering field's moments. Then the floor's rows: its radiance under a sun of floor column j, from its
+    irradiance by the rays looking up."""
+    row, k = wp.tid()
+    d = dirs[k]
+    ray = BuildRay()
+    ray.row = row
+    ray.mu0 = d[0]
+    if row < HEIGHTS * SUNS:
+        i = row // SUNS
+        u = float(i) / float(HEIGHTS - 1)
+        ray.h0 = grid.floor + grid.height * u * u
+        ray.mu_s0 = sun_at_coordinate(grid.radius, grid.floor, ray.h0, 2.0 * float(row - i * SUNS) / float(SUNS - 1)
+                                      - 1.0)
+        ray.weight = wp.vec3(d[3] / (4.0 * wp.pi))
+    else:
+        if ray.mu0 <= 0.0:
+            return
+        v = 2.0 * float(row - HEIGHTS * SUNS) / float(FLOOR_SUNS - 1) - 1.0
+        ray.h0 = grid.floor
+        ray.mu_s0 = wp.sign(v) * v * v
+        ray.weight = grid.albedo * (d[3] * ray.mu0 / wp.pi)
+    across = wp.sqrt(wp.max(1.0 - ray.mu0 * ray.mu0, 0.0))
+    ray.nu = across * d[1] * wp.sqrt(wp.max(1.0 - ray.mu_s0 * ray.mu_s0, 0.0)) + ray.mu0 * ray.mu_s0
+    first = trace_build_ray(air, ra, grid, ray, m, x2)
+    if row < HEIGHTS * SUNS:
+        # the direction's second moments in the point's frame (up, towards the sun's azimuth, across) less 1/3,
+        # and its components
+        moments = wp.vec3(ray.mu0 * ray.mu0 - 1.0 / 3.0, across * across * d[1] * d[1] - 1.0 / 3.0,
+                          ray.mu0 * across * d[1])
+        for term in range(3):
+            wp.atomic_add(quad, row, term, first * (moments[term] * d[3]))
+        wp.atomic_add(quad, row, 3, first * (ray.mu0 * d[3]))
+        wp.atomic_add(quad, row, 4, first * (across * d[1] * d[3]))
 
 
 def build(atm, floor: float, albedo, device) -> RoundTable:
@@ -251,14 +289,14 @@ def build(atm, floor: float, albedo, device) -> RoundTable:
     grid.height = float(ra.top - floor)
     grid.albedo = wp.vec3(*np.asarray(albedo, dtype=np.float64).tolist())
     grid.radius = float(atm.planet_radius)
-    count = HEIGHTS * SUNS + SUNS
+    count = HEIGHTS * SUNS + FLOOR_SUNS
     sphere = directions()
     with wp.ScopedDevice(device):
         dirs = wp.array(sphere.astype(np.float32), dtype=wp.vec4)
         m = wp.zeros((3, count, count), dtype=float)
         x2 = wp.zeros(count, dtype=wp.vec3)
         quad = wp.zeros((HEIGHTS * SUNS, 5), dtype=wp.vec3)
-        wp.launch(transport_kernel, dim=(HEIGHTS * SUNS, len(sphere)),
+        wp.launch(transport_kernel, dim=(count, len(sphere)),
                   inputs=[analytic_air(atm, np.zeros(3)), ra, grid, dirs, m, x2, quad])
         matrix = m.numpy().astype(np.float64)
         source = x2.numpy().astype(np.float64)
