@@ -19,7 +19,7 @@ import warp as wp
 
 from warpsky import device_buffers
 from warpsky.media.air_analytic import AnalyticAir
-from warpsky.media.air_round import RoundAir, round_struct, top_distance
+from warpsky.media.air_round import RoundAir, round_struct, sphere_below, top_distance
 from warpsky.numerics import mean3
 from warpsky.optics.phase import hg_pdf, hg_sample_cos, phase_hg, phase_rayleigh, rayleigh_pdf, rayleigh_sample_cos
 
@@ -263,14 +263,7 @@ def top_entry(ra: RoundAir, h0: float, mu0: float) -> float:
     earth's air: 0 from inside it, -1 when it never does."""
     if h0 <= ra.top:
         return 0.0
-    if mu0 >= 0.0:
-        return -1.0
-    r0 = ra.radius + h0
-    c = (h0 - ra.top) * (2.0 * ra.radius + h0 + ra.top)  # r0^2 - r_top^2 > 0
-    disc = r0 * r0 * mu0 * mu0 - c
-    if disc < 0.0:
-        return -1.0
-    return c / (-r0 * mu0 + wp.sqrt(disc))
+    return sphere_below(ra.radius, h0, ra.top, mu0)
 
 
 @wp.func

@@ -161,19 +161,28 @@ def sun_at_coordinate(radius: float, floor: float, h: float, v: float) -> float:
 
 
 @wp.func
-def floor_distance(ra: RoundAir, h0: float, mu0: float) -> float:
-    """Distance [m] along a ray from altitude ``h0`` of elevation sine ``mu0`` to the floor's sphere; -1 when it
-    misses."""
-    if mu0 >= 0.0 or h0 <= ra.floor:
-        if h0 <= ra.floor and mu0 < 0.0:
-            return 0.0
+def sphere_below(radius: float, h0: float, level: float, mu0: float) -> float:
+    """Distance [m] along a ray from altitude ``h0`` of elevation sine ``mu0`` down to the sphere at altitude
+    ``level`` < ``h0`` (of a planet whose sea level has ``radius``); -1 when it misses."""
+    if mu0 >= 0.0:
         return -1.0
-    r0 = ra.radius + h0
-    c = (h0 - ra.floor) * (2.0 * ra.radius + h0 + ra.floor)  # r0^2 - r_floor^2
+    r0 = radius + h0
+    c = (h0 - level) * (2.0 * radius + h0 + level)  # r0^2 - r_level^2 > 0
     disc = r0 * r0 * mu0 * mu0 - c
     if disc < 0.0:
         return -1.0
     return c / (-r0 * mu0 + wp.sqrt(disc))
+
+
+@wp.func
+def floor_distance(ra: RoundAir, h0: float, mu0: float) -> float:
+    """Distance [m] along a ray from altitude ``h0`` of elevation sine ``mu0`` to the floor's sphere; -1 when it
+    misses."""
+    if h0 <= ra.floor:
+        if mu0 < 0.0:
+            return 0.0
+        return -1.0
+    return sphere_below(ra.radius, h0, ra.floor, mu0)
 
 
 @wp.func

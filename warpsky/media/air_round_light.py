@@ -20,6 +20,9 @@ from warpsky.media.air_analytic import AnalyticAir
 from warpsky.media.air_mixture_kernels import AirScatter
 from warpsky.media.air_round import (
     PANEL_NODES,
+    Line,
+    PanelExtinction,
+    Panels,
     RoundAir,
     depth_to_node,
     make_line,
@@ -125,6 +128,35 @@ def scattering_at(air: AnalyticAir, h: float) -> AirScatter:
 
 
 @wp.struct
+class LitNode:
+    """One quadrature node of a ray with the sun: its altitude, the ray's transmittance to it, the sun's elevation
+    sine there, the air's scattering there and the node's weight dt."""
+
+    h: float
+    t: float  # distance along the ray [m]
+    t_view: wp.vec3
+    mu_s: float
+    parts: AirScatter
+    dt: float
+
+
+@wp.func
+def lit_node(air: AnalyticAir, ra: RoundAir, line: Line, s: Panels, panel: PanelExtinction, tau: wp.vec3,
+             h_a: float, h_b: float, j: int, mu_s0: float, nu: float) -> LitNode:
+    """Node ``j`` of the panel [h_a, h_b] of side ``s`` (whose extinction is ``panel``, ``tau`` the ray's optical
+    depth at the panel's start), for a sun of elevation sine ``mu_s0`` at the ray's start and cos(ray, sun) ``nu``."""
+    node = panel_node(line, s, h_a, h_b, j)
+    out = LitNode()
+    out.h = node.h
+    out.t = node.t
+    out.t_view = exp3(tau + depth_to_node(panel, j))
+    out.mu_s = wp.clamp((line.r0 * mu_s0 + node.t * nu) / (ra.radius + node.h), -1.0, 1.0)
+    out.parts = scattering_at(air, node.h)
+    out.dt = node.dt
+    return out
+
+
+@wp.struct
 class RoundLight:
     """Integrals along one ray (multiply the first three by E, the single-scattering ones by their phase)."""
 
@@ -160,20 +192,17 @@ def round_light(air: AnalyticAir, ra: RoundAir, ms: RoundMultiple, h0: float, mu
                 h_b = panel_bound(ra, line, s, k + 1)
                 panel = panel_extinction(air, line, s, h_a, h_b)
                 for j in range(PANEL_NODES):
-                    node = panel_node(line, s, h_a, h_b, j)
-                    t_view = exp3(tau + depth_to_node(panel, j))
-                    r = ra.radius + node.h
-                    mu_s = wp.clamp((line.r0 * sun.mu_s0 + node.t * sun.nu) / r, -1.0, 1.0)
-                    parts = scattering_at(air, node.h)
-                    lit = wp.cw_mul(t_view, sun_transmittance(ra, node.h, mu_s, sun.radius)) * node.dt
-                    out.rayleigh += wp.cw_mul(parts.rayleigh, lit)
-                    out.mie += wp.cw_mul(parts.mie, lit)
+                    n = lit_node(air, ra, line, s, panel, tau, h_a, h_b, j, sun.mu_s0, sun.nu)
+                    lit = wp.cw_mul(n.t_view, sun_transmittance(ra, n.h, n.mu_s, sun.radius)) * n.dt
+                    out.rayleigh += wp.cw_mul(n.parts.rayleigh, lit)
+                    out.mie += wp.cw_mul(n.parts.mie, lit)
                     if ms.enabled != 0:
-                        mu = wp.clamp((line.r0 * mu0 + node.t) / r, -1.0, 1.0)
-                        terms = multiple_terms(ms, node.h, mu_s, mu, sun.nu)
-                        out.multiple += wp.cw_mul(t_view, wp.cw_mul(parts.rayleigh + parts.mie, terms.isotropic)
-                                                  + wp.cw_mul(parts.rayleigh, terms.rayleigh)
-                                                  + wp.cw_mul(parts.mie, terms.mie)) * node.dt
+                        mu = wp.clamp((line.r0 * mu0 + n.t) / (ra.radius + n.h), -1.0, 1.0)
+                        terms = multiple_terms(ms, n.h, n.mu_s, mu, sun.nu)
+                        out.multiple += wp.cw_mul(n.t_view, wp.cw_mul(n.parts.rayleigh + n.parts.mie,
+                                                                      terms.isotropic)
+                                                  + wp.cw_mul(n.parts.rayleigh, terms.rayleigh)
+                                                  + wp.cw_mul(n.parts.mie, terms.mie)) * n.dt
                 tau += panel_depth(panel)
     out.depth = tau
     return out

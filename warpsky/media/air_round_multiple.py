@@ -47,14 +47,12 @@ from warpsky.media.air_round import (
     PANEL_NODES,
     RoundAir,
     air_key,
-    depth_to_node,
     floor_distance,
     horizon_sine,
     make_line,
     panel_bound,
     panel_depth,
     panel_extinction,
-    panel_node,
     piece_bounds,
     round_struct,
     side,
@@ -63,7 +61,7 @@ from warpsky.media.air_round import (
     sun_transmittance,
     top_distance,
 )
-from warpsky.media.air_round_light import RoundMultiple, scattering_at
+from warpsky.media.air_round_light import RoundMultiple, lit_node
 from warpsky.numerics import exp3
 from warpsky.optics.phase import phase_hg, phase_rayleigh
 
@@ -221,15 +219,12 @@ def trace_build_ray(air: AnalyticAir, ra: RoundAir, grid: Grid, ray: BuildRay, m
                 h_a = panel_bound(ra, line, s, p)
                 h_b = panel_bound(ra, line, s, p + 1)
                 panel = panel_extinction(air, line, s, h_a, h_b)
-                for n in range(PANEL_NODES):
-                    node = panel_node(line, s, h_a, h_b, n)
-                    t_view = exp3(tau + depth_to_node(panel, n))
-                    mu_s = wp.clamp((line.r0 * ray.mu_s0 + node.t * ray.nu) / (ra.radius + node.h), -1.0, 1.0)
-                    parts = scattering_at(air, node.h)
-                    carried = wp.cw_mul(parts.rayleigh + parts.mie, t_view) * node.dt
-                    single = wp.cw_mul(wp.cw_mul(parts.rayleigh * phase_r + parts.mie * phase_m, t_view),
-                                       sun_transmittance(ra, node.h, mu_s, SUN_RADIUS)) * node.dt
-                    add_cell(m, ray.row, grid_cell(grid, node.h, mu_s), wp.cw_mul(carried, ray.weight))
+                for j in range(PANEL_NODES):
+                    n = lit_node(air, ra, line, s, panel, tau, h_a, h_b, j, ray.mu_s0, ray.nu)
+                    carried = wp.cw_mul(n.parts.rayleigh + n.parts.mie, n.t_view) * n.dt
+                    single = wp.cw_mul(wp.cw_mul(n.parts.rayleigh * phase_r + n.parts.mie * phase_m, n.t_view),
+                                       sun_transmittance(ra, n.h, n.mu_s, SUN_RADIUS)) * n.dt
+                    add_cell(m, ray.row, grid_cell(grid, n.h, n.mu_s), wp.cw_mul(carried, ray.weight))
                     wp.atomic_add(x2, ray.row, wp.cw_mul(single, ray.weight))
                     first += single
                 tau += panel_depth(panel)
