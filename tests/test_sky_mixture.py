@@ -112,7 +112,7 @@ def _mixed_scene(sun_elevation: float, albedo: float, **air):
                  atmosphere=Atmosphere(**air))
 
 
-def _absorbed_by_the_air(scene, light, count: int = 24) -> np.ndarray:
+def _absorbed_by_the_air(scene, light, count: int = 12) -> np.ndarray:
     """int sigma_a(h) [E T_sun(h) + int L dw] dh: what the aerosols and ozone absorb, by Gauss-Legendre over
     altitude in two spans (the aerosols' few km, the ozone layer's 10-40 km) and the sky light over the sphere."""
     atm = scene.atmosphere

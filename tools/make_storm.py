@@ -204,6 +204,8 @@ def write_stage(path: Path, data: Path, frames: int) -> Path:
 
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdRender, UsdVol
 
+    from warpsky.scene.usd_authoring import author_earth_air
+
     stage = Usd.Stage.CreateInMemory()
     stage.GetRootLayer().documentation = (
         "warpsky storm: a cumulonimbus cell with rain shaft, snow aloft and an ice anvil at sunrise; written by "
@@ -251,6 +253,7 @@ def write_stage(path: Path, data: Path, frames: int) -> Path:
 
     atmosphere = stage.DefinePrim("/World/Atmosphere", "Scope")
     atmosphere.CreateAttribute("warpsky:atmosphere:altitude", Sdf.ValueTypeNames.Float).Set(0.0)
+    author_earth_air(atmosphere)
     atmosphere.CreateAttribute("warpsky:atmosphere:scaleHeight", Sdf.ValueTypeNames.Float).Set(8000.0)
 
     for volume_name, fields in (("Cell", ("cloud", "rain", "snow")), ("Anvil", ("ice",))):

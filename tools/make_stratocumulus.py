@@ -79,6 +79,7 @@ def Xform "World"
     def Scope "Atmosphere"
     {{
         custom float warpsky:atmosphere:altitude = 0
+{earth}
     }}
 
     def Plane "Ground"
@@ -150,16 +151,17 @@ def main(argv=None) -> int:
         write_radiosity_light(args.radiosity_light)
         return 0
     from warpsky.media.stratiform import procedural_thickness
+    from warpsky.scene.usd_authoring import earth_air_lines
 
     data = args.out / "stratocumulus"
     data.mkdir(parents=True, exist_ok=True)
     np.save(data / "thickness.npy", procedural_thickness(256, cover=0.75, max_thickness=450.0, seed=8))
     np.save(data / "ground_albedo.npy", ground_albedo())
     stage = ROOT / "usd_scenes" / "stratocumulus.usda"
-    stage.write_text(STAGE.format(size=SIZE, doc="", header="", advection=""))
+    stage.write_text(STAGE.format(size=SIZE, doc="", header="", advection="", earth=earth_air_lines()))
     anim = ROOT / "usd_scenes" / "stratocumulus_anim.usda"
     anim.write_text(STAGE.format(size=SIZE, doc=f", {FRAMES} frames advected by wind and curl noise",
-                                 header=ANIM_HEADER, advection=ANIM_ADVECTION))
+                                 header=ANIM_HEADER, advection=ANIM_ADVECTION, earth=earth_air_lines()))
     print(f"wrote {data}/thickness.npy, {data}/ground_albedo.npy, {stage}, {anim}")
     if args.render is not None:
         return render(stage, args.render, width=args.width, device=args.device)

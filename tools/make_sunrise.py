@@ -24,6 +24,8 @@ def main(argv=None) -> int:
 
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdVol
 
+    from warpsky.scene.usd_authoring import author_earth_air
+
     stage = Usd.Stage.CreateInMemory()
     stage.GetRootLayer().documentation = (
         "warpsky sunrise: the demo cumulus from the ground while the sun climbs from 0.5 to 12 deg; "
@@ -60,6 +62,7 @@ def main(argv=None) -> int:
     atmosphere = stage.DefinePrim("/World/Atmosphere", "Scope")
     atmosphere.CreateAttribute("warpsky:atmosphere:scaleHeight", Sdf.ValueTypeNames.Float).Set(8000.0)
     atmosphere.CreateAttribute("warpsky:atmosphere:altitude", Sdf.ValueTypeNames.Float).Set(0.0)
+    author_earth_air(atmosphere)
 
     volume = UsdVol.Volume.Define(stage, "/World/Cumulus")
     volume.CreateExtentAttr([Gf.Vec3f(-1200, 1000, -1200), Gf.Vec3f(1200, 2600, 1200)])

@@ -31,9 +31,9 @@ import numpy as np
 from warpsky.errors import UsageError
 from warpsky.scene.model import PhaseKind
 
-#: Where Debian and Ubuntu put the LLVM shared library Dr.Jit's LLVM backend loads.
-LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM-1[5-9].so", "/usr/lib/x86_64-linux-gnu/libLLVM-2*.so",
-                   "/usr/lib/llvm-*/lib/libLLVM.so")
+#: Where Debian and Ubuntu put the LLVM shared library Dr.Jit's LLVM backend loads (LLVM 14 and 15 abort it).
+LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM-1[6-9].so", "/usr/lib/x86_64-linux-gnu/libLLVM-2*.so",
+                   "/usr/lib/llvm-1[6-9]/lib/libLLVM.so", "/usr/lib/llvm-2*/lib/libLLVM.so")
 
 
 def import_mitsuba():

@@ -284,6 +284,18 @@ EARTH_OZONE = {"ozone_absorption": np.array([6.5e-7, 1.881e-6, 8.5e-8]), "ozone_
                "ozone_width": 15000.0}
 #: Bruneton's (2017) Earth radius at sea level [m].
 EARTH_RADIUS = 6_360_000.0
+#: The Earth's air as USD attributes (``warpsky:atmosphere:NAME``: value, in metres): Bruneton's and Hillaire's
+#: aerosols and ozone over a round earth, what the shipped stages author.
+EARTH_AIR_ATTRIBUTES = {
+    "planetRadius": EARTH_RADIUS,
+    "mieScattering": tuple(EARTH_AEROSOLS["mie_scattering"].tolist()),
+    "mieAbsorption": tuple(EARTH_AEROSOLS["mie_absorption"].tolist()),
+    "mieScaleHeight": EARTH_AEROSOLS["mie_scale_height"],
+    "mieAnisotropy": EARTH_AEROSOLS["mie_g"],
+    "ozoneAbsorption": tuple(EARTH_OZONE["ozone_absorption"].tolist()),
+    "ozoneAltitude": EARTH_OZONE["ozone_altitude"],
+    "ozoneWidth": EARTH_OZONE["ozone_width"],
+}
 #: The smallest round planet [m]: its air (tens of km thick) must stay thin beside its radius.
 MIN_PLANET_RADIUS = 1.0e6
 
