@@ -132,3 +132,48 @@ def test_a_missing_deep_file_renders_the_frame_again(tmp_path, homogeneous_npy, 
     deep.unlink()
     code, _, err = run(args, capsys)
     assert code == 0 and deep.is_file() and (tmp_path / "f.0001.exr").stat().st_mtime_ns != stamp, err
+
+
+def test_a_deep_raster_product_is_a_deep_exr_that_flattens_to_its_raster_sibling(tmp_path, homogeneous_npy,
+                                                                                  capsys, monkeypatch):
+    """A RenderProduct of productType deepRaster (as Solaris writes for Nuke) is written as a deep scanline EXR at
+    its productName, with no flat file: it flattens to the raster product of the same camera within 1e-3, a
+    RenderVar a deep image cannot hold is named in one warning, and a second run finds the frame up to date."""
+    from test_usd_render import add_render
+
+    from warpsky.output.deep import DeepPixels
+
+    monkeypatch.chdir(tmp_path)
+    stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40),
+                                                       ground=(-12.0, 0.3)))
+    add_render(stage, {
+        "Beauty": ("out/beauty.$F4.exr", None, None, [("color", "color", "color4f", "raw")], None),
+        "Deep": ("out/deep.$F4.exr", None, None, [("color", "color", "color4f", "raw"),
+                                                  ("tau", "transmittance", "color3f", "raw")],
+                 {"productType": "deepRaster"}),
+    }, second_camera=False)
+    code, stdout, err = run(["render", stage, "--frames", "1", "--float", *FAST], capsys)
+    assert code == 0, err
+    assert "RenderVar /Render/Deep/tau (transmittance): a deep product holds" in err
+    assert not (tmp_path / "out/deep.0001.deep.exr").exists()
+    header, channels = read_deep(tmp_path / "out/deep.0001.exr")
+    assert str(header["type"]).endswith("deepscanline") and sorted(channels) == ["A", "B", "G", "R", "Z", "ZBack"]
+    counts = np.vectorize(lambda samples: 0 if samples is None else len(samples), otypes=[int])(channels["A"])
+    deep = DeepPixels(counts, {name: np.concatenate([v for v in values.reshape(-1) if v is not None])
+                               for name, values in channels.items()})
+    flat = read_exr(tmp_path / "out/beauty.0001.exr")
+    rgba = np.stack([flat.channels[c].astype(np.float64) for c in "RGBA"], axis=-1)
+    np.testing.assert_allclose(flatten(deep), rgba, atol=1e-3 * rgba[..., :3].max())
+    code, _, err = run(["render", stage, "--frames", "1", "--float", *FAST], capsys)
+    assert code == 0 and err.count("1 skipped") == 2, err
+
+
+def test_an_unknown_product_type_names_the_product_and_what_is_written(tmp_path, homogeneous_npy, capsys):
+    from test_usd_render import add_render
+
+    stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
+    add_render(stage, {"Cryptomatte": (str(tmp_path / "c.exr"), None, None, [("color", "color", "color4f", "raw")],
+                                       {"productType": "cryptomatte"})}, second_camera=False)
+    code, _, err = run(["render", stage, *FAST], capsys)
+    assert code == 2 and err.count("\n") == 1, err
+    assert "/Render/Cryptomatte.productType 'cryptomatte'" in err and "'deepRaster'" in err

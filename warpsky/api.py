@@ -71,9 +71,10 @@ def with_render_settings(options: RenderOptions, spec: RenderSpec | None, *, exp
 
 def with_product(options: RenderOptions, product: ProductSpec, *, explicit: set[str] = frozenset()
                  ) -> RenderOptions:
-    """``options`` with a RenderProduct's camera, resolution, pixel aspect, data window and vars (its own values
-    or those it inherits from its settings), except what ``explicit`` names."""
-    changes = {"pixel_aspect": product.pixel_aspect, "data_window": product.data_window, "outputs": product.outputs}
+    """``options`` with a RenderProduct's camera, resolution, pixel aspect, data window, vars and type (its own
+    values or those it inherits from its settings), except what ``explicit`` names."""
+    changes = {"pixel_aspect": product.pixel_aspect, "data_window": product.data_window, "outputs": product.outputs,
+               "deep_product": product.deep}
     if "camera" not in explicit and product.camera is not None:
         changes["camera"] = product.camera
     if "resolution" not in explicit and product.resolution is not None:

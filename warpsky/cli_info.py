@@ -57,8 +57,8 @@ def _render_spec_lines(spec, products) -> list[str]:
     for product in products:
         res = "x".join(map(str, product.resolution)) if product.resolution else "default"
         lines.append(f"product     {product.path} -> {product.name}: camera {product.camera or 'default'}, "
-                     f"resolution {res}")
-        for var in product.outputs:
+                     f"resolution {res}" + (", deep scanline EXR (R, G, B, A, Z, ZBack)" if product.deep else ""))
+        for var in (() if product.deep else product.outputs):
             precision = "half" if var.half else "float"
             lines.append(f"  var       {var.prim}: {var.source} -> {', '.join(var.channels)} ({precision})")
     return lines

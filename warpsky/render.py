@@ -72,6 +72,7 @@ class RenderOptions:
         half: Write RGBA as half floats (False: 32-bit float).
         png: Also write a tone-mapped PNG preview next to the EXR.
         deep: Also write a deep scanline EXR next to it (:mod:`warpsky.output.deep`).
+        deep_product: The output is itself a deep scanline EXR (a ``deepRaster`` RenderProduct): no flat frame.
         shutter: (open, close) [frames] overriding the camera's shutter (:mod:`warpsky.motion`); None: the camera's.
         motion_samples: Sub-frames of a frame whose shutter is open (:mod:`warpsky.motion`).
         exposure: Preview exposure in stops on top of the sun-based normalisation (a white surface facing the sun ->
@@ -94,6 +95,7 @@ class RenderOptions:
     half: bool = True
     png: bool = False
     deep: bool = False
+    deep_product: bool = False
     shutter: tuple[float, float] | None = None
     motion_samples: int = DEFAULT_SAMPLES
     exposure: float | None = None
@@ -248,6 +250,7 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
          "half": options.half, "inputs": inputs, "outputs": [list(o.channels) for o in options.outputs or ()],
          "pixelAspect": options.pixel_aspect, "window": list(options.data_window), "colorspace": options.colorspace,
          "stage": repr(options.stage), **({"deep": True} if options.deep else {}),
+         **({"deepProduct": True} if options.deep_product else {}),
          **({"shutter": list(shutter_interval(scene, options)), "motionSamples": options.motion_samples}
             if scene is not None and blurs(scene, options, 0.0) else {})},
         sort_keys=True,
@@ -280,8 +283,9 @@ def blurred_image(reader, scene: Scene, plan: RenderPlan, options: RenderOptions
                   timings) -> RenderedImage:
     """The average of the frame's sub-frames over its shutter (:mod:`warpsky.motion`), as the frame at
     ``time_code`` (its scene and plan: camera matrices and metadata)."""
-    if options.deep:
-        raise UsageError("--deep with motion blur (an open shutter) is not supported; render with --shutter 0:0")
+    if options.deep or options.deep_product:
+        what = "a deepRaster product" if options.deep_product else "--deep"
+        raise UsageError(f"{what} with motion blur (an open shutter) is not supported; render with --shutter 0:0")
     seeded = "seed" in json.loads(plan.settings_json())
     images = []
     for k, t in enumerate(sub_frame_times(time_code, shutter_interval(scene, options), options.motion_samples)):
@@ -309,7 +313,7 @@ def rendered_image(scene: Scene, plan: RenderPlan, options: RenderOptions, timin
     preview = linear.rgba[y:y + plan.height, x:x + plan.width, :3]
     image = RenderedImage(frame, {}, {}, {}, None, preview, scene, plan, layer, timings,
                           warnings=gathered_warnings(layers), origin=(bounds[0], bounds[1]))
-    if options.deep:
+    if options.deep or options.deep_product:
         image.deep = image_deep(layers, scene, options, (x, y, plan.width, plan.height))
     capped = capped_paths_warning(quality_stats(layer), plan)
     if capped:
@@ -391,8 +395,10 @@ def write_frame(scene: Scene, plan: RenderPlan, out_path: Path, options: RenderO
         from warpsky.output.deep import deep_path, write_deep_exr
         from warpsky.output.exr import header_attributes
 
-        write_deep_exr(deep_path(out_path), image.deep, header=header_attributes(image.metadata, image.attributes))
-    exr = _write_image(image, out_path)
+        deep_out = out_path if options.deep_product else deep_path(out_path)
+        exr = write_deep_exr(deep_out, image.deep, header=header_attributes(image.metadata, image.attributes))
+    if not options.deep_product:
+        exr = _write_image(image, out_path)
     for path, sibling_options in siblings:
         sibling = output_image(image, sibling_options, stage=stage, time_code=time_code)
         sibling.metadata["settingsHash"] = settings_hash(plan, sibling_options, scene)

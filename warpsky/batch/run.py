@@ -150,9 +150,11 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
 
 def _up_to_date(job: FrameJob, scene, plan) -> bool:
     """Whether the job's EXR and its siblings' exist, open, hold their channels and carry their settings hash (and
-    the deep EXR beside the job's exists, when it is asked for)."""
-    from warpsky.output.deep import deep_path
+    the deep EXR beside the job's exists, when it is asked for; a deep product's own file carries the hash)."""
+    from warpsky.output.deep import deep_path, deep_up_to_date
 
+    if job.options.deep_product:
+        return deep_up_to_date(job.out, plan.settings_hash)
     if job.options.deep and not Path(deep_path(job.out)).is_file():
         return False
     outputs = [(job.out, job.options, plan.settings_hash)]

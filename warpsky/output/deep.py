@@ -151,6 +151,23 @@ def write_deep_exr(path: str | os.PathLike, deep: DeepPixels, *, header: dict | 
     return atomic_write(path, lambda tmp: OpenEXR.File(attributes, channels).write(str(tmp)))
 
 
+def deep_up_to_date(path: str | os.PathLike, settings_hash: str) -> bool:
+    """Whether ``path`` is a readable deep EXR whose header carries ``settings_hash`` (a batch's resume test)."""
+    import OpenEXR
+
+    from warpsky.output.exr import METADATA_PREFIX
+
+    if not os.path.isfile(path):
+        return False
+    try:
+        with OpenEXR.File(os.fspath(path), header_only=True) as exr:  # the header lives while the file is open
+            header = exr.header()
+            return (str(header.get("type", "")).endswith("deepscanline")
+                    and header.get(METADATA_PREFIX + "settingsHash") == settings_hash)
+    except Exception:  # noqa: BLE001 - a truncated or foreign file is simply not up to date
+        return False
+
+
 def deep_path(out_path: str | os.PathLike) -> str:
     """The deep file written beside a flat frame: ``name.0001.exr`` -> ``name.0001.deep.exr``."""
     text = os.fspath(out_path)

@@ -70,6 +70,13 @@ class ProductSpec:
     pixel_aspect: float
     data_window: tuple[float, float, float, float]
     outputs: tuple[OutputVar, ...]
+    deep: bool = False  # productType "deepRaster": the file is a deep EXR (R, G, B, A, Z, ZBack), no flat frame
+
+
+#: The RenderProduct types warpsky writes: a flat OpenEXR image, or a deep scanline one.
+PRODUCT_TYPES = ("raster", "deepRaster")
+#: The sources a deep product's samples carry; its other RenderVars are left out with a warning.
+DEEP_SOURCES = ("color", "alpha", "depth")
 
 
 @dataclass(frozen=True)
@@ -217,8 +224,9 @@ def _product(stage, product, base, sources: dict[str, str], warnings: list[str])
     prim = product.GetPrim()
     path = str(prim.GetPath())
     kind = str(product.GetProductTypeAttr().Get() or "raster")
-    if kind != "raster":
-        raise SceneError(f"{path}.productType {kind!r} is not supported; warpsky writes 'raster' products (EXR)")
+    if kind not in PRODUCT_TYPES:
+        raise SceneError(f"{path}.productType {kind!r} is not supported; warpsky writes 'raster' (flat EXR) and "
+                         "'deepRaster' (deep scanline EXR) products")
     attr = product.GetProductNameAttr()
     times = attr.GetTimeSamples()
     name = sampled_name(attr, times, path) if times else str(attr.Get() or "")
@@ -252,7 +260,11 @@ def _product(stage, product, base, sources: dict[str, str], warnings: list[str])
                 raise SceneError(f"{path}: RenderVars {seen[channel]} and {output.prim} both write channel "
                                  f"{channel!r}; give one of them another name")
             seen[channel] = output.prim
-    return ProductSpec(path, name, *values, tuple(outputs))
+    deep = kind == "deepRaster"
+    if deep:
+        warnings += [f"RenderVar {o.prim} ({o.source}): a deep product holds R, G, B, A, Z and ZBack only; left out "
+                     f"of product {path}" for o in outputs if o.source not in DEEP_SOURCES]
+    return ProductSpec(path, name, *values, tuple(outputs), deep)
 
 
 def read_var(var, sources: dict[str, str] = SOURCES) -> OutputVar:
