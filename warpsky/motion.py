@@ -12,8 +12,10 @@ rendered once at its time code, bit for bit as without motion blur. Each sub-fra
 frame costs N frames; Monte Carlo techniques may take N times fewer paths per sub-frame for the same noise, their
 seed differing per sub-frame (``seed + k``) so the sub-frames' noise does not repeat.
 
-Not modelled: blur from a velocity field inside a frame (a simulation's ``vel`` grid); a deep EXR of a blurred
-frame is refused; a render without a time code (the API's ``time=None``, the stage's earliest time) is not blurred.
+A Volume with a velocity field (a simulation's ``vel`` grid) is read at each sub-frame's time with its density
+moved along that velocity from the state its file holds (:mod:`warpsky.media.velocity`), so a cached simulation
+blurs within the frame. Not modelled: a deep EXR of a blurred frame is refused; a render without a time code (the
+API's ``time=None``, the stage's earliest time) is not blurred.
 """
 
 from __future__ import annotations

@@ -288,9 +288,10 @@ def blurred_image(reader, scene: Scene, plan: RenderPlan, options: RenderOptions
         raise UsageError(f"{what} with motion blur (an open shutter) is not supported; render with --shutter 0:0")
     seeded = "seed" in json.loads(plan.settings_json())
     images = []
-    for k, t in enumerate(sub_frame_times(time_code, shutter_interval(scene, options), options.motion_samples)):
-        sub = sub_frame_options(options, k, seeded)
-        images.append(rendered_image(*plan_frame(reader, t, sub), sub, None))
+    with reader.sub_frames_of(time_code):  # a Volume's velocity moves its density to each sub-frame's time
+        for k, t in enumerate(sub_frame_times(time_code, shutter_interval(scene, options), options.motion_samples)):
+            sub = sub_frame_options(options, k, seeded)
+            images.append(rendered_image(*plan_frame(reader, t, sub), sub, None))
     warnings = [line for image in images for line in image.warnings]
     layer = replace(images[0].layer, stats=add_stats([image.layer for image in images]))
     spent = {key: sum(image.timings.get(key, 0.0) for image in images) for key in images[0].timings}

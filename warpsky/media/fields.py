@@ -1,4 +1,5 @@
-"""Read scalar density grids from disk: dense ``.npy``, NanoVDB ``.nvdb`` and OpenVDB ``.vdb``.
+"""Read scalar density grids (and a velocity's vector grids) from disk: dense ``.npy``, NanoVDB ``.nvdb`` and
+OpenVDB ``.vdb``.
 
 The format is told by the file's magic bytes, not its extension. OpenVDB files are converted once with
 ``nanovdb_convert`` (Debian package ``libnanovdb-tools``) and cached by content hash under
@@ -110,6 +111,29 @@ def load_field(path: str | os.PathLike, *, grid_name: str | None = None, grid_in
     return _load_nanovdb(nvdb, grid_name=grid_name, grid_index=grid_index, source=path)
 
 
+def load_vector_field(path: str | os.PathLike, *, grid_name: str | None = None, grid_index: int = 0) -> FieldGrid:
+    """Load one vector grid (a velocity) from ``path``: ``values`` float32 of shape (X, Y, Z, 3); a ``.npy`` file
+    holds that array, a VDB file a vec3 grid (``vec3f``/``vec3d``)."""
+    path = Path(path)
+    if not path.is_file():
+        raise SceneError(f"field file {path} does not exist")
+    kind = sniff_format(path)
+    if kind == "npy":
+        if grid_index != 0:
+            raise SceneError(f"dense grid {path} holds one grid, so fieldIndex {grid_index} is out of range")
+        try:
+            values = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise SceneError(f"cannot read dense grid {path}: {exc}") from exc
+        if values.ndim != 4 or values.shape[3] != 3 or not np.issubdtype(values.dtype, np.number):
+            raise SceneError(f"dense vector grid {path} must be a numeric array indexed [x, y, z, component] of "
+                             f"shape (X, Y, Z, 3), got {values.dtype} {values.shape}")
+        return FieldGrid(np.ascontiguousarray(values, dtype=np.float32), None, str(path))
+    nvdb = convert_vdb(path) if kind == "vdb" else path
+    name, blob, _ = _pick_grid(nanovdb_grids(nvdb.read_bytes(), path), grid_name, grid_index, path)
+    return _dense_grid(blob, name, path, vector=True)
+
+
 def level_set_advice(source: str | os.PathLike, grid_name: str | None) -> str:
     """How to turn a level-set grid into the fog volume warpsky renders (OpenVDB's ``vdb_tool``)."""
     source = Path(source)
@@ -219,6 +243,12 @@ def _densify_kernel(volume: wp.uint64, origin: wp.vec3i, out: wp.array3d(dtype=f
     out[i, j, k] = wp.volume_lookup_f(volume, i + origin[0], j + origin[1], k + origin[2])
 
 
+@wp.kernel
+def _densify_vector_kernel(volume: wp.uint64, origin: wp.vec3i, out: wp.array3d(dtype=wp.vec3)):
+    i, j, k = wp.tid()
+    out[i, j, k] = wp.volume_lookup_v(volume, i + origin[0], j + origin[1], k + origin[2])
+
+
 def _pick_grid(grids: list[NanoGrid], grid_name: str | None, grid_index: int, source: Path) -> NanoGrid:
     """The ``grid_index``-th grid named ``grid_name`` (of all grids when no name is given)."""
     if grid_name:
@@ -242,13 +272,21 @@ def _pick_grid(grids: list[NanoGrid], grid_name: str | None, grid_index: int, so
 
 def _load_nanovdb(path: Path, *, grid_name: str | None, grid_index: int, source: Path) -> FieldGrid:
     name, blob, _ = _pick_grid(nanovdb_grids(path.read_bytes(), source), grid_name, grid_index, source)
+    return _dense_grid(blob, name, source, vector=False)
+
+
+def _dense_grid(blob: bytes, name: str, source: Path, *, vector: bool) -> FieldGrid:
+    """A NanoVDB grid copied into a dense array over its active voxels, one voxel of background on each side."""
     try:
         volume = wp.Volume.load_from_nvdb(blob, device="cpu")
     except RuntimeError as exc:
         raise SceneError(f"cannot load grid {name!r} of {source}: {exc}") from exc
     info = volume.get_grid_info()
-    if info.type_str != "float":
-        if info.type_str.lower().startswith("vec"):
+    is_vector = info.type_str.lower().startswith("vec")
+    if vector and info.type_str.lower() != "vec3f":
+        raise SceneError(f"grid {name!r} of {source} holds {info.type_str!r} values; a velocity is a Vec3f grid")
+    if not vector and info.type_str != "float":
+        if is_vector:
             raise SceneError(
                 f"grid {name!r} of {source} is a vector grid of {info.type_str!r} values; warpsky renders scalar "
                 "float (fog) grids: point fieldName at the density grid"
@@ -256,13 +294,15 @@ def _load_nanovdb(path: Path, *, grid_name: str | None, grid_index: int, source:
         raise SceneError(f"grid {name!r} of {source} holds {info.type_str!r} values; expected a float (fog) grid")
     voxels = volume.get_voxels().numpy()
     if len(voxels) == 0:  # a simulation's first frame: an empty medium, not an error
-        return FieldGrid(np.zeros((0, 0, 0), dtype=np.float32), np.eye(4), str(source), name)
+        return FieldGrid(np.zeros((0, 0, 0) + ((3,) if vector else ()), dtype=np.float32), np.eye(4), str(source),
+                         name)
     lo = voxels.min(axis=0) - 1
     shape = tuple(int(n) for n in voxels.max(axis=0) - lo + 2)
     if np.prod(shape, dtype=np.int64) > 2**31 - 1:
         raise SceneError(f"grid {name!r} of {source} spans {shape} voxels, too large for a dense grid")
-    dense = wp.zeros(shape, dtype=float, device="cpu")
-    wp.launch(_densify_kernel, dim=shape, inputs=[volume.id, wp.vec3i(*lo.tolist()), dense], device="cpu")
+    dense = wp.zeros(shape, dtype=wp.vec3 if vector else float, device="cpu")
+    kernel = _densify_vector_kernel if vector else _densify_kernel
+    wp.launch(kernel, dim=shape, inputs=[volume.id, wp.vec3i(*lo.tolist()), dense], device="cpu")
     linear = np.array(info.transform_matrix, dtype=np.float64).reshape(3, 3)
     local_from_index = np.eye(4)
     local_from_index[:3, :3] = linear

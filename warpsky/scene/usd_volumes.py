@@ -27,13 +27,15 @@ pxr is imported inside the methods (a heavy import).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 
 import numpy as np
 
 from warpsky.errors import SceneError
-from warpsky.media.fields import level_set_advice, load_field
+from warpsky.media.fields import level_set_advice, load_field, load_vector_field
+from warpsky.media.velocity import advected_grid
 from warpsky.optics.species import get_species
 from warpsky.scene.model import FIELD_SPECIES, DetailSpec, IceCrystals, PhaseKind, PhaseModel, VoxelMedium
 from warpsky.scene.usd_prims import StagePrims
@@ -46,6 +48,10 @@ ANALYTIC_FIELDS = (DENSITY_FIELD, "extinction")
 SPECIES_FIELDS = FIELD_SPECIES
 RENDERED_FIELDS = (*ANALYTIC_FIELDS, *SPECIES_FIELDS)
 QUANTITIES = ("extinction", "concentration")
+#: Field relationship names of a Volume's velocity (Blender's and EmberGen's ``velocity``, Houdini's ``vel``).
+VELOCITY_FIELDS = ("velocity", "vel", "v")
+#: ``fieldDataType`` tokens of a velocity grid.
+VECTOR_DATA_TYPES = ("float3", "vector3f", "half3", "vector3h")
 #: ``fieldDataType`` tokens of scalar grids; UsdVol allows vectors, matrices, ints and more.
 SCALAR_DATA_TYPES = ("float", "half", "double")
 #: Attributes that say a grid's class: UsdVol's ``fieldClass`` and the ``vdbGridClass`` some tools author.
@@ -54,6 +60,9 @@ GRID_CLASS_ATTRS = ("fieldClass", "vdbGridClass")
 
 class VolumeReading(StagePrims):
     """The stage reader's voxel media."""
+
+    #: The frame whose sub-frames are being read (:meth:`sub_frames_of`), else None.
+    motion_origin: float | None = None
 
     def read_media(self, time=None) -> tuple[VoxelMedium, ...]:
         from pxr import UsdVol
@@ -109,6 +118,7 @@ class VolumeReading(StagePrims):
                 local_from_index = self._extent_placement(prim, tc, grid.values.shape)
             else:
                 local_from_index = grid.local_from_index
+            values, local_from_index = self._moved(prim, fields, field_prim, tc, grid.values, local_from_index)
             species = None if name in ANALYTIC_FIELDS else name
             self._warn_extinction_unit(field_prim)
             scale = np.full(3, self._float_attr(field_prim, "warpsky:extinctionScale", tc, 1.0))
@@ -128,13 +138,75 @@ class VolumeReading(StagePrims):
             ice = self._read_ice(field_prim, name, tc)
             try:
                 media.append(VoxelMedium(
-                    f"{path}:{name}" if species else path, grid.values, volume_world @ local_from_index, scale,
+                    f"{path}:{name}" if species else path, values, volume_world @ local_from_index, scale,
                     albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi, detail,
                     ice,
                 ))
             except SceneError as exc:
                 raise SceneError(f"Volume {path}: {exc}") from None
         return media
+
+    @contextlib.contextmanager
+    def sub_frames_of(self, time_code: float):
+        """Within this block the media are read as sub-frames of the frame at ``time_code``: a Volume with a
+        velocity field has its density moved from the cached state to the sub-frame's time
+        (:mod:`warpsky.media.velocity`)."""
+        self.motion_origin = float(time_code)
+        try:
+            yield self
+        finally:
+            self.motion_origin = None
+
+    def _moved(self, prim, fields: dict, field_prim, tc, values: np.ndarray, local_from_index: np.ndarray):
+        """(values, local_from_index) of a density field at the sub-frame time ``tc``: moved by the Volume's
+        velocity over the seconds since the state its file holds (the filePath's time sample at or before ``tc``,
+        or, for one file, the frame's time), unchanged outside a blurred frame or without a velocity field."""
+        from pxr import UsdVol
+
+        origin = self.motion_origin
+        velocity_name = next((n for n in VELOCITY_FIELDS if n in fields), None)
+        if origin is None or velocity_name is None:
+            return values, local_from_index
+        samples = UsdVol.OpenVDBAsset(field_prim).GetFilePathAttr().GetTimeSamples()
+        held = [t for t in samples if t <= tc.GetValue()]
+        state = held[-1] if held else (samples[0] if samples else origin)
+        seconds = (tc.GetValue() - state) / self.stage.GetTimeCodesPerSecond()
+        scale = self._float_attr(prim, "warpsky:velocityScale", tc, 1.0)
+        if seconds * scale == 0.0:
+            return values, local_from_index
+        vel_prim = self.stage.GetPrimAtPath(fields[velocity_name])
+        path = prim.GetPath()
+        if not vel_prim or not vel_prim.IsA(UsdVol.OpenVDBAsset):
+            raise SceneError(f"Volume {path}: field:{velocity_name} targets {fields[velocity_name]}, which is not "
+                             "an OpenVDBAsset")
+        velocity, vel_from_index = self._load_velocity(prim, vel_prim, tc)
+        if velocity.size == 0:
+            return values, local_from_index
+        return advected_grid(values, local_from_index, velocity * np.float32(scale), vel_from_index, seconds)
+
+    def _load_velocity(self, prim, vel_prim, tc) -> tuple[np.ndarray, np.ndarray]:
+        """A velocity field's (X, Y, Z, 3) values [stage units per second] and its index-to-Volume matrix."""
+        from pxr import UsdVol
+
+        asset = UsdVol.OpenVDBAsset(vel_prim)
+        field_path = vel_prim.GetPath()
+        data_type = vel_prim.GetAttribute("fieldDataType")
+        if data_type and data_type.HasAuthoredValue() and str(data_type.Get(tc)) not in VECTOR_DATA_TYPES:
+            raise SceneError(f"{field_path}.fieldDataType is {str(data_type.Get(tc))!r}; a velocity field is a "
+                             f"vector grid ({', '.join(VECTOR_DATA_TYPES)})")
+        asset_path = asset.GetFilePathAttr().Get(tc)
+        if asset_path is None or not asset_path.resolvedPath:
+            raise SceneError(f"field {field_path}: file {getattr(asset_path, 'path', None)!r} not found")
+        name = asset.GetFieldNameAttr().Get(tc)
+        index = vel_prim.GetAttribute("fieldIndex")
+        index = int(index.Get(tc)) if index and index.HasAuthoredValue() else 0
+        try:
+            grid = load_vector_field(asset_path.resolvedPath, grid_name=str(name) if name else None, grid_index=index)
+        except SceneError as exc:
+            raise SceneError(f"field {field_path}: {exc}") from None
+        if grid.local_from_index is None:
+            return grid.values, self._extent_placement(prim, tc, grid.values.shape[:3])
+        return grid.values, grid.local_from_index
 
     def _read_ice(self, field_prim, name: str, tc) -> IceCrystals | None:
         """``warpsky:ice:*`` of a field prim (see IceCrystals); None when none is authored. Refused on any field
