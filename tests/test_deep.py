@@ -177,3 +177,28 @@ def test_an_unknown_product_type_names_the_product_and_what_is_written(tmp_path,
     code, _, err = run(["render", stage, *FAST], capsys)
     assert code == 2 and err.count("\n") == 1, err
     assert "/Render/Cryptomatte.productType 'cryptomatte'" in err and "'deepRaster'" in err
+
+
+def test_averaged_deep_images_flatten_to_the_mean_of_their_flattenings():
+    """Three deep images of random samples (opaque, translucent and empty ones, coincident depths between
+    images, pixels without samples): their average flattens, front to back, to the mean of their flattenings
+    within 1e-6, with every alpha in [0, 1] and depths non-decreasing along each pixel."""
+    from warpsky.output.deep import DeepPixels, average_deep
+
+    rng = np.random.default_rng(11)
+    deeps = []
+    for _ in range(3):
+        counts = rng.integers(0, 4, size=(4, 5))
+        total = int(counts.sum())
+        z = np.concatenate([np.sort(rng.choice([5.0, 10.0, 20.0, 40.0], n)) for n in counts.reshape(-1)])
+        alpha = rng.choice([0.0, 0.3, 0.9, 1.0], total)
+        channels = {c: rng.uniform(0, 1, total).astype(np.float32) for c in "RGB"}
+        channels.update(A=alpha.astype(np.float32), Z=z.astype(np.float32), ZBack=z.astype(np.float32))
+        deeps.append(DeepPixels(counts, channels))
+    mean = np.mean([flatten(d) for d in deeps], axis=0)
+    merged = average_deep(deeps)
+    np.testing.assert_allclose(flatten(merged), mean, atol=1e-6)
+    assert np.all((merged.channels["A"] >= 0.0) & (merged.channels["A"] <= 1.0))
+    start = np.cumsum(merged.counts.reshape(-1)) - merged.counts.reshape(-1)
+    for s, n in zip(start, merged.counts.reshape(-1), strict=True):
+        assert np.all(np.diff(merged.channels["Z"][s:s + n]) >= 0.0)

@@ -125,12 +125,18 @@ def test_a_shutter_closing_before_it_opens_is_named(tmp_path, homogeneous_npy):
         warpsky.render_stage(stage, 1.0, **FAST)
 
 
-def test_deep_output_of_a_blurred_frame_is_refused(tmp_path, homogeneous_npy):
-    from warpsky.errors import UsageError
+def test_a_blurred_frame_has_deep_samples_that_flatten_to_it(tmp_path, homogeneous_npy):
+    """--deep with an open shutter: every sub-frame's samples, weighted so that flattening them front to back
+    gives the blurred frame (to float32 precision), alpha included."""
+    from warpsky.output.deep import flatten
 
     stage = moving_stage(tmp_path / "m.usda", homogeneous_npy)
-    with pytest.raises(UsageError, match="--deep with motion blur"):
-        warpsky.render_stage(stage, 1.0, deep=True, **FAST)
+    blurred = warpsky.render_stage(stage, 1.0, motion_samples=4, deep=True, **FAST)
+    still = warpsky.render_stage(stage, 1.0, shutter=(0.0, 0.0), deep=True, **FAST)
+    assert blurred.deep.counts.sum() > 3 * still.deep.counts.sum()
+    np.testing.assert_allclose(flatten(blurred.deep), blurred.frame.rgba, atol=1e-5 * blurred.frame.rgba.max())
+    a = blurred.deep.channels["A"]
+    assert np.all((a >= 0.0) & (a <= 1.0))
 
 
 def test_monte_carlo_sub_frames_take_their_own_seeds():

@@ -14,8 +14,9 @@ seed differing per sub-frame (``seed + k``) so the sub-frames' noise does not re
 
 A Volume with a velocity field (a simulation's ``vel`` grid) is read at each sub-frame's time with its density
 moved along that velocity from the state its file holds (:mod:`warpsky.media.velocity`), so a cached simulation
-blurs within the frame. Not modelled: a deep EXR of a blurred frame is refused; a render without a time code (the
-API's ``time=None``, the stage's earliest time) is not blurred.
+blurs within the frame. A deep EXR of a blurred frame holds every sub-frame's samples, weighted
+to flatten to the average (:func:`~warpsky.output.deep.average_deep`). A render without a time code (the API's
+``time=None``, the stage's earliest time) is not blurred.
 """
 
 from __future__ import annotations

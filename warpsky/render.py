@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.composite import Frame, composite
-from warpsky.errors import SceneError, UsageError
+from warpsky.errors import SceneError
 from warpsky.layer import Layer, gathered_warnings
 from warpsky.motion import (
     DEFAULT_SAMPLES,
@@ -28,6 +28,7 @@ from warpsky.motion import (
     sub_frame_times,
 )
 from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_frame
+from warpsky.output.deep import average_deep
 from warpsky.output.exr import write_channels
 from warpsky.output.png import DEFAULT_VIEW, auto_exposure, shown_view, write_png
 from warpsky.output.products import (
@@ -282,10 +283,8 @@ def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stag
 def blurred_image(reader, scene: Scene, plan: RenderPlan, options: RenderOptions, time_code,
                   timings) -> RenderedImage:
     """The average of the frame's sub-frames over its shutter (:mod:`warpsky.motion`), as the frame at
-    ``time_code`` (its scene and plan: camera matrices and metadata)."""
-    if options.deep or options.deep_product:
-        what = "a deepRaster product" if options.deep_product else "--deep"
-        raise UsageError(f"{what} with motion blur (an open shutter) is not supported; render with --shutter 0:0")
+    ``time_code`` (its scene and plan: camera matrices and metadata); its deep samples are every sub-frame's,
+    weighted to flatten to that average (:func:`~warpsky.output.deep.average_deep`)."""
     seeded = "seed" in json.loads(plan.settings_json())
     images = []
     with reader.sub_frames_of(time_code):  # a Volume's velocity moves its density to each sub-frame's time
@@ -295,7 +294,9 @@ def blurred_image(reader, scene: Scene, plan: RenderPlan, options: RenderOptions
     warnings = [line for image in images for line in image.warnings]
     layer = replace(images[0].layer, stats=add_stats([image.layer for image in images]))
     spent = {key: sum(image.timings.get(key, 0.0) for image in images) for key in images[0].timings}
+    deep = average_deep([image.deep for image in images]) if images[0].deep is not None else None
     return replace(images[0], frame=average_frames([image.frame for image in images]), scene=scene, plan=plan,
+                   deep=deep,
                    preview=np.mean([image.preview for image in images], axis=0), layer=layer,
                    timings={**dict(timings or {}), **spent}, warnings=list(dict.fromkeys(warnings)))
 

@@ -119,6 +119,56 @@ def deep_from_layers(layers, far: float, matrix: np.ndarray | None = None, regio
     return DeepPixels(pick.sum(axis=-1).astype(np.int64), channels)
 
 
+def _visibility(deep: DeepPixels) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample, prod (1 - A) of its pixel's samples in front of it, and that product including itself."""
+    counts = deep.counts.reshape(-1)
+    start = np.cumsum(counts) - counts
+    before, after = np.empty(int(counts.sum())), np.empty(int(counts.sum()))
+    through = np.ones(counts.size)
+    for k in range(int(counts.max(initial=0))):
+        has = counts > k
+        index = start[has] + k
+        before[index] = through[has]
+        through[has] *= 1.0 - deep.channels["A"][index].astype(np.float64)
+        after[index] = through[has]
+    return before, after
+
+
+def average_deep(deeps: list[DeepPixels]) -> DeepPixels:
+    """One deep image that flattens to the mean of the flattened ``deeps`` (a motion-blurred frame's sub-frames).
+
+    Every sub-frame's samples are kept, merged per pixel in depth order. Along one sub-frame k a sample sees
+    v_k = prod (1 - A) of the samples in front of it; the mean image's visibility in front of the merged sample m
+    is V_m = 1 - sum over the merged samples l before it of (v_before_l - v_after_l) / N. The sample gets
+    A_m = 1 - V_(m+1) / V_m and colour C_m = C v_before / (N V_m), so the flattened colour is
+    sum_m C v_before / N and the flattened alpha 1 - mean_k v_k, exactly the mean of the sub-frames."""
+    n = len(deeps)
+    counts = np.sum([d.counts for d in deeps], axis=0)
+    pixel, z, order, before, after = [], [], [], [], []
+    for k, deep in enumerate(deeps):
+        v_before, v_after = _visibility(deep)
+        pixel.append(np.repeat(np.arange(deep.counts.size), deep.counts.reshape(-1)))
+        z.append(deep.channels["Z"]), order.append(np.full(v_before.size, k))
+        before.append(v_before), after.append(v_after)
+    pixel, z, order = np.concatenate(pixel), np.concatenate(z), np.concatenate(order)
+    sort = np.lexsort((order, z, pixel))
+    v_before, v_after = np.concatenate(before)[sort], np.concatenate(after)[sort]
+    drop = (v_before - v_after) / n
+    owner = pixel[sort]
+    total = np.cumsum(drop)
+    first = np.searchsorted(owner, owner)  # each sample's pixel's first merged sample
+    seen_before = 1.0 - (total - drop - np.where(first > 0, total[np.maximum(first - 1, 0)], 0.0))
+    seen_after = seen_before - drop
+    visible = seen_before > HIDDEN_BELOW
+    safe = np.where(visible, seen_before, 1.0)
+    channels = {name: np.concatenate([d.channels[name] for d in deeps])[sort] for name in ("Z", "ZBack")}
+    for name in "RGB":
+        colour = np.concatenate([d.channels[name] for d in deeps]).astype(np.float64)[sort]
+        channels[name] = np.where(visible, colour * v_before / (n * safe), 0.0).astype(np.float32)
+    channels["A"] = np.where(visible, np.clip(1.0 - seen_after / safe, 0.0, 1.0), 0.0).astype(np.float32)
+    return DeepPixels(counts.astype(np.int64), channels)
+
+
 def flatten(deep: DeepPixels) -> np.ndarray:
     """(H, W, 4) RGBA of OpenEXR's flattening of point samples sorted front to back: each sample's colour seen
     through 1 - alpha of those in front of it; alpha 1 - prod (1 - A_k)."""
