@@ -91,13 +91,16 @@ def sniff_format(path: Path) -> str:
     raise SceneError(f"field file {path} is not a .npy, NanoVDB or OpenVDB file (unrecognised magic bytes {head!r})")
 
 
-def load_field(path: str | os.PathLike, *, grid_name: str | None = None, grid_index: int = 0) -> FieldGrid:
-    """Load one scalar grid from ``path``.
+def load_field(path: str | os.PathLike, *, grid_name: str | None = None, grid_index: int = 0,
+               vector: bool = False) -> FieldGrid:
+    """Load one scalar grid from ``path`` (with ``vector``, one Vec3f grid such as a velocity: ``values`` of shape
+    (X, Y, Z, 3)).
 
     Args:
         path: A ``.npy``, ``.nvdb`` or ``.vdb`` file (told apart by magic bytes).
         grid_name: Picks the grids of this name in a VDB file; None: every grid.
         grid_index: Which of those grids, 0 for the first in file order (UsdVol's ``fieldIndex``).
+        vector: Read a vector grid instead of a scalar one.
     """
     path = Path(path)
     if not path.is_file():
@@ -106,32 +109,15 @@ def load_field(path: str | os.PathLike, *, grid_name: str | None = None, grid_in
     if kind == "npy":
         if grid_index != 0:
             raise SceneError(f"dense grid {path} holds one grid, so fieldIndex {grid_index} is out of range")
-        return _load_npy(path)
+        return _load_npy(path, vector)
     nvdb = convert_vdb(path) if kind == "vdb" else path
-    return _load_nanovdb(nvdb, grid_name=grid_name, grid_index=grid_index, source=path)
+    name, blob, _ = _pick_grid(nanovdb_grids(nvdb.read_bytes(), path), grid_name, grid_index, path)
+    return _dense_grid(blob, name, path, vector=vector)
 
 
 def load_vector_field(path: str | os.PathLike, *, grid_name: str | None = None, grid_index: int = 0) -> FieldGrid:
-    """Load one vector grid (a velocity) from ``path``: ``values`` float32 of shape (X, Y, Z, 3); a ``.npy`` file
-    holds that array, a VDB file a vec3 grid (``vec3f``/``vec3d``)."""
-    path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"field file {path} does not exist")
-    kind = sniff_format(path)
-    if kind == "npy":
-        if grid_index != 0:
-            raise SceneError(f"dense grid {path} holds one grid, so fieldIndex {grid_index} is out of range")
-        try:
-            values = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as exc:
-            raise SceneError(f"cannot read dense grid {path}: {exc}") from exc
-        if values.ndim != 4 or values.shape[3] != 3 or not np.issubdtype(values.dtype, np.number):
-            raise SceneError(f"dense vector grid {path} must be a numeric array indexed [x, y, z, component] of "
-                             f"shape (X, Y, Z, 3), got {values.dtype} {values.shape}")
-        return FieldGrid(np.ascontiguousarray(values, dtype=np.float32), None, str(path))
-    nvdb = convert_vdb(path) if kind == "vdb" else path
-    name, blob, _ = _pick_grid(nanovdb_grids(nvdb.read_bytes(), path), grid_name, grid_index, path)
-    return _dense_grid(blob, name, path, vector=True)
+    """:func:`load_field` of a vector grid (a velocity): a ``.npy`` (X, Y, Z, 3) array or a VDB Vec3f grid."""
+    return load_field(path, grid_name=grid_name, grid_index=grid_index, vector=True)
 
 
 def level_set_advice(source: str | os.PathLike, grid_name: str | None) -> str:
@@ -151,12 +137,15 @@ def level_set_advice(source: str | os.PathLike, grid_name: str | None) -> str:
     return f"warpsky renders fog volumes (density), not level sets; convert it with {convert}"
 
 
-def _load_npy(path: Path) -> FieldGrid:
+def _load_npy(path: Path, vector: bool) -> FieldGrid:
     try:
         values = np.load(path, allow_pickle=False)
     except (ValueError, OSError) as exc:
         raise SceneError(f"cannot read dense grid {path}: {exc}") from exc
-    if values.ndim != 3:
+    if vector and (values.ndim != 4 or values.shape[3] != 3):
+        raise SceneError(f"dense vector grid {path} must be a 4-D array indexed [x, y, z, component] of shape "
+                         f"(X, Y, Z, 3), got shape {values.shape}")
+    if not vector and values.ndim != 3:
         raise SceneError(f"dense grid {path} must be a 3-D array indexed [x, y, z], got shape {values.shape}")
     if not np.issubdtype(values.dtype, np.floating) and not np.issubdtype(values.dtype, np.integer):
         raise SceneError(f"dense grid {path} must hold numbers, got dtype {values.dtype}")
@@ -268,11 +257,6 @@ def _pick_grid(grids: list[NanoGrid], grid_name: str | None, grid_index: int, so
     if grid.grid_class == GRID_CLASS_LEVEL_SET:
         raise SceneError(f"grid {grid.name!r} of {source} is a level set: {level_set_advice(source, grid.name)}")
     return grid
-
-
-def _load_nanovdb(path: Path, *, grid_name: str | None, grid_index: int, source: Path) -> FieldGrid:
-    name, blob, _ = _pick_grid(nanovdb_grids(path.read_bytes(), source), grid_name, grid_index, source)
-    return _dense_grid(blob, name, source, vector=False)
 
 
 def _dense_grid(blob: bytes, name: str, source: Path, *, vector: bool) -> FieldGrid:

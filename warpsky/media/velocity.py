@@ -20,11 +20,12 @@ outside it, as the medium itself is evaluated).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import warp as wp
 
-from warpsky.numerics import trilinear_cell
+from warpsky.numerics import TrilinearCell, trilinear_cell
 
 #: Most voxels a grid grows by on each side for the displacement (a velocity that moves further is clipped there).
 MAX_PADDING = 64
@@ -42,14 +43,8 @@ class VelocityStep:
 
 
 @wp.func
-def boxed_density(grid: wp.array3d(dtype=float), p: wp.vec3) -> float:
-    """The medium's value at index position ``p``: trilinear, clamped to the edge inside [-0.5, n - 0.5], 0
-    outside."""
-    n = wp.vec3i(grid.shape[0], grid.shape[1], grid.shape[2])
-    for a in range(3):
-        if p[a] < -0.5 or p[a] > float(n[a]) - 0.5:
-            return 0.0
-    c = trilinear_cell(p, n)
+def trilinear_at(grid: wp.array3d(dtype=Any), c: TrilinearCell):
+    """``grid`` (of floats or vectors) interpolated in the cell ``c``."""
     f = c.frac
     c00 = wp.lerp(grid[c.lo[0], c.lo[1], c.lo[2]], grid[c.hi[0], c.lo[1], c.lo[2]], f[0])
     c10 = wp.lerp(grid[c.lo[0], c.hi[1], c.lo[2]], grid[c.hi[0], c.hi[1], c.lo[2]], f[0])
@@ -59,15 +54,14 @@ def boxed_density(grid: wp.array3d(dtype=float), p: wp.vec3) -> float:
 
 
 @wp.func
-def boxed_velocity(grid: wp.array3d(dtype=wp.vec3), p: wp.vec3) -> wp.vec3:
-    """The velocity at index position ``p``: trilinear between voxel centres, clamped to the edge outside them."""
-    c = trilinear_cell(p, wp.vec3i(grid.shape[0], grid.shape[1], grid.shape[2]))
-    f = c.frac
-    c00 = wp.lerp(grid[c.lo[0], c.lo[1], c.lo[2]], grid[c.hi[0], c.lo[1], c.lo[2]], f[0])
-    c10 = wp.lerp(grid[c.lo[0], c.hi[1], c.lo[2]], grid[c.hi[0], c.hi[1], c.lo[2]], f[0])
-    c01 = wp.lerp(grid[c.lo[0], c.lo[1], c.hi[2]], grid[c.hi[0], c.lo[1], c.hi[2]], f[0])
-    c11 = wp.lerp(grid[c.lo[0], c.hi[1], c.hi[2]], grid[c.hi[0], c.hi[1], c.hi[2]], f[0])
-    return wp.lerp(wp.lerp(c00, c10, f[1]), wp.lerp(c01, c11, f[1]), f[2])
+def boxed_density(grid: wp.array3d(dtype=float), p: wp.vec3) -> float:
+    """The medium's value at index position ``p``: trilinear, clamped to the edge inside [-0.5, n - 0.5], 0
+    outside."""
+    n = wp.vec3i(grid.shape[0], grid.shape[1], grid.shape[2])
+    for a in range(3):
+        if p[a] < -0.5 or p[a] > float(n[a]) - 0.5:
+            return 0.0
+    return trilinear_at(grid, trilinear_cell(p, n))
 
 
 @wp.kernel
@@ -75,7 +69,8 @@ def advect_density(density: wp.array3d(dtype=float), velocity: wp.array3d(dtype=
                    out: wp.array3d(dtype=float)):
     i, j, k = wp.tid()
     p = wp.vec3(float(i - step.padding), float(j - step.padding), float(k - step.padding))
-    v = boxed_velocity(velocity, wp.transform_point(step.vel_from_dens, p))
+    q = wp.transform_point(step.vel_from_dens, p)  # clamped to the edge beyond the outer voxel centres
+    v = trilinear_at(velocity, trilinear_cell(q, wp.vec3i(velocity.shape[0], velocity.shape[1], velocity.shape[2])))
     out[i, j, k] = boxed_density(density, p - step.displacement * v)
 
 
