@@ -151,7 +151,8 @@ def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool):
 @functools.cache
 def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
                   has_meshes: bool = False):
-    """``trace_path(...) -> PathState``, one path from its camera ray, specialised like the kernels."""
+    """``trace_path(...) -> PathState``, one path from its camera ray (one loop carrying state), specialised like
+    the kernels; with ``has_meshes`` its flights end at the meshes and bounce on them."""
     delta_track = tracking_functions(has_detail)[1]
     mesh_event = mesh_event_function(has_detail)
     flight_end = surface_functions(has_ground)[1]
