@@ -12,6 +12,7 @@ from conftest import look_rotation
 
 from warpsky.passes.frame import render_layers
 from warpsky.plan import make_plan
+from warpsky.scene.layers import GroundTexture
 from warpsky.scene.model import Camera, Ground, Scene, Sun, VoxelMedium
 from warpsky.scene.terrain import TerrainMesh
 from warpsky.techniques.path_tracer.technique import PathTracer
@@ -109,6 +110,23 @@ def test_tilted_plane_is_lambert_under_the_sun(device, case):
     assert np.all(layer.transmittance == 0.0)
     np.testing.assert_allclose(layer.radiance, np.broadcast_to(expected, layer.radiance.shape), rtol=1e-5)
     assert np.all(layer.aovs["variance"] <= 1e-6 * expected.max() ** 2)  # every path the same
+
+
+def test_albedo_map_is_read_at_world_x_z(device):
+    """A floor mesh with a 2 x 2 albedo map over [-40, 40]^2 m under a zenith sun, 100 km from the origin: the first
+    bounce is each texel's albedo / pi E at the texel centres (x, z = +-20 m) and beyond the map (+-60 m, edge
+    texels continued), as the surfaces pass reads it."""
+    texels = np.array([[[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]], [[0.7, 0.8, 0.9], [0.9, 0.1, 0.5]]])
+    far = np.array([1.0e5, 0.0, -1.0e5])
+    texture = GroundTexture(texels, (far[0] - 40.0, far[2] - 40.0), (80.0, 80.0))
+    floor = square(0.0, 100.0)
+    floor = TerrainMesh("floor", floor.points + far, floor.triangles, floor.albedo, albedo_map=texture)
+    camera = ortho_camera(far + (0.0, 30.0, 0.0), DOWN, 160.0)
+    layer = traced(Scene(camera=camera, sun=Sun(np.array(UP), np.ones(3)), meshes=(floor,)), device, 4, spp=1,
+                   max_bounces=1)
+    where = pixel_points(camera, 4) - far
+    expected = texels[(where[..., 0] > 0).astype(int), (where[..., 2] > 0).astype(int)] / math.pi
+    np.testing.assert_allclose(layer.radiance, expected, rtol=1e-5)
 
 
 @pytest.mark.parametrize("floor_kind", ["ground_plane", "mesh"])
