@@ -153,15 +153,18 @@ class PathTracer(Technique):
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
         """Bytes a frame allocates: a :class:`PixelSums` (and on a GPU the paths of one launch when the frame is
-        small), the float64 sums of :func:`sums_layer`, the variance AOV, and the media with their majorants."""
+        small), the float64 sums of :func:`sums_layer`, the variance AOV, the media with their majorants, and the
+        meshes it traces (their points, indices and Warp's BVH, as the surfaces pass counts them)."""
         settings = self.settings_for(scene)
         pixels = width * height
-        return (path_tracing_memory(scene, pixels, settings.majorant_block, self.device,
-                                    int(settings.samples_per_pass), bake_detail=bool(settings.bake_detail))
-                .add("images", host=pixels * SUMS_LAYER_BYTES)
-                .add("AOVs", host=pixels * AOV_BYTES)
-                .merge(layer_voxel_memory(scene, settings))
-                .merge(deck_voxel_memory(scene, settings, width, height)))
+        estimate = (path_tracing_memory(scene, pixels, settings.majorant_block, self.device,
+                                        int(settings.samples_per_pass), bake_detail=bool(settings.bake_detail))
+                    .add("images", host=pixels * SUMS_LAYER_BYTES)
+                    .add("AOVs", host=pixels * AOV_BYTES)
+                    .merge(layer_voxel_memory(scene, settings))
+                    .merge(deck_voxel_memory(scene, settings, width, height)))
+        triangles = sum(len(m.triangles) for m in scene.meshes)
+        return estimate.add("meshes", host=40 * triangles, device=88 * triangles) if triangles else estimate
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Worst-case path events: every path runs to the bounce cap."""
