@@ -169,10 +169,9 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
         then a scattering event, a ground or mesh bounce (:mod:`~warpsky.techniques.path_tracer.surfaces`; the
         meshes also shadow the other events' sunlight), or the end (environment, sun disk, sea level), then
         roulette. With ``settings.multiple_only`` the first event takes no sunlight and a camera ray does not see
-        the sun's disk:
-        the path carries light scattered at least twice (media, air or ground), the part that an exact
-        single-scattering march and the analytic sky leave out, and all the dome's light but what the camera sees
-        of it directly (the composite's background). With ``settings.forward_cut`` the flights and events after
+        the sun's disk: the path carries light scattered at least twice (media, air or ground), the part that an
+        exact single-scattering march and the analytic sky leave out, and all the dome's light but what the camera
+        sees of it directly (the composite's background). With ``settings.forward_cut`` the flights and events after
         the first run through the ``cut`` media, and the first event adds the sunlight of its peak scatterings."""
         path = start
         if wp.static(has_tables):  # the hero channel of the phase tables' sampling, uniformly (one draw)
@@ -193,11 +192,9 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                 here = cut.media
                 bounds = cut.majorants
             end = flight_end(air, ground, path.origin, path.direction, bounce, first)
-            hit = first_hit
             if wp.static(has_meshes):
                 stop = mesh_flight_end(surfaces, path.origin, path.direction, bounce, first_hit, end)
                 end = stop.end
-                hit = stop.hit
             flight = delta_track(here, bounds, air, path.origin, path.direction, end.t, path.throughput,
                                  path.state, reduced)
             path.state = flight.state
@@ -240,7 +237,7 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                     path = scatter_event(here, bounds, phase_tables, air, sun, lit, path, p, air_weight)
             elif end.surface == SURFACE_MESH:
                 if wp.static(has_meshes):
-                    path = mesh_event(here, bounds, air, sun, surfaces, lit, path, p, hit, reduced)
+                    path = mesh_event(here, bounds, air, sun, surfaces, lit, path, p, stop.hit, reduced)
             else:
                 path = ground_event(here, bounds, air, sun, ground, lit, path, p, reduced)
             bounce += 1
