@@ -104,7 +104,7 @@ def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
 # ------------------------------------------------------------------------------------------ through the tools
 def test_render_and_info_trace_the_deck(tmp_path, capsys):
     """``warpsky render --technique path_tracer`` on the deck stage writes finite, non-negative pixels with the
-    deck in them, and ``info`` says it is voxelised and how; a stage with a Mesh is still refused (exit 2)."""
+    deck in them, and ``info`` says it is voxelised and how; with a Mesh too it traces both (no surfaces pass)."""
     from warpsky.evaluation.deck_stage import write_deck_stage
     from warpsky.output.exr import read_exr
 
@@ -131,10 +131,14 @@ def test_render_and_info_trace_the_deck(tmp_path, capsys):
 """
     terrain = tmp_path / "terrain.usda"
     terrain.write_text(open(stage).read().replace('    def Xform "Deck"', mesh + '    def Xform "Deck"'))
-    code, _, err = run_cli(["render", str(terrain), tmp_path / "x.exr", "--technique", "path_tracer"], capsys)
-    assert code == 2
-    assert "technique path_tracer does not render meshes (" in err and "/Hill" in err
-    assert "height-field" not in err  # the deck itself is traced
+    code, out, err = run_cli(["info", str(terrain), "--technique", "path_tracer", "--res", "24"], capsys)
+    assert code == 0, err
+    assert "passes      media -> composite" in out and "traced by path_tracer inside its paths" in out
+    code, _, err = run_cli(["render", str(terrain), exr, "--technique", "path_tracer", "--res", "24", *settings,
+                            "--device", "cpu"], capsys)
+    assert code == 0, err
+    with_hill = read_exr(exr).rgba()
+    assert np.all(np.isfinite(with_hill)) and with_hill[..., :3].min() >= 0.0
 
 
 def test_error_vs_time_judges_the_heightfield_pass(tmp_path, monkeypatch):

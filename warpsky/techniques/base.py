@@ -31,6 +31,8 @@ class Technique:
     - ``traces_layers``: it traces the stratiform layers itself, voxelised, so no stratiform pass runs.
     - ``traces_decks``: it traces height-field cloud decks and their haze itself, so no height-field pass runs.
     - ``traces_dome``: a dome's light is path traced exactly (else it is an ambient light of the marching models).
+    - ``traces_meshes``: it traces the scene's triangle meshes itself (light bounces between them, the media and
+      the ground), so no surfaces pass runs: it draws the ground plane and the meshes in its own layer.
     - ``aovs``: the extra outputs its layer holds, name -> components (``variance``: ``RGB``), which RenderVars
       may name.
     - ``kernel_modules``: the modules whose kernel factories it launches (the first-compile notice checks Warp's
@@ -48,6 +50,7 @@ class Technique:
     traces_layers: ClassVar[bool] = False
     traces_decks: ClassVar[bool] = False
     traces_dome: ClassVar[bool] = False
+    traces_meshes: ClassVar[bool] = False
     aovs: ClassVar[dict[str, str]] = {}
     kernel_modules: ClassVar[tuple[str, ...]] = ()
     settings_notes: ClassVar[str] = ""

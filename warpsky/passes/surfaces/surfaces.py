@@ -40,12 +40,7 @@ from warpsky.passes.surfaces.kernels import (
 )
 from warpsky.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.scene.model import Scene
-from warpsky.surfaces.mesh import MeshBuffers
-
-#: Shadow rays start this fraction of (1 m + the hit's scale) off the surface, along its normal; the scale is the
-#: largest distance from the eye of the hit point and its triangle's corners, which sets the float32 error of the
-#: ray-triangle test. About 170 roundings: a surface never shadows itself; 2 cm for triangles within 1 km.
-SHADOW_BIAS = 2.0e-5
+from warpsky.surfaces.mesh import SHADOW_BIAS, MeshBuffers
 
 
 class Surfaces:
@@ -216,14 +211,14 @@ class SurfacesPass(Pass):
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
-        if scene.heightfield_clouds and technique.traces_decks:
+        if technique.traces_meshes or (scene.heightfield_clouds and technique.traces_decks):
             return False
         scenery = bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
         return bool(scene.meshes) or (scene.ground is not None and scenery and not scene.media and not scene.layers)
 
     @classmethod
     def refusal(cls, scene, technique):
-        if scene.meshes and technique.traces_air:
+        if scene.meshes and technique.traces_air and not technique.traces_meshes:
             return "meshes", [mesh.name for mesh in scene.meshes]
         return None
 
@@ -232,8 +227,9 @@ class SurfacesPass(Pass):
         if not scene.meshes:
             return {"meshes": "none (no Mesh prim): no BVH built"}
         triangles = sum(len(m.triangles) for m in scene.meshes)
+        drawn = (f"traced by {technique.name} inside its paths" if technique.traces_meshes else "surfaces pass")
         return {"meshes": f"{len(scene.meshes)} mesh(es) ({', '.join(m.name for m in scene.meshes)}), "
-                          f"{triangles:,} triangles: one Warp BVH, surfaces pass"}
+                          f"{triangles:,} triangles: one Warp BVH, {drawn}"}
 
     def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
         """Points (12 B) and indices (12 B per triangle) plus Warp's BVH (about 64 B per triangle), per-pixel hits."""

@@ -50,12 +50,14 @@ from warpsky.techniques.path_tracer.tracking import Transmittance, reduced_with_
 
 oriented_mixture_correction = oriented_correction_function(medium_phase)[1]
 
-#: What ends a ray before the far distance: nothing, the ground plane, sea level (the air's floor), or an opaque
-#: surface another pass draws behind the media (a mesh: the camera ray ends there, the path with nothing more).
+#: What ends a ray before the far distance: nothing, the ground plane, sea level (the air's floor), an opaque
+#: surface another pass draws behind the media (a mesh: the camera ray ends there, the path with nothing more), or a
+#: mesh the path tracer traces itself (:mod:`~warpsky.techniques.path_tracer.surfaces`: a Lambertian bounce).
 SURFACE_NONE = wp.constant(0)
 SURFACE_GROUND = wp.constant(1)
 SURFACE_SEA = wp.constant(2)
 SURFACE_OPAQUE = wp.constant(3)
+SURFACE_MESH = wp.constant(4)
 #: "No end": flights after the first bounce and rays toward the sun run this far [m].
 UNBOUNDED = wp.constant(1.0e30)
 #: A ground plane at sea level and sea level itself are one surface: distances within this relative difference

@@ -31,9 +31,11 @@ from warpsky.media.air_round import ray_depth
 from warpsky.media.voxel import VoxelMedia
 from warpsky.numerics import exp3
 from warpsky.optics.phase_sampling import PhaseTables
+from warpsky.surfaces.mesh import SurfaceHit, SurfaceMeshes, no_hit
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.events import (
     SURFACE_GROUND,
+    SURFACE_MESH,
     SURFACE_NONE,
     SURFACE_OPAQUE,
     SURFACE_SEA,
@@ -51,6 +53,12 @@ from warpsky.techniques.path_tracer.events import (
 from warpsky.techniques.path_tracer.forward_cut import CutMedia, peak_light_function
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.planet import ground_point
+from warpsky.techniques.path_tracer.surfaces import (
+    camera_mesh_end,
+    mesh_event_function,
+    mesh_flight_end,
+    sun_unblocked,
+)
 from warpsky.techniques.path_tracer.tracking import tracking_functions
 
 #: Samples of one pixel seed their streams ``seed + sample * SAMPLE_STRIDE`` (the pixel is the stream offset).
@@ -141,9 +149,12 @@ def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool):
 
 
 @functools.cache
-def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
-    """``trace_path(...) -> PathState``, one path from its camera ray, specialised like the kernels."""
+def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
+                  has_meshes: bool = False):
+    """``trace_path(...) -> PathState``, one path from its camera ray (one loop carrying state), specialised like
+    the kernels; with ``has_meshes`` its flights end at the meshes and bounce on them."""
     delta_track = tracking_functions(has_detail)[1]
+    mesh_event = mesh_event_function(has_detail)
     flight_end = surface_functions(has_ground)[1]
     scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
     media_first = media_first_function(has_detail)
@@ -151,14 +162,16 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
 
     @wp.func
     def trace_path(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
-                   sun: Sun, ground: Ground, dome: DomeLight, settings: PathSettings, sun_on: bool, start: PathState,
-                   first: RayEnd) -> PathState:
-        """One path from the camera ray ``start`` (which ends at ``first``): per bounce a free flight, then a
-        scattering event, a ground bounce, or the end (environment, sun disk, sea level), then roulette. With
-        ``settings.multiple_only`` the first event takes no sunlight and a camera ray does not see the sun's disk:
-        the path carries light scattered at least twice (media, air or ground), the part that an exact
-        single-scattering march and the analytic sky leave out, and all the dome's light but what the camera sees
-        of it directly (the composite's background). With ``settings.forward_cut`` the flights and events after
+                   sun: Sun, ground: Ground, dome: DomeLight, surfaces: SurfaceMeshes, settings: PathSettings,
+                   sun_on: bool, start: PathState, first: RayEnd, first_hit: SurfaceHit) -> PathState:
+        """One path from the camera ray ``start`` (which ends at ``first``, on the mesh ``first_hit`` when it
+        hit one): one loop carrying state, per bounce a free flight (with meshes, to the nearest mesh hit at most),
+        then a scattering event, a ground or mesh bounce (:mod:`~warpsky.techniques.path_tracer.surfaces`; the
+        meshes also shadow the other events' sunlight), or the end (environment, sun disk, sea level), then
+        roulette. With ``settings.multiple_only`` the first event takes no sunlight and a camera ray does not see
+        the sun's disk: the path carries light scattered at least twice (media, air or ground), the part that an
+        exact single-scattering march and the analytic sky leave out, and all the dome's light but what the camera
+        sees of it directly (the composite's background). With ``settings.forward_cut`` the flights and events after
         the first run through the ``cut`` media, and the first event adds the sunlight of its peak scatterings."""
         path = start
         if wp.static(has_tables):  # the hero channel of the phase tables' sampling, uniformly (one draw)
@@ -179,6 +192,9 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                 here = cut.media
                 bounds = cut.majorants
             end = flight_end(air, ground, path.origin, path.direction, bounce, first)
+            if wp.static(has_meshes):
+                stop = mesh_flight_end(surfaces, path.origin, path.direction, bounce, first_hit, end)
+                end = stop.end
             flight = delta_track(here, bounds, air, path.origin, path.direction, end.t, path.throughput,
                                  path.state, reduced)
             path.state = flight.state
@@ -187,7 +203,7 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
             lit = sun_on
             if bounce == 0:
                 lit = sun_on and settings.multiple_only == 0
-            if flight.scattered == 0 and end.surface != SURFACE_GROUND:
+            if flight.scattered == 0 and end.surface != SURFACE_GROUND and end.surface != SURFACE_MESH:
                 # a black sea gives nothing; an opaque surface's pass draws what lies there and beyond
                 if end.surface != SURFACE_OPAQUE and end.surface != SURFACE_SEA:
                     path.radiance = path.radiance + escaped_radiance(air, sun, settings.environment,
@@ -197,8 +213,15 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                                                                      bounce)
                 break
             p = path.origin + flight.t * path.direction
+            event_sun = sun_on
+            if wp.static(has_meshes):  # a mesh's own event tests its shadow; no peak light is added on a mesh
+                event_sun = sun_on and (flight.scattered == 1 or end.surface != SURFACE_MESH)
+                if event_sun:
+                    if not sun_unblocked(surfaces, air, ground, sun, p, 1 - flight.scattered):
+                        event_sun = False
+                        lit = False
             if bounce == 0:
-                path = first_event(media, majorants, cut, phase_tables, air, sun, ground, settings, sun_on, path,
+                path = first_event(media, majorants, cut, phase_tables, air, sun, ground, settings, event_sun, path,
                                    flight.t, flight.scattered, p)
             if flight.scattered == 1:
                 path.events = path.events + 1
@@ -212,6 +235,9 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                     path = reduced_scatter_event(here, bounds, air, sun, lit, path, p)
                 else:
                     path = scatter_event(here, bounds, phase_tables, air, sun, lit, path, p, air_weight)
+            elif end.surface == SURFACE_MESH:
+                if wp.static(has_meshes):
+                    path = mesh_event(here, bounds, air, sun, surfaces, lit, path, p, stop.hit, reduced)
             else:
                 path = ground_event(here, bounds, air, sun, ground, lit, path, p, reduced)
             bounce += 1
@@ -222,17 +248,18 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
 
 
 @functools.cache
-def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False):
+def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
+                    has_meshes: bool = False):
     """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
     without a dome runs exactly the code it ran before domes existed)."""
     ratio_track = tracking_functions(has_detail)[2]
     primary_end, _flight_end, sun_reaches = surface_functions(has_ground)
-    trace_path = path_function(has_ground, has_tables, has_detail, has_dome)
+    trace_path = path_function(has_ground, has_tables, has_detail, has_dome, has_meshes)
 
     @wp.func
     def pixel_sample(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
-                     sun: Sun, cam: PinholeCamera, ground: Ground, dome: DomeLight, settings: PathSettings, row: int,
-                     col: int, sample: int) -> SampleResult:
+                     sun: Sun, cam: PinholeCamera, ground: Ground, dome: DomeLight, surfaces: SurfaceMeshes,
+                     settings: PathSettings, row: int, col: int, sample: int) -> SampleResult:
         """Path ``sample`` of pixel (row, col): the camera ray (jittered in the pixel when asked), the primary
         transmittance, the path, the depth of its first event. Its random stream depends on the seed, the pixel and
         the path index alone."""
@@ -252,10 +279,16 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
         if air.enabled != 0:
             t_end = UNBOUNDED
         first = primary_end(air, ground, origin, view, t_end)
+        first_hit = no_hit(first.t)
+        if wp.static(has_meshes):  # the nearest mesh ends the camera ray where it is nearer
+            seen = camera_mesh_end(surfaces, origin, view, first)
+            first = seen.end
+            first_hit = seen.hit
         if cam.has_opaque != 0:  # a surface drawn by another pass ends the camera ray (primary_ray's t_far)
             if cam.opaque[row, col] < cam.far and ray.t_far - ray.t_near <= first.t:
                 first.t = ray.t_far - ray.t_near
                 first.surface = SURFACE_OPAQUE
+                first_hit.hit = 0
         out = SampleResult()
         steps = int(0)
         tracked = int(0)
@@ -265,8 +298,8 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
             out.transmittance = wp.cw_mul(tr.value, air_transmittance(air, origin, view, first.t))
             steps = tr.steps
             tracked = 1
-        path = trace_path(media, majorants, cut, phase_tables, air, sun, ground, dome, settings,
-                          sun_reaches(sun, air), start_path(origin, view, state, steps), first)
+        path = trace_path(media, majorants, cut, phase_tables, air, sun, ground, dome, surfaces, settings,
+                          sun_reaches(sun, air), start_path(origin, view, state, steps), first, first_hit)
         if path.hit != 0:
             out.depth = wp.vec2((ray.t_near + path.first_t) * ray.cos_axis, 1.0)
         out.radiance = path.radiance
@@ -289,16 +322,18 @@ def add_sample(sums: PixelSums, row: int, col: int, sample: SampleResult):
 
 
 @kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True),
-                 has_dome=(False, True))
+                 has_dome=(False, True), has_meshes=(False, True))
 @functools.cache
-def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False,
-                      has_dome: bool = False) -> wp.Kernel:
+def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
+                      has_meshes: bool = False) -> wp.Kernel:
     """The progressive path tracer in both launch shapes (one kernel per scene kind, hence one CUDA module, for
     frames of any size). With ``samples`` empty (None), one thread per pixel runs the launch's
     ``settings.sample_count`` paths in path order into ``sums``. Otherwise one thread per (path, pixel): a launch
     over a frame of H rows covers ``sample_count`` x H rows, row r running path r // H of pixel row r % H into
-    ``samples[r]`` (``sums`` untouched); :func:`sum_samples_kernel` then adds them."""
-    pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome)
+    ``samples[r]`` (``sums`` untouched); :func:`sum_samples_kernel` then adds them. Only ``has_meshes`` kernels
+    read ``surfaces`` (the meshes' BVH); the others are given an empty one (:func:`~warpsky.surfaces.mesh.
+    no_surfaces`) and run the code they ran before the path tracer traced meshes."""
+    pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome, has_meshes)
 
     @wp.kernel(module="unique")
     def path_trace(
@@ -311,6 +346,7 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
         cam: PinholeCamera,
         ground: Ground,
         dome: DomeLight,
+        surfaces: SurfaceMeshes,
         settings: PathSettings,
         sums: PixelSums,
         samples: wp.array2d(dtype=SampleResult),
@@ -327,8 +363,8 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
             count = 1
         counts = wp.vec4i(0, 0, 0, 0)
         for s in range(count):
-            sample = pixel_sample(media, majorants, cut, phase_tables, air, sun, cam, ground, dome, settings,
-                                  pixel_row, col, settings.first_sample + path + s)
+            sample = pixel_sample(media, majorants, cut, phase_tables, air, sun, cam, ground, dome, surfaces,
+                                  settings, pixel_row, col, settings.first_sample + path + s)
             if keep:
                 samples[row, col] = sample
             else:

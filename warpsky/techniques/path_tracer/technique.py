@@ -55,6 +55,7 @@ from warpsky.techniques.path_tracer.layer_media import (
     with_layers_as_media,
 )
 from warpsky.techniques.path_tracer.majorants import medium_block, upload_majorants
+from warpsky.techniques.path_tracer.surfaces import traced_meshes
 from warpsky.techniques.single_scatter.technique import MEDIA_CACHE
 
 
@@ -133,6 +134,8 @@ class PathTracer(Technique):
     #: It traces a height-field cloud deck itself too, voxelised (``deck_extent``, ``deck_voxel*``).
     traces_decks = True
     traces_dome = True
+    #: It traces the scene's triangle meshes itself, inside its paths (:mod:`.surfaces`): no surfaces pass.
+    traces_meshes = True
     aovs = {"variance": "RGB"}
     kernel_modules = ("warpsky.techniques.path_tracer.kernels",)
     settings_notes = ("--spp N and --seed S are shorthands for --set spp=N / seed=S. Writes a variance.RGB AOV "
@@ -150,15 +153,18 @@ class PathTracer(Technique):
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
         """Bytes a frame allocates: a :class:`PixelSums` (and on a GPU the paths of one launch when the frame is
-        small), the float64 sums of :func:`sums_layer`, the variance AOV, and the media with their majorants."""
+        small), the float64 sums of :func:`sums_layer`, the variance AOV, the media with their majorants, and the
+        meshes it traces (their points, indices and Warp's BVH, as the surfaces pass counts them)."""
         settings = self.settings_for(scene)
         pixels = width * height
-        return (path_tracing_memory(scene, pixels, settings.majorant_block, self.device,
-                                    int(settings.samples_per_pass), bake_detail=bool(settings.bake_detail))
-                .add("images", host=pixels * SUMS_LAYER_BYTES)
-                .add("AOVs", host=pixels * AOV_BYTES)
-                .merge(layer_voxel_memory(scene, settings))
-                .merge(deck_voxel_memory(scene, settings, width, height)))
+        estimate = (path_tracing_memory(scene, pixels, settings.majorant_block, self.device,
+                                        int(settings.samples_per_pass), bake_detail=bool(settings.bake_detail))
+                    .add("images", host=pixels * SUMS_LAYER_BYTES)
+                    .add("AOVs", host=pixels * AOV_BYTES)
+                    .merge(layer_voxel_memory(scene, settings))
+                    .merge(deck_voxel_memory(scene, settings, width, height)))
+        triangles = sum(len(m.triangles) for m in scene.meshes)
+        return estimate.add("meshes", host=40 * triangles, device=88 * triangles) if triangles else estimate
 
     def work_estimate(self, scene: Scene, width: int, height: int) -> list[WorkItem]:
         """Worst-case path events: every path runs to the bounce cap."""
@@ -192,7 +198,7 @@ class PathTracer(Technique):
         started = time.perf_counter()
         scene = with_deck_as_media(with_layers_as_media(scene, settings, self.device), settings, width, height)
         with device_buffers.exclusive("path_tracer", self.device):  # the sums and kept paths below
-            tracing = PathTracing(scene, width, height, settings, self.device)
+            tracing = PathTracing(scene, width, height, settings, self.device, meshes=True)
             sums = pixel_sums((height, width), self.device, name="path_tracer")
             spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
             done = 0
@@ -220,7 +226,9 @@ class PathTracing:
 
     ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
     at least twice, for techniques that march single scattering exactly; ``air_by_table`` leaves out the paths
-    whose first event is in the air (the sky pass's multiple-scattering table holds their light). The media's
+    whose first event is in the air (the sky pass's multiple-scattering table holds their light); ``meshes``
+    traces the scene's meshes inside the paths (else another pass draws them and camera rays end at its depth,
+    ``Camera.opaque_depth``). The media's
     values (under :data:`MEDIA_CACHE`, shared with the single-scattering march) and majorants go through
     :func:`warpsky.device_buffers.upload`: the next frame of a batch with the same grids copies nothing; the sums
     and kept paths are :func:`warpsky.device_buffers.reusable` arrays under ``buffer_name``.
@@ -233,7 +241,7 @@ class PathTracing:
 
     def __init__(self, scene: Scene, width: int, height: int, settings: PathTracerSettings, device: str, *,
                  air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer",
-                 per_sample: bool | None = None, air_by_table: bool = False):
+                 per_sample: bool | None = None, air_by_table: bool = False, meshes: bool = False):
         self.settings = settings
         self.air_by_table = bool(air_by_table and air)
         self.device = device
@@ -266,7 +274,9 @@ class PathTracing:
                 cut_struct.media = cut_media.media
                 cut_struct.majorants = upload_majorants(cut_list, settings.majorant_block, device,
                                                         cache_name="path_tracer:majorants:cut")[0]
-        flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None)
+            surfaces, mesh_buffers = traced_meshes(scene.meshes if meshes else (), camera.position, device)
+        flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None,
+                 mesh_buffers is not None)
         capacity = per_sample_launches(device, width * height, int(settings.samples_per_pass or 1))
         if per_sample is not None:
             capacity = max(1, int(settings.samples_per_pass or 1)) if per_sample else 0
@@ -279,10 +289,12 @@ class PathTracing:
         dome = dome_struct(scene.dome, device)
         oriented = oriented_phases(scene, device, cache="path_tracer")
         continuation = continuation_tables(scene, device, cache="path_tracer")
-        self._keep = (tables, media, dome, oriented, continuation, cut_struct)  # the structs below point into these
+        # the structs below point into these
+        self._keep = (tables, media, dome, oriented, continuation, cut_struct, mesh_buffers, surfaces)
         self.fixed = [media.media, majorants, cut_struct, phase_tables_struct(tables, oriented, continuation),
                       air_struct(scene, camera.position, device, air=air), sun_struct(sunlight(scene)),
-                      pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position), dome]
+                      pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position), dome,
+                      surfaces]
 
     def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:
         """Add paths ``first_sample .. first_sample + count - 1`` of every pixel to ``sums`` (asynchronous on
