@@ -30,6 +30,7 @@ class Technique:
       the ground, which the lowest stratiform layer draws).
     - ``traces_layers``: it traces the stratiform layers itself, voxelised, so no stratiform pass runs.
     - ``traces_decks``: it traces height-field cloud decks and their haze itself, so no height-field pass runs.
+    - ``traces_fog``: it traces analytic fog itself as a participating medium, so no fog pass runs.
     - ``traces_dome``: a dome's light is path traced exactly (else it is an ambient light of the marching models).
     - ``aovs``: the extra outputs its layer holds, name -> components (``variance``: ``RGB``), which RenderVars
       may name.
@@ -47,6 +48,7 @@ class Technique:
     renders_layers: ClassVar[bool] = True
     traces_layers: ClassVar[bool] = False
     traces_decks: ClassVar[bool] = False
+    traces_fog: ClassVar[bool] = False
     traces_dome: ClassVar[bool] = False
     aovs: ClassVar[dict[str, str]] = {}
     kernel_modules: ClassVar[tuple[str, ...]] = ()
