@@ -113,22 +113,26 @@ def looking_down(mu: float, position) -> Camera:
                   far=1.0e4)
 
 
-def test_fog_slab_over_ground_against_adding_doubling(device):
-    """A constant fog slab of optical depth 1 (albedo 0.9, HG g = 0.5) on a Lambertian ground (albedo 0.5) under a
-    zenith sun, no air: the radiance leaving it at mu = 0.7 (every order of scattering and ground bounce) agrees with
-    adding-doubling, |z| < 3."""
-    mu, g = 0.7, 0.5
+@pytest.mark.parametrize("g,order", [(0.5, 0), (0.0, 1)])
+def test_fog_slab_over_ground_against_adding_doubling(g, order, device):
+    """A constant fog slab of optical depth 1 (albedo 0.9, HG g) on a Lambertian ground (albedo 0.5) under a zenith
+    sun, no air: the radiance leaving it at mu = 0.7 (every order of scattering and ground bounce) agrees with
+    adding-doubling, |z| < 3. With g = 0 high-order similarity from the first event changes nothing (the reduced
+    fog is the fog): the same agreement through the reduced flights, events and shadow rays."""
+    mu = 0.7
     fog = AnalyticFog("slab", [ConstantTerm(0.1)], floor=0.0, top=10.0, albedo=np.full(3, 0.9), g=g)
     scene = Scene(looking_down(mu, (0.0, 30.0, 0.0)), Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), fogs=(fog,),
                   ground=Ground(0.0, np.full(3, 0.5)))
-    layer = PathTracer(PathTracerSettings(spp=4096, seed=3), device=device).render(scene, 4, 4)
+    settings = PathTracerSettings(spp=4096, seed=3, similarity_order=order)
+    layer = PathTracer(settings, device=device).render(scene, 4, 4)
     from adding_doubling import ground_reflected_radiance
 
     expected = ground_reflected_radiance(lambda c: phase_numpy(PhaseKind.HG, g, c), 1.0, 0.9, 0.5, mu)
     mean = layer.radiance[..., 1].astype(np.float64).mean()
     sigma = np.sqrt(layer.aovs["variance"][..., 1].astype(np.float64).sum()) / layer.radiance[..., 1].size
     z = (mean - expected) / sigma
-    print(f"\nfog slab over ground: path tracer {mean:.5f} +- {sigma:.5f}, adding-doubling {expected:.5f}, z = {z:.2f}")
+    print(f"\nfog slab over ground, g = {g}, similarity order {order}: path tracer {mean:.5f} +- {sigma:.5f}, "
+          f"adding-doubling {expected:.5f}, z = {z:.2f}")
     assert abs(z) < 3.0
     assert np.allclose(layer.radiance[..., 0], layer.radiance[..., 1]) and sigma < 0.005 * expected
 
