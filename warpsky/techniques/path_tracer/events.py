@@ -374,12 +374,10 @@ def media_first_function(has_detail: bool):
 
 
 @functools.cache
-def event_functions(has_ground: bool, has_tables: bool, has_detail: bool, has_fog: bool = False):
-    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species,
-    animated detail and analytic fog."""
-    sample_media = media_functions(has_detail)
+def fog_event_function(has_detail: bool, has_fog: bool):
+    """``fog_scatter_event(media, majorants, air, sun, sun_on, path, p, g) -> PathState``, specialised on animated
+    detail and analytic fog."""
     transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
-    mixture_phase, sample_mixture = mixture_functions(has_tables)
 
     @wp.func
     def fog_scatter_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, sun_on: bool,
@@ -401,6 +399,18 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool, has_fo
         out.state = state
         out.origin = p
         return out
+
+    return fog_scatter_event
+
+
+@functools.cache
+def event_functions(has_ground: bool, has_tables: bool, has_detail: bool, has_fog: bool = False):
+    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species,
+    animated detail and analytic fog."""
+    sample_media = media_functions(has_detail)
+    transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
+    mixture_phase, sample_mixture = mixture_functions(has_tables)
+    fog_scatter_event = fog_event_function(has_detail, has_fog)
 
     @wp.func
     def scatter_event(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
