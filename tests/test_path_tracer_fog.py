@@ -137,6 +137,42 @@ def test_fog_slab_over_ground_against_adding_doubling(g, order, device):
     assert np.allclose(layer.radiance[..., 0], layer.radiance[..., 1]) and sigma < 0.005 * expected
 
 
+def test_fogs_and_a_voxel_slab_mix_against_adding_doubling(tmp_path, homogeneous_npy, device):
+    """Two fogs and a voxel slab filling the same 10 m under a zenith sun (tau 0.3 + 0.2 + 0.5, albedos 0.9, 0.6 and
+    1, HG g 0.7, -0.2 and 0.5), seen from above at mu = 0.7: the scattering events pick each part by its share, so
+    the reflected radiance is adding-doubling's for the mixture's albedo and phase, |z| < 3."""
+    import dataclasses
+
+    from adding_doubling import slab_radiance
+    from conftest import StageSpec, look_rotation, write_stage
+
+    from warpsky.scene.usd import StageReader
+
+    mu = 0.7
+    look = np.array([np.sqrt(1.0 - mu * mu), -mu, 0.0])
+    spec = StageSpec(volume_file=homogeneous_npy, volume_extent=((-1e5, 0.0, -1e5), (1e5, 10.0, 1e5)),
+                     extinction_scale=0.05, phase="hg", g=0.5, sun_direction=(0.0, 1.0, 0.0),
+                     camera_position=tuple(-look * 40.0 + np.array([0.0, 5.0, 0.0])),
+                     camera_rotation=look_rotation(look), focal_length=2000.0)
+    scene = StageReader(write_stage(tmp_path / "mixed.usda", spec)).scene_at(None)
+    fogs = (AnalyticFog("a", [ConstantTerm(0.03)], floor=0.0, top=10.0, albedo=np.full(3, 0.9), g=0.7),
+            AnalyticFog("b", [ConstantTerm(0.02)], floor=0.0, top=10.0, albedo=np.full(3, 0.6), g=-0.2))
+    scene = dataclasses.replace(scene, fogs=fogs)
+    layer = PathTracer(PathTracerSettings(spp=4096, seed=5), device=device).render(scene, 4, 4)
+    parts = [(0.3 * 0.9, 0.7), (0.2 * 0.6, -0.2), (0.5 * 1.0, 0.5)]  # (scattering optical depth, g)
+    scattering = sum(s for s, _ in parts)
+
+    def phase(c):
+        return sum(s * phase_numpy(PhaseKind.HG, g, c) for s, g in parts) / scattering
+
+    expected = slab_radiance(phase, 1.0, scattering, [mu])[0][0]
+    mean = layer.radiance[..., 1].astype(np.float64).mean()
+    sigma = np.sqrt(layer.aovs["variance"][..., 1].astype(np.float64).sum()) / layer.radiance[..., 1].size
+    z = (mean - expected) / sigma
+    print(f"\nfogs and voxels: path tracer {mean:.5f} +- {sigma:.5f}, adding-doubling {expected:.5f}, z = {z:.2f}")
+    assert abs(z) < 3.0 and sigma < 0.01 * expected
+
+
 def test_thin_fog_single_scattering_matches_the_fog_pass(device):
     """A thin varied fog (optical depth at most 0.15 along the rays) around the camera, no ground or air, paths cut
     after one scattering: the image is the fog pass's single scattering (ambient 0), |z| < 3 over the frame (a
