@@ -82,3 +82,19 @@ def stack_radiance(layers, view_mu, *, nodes: int = 64, doublings=None):
     beam = np.zeros(len(mu))
     beam[nodes] = 1.0 / (2 * np.pi * weight[nodes])
     return (t_total @ beam)[nodes + 1 :]
+
+
+def ground_reflected_radiance(phase, tau: float, albedo: float, ground_albedo: float, view_mu: float) -> float:
+    """Radiance leaving the top of a homogeneous slab over a Lambertian ground, per unit beam irradiance at normal
+    incidence, by adding-doubling: the slab's R and T on Gauss nodes, the ground as the
+    operator L_i = 2 a sum_j w_j mu_j L_j, added: R + T G (1 - R G)^-1 T."""
+    x, w = np.polynomial.legendre.leggauss(64)
+    mu = np.concatenate([0.5 * (x + 1.0), [1.0, view_mu]])
+    weight = np.concatenate([0.5 * w, [1e-9, 1e-9]])
+    r, t = _layer(phase, tau, albedo, mu, weight, None)
+    ground = 2.0 * ground_albedo * np.tile(weight * mu, (len(mu), 1))
+    beam = np.zeros(len(mu))
+    beam[64] = 1.0 / (2 * np.pi * weight[64])
+    down = t @ beam
+    up = np.linalg.solve(np.eye(len(mu)) - ground @ r, ground @ down)
+    return float((r @ beam + t @ up)[65])

@@ -312,6 +312,23 @@ def fogs_optical_depth(fogs: FogSet, a: wp.vec3d, b: wp.vec3d) -> wp.vec3d:
     return total
 
 
+@wp.func
+def slabs_exit_length(fogs: FogSet, x: wp.vec3d, direction: wp.vec3d, horizontal: wp.float64) -> wp.float64:
+    """Length [m] along unit ``direction`` from ``x`` after which the ray is out of every slab for good (up to the
+    highest top, down to the lowest floor; ``horizontal`` for a horizontal ray)."""
+    top = fogs.bodies[0].top
+    floor = fogs.bodies[0].floor
+    for f in range(fogs.body_count):
+        top = wp.max(top, fogs.bodies[f].top)
+        floor = wp.min(floor, fogs.bodies[f].floor)
+    length = horizontal
+    if direction[1] > wp.float64(0.0):
+        length = wp.max(top - x[1], wp.float64(0.0)) / direction[1]
+    elif direction[1] < wp.float64(0.0):
+        length = wp.max(x[1] - floor, wp.float64(0.0)) / -direction[1]
+    return length
+
+
 # ------------------------------------------------------------------------------------------------------- host
 def centred_coefficients(coefficients, centre: float) -> np.ndarray:
     """Coefficients of P(centre + v) in ascending powers of v: c'_j = sum_n c_n C(n, j) centre^(n - j)."""

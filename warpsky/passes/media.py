@@ -32,10 +32,10 @@ class MediaPass(Pass):
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
-        """With voxel media, with layers, a deck or meshes the technique traces itself, or in a scene with nothing
-        else to draw (the technique draws the ground, the sky or nothing)."""
+        """With voxel media, with layers, a deck, fog or meshes the technique traces itself, or in a scene with
+        nothing else to draw (the technique draws the ground, the sky or nothing)."""
         traced = ((scene.layers and technique.traces_layers) or (scene.heightfield_clouds and technique.traces_decks)
-                  or (scene.meshes and technique.traces_meshes))
+                  or (scene.fogs and technique.traces_fog) or (scene.meshes and technique.traces_meshes))
         return bool(scene.media) or bool(traced) or not (scene.layers or has_scenery(scene))
 
     @classmethod

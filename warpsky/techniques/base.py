@@ -30,6 +30,7 @@ class Technique:
       the ground, which the lowest stratiform layer draws).
     - ``traces_layers``: it traces the stratiform layers itself, voxelised, so no stratiform pass runs.
     - ``traces_decks``: it traces height-field cloud decks and their haze itself, so no height-field pass runs.
+    - ``traces_fog``: it traces analytic fog itself as a participating medium, so no fog pass runs.
     - ``traces_dome``: a dome's light is path traced exactly (else it is an ambient light of the marching models).
     - ``traces_meshes``: it traces the scene's triangle meshes itself (light bounces between them, the media and
       the ground), so no surfaces pass runs: it draws the ground plane and the meshes in its own layer.
@@ -49,6 +50,7 @@ class Technique:
     renders_layers: ClassVar[bool] = True
     traces_layers: ClassVar[bool] = False
     traces_decks: ClassVar[bool] = False
+    traces_fog: ClassVar[bool] = False
     traces_dome: ClassVar[bool] = False
     traces_meshes: ClassVar[bool] = False
     aovs: ClassVar[dict[str, str]] = {}

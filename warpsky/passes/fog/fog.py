@@ -167,11 +167,11 @@ class FogPass(Pass):
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
-        return bool(scene.fogs)
+        return bool(scene.fogs) and not technique.traces_fog
 
     @classmethod
     def refusal(cls, scene, technique):
-        if scene.fogs and technique.traces_air:
+        if cls.runs(scene, technique) and technique.traces_air:
             return "analytic fog", [fog.name for fog in scene.fogs]
         return None
 
@@ -179,6 +179,10 @@ class FogPass(Pass):
     def describe(cls, scene, technique, settings) -> dict[str, str]:
         if not scene.fogs:
             return {"fog": 'none (no prim with warpsky:kind = "analyticFog")'}
+        if technique.traces_fog:
+            return {"fog": "; ".join(f"{fog.name}: {fog.describe()}" for fog in scene.fogs)
+                    + f" (Biri 2002): traced by {technique.name} as a participating medium, closed-form density "
+                    "and sun transmittance; no fog pass"}
         return {"fog": "; ".join(f"{fog.name}: {fog.describe()}" for fog in scene.fogs)
                 + " (Biri 2002, closed-form optical depths)"}
 

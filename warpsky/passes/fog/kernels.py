@@ -26,7 +26,7 @@ import math
 import warp as wp
 
 from warpsky.camera_rays import PinholeCamera, camera_forward, primary_ray
-from warpsky.media.analytic_fog import FogSet, fog_density, fogs_optical_depth
+from warpsky.media.analytic_fog import FogSet, fog_density, fogs_optical_depth, slabs_exit_length
 from warpsky.surfaces.mesh import SurfaceMeshes, mesh_occluded
 
 FOUR_PI = wp.constant(wp.float64(4.0 * math.pi))
@@ -324,14 +324,5 @@ def sun_transmittance_kernel(fogs: FogSet, direction: wp.vec3d, horizontal_lengt
     horizontal direction: ``horizontal_length`` metres)."""
     i = wp.tid()
     x = points[i]
-    top = fogs.bodies[0].top
-    floor = fogs.bodies[0].floor
-    for f in range(fogs.body_count):
-        top = wp.max(top, fogs.bodies[f].top)
-        floor = wp.min(floor, fogs.bodies[f].floor)
-    length = horizontal_length
-    if direction[1] > wp.float64(0.0):
-        length = wp.max(top - x[1], wp.float64(0.0)) / direction[1]
-    elif direction[1] < wp.float64(0.0):
-        length = wp.max(x[1] - floor, wp.float64(0.0)) / -direction[1]
+    length = slabs_exit_length(fogs, x, direction, horizontal_length)
     out[i] = exp3d(fogs_optical_depth(fogs, x, x + length * direction))

@@ -213,7 +213,8 @@ class SurfacesPass(Pass):
     def runs(cls, scene, technique) -> bool:
         if technique.traces_meshes or (scene.heightfield_clouds and technique.traces_decks):
             return False
-        scenery = bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
+        fog = bool(scene.fogs) and not technique.traces_fog  # else the technique draws the ground with its fog
+        scenery = bool(scene.meshes or scene.heightfield_clouds or fog)
         return bool(scene.meshes) or (scene.ground is not None and scenery and not scene.media and not scene.layers)
 
     @classmethod

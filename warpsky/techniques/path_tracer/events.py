@@ -34,9 +34,10 @@ from warpsky.media.air import (
 from warpsky.media.phase_mixture import mixture_functions, oriented_correction_function
 from warpsky.media.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import medium_phase, scattering_angle
-from warpsky.optics.phase import isotropic_sample_cos
+from warpsky.optics.phase import hg_sample_cos, isotropic_sample_cos, phase_hg
 from warpsky.optics.phase_sampling import PhaseTables, rotate_about
 from warpsky.surfaces.plane import Ground
+from warpsky.techniques.path_tracer.fog_media import fog_coefficients, fog_sun_transmittance, pick_fog
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.planet import (
     air_to_sun,
@@ -270,9 +271,9 @@ def surface_functions(has_ground: bool):
 
 
 @functools.cache
-def sun_transmittance_function(has_detail: bool):
+def sun_transmittance_function(has_detail: bool, has_fog: bool = False):
     """``transmittance_to_sun(media, majorants, air, sun, p, state, reduced) -> Transmittance``, specialised on
-    animated detail."""
+    animated detail and analytic fog (whose transmittance is its closed form)."""
     ratio_track = tracking_functions(has_detail)[2]
 
     @wp.func
@@ -292,17 +293,19 @@ def sun_transmittance_function(has_detail: bool):
             return out
         out = ratio_track(media, majorants, no_air(), p, sun.direction, UNBOUNDED, state, reduced)
         out.value = wp.cw_mul(out.value, through_air)
+        if wp.static(has_fog):
+            out.value = wp.cw_mul(out.value, fog_sun_transmittance(majorants.fog, p, sun.direction, reduced))
         return out
 
     return transmittance_to_sun
 
 
 @functools.cache
-def reduced_event_function(has_detail: bool):
+def reduced_event_function(has_detail: bool, has_fog: bool = False):
     """``reduced_scatter_event(media, majorants, air, sun, sun_on, path, p) -> PathState``: scattering after
-    high-order similarity, specialised on animated detail."""
+    high-order similarity, specialised on animated detail and analytic fog (reduced like the media)."""
     sample_media = media_functions(has_detail)
-    transmittance_to_sun = sun_transmittance_function(has_detail)
+    transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
 
     @wp.func
     def reduced_scatter_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, sun_on: bool,
@@ -313,6 +316,8 @@ def reduced_event_function(has_detail: bool):
         out = path
         air_s = air_part(air, p)
         media_part = reduced_with_air(media, sample_media(media, p), no_air(), p).scattering
+        if wp.static(has_fog):
+            media_part = media_part + fog_coefficients(majorants.fog, p, 1).scattering
         total = part_total(air_s) + media_part
         if sun_on:
             tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 1)
@@ -371,12 +376,43 @@ def media_first_function(has_detail: bool):
 
 
 @functools.cache
-def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
-    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species and
-    animated detail."""
+def fog_event_function(has_detail: bool, has_fog: bool):
+    """``fog_scatter_event(media, majorants, air, sun, sun_on, path, p, g) -> PathState``, specialised on animated
+    detail and analytic fog."""
+    transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
+
+    @wp.func
+    def fog_scatter_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, sun_on: bool,
+                          path: PathState, p: wp.vec3, g: float) -> PathState:
+        """Scattering in a fog at ``p`` (:func:`~warpsky.techniques.path_tracer.fog_media.pick_fog` chose it): the
+        sun through everything times its Henyey-Greenstein phase, then a direction drawn from that phase (weight 1:
+        the same density in every channel, so the hero ratios stay); two random draws."""
+        out = path
+        if sun_on:
+            tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 0)
+            out.state = tr_sun.state
+            out.steps = out.steps + tr_sun.steps
+            out.shadow_steps = out.shadow_steps + tr_sun.steps
+            phase = phase_hg(wp.dot(sun.direction, out.direction), g)
+            out.radiance = out.radiance + wp.cw_mul(out.throughput, wp.cw_mul(sun.irradiance, tr_sun.value)) * phase
+        state = out.state
+        cos_theta = hg_sample_cos(g, wp.randf(state))
+        out.direction = rotate_about(out.direction, cos_theta, 2.0 * wp.pi * wp.randf(state))
+        out.state = state
+        out.origin = p
+        return out
+
+    return fog_scatter_event
+
+
+@functools.cache
+def event_functions(has_ground: bool, has_tables: bool, has_detail: bool, has_fog: bool = False):
+    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species,
+    animated detail and analytic fog."""
     sample_media = media_functions(has_detail)
-    transmittance_to_sun = sun_transmittance_function(has_detail)
+    transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
     mixture_phase, sample_mixture = mixture_functions(has_tables)
+    fog_scatter_event = fog_event_function(has_detail, has_fog)
 
     @wp.func
     def scatter_event(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
@@ -387,6 +423,12 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
         out = path
         point = sample_media(media, p)
         air_s = scaled_part(air_part(air, p), air_weight)
+        if wp.static(has_fog):
+            pick = pick_fog(majorants.fog, p, point.scattering + part_total(air_s), out.state)
+            out.state = pick.state
+            out.throughput = wp.cw_mul(out.throughput, pick.weight)
+            if pick.body >= 0:
+                return fog_scatter_event(media, majorants, air, sun, sun_on, out, p, pick.g)
         if sun_on:
             tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 0)
             out.state = tr_sun.state
@@ -438,4 +480,4 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool):
                 out.origin = q + wp.vec3(0.0, 1.0e-4, 0.0)
         return out
 
-    return scatter_event, reduced_event_function(has_detail), ground_event
+    return scatter_event, reduced_event_function(has_detail, has_fog), ground_event

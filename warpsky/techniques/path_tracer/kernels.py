@@ -50,6 +50,7 @@ from warpsky.techniques.path_tracer.events import (
     start_path,
     surface_functions,
 )
+from warpsky.techniques.path_tracer.fog_media import fog_sun_transmittance, fog_view_transmittance
 from warpsky.techniques.path_tracer.forward_cut import CutMedia, peak_light_function
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.planet import ground_point
@@ -119,9 +120,9 @@ def air_transmittance(air: Air, origin: wp.vec3, view: wp.vec3, distance: float)
 
 
 @functools.cache
-def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool):
+def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool, has_fog: bool = False):
     """``first_event(...) -> PathState``, what a path does where its first flight ends, specialised like the
-    kernels."""
+    kernels (the peak scatterings' sunlight comes through the analytic fogs too)."""
     first_event_peak_light = peak_light_function(has_tables, has_detail, has_ground)
 
     @wp.func
@@ -139,6 +140,8 @@ def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool):
                 q = ground_point(air, ground, p)
             peak = first_event_peak_light(media, majorants, cut, phase_tables, air, sun, ground, out.throughput,
                                           out.direction, q, 1 - scattered, out.state)
+            if wp.static(has_fog):
+                peak.radiance = wp.cw_mul(peak.radiance, fog_sun_transmittance(majorants.fog, q, sun.direction, 0))
             out.radiance = out.radiance + peak.radiance
             out.state = peak.state
             out.steps = out.steps + peak.steps
@@ -150,15 +153,16 @@ def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool):
 
 @functools.cache
 def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
-                  has_meshes: bool = False):
+                  has_meshes: bool = False, has_fog: bool = False):
     """``trace_path(...) -> PathState``, one path from its camera ray (one loop carrying state), specialised like
-    the kernels; with ``has_meshes`` its flights end at the meshes and bounce on them."""
-    delta_track = tracking_functions(has_detail)[1]
-    mesh_event = mesh_event_function(has_detail)
+    the kernels; with ``has_meshes`` its flights end at the meshes and bounce on them, with ``has_fog`` the analytic
+    fogs are tracked with the media."""
+    delta_track = tracking_functions(has_detail, has_fog)[1]
+    mesh_event = mesh_event_function(has_detail, has_fog)
     flight_end = surface_functions(has_ground)[1]
-    scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail)
+    scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail, has_fog)
     media_first = media_first_function(has_detail)
-    first_event = first_event_function(has_ground, has_tables, has_detail)
+    first_event = first_event_function(has_ground, has_tables, has_detail, has_fog)
 
     @wp.func
     def trace_path(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
@@ -249,12 +253,13 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
 
 @functools.cache
 def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
-                    has_meshes: bool = False):
+                    has_meshes: bool = False, has_fog: bool = False):
     """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
-    without a dome runs exactly the code it ran before domes existed)."""
+    without a dome runs exactly the code it ran before domes existed, one without analytic fog the code it ran
+    before the path tracer traced fog)."""
     ratio_track = tracking_functions(has_detail)[2]
     primary_end, _flight_end, sun_reaches = surface_functions(has_ground)
-    trace_path = path_function(has_ground, has_tables, has_detail, has_dome, has_meshes)
+    trace_path = path_function(has_ground, has_tables, has_detail, has_dome, has_meshes, has_fog)
 
     @wp.func
     def pixel_sample(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
@@ -296,6 +301,9 @@ def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False
             tr = ratio_track(media, majorants, no_air(), origin, view, first.t, state, 0)
             state = tr.state
             out.transmittance = wp.cw_mul(tr.value, air_transmittance(air, origin, view, first.t))
+            if wp.static(has_fog):  # closed form, exact
+                out.transmittance = wp.cw_mul(out.transmittance,
+                                              fog_view_transmittance(majorants.fog, origin, view, first.t))
             steps = tr.steps
             tracked = 1
         path = trace_path(media, majorants, cut, phase_tables, air, sun, ground, dome, surfaces, settings,
@@ -322,18 +330,19 @@ def add_sample(sums: PixelSums, row: int, col: int, sample: SampleResult):
 
 
 @kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True),
-                 has_dome=(False, True), has_meshes=(False, True))
+                 has_dome=(False, True), has_meshes=(False, True), has_fog=(False, True))
 @functools.cache
 def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
-                      has_meshes: bool = False) -> wp.Kernel:
+                      has_meshes: bool = False, has_fog: bool = False) -> wp.Kernel:
     """The progressive path tracer in both launch shapes (one kernel per scene kind, hence one CUDA module, for
     frames of any size). With ``samples`` empty (None), one thread per pixel runs the launch's
     ``settings.sample_count`` paths in path order into ``sums``. Otherwise one thread per (path, pixel): a launch
     over a frame of H rows covers ``sample_count`` x H rows, row r running path r // H of pixel row r % H into
     ``samples[r]`` (``sums`` untouched); :func:`sum_samples_kernel` then adds them. Only ``has_meshes`` kernels
     read ``surfaces`` (the meshes' BVH); the others are given an empty one (:func:`~warpsky.surfaces.mesh.
-    no_surfaces`) and run the code they ran before the path tracer traced meshes."""
-    pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome, has_meshes)
+    no_surfaces`) and run the code they ran before the path tracer traced meshes; likewise only ``has_fog``
+    kernels read the majorants' fogs."""
+    pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome, has_meshes, has_fog)
 
     @wp.kernel(module="unique")
     def path_trace(

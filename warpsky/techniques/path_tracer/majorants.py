@@ -19,6 +19,7 @@ from warpsky.media.air_round import Line, altitude_at, make_line
 from warpsky.media.detail import detail_factor_bound
 from warpsky.media.voxel import VoxelMedia, grid_interval, reduced_coefficients
 from warpsky.scene.model import VoxelMedium
+from warpsky.techniques.path_tracer.fog_media import FogTracking
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
 MAJORANT_MARGIN = wp.constant(1.0001)
@@ -47,11 +48,13 @@ class MajorantGrid:
 class Majorants:
     """Every medium's majorant grid: one :class:`MajorantGrid` per medium over one flat buffer of bounds [1/m], and
     the same bounds for the media after high-order similarity (``reduced``; the same buffer when paths never
-    switch to it)."""
+    switch to it); and the scene's analytic fogs, whose bounds come from their terms
+    (:mod:`~warpsky.techniques.path_tracer.fog_media`)."""
 
     grids: wp.array(dtype=MajorantGrid)
     values: wp.array(dtype=float)
     reduced: wp.array(dtype=float)
+    fog: FogTracking  # the analytic fogs, read only by the kernels specialised on fog
 
 
 @wp.struct

@@ -107,10 +107,10 @@ def sun_unblocked(surfaces: SurfaceMeshes, air: Air, ground: Ground, sun: Sun, p
 
 
 @functools.cache
-def mesh_event_function(has_detail: bool):
+def mesh_event_function(has_detail: bool, has_fog: bool = False):
     """``mesh_event(media, majorants, air, sun, surfaces, sun_on, path, p, hit, reduced) -> PathState``, the
-    Lambertian bounce on a mesh, specialised on animated detail."""
-    transmittance_to_sun = sun_transmittance_function(has_detail)
+    Lambertian bounce on a mesh, specialised on animated detail and analytic fog (its sunlight through the fogs)."""
+    transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
 
     @wp.func
     def mesh_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, surfaces: SurfaceMeshes,

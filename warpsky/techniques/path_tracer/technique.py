@@ -34,6 +34,7 @@ from warpsky.settings import Settings, documented, setting
 from warpsky.surfaces.plane import ground_struct
 from warpsky.techniques.base import Technique
 from warpsky.techniques.path_tracer.deck_media import deck_voxel_features, deck_voxel_memory, with_deck_as_media
+from warpsky.techniques.path_tracer.fog_media import fog_tracking
 from warpsky.techniques.path_tracer.forward_cut import (
     CutMedia,
     check_cut_settings,
@@ -120,7 +121,8 @@ class PathTracer(Technique):
     Russian roulette, a Lambertian ground, an optional uniform environment and the scene's dome (light of paths
     that escape after a bounce; the composite draws it behind the camera rays). Stratiform layers are voxelised
     (:mod:`.layer_media`) and traced as media, and so is a height-field cloud deck with its haze
-    (:mod:`.deck_media`). Progressive: samples accumulate per pixel with their running
+    (:mod:`.deck_media`); analytic fog (Biri et al. 2002) is traced as a medium of closed-form density
+    (:mod:`.fog_media`). Progressive: samples accumulate per pixel with their running
     variance (``Layer.aovs["variance"]``, the variance of the pixel mean)."""
 
     name = "path_tracer"
@@ -133,6 +135,8 @@ class PathTracer(Technique):
     traces_layers = True
     #: It traces a height-field cloud deck itself too, voxelised (``deck_extent``, ``deck_voxel*``).
     traces_decks = True
+    #: And analytic fog, as a medium whose density is evaluated in closed form (:mod:`.fog_media`): no fog pass.
+    traces_fog = True
     traces_dome = True
     #: It traces the scene's triangle meshes itself, inside its paths (:mod:`.surfaces`): no surfaces pass.
     traces_meshes = True
@@ -198,7 +202,7 @@ class PathTracer(Technique):
         started = time.perf_counter()
         scene = with_deck_as_media(with_layers_as_media(scene, settings, self.device), settings, width, height)
         with device_buffers.exclusive("path_tracer", self.device):  # the sums and kept paths below
-            tracing = PathTracing(scene, width, height, settings, self.device, meshes=True)
+            tracing = PathTracing(scene, width, height, settings, self.device, meshes=True, fog=True)
             sums = pixel_sums((height, width), self.device, name="path_tracer")
             spp, per_pass = int(settings.spp), int(settings.samples_per_pass)
             done = 0
@@ -224,7 +228,8 @@ class PathTracing:
     """The path tracer set up for one frame: tables, media, majorants and the specialised kernel uploaded once;
     :meth:`launch` adds paths per pixel to a :class:`PixelSums` (progressive passes reuse everything).
 
-    ``air=False`` leaves the atmosphere out (the sky pass draws it); ``multiple_only`` keeps only light scattered
+    ``air=False`` leaves the atmosphere out (the sky pass draws it); ``fog=True`` traces the scene's analytic fogs
+    (:mod:`.fog_media`; else the fog pass draws them); ``multiple_only`` keeps only light scattered
     at least twice, for techniques that march single scattering exactly; ``air_by_table`` leaves out the paths
     whose first event is in the air (the sky pass's multiple-scattering table holds their light); ``meshes``
     traces the scene's meshes inside the paths (else another pass draws them and camera rays end at its depth,
@@ -241,7 +246,8 @@ class PathTracing:
 
     def __init__(self, scene: Scene, width: int, height: int, settings: PathTracerSettings, device: str, *,
                  air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer",
-                 per_sample: bool | None = None, air_by_table: bool = False, meshes: bool = False):
+                 per_sample: bool | None = None, air_by_table: bool = False, meshes: bool = False,
+                 fog: bool = False):
         self.settings = settings
         self.air_by_table = bool(air_by_table and air)
         self.device = device
@@ -275,8 +281,11 @@ class PathTracing:
                 cut_struct.majorants = upload_majorants(cut_list, settings.majorant_block, device,
                                                         cache_name="path_tracer:majorants:cut")[0]
             surfaces, mesh_buffers = traced_meshes(scene.meshes if meshes else (), camera.position, device)
+        fogs = scene.fogs if fog else ()
+        majorants.fog = fog_tracking(fogs, camera.position, scene.time_s, device)
+        cut_struct.majorants.fog = majorants.fog
         flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None,
-                 mesh_buffers is not None)
+                 mesh_buffers is not None, bool(fogs))
         capacity = per_sample_launches(device, width * height, int(settings.samples_per_pass or 1))
         if per_sample is not None:
             capacity = max(1, int(settings.samples_per_pass or 1)) if per_sample else 0

@@ -30,6 +30,7 @@ import warp as wp
 
 from warpsky.media.air import Air, air_coefficient, air_scattering
 from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
+from warpsky.techniques.path_tracer.fog_media import fog_coefficients, fog_segment
 from warpsky.techniques.path_tracer.majorants import Majorants, majorant_segment
 
 #: Ratio tracking plays Russian roulette once its largest channel falls below this (on the storm, 1e-3 with survival
@@ -114,39 +115,55 @@ class Collision:
     state: wp.uint32
 
 
-@wp.func
-def next_collision(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
-                   t_start: float, t_max: float, steps_start: int, state: wp.uint32, reduced: int) -> Collision:
-    """The next tentative collision after ``t_start`` (one random draw per exponential step), or ``t_max``; with
-    ``reduced`` against the majorants after high-order similarity."""
-    t = float(t_start)
-    steps = int(steps_start)
-    found = int(0)
-    majorant = float(0.0)
-    while t < t_max and steps < MAX_TRACKING_STEPS:
-        seg = majorant_segment(media, majorants, air, origin, direction, t, t_max, reduced)
-        if seg.majorant <= 0.0:
-            if seg.end >= t_max:
-                break
-            t = wp.max(seg.end, t)
+@functools.cache
+def collision_function(has_fog: bool):
+    """``next_collision(media, majorants, air, origin, direction, t_start, t_max, steps_start, state, reduced) ->
+    Collision``, specialised on analytic fog (inside a fog's slab its majorant joins the media's and the air's, and
+    the slab's faces end majorant segments: :func:`~warpsky.techniques.path_tracer.fog_media.fog_segment`)."""
+
+    @wp.func
+    def next_collision(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
+                       t_start: float, t_max: float, steps_start: int, state: wp.uint32, reduced: int) -> Collision:
+        """The next tentative collision after ``t_start`` (one random draw per exponential step), or ``t_max``;
+        with ``reduced`` against the majorants after high-order similarity."""
+        t = float(t_start)
+        steps = int(steps_start)
+        found = int(0)
+        majorant = float(0.0)
+        while t < t_max and steps < MAX_TRACKING_STEPS:
+            seg = majorant_segment(media, majorants, air, origin, direction, t, t_max, reduced)
+            if wp.static(has_fog):
+                fog = fog_segment(majorants.fog, origin, direction, t, reduced)
+                seg.majorant = seg.majorant + fog[0]
+                seg.end = wp.min(seg.end, fog[1])
+            if seg.majorant <= 0.0:
+                if seg.end >= t_max:
+                    break
+                t = wp.max(seg.end, t)
+                steps += 1
+                continue
+            step = -wp.log(1.0 - wp.randf(state)) / seg.majorant
             steps += 1
-            continue
-        step = -wp.log(1.0 - wp.randf(state)) / seg.majorant
-        steps += 1
-        if t + step >= seg.end:
-            t = seg.end
-            continue
-        t = t + step
-        found = 1
-        majorant = seg.majorant
-        break
-    out = Collision()
-    out.t = t
-    out.majorant = majorant
-    out.found = found
-    out.steps = steps
-    out.state = state
-    return out
+            if t + step >= seg.end:
+                t = seg.end
+                continue
+            t = t + step
+            found = 1
+            majorant = seg.majorant
+            break
+        out = Collision()
+        out.t = t
+        out.majorant = majorant
+        out.found = found
+        out.steps = steps
+        out.state = state
+        return out
+
+    return next_collision
+
+
+#: The tentative collisions of media and air (no fog).
+next_collision = collision_function(False)
 
 
 @wp.struct
@@ -174,10 +191,13 @@ def positive(v: wp.vec3) -> wp.vec3:
     return wp.vec3(wp.max(v[0], 0.0), wp.max(v[1], 0.0), wp.max(v[2], 0.0))
 
 
-def tracking_functions(has_detail: bool):
+def tracking_functions(has_detail: bool, has_fog: bool = False):
     """``(media_at, delta_track, ratio_track)``, specialised on animated detail: with it every density lookup is
-    multiplied by the medium's detail factor (the majorant grids are scaled by its bound on the host)."""
-    return media_at_function(has_detail), delta_track_function(has_detail), ratio_track_function(has_detail)
+    multiplied by the medium's detail factor (the majorant grids are scaled by its bound on the host); with
+    ``has_fog`` the free flights track the analytic fogs too (ratio tracking never does: their transmittance is
+    closed-form, :mod:`~warpsky.techniques.path_tracer.fog_media`)."""
+    return (media_at_function(has_detail), delta_track_function(has_detail, has_fog),
+            ratio_track_function(has_detail))
 
 
 @functools.cache
@@ -198,10 +218,11 @@ def media_at_function(has_detail: bool):
 
 
 @functools.cache
-def delta_track_function(has_detail: bool):
+def delta_track_function(has_detail: bool, has_fog: bool = False):
     """``delta_track(media, majorants, air, origin, direction, t_max, history, state, reduced) -> Flight`` (see
     :func:`tracking_functions`)."""
     media_at = media_at_function(has_detail)
+    collide = collision_function(has_fog)
 
     @wp.func
     def delta_track(media: VoxelMedia, majorants: Majorants, air: Air, origin: wp.vec3, direction: wp.vec3,
@@ -215,13 +236,17 @@ def delta_track_function(has_detail: bool):
         steps = int(0)
         found = int(1)
         while found != 0:
-            hit = next_collision(media, majorants, air, origin, direction, t, t_max, steps, state, reduced)
+            hit = collide(media, majorants, air, origin, direction, t, t_max, steps, state, reduced)
             t = hit.t
             steps = hit.steps
             state = hit.state
             found = hit.found
             if found != 0:
                 point = media_at(media, air, origin + t * direction, reduced)
+                if wp.static(has_fog):
+                    fog = fog_coefficients(majorants.fog, origin + t * direction, reduced)
+                    point.extinction = point.extinction + fog.extinction
+                    point.scattering = point.scattering + fog.scattering
                 # history-aware spectral tracking (Kutz et al. 2017): scatter with the throughput-weighted
                 # probability, so the channels' weights keep their sum on null collisions and cannot blow up
                 hw = wp.cw_mul(history, weight)
