@@ -139,6 +139,31 @@ def test_fog_slab_over_ground_against_adding_doubling(g, order, device):
     assert np.allclose(layer.radiance[..., 0], layer.radiance[..., 1]) and sigma < 0.005 * expected
 
 
+def test_fog_slab_over_a_terrain_mesh_against_adding_doubling(device):
+    """The same fog slab (g = 0.5) over a flat Lambertian mesh instead of the ground plane: the meshes and the fog
+    meet in one walk (the mesh bounce's sunlight through the fog's closed-form transmittance), |z| < 3 against
+    adding-doubling."""
+    from adding_doubling import ground_reflected_radiance
+
+    from warpsky.scene.terrain import TerrainMesh
+
+    mu, g = 0.7, 0.5
+    fog = AnalyticFog("slab", [ConstantTerm(0.1)], floor=0.0, top=10.0, albedo=np.full(3, 0.9), g=g)
+    half = 500.0  # wide enough for every path in the slab; its rays leave 2e-5 x (1 m + 707 m) = 1.4 cm off it
+    floor = TerrainMesh("floor", np.array([[-half, 0.0, -half], [half, 0.0, -half], [half, 0.0, half],
+                                           [-half, 0.0, half]]), np.array([[0, 2, 1], [0, 3, 2]]), (0.5, 0.5, 0.5))
+    scene = Scene(looking_down(mu, (0.0, 30.0, 0.0)), Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), fogs=(fog,),
+                  meshes=(floor,))
+    layer = PathTracer(PathTracerSettings(spp=4096, seed=5), device=device).render(scene, 4, 4)
+    expected = ground_reflected_radiance(lambda c: phase_numpy(PhaseKind.HG, g, c), 1.0, 0.9, 0.5, mu)
+    mean = layer.radiance[..., 1].astype(np.float64).mean()
+    sigma = np.sqrt(layer.aovs["variance"][..., 1].astype(np.float64).sum()) / layer.radiance[..., 1].size
+    z = (mean - expected) / sigma
+    print(f"\nfog slab over a mesh: path tracer {mean:.5f} +- {sigma:.5f}, adding-doubling {expected:.5f}, "
+          f"z = {z:.2f}")
+    assert abs(z) < 3.0 and sigma < 0.005 * expected
+
+
 def test_fogs_and_a_voxel_slab_mix_against_adding_doubling(tmp_path, homogeneous_npy, device):
     """Two fogs and a voxel slab filling the same 10 m under a zenith sun (tau 0.3 + 0.2 + 0.5, albedos 0.9, 0.6 and
     1, HG g 0.7, -0.2 and 0.5), seen from above at mu = 0.7: the scattering events pick each part by its share, so

@@ -97,20 +97,21 @@ def test_fog_is_composited_in_front_of_the_terrain_that_cuts_it(tmp_path, capsys
     assert np.all(np.isfinite(rgb)) and rgb.min() >= 0.0
 
 
-def test_path_tracer_traces_fog_and_refuses_meshes_with_a_clear_error(tmp_path, capsys):
-    """The path tracer traces analytic fog itself (no fog pass); meshes it still refuses, naming them."""
+def test_path_tracer_traces_fog_and_terrain_itself(tmp_path, capsys):
+    """The path tracer traces analytic fog and the terrain mesh itself (no fog or surfaces pass): a fog-only stage
+    and the fog over terrain render, finite and non-negative."""
+    from warpsky.output.exr import read_exr
+
     code, out, _ = run_cli(["info", write_stage(tmp_path, FOG, name="fog_only.usda"), "--technique", "path_tracer"],
                            capsys)
     assert code == 0 and "passes      media -> composite" in out and "traced by path_tracer" in out
-    code, _, err = run_cli(["render", write_stage(tmp_path, FOG, name="fog_only.usda"), tmp_path / "fog.exr",
-                            "--technique", "path_tracer", "--res", "16", "--spp", "2"], capsys)
-    assert code == 0, err
-    assert (tmp_path / "fog.exr").exists()
-    code, _, err = run_cli(["render", write_stage(tmp_path, TERRAIN, FOG), tmp_path / "x.exr", "--technique",
-                            "path_tracer"], capsys)
-    assert code == 2
-    assert "technique path_tracer does not render meshes (/World/Ground); use hybrid, single_scatter or slicing" in err
-    assert not (tmp_path / "x.exr").exists()
+    for name, parts in (("fog_only", (FOG,)), ("terrain_fog", (TERRAIN, FOG))):
+        out_path = tmp_path / f"{name}.exr"
+        code, _, err = run_cli(["render", write_stage(tmp_path, *parts, name=f"{name}.usda"), out_path,
+                                "--technique", "path_tracer", "--res", "16", "--spp", "2", "--float"], capsys)
+        assert code == 0, err
+        rgba = np.stack([read_exr(out_path).channels[c] for c in "RGBA"], axis=-1)
+        assert np.all(np.isfinite(rgba)) and rgba.min() >= 0.0 and rgba[..., :3].max() > 0.0
 
 
 def test_fog_attribute_on_a_prim_of_another_kind_is_named(tmp_path, capsys):

@@ -116,15 +116,16 @@ def mesh_event_function(has_detail: bool, has_fog: bool = False):
     def mesh_event(media: VoxelMedia, majorants: Majorants, air: Air, sun: Sun, surfaces: SurfaceMeshes,
                    sun_on: bool, path: PathState, p: wp.vec3, hit: SurfaceHit, reduced: int) -> PathState:
         """The path's flight ended on a mesh at ``p`` (``hit``): next-event estimation toward the sun (the meshes'
-        any-hit shadow ray, then the media, with ``reduced`` after high-order similarity, and the air), then a
-        cosine-weighted bounce about the shading normal (two random draws); a bounce under the face ends it."""
+        any-hit shadow ray from the point lifted off the face, then the media, with ``reduced`` after high-order
+        similarity, and the air from the hit itself), then a cosine-weighted bounce about the shading normal (two
+        random draws) from the lifted point; a bounce under the face ends it."""
         out = path
         start = off_surface(hit, p)
         n = hit.shading
         cosine = wp.dot(n, sun.direction)
         if sun_on and cosine > 0.0 and wp.dot(hit.normal, sun.direction) > 0.0:
             if not mesh_occluded(surfaces, start, sun.direction, UNBOUNDED):
-                tr_sun = transmittance_to_sun(media, majorants, air, sun, start, out.state, reduced)
+                tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, reduced)  # from the hit
                 out.state = tr_sun.state
                 out.steps = out.steps + tr_sun.steps
                 out.shadow_steps = out.shadow_steps + tr_sun.steps
