@@ -364,3 +364,26 @@ over "World"
     assert lines[-1].endswith("7 more Sphere prims ignored as the 5 above (/World/S05 .. /World/S11)"), lines[-1]
     code, stdout, _ = run(["info", stage, "--device", "cpu"], capsys)
     assert len([line for line in stdout.splitlines() if line.startswith("warning") and "Sphere" in line]) == 6
+
+
+def test_volumes_without_a_field_warpsky_renders_are_skipped_with_a_warning(tmp_path, scene, capsys):
+    """A procedural Volume its material makes (no fields, as in OpenUSD's volumeMaterial.usda) and one whose only
+    field is a temperature are each named in one warning and skipped; the stage's cloud still renders."""
+    from pxr import Usd, UsdVol
+
+    usd = Usd.Stage.Open(str(scene))
+    UsdVol.Volume.Define(usd, "/World/Procedural")
+    heat = UsdVol.Volume.Define(usd, "/World/Heat")
+    UsdVol.OpenVDBAsset.Define(usd, "/World/Heat/temperature").CreateFilePathAttr("heat.vdb")
+    heat.CreateFieldRelationship("temperature", "/World/Heat/temperature")
+    usd.GetRootLayer().Save()
+    out = tmp_path / "x.exr"
+    code, _, err = run(["render", scene, out, "--res", "8", "--float", *FAST], capsys)
+    assert code == 0, err
+    lines = warning_lines(err)
+    assert any("Volume /World/Procedural ignored: it has no fields" in line for line in lines), err
+    assert any("Volume /World/Heat ignored: it has fields temperature but none warpsky renders" in line
+               for line in lines), err
+    assert read_exr(out).channels["A"].max() > 0.1  # the cloud
+    code, stdout, _ = run(["info", scene, "--device", "cpu"], capsys)
+    assert code == 0 and "warning     Volume /World/Procedural ignored" in stdout

@@ -79,9 +79,11 @@ class IgnoredReading(StagePrims):
 
         if not (prim.IsA(UsdGeom.Gprim) or prim.IsA(UsdGeom.PointInstancer)):
             return None
-        if prim.IsA(UsdGeom.Mesh) or prim.IsA(UsdVol.Volume) or not self._rendered(prim, tc):
+        if prim.IsA(UsdGeom.Mesh) or not self._rendered(prim, tc):
             return None
         path = str(prim.GetPath())
+        if prim.IsA(UsdVol.Volume):
+            return self._volume_reason(UsdVol.Volume(prim), path)
         if prim.IsA(UsdGeom.Plane):
             used = first.setdefault("plane", path)
             return None if used == path else (f"Plane {path} ignored: the first rendered Plane ({used}) is the only "
@@ -91,3 +93,16 @@ class IgnoredReading(StagePrims):
             return None
         kind = prim.GetTypeName()
         return f"{kind} {path} ignored: warpsky renders {RENDERED_GEOMETRY}; make it a Mesh to render it"
+
+    @staticmethod
+    def _volume_reason(volume, path: str) -> str | None:
+        """Why a Volume is not rendered: it has no field warpsky renders (a procedural volume its material makes);
+        None when it has one."""
+        from warpsky.scene.usd_volumes import RENDERED_FIELDS
+
+        fields = sorted(str(name) for name in volume.GetFieldPaths())
+        if any(name in RENDERED_FIELDS for name in fields):
+            return None
+        what = f"fields {', '.join(fields)} but none warpsky renders" if fields else "no fields"
+        expected = ", ".join(f"field:{n}" for n in RENDERED_FIELDS)
+        return f"Volume {path} ignored: it has {what} ({expected}; a volume made by its material is not rendered)"

@@ -83,14 +83,9 @@ class VolumeReading(StagePrims):
         volume = UsdVol.Volume(prim)
         path = str(prim.GetPath())
         fields = {str(name): field_path for name, field_path in volume.GetFieldPaths().items()}
-        expected = ", ".join(f"field:{n}" for n in RENDERED_FIELDS)
-        if not fields:
-            raise SceneError(f"Volume {path} has no fields; expected one of {expected}")
         rendered = [name for name in RENDERED_FIELDS if name in fields]
-        if not rendered:
-            raise SceneError(
-                f"Volume {path} has fields {', '.join(sorted(fields))} but none that warpsky renders ({expected})"
-            )
+        if not rendered:  # a procedural volume its material makes: the ignored-prim warnings name it
+            return []
         if all(name in fields for name in ANALYTIC_FIELDS):
             raise SceneError(
                 f"Volume {path} has both field:density and field:extinction, which mean the same thing; keep one"
