@@ -23,6 +23,13 @@ def has_scenery(scene) -> bool:
     return bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
 
 
+def scenery_traceable(scene) -> bool:
+    """Whether a ``scatters_scenery`` technique path traces ``scene``'s fog and meshes beyond their single
+    scattering: there are some, and no stratiform layer or height-field deck, whose light and shadows its paths
+    do not carry."""
+    return bool(scene.fogs or scene.meshes) and not (scene.layers or scene.heightfield_clouds)
+
+
 class MediaPass(Pass):
     """The technique's voxel media (and whatever the technique traces itself: voxelised layers, a deck)."""
 
@@ -34,9 +41,20 @@ class MediaPass(Pass):
     def runs(cls, scene, technique) -> bool:
         """With voxel media, with layers, a deck, fog or meshes the technique traces itself, or in a scene with
         nothing else to draw (the technique draws the ground, the sky or nothing)."""
+        return cls.renders_own(scene, technique) or (technique.scatters_scenery and scenery_traceable(scene))
+
+    @classmethod
+    def renders_own(cls, scene, technique) -> bool:
+        """Whether it runs for what the technique draws itself (not only for the scenery's multiple scattering,
+        :meth:`~warpsky.techniques.base.Technique.scenery_paths`)."""
         traced = ((scene.layers and technique.traces_layers) or (scene.heightfield_clouds and technique.traces_decks)
                   or (scene.fogs and technique.traces_fog) or (scene.meshes and technique.traces_meshes))
         return bool(scene.media) or bool(traced) or not (scene.layers or has_scenery(scene))
+
+    def draws_ground(self, scene) -> bool:
+        """Not where it runs only for the scenery's multiple scattering: the surfaces pass draws the ground there,
+        in the fog's shadow (the technique's paths still bounce on it)."""
+        return self.renders_own(scene, type(self.technique))
 
     @classmethod
     def describe(cls, scene, technique, settings) -> dict[str, str]:
@@ -57,7 +75,11 @@ class MediaPass(Pass):
         return self.technique.tables(scene)
 
     def render(self, frame) -> list:
-        return [frame.technique.render(media_scene(frame), frame.width, frame.height)]
+        scene = media_scene(frame)
+        if frame.technique.scenery_paths(scene) and scene.ground is None and frame.scene.ground is not None:
+            # another pass draws the ground plane; the paths bounce on it
+            return [frame.technique.render(scene, frame.width, frame.height, paths_ground=frame.scene.ground)]
+        return [frame.technique.render(scene, frame.width, frame.height)]
 
 
 def media_scene(frame):
