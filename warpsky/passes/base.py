@@ -68,7 +68,8 @@ class Pass:
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
-        """Whether the pass runs in a frame of ``scene`` rendered by the technique class ``technique``."""
+        """Whether the pass runs in a frame of ``scene`` rendered by ``technique`` (the plan's built technique, or
+        a technique class)."""
         raise NotImplementedError
 
     @classmethod

@@ -41,7 +41,10 @@ class MediaPass(Pass):
     def runs(cls, scene, technique) -> bool:
         """With voxel media, with layers, a deck, fog or meshes the technique traces itself, or in a scene with
         nothing else to draw (the technique draws the ground, the sky or nothing)."""
-        return cls.renders_own(scene, technique) or (technique.scatters_scenery and scenery_traceable(scene))
+        scenery = technique.scatters_scenery and scenery_traceable(scene)
+        if scenery and not isinstance(technique, type):  # a built technique: its settings decide
+            scenery = technique.scenery_paths(scene)
+        return cls.renders_own(scene, technique) or scenery
 
     @classmethod
     def renders_own(cls, scene, technique) -> bool:
@@ -63,6 +66,9 @@ class MediaPass(Pass):
             return {"media": f"{len(scene.media)} voxel grid(s), {voxels:,} voxels, {voxels * 4 / 2**20:.1f} MiB"}
         if scene.layers:
             return {"media": f"none: {technique.name} does not run, the layers are rendered by the stratiform pass"}
+        if cls.runs(scene, technique) and not cls.renders_own(scene, technique):
+            return {"media": f"none: {technique.name} path traces the multiple scattering of the fog and the "
+                             "meshes (the fog and surfaces passes draw their single scattering)"}
         return {"media": "none"}
 
     def memory_estimate(self, scene, width: int, height: int):
