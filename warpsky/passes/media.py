@@ -5,7 +5,9 @@ comes through the air above them (:meth:`~warpsky.light.frame.FrameLight.lit_at_
 the ground plane (the lowest stratiform layer), the technique renders the media without the ground and without what
 that pass draws from the scene (the layers), and where the ground was the only horizon, the sun becomes the light
 of its disk's visible part (:func:`~warpsky.light.sun.visible_sun`), so the ground still hides what has set. Not
-modelled there: shadows between voxel media and layers, and of voxel media on the ground.
+modelled there: shadows between voxel media and layers, and of voxel media on the ground. A technique that
+``scatters_scenery`` runs here in a stage of fog or meshes even without voxel media, for their multiple scattering;
+the surfaces pass then draws the ground plane (in the fog's shadow), on which the technique's paths bounce.
 """
 
 from __future__ import annotations

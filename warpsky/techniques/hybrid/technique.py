@@ -134,8 +134,9 @@ class Hybrid(Technique):
     work as with ``single_scatter``: the sky pass draws the air's single scattering around the media's layer,
     while the paths are traced through the air too (skylight on the media, light between air, media and ground,
     the air's own multiple scattering). Next to stratiform layers the front-air correction uses the media's own
-    depth. AOVs: ``single_scatter`` and ``multiple_scatter`` radiance, ``variance`` of the noisy
-    multiple-scattering mean.
+    depth. Next to the fog and surfaces passes its paths also trace the fog and the meshes and carry their light
+    beyond the sun's single scattering (:mod:`.scenery`). AOVs: ``single_scatter`` and ``multiple_scatter``
+    radiance, ``variance`` of the noisy multiple-scattering mean.
     """
 
     name = "hybrid"
