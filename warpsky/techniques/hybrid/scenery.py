@@ -25,6 +25,7 @@ import dataclasses
 import numpy as np
 
 from warpsky.layer import Layer
+from warpsky.passes.fog.fog import Fog
 from warpsky.scene.model import Scene
 
 
@@ -36,13 +37,20 @@ def paths_scene(scene: Scene, paths_ground=None) -> Scene:
     return dataclasses.replace(scene, ground=ground, camera=camera)
 
 
-def scenery_guide(scene: Scene, single: Layer) -> Layer:
-    """The single-scattering layer as the paths' error estimate and denoiser read it: covered where the media are or
-    where the camera ray ends on an opaque surface another pass drew (the camera's opaque depth)."""
+def scenery_guide(scene: Scene, single: Layer, device: str) -> Layer:
+    """The single-scattering layer as the paths' error estimate and denoiser read it: its transmittance times the
+    fogs' (closed form, to the opaque depth; :class:`~warpsky.passes.fog.fog.Fog` without light), zero where the
+    camera ray ends on an opaque surface another pass drew (the camera's opaque depth)."""
+    height, width = single.depth.shape
     opaque = scene.camera.opaque_depth
-    if opaque is None:
-        return single
-    depth = opaque.numpy() if hasattr(opaque, "numpy") else np.asarray(opaque)
-    hit = (depth < scene.camera.far)[..., None]
-    transmittance = np.where(hit, 0.0, single.transmittance).astype(np.float32)
-    return Layer(single.radiance, transmittance, single.depth, single.stats)
+    depth = None
+    if opaque is not None:
+        depth = np.asarray(opaque.numpy() if hasattr(opaque, "numpy") else opaque, dtype=np.float32)
+    transmittance = single.transmittance
+    if scene.fogs:
+        dark = dataclasses.replace(scene, sun=None, extra_suns=(), dome=None)
+        fog = Fog(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
+        transmittance = transmittance * fog.transmittance
+    if depth is not None:
+        transmittance = np.where((depth < scene.camera.far)[..., None], 0.0, transmittance)
+    return Layer(single.radiance, transmittance.astype(np.float32), single.depth, single.stats)

@@ -226,7 +226,7 @@ class Hybrid(Technique):
         lit = (scene.sun is not None and (scene.media or scenery)) or (
             scene.dome is not None and (scene.media or scene.ground or scenery))
         if settings.multiple_scattering and lit:
-            guide = scenery_guide(scene, single) if scenery else single
+            guide = scenery_guide(scene, single, self.device) if scenery else single
             with device_buffers.exclusive(BUFFER_NAME, self.device):  # the halves and kept paths
                 multiple, variance, ms_stats = MultipleScattering(paths, width, height, settings, self.device,
                                                                   scenery=scenery).run(guide, started)
