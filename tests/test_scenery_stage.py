@@ -66,19 +66,22 @@ def write_stage(tmp_path, *parts, name="scene.usda") -> str:
 def test_info_plans_only_the_passes_a_stage_needs(tmp_path, capsys):
     code, out, _ = run_cli(["info", write_stage(tmp_path, TERRAIN, FOG)], capsys)
     assert code == 0
-    assert "passes      surfaces -> fog -> composite" in out
+    assert "passes      surfaces -> media -> fog -> composite" in out
+    assert "hybrid path traces the multiple scattering of the fog and the meshes" in out
     assert "meshes      1 mesh(es) (/World/Ground), 2 triangles: one Warp BVH" in out
     assert "fog         /World/Fog: 1 constant, 1 cosine; slab -10 .. 60 m, wind [2.0, 0.0, 0.0] m/s" in out
     code, out, _ = run_cli(["info", write_stage(tmp_path, FOG, name="fog_only.usda")], capsys)
     assert code == 0
-    assert "passes      fog -> composite" in out and "no BVH built" in out
+    assert "passes      media -> fog -> composite" in out and "no BVH built" in out
     code, out, _ = run_cli(["info", write_stage(tmp_path, TERRAIN, name="terrain_only.usda")], capsys)
-    assert "passes      surfaces -> composite" in out and 'none (no prim with warpsky:kind = "analyticFog")' in out
+    assert "passes      surfaces -> media -> composite" in out
+    assert 'none (no prim with warpsky:kind = "analyticFog")' in out
 
 
 def test_fog_is_composited_in_front_of_the_terrain_that_cuts_it(tmp_path, capsys):
     """The frame is the fog's radiance plus its transmittance times the terrain's (rendered by the passes alone),
-    and the fog layer ends at the terrain: nearer rays (lower in the image) see less fog."""
+    plus the hybrid's paths' light in front of both (already attenuated to the eye); the media layer holds no voxel
+    media. The fog layer ends at the terrain: nearer rays (lower in the image) see less fog."""
     path = write_stage(tmp_path, TERRAIN, FOG)
     out = tmp_path / "frame.exr"
     code, _, err = run_cli(["render", path, out, "--res", "32", "--float"], capsys)
@@ -88,8 +91,10 @@ def test_fog_is_composited_in_front_of_the_terrain_that_cuts_it(tmp_path, capsys
     reader = StageReader(path)
     scene = reader.scene_at(None)
     plan = make_plan(scene, resolution=(32, None))
-    surfaces, fog = depth_layers(plan, scene)
-    expected = fog.radiance + fog.transmittance * surfaces.radiance
+    surfaces, media, fog = depth_layers(plan, scene)
+    assert np.all(media.radiance == 0.0) and np.all(media.transmittance == 1.0)
+    assert media.front is not None and media.front.radiance.mean() > 0.0
+    expected = media.front.radiance + fog.radiance + fog.transmittance * surfaces.radiance
     np.testing.assert_allclose(rgb, expected, rtol=1e-4, atol=1e-7)
     assert np.all(surfaces.transmittance[-1] == 0.0)  # the bottom row sees the ground
     column = fog.transmittance[:, 16, 1]
@@ -180,8 +185,8 @@ def test_scenery_pass_settings_come_from_set_and_bad_ones_are_named(tmp_path, ca
     coarse = make_plan(scene, resolution=(16, None), settings={"fog.nodes": "1", "fog.max_pieces": "4"})
     fine = make_plan(scene, resolution=(16, None))
     assert coarse.settings_json() != fine.settings_json()
-    _, a = depth_layers(coarse, scene)
-    _, b = depth_layers(fine, scene)
+    a = depth_layers(coarse, scene)[-1]
+    b = depth_layers(fine, scene)[-1]
     assert a.stats["nodes"] == 1 and b.stats["nodes"] == 4
 
 
@@ -204,7 +209,7 @@ def test_shipped_stages_plan_and_render(tmp_path, capsys, stage):
     path = tmp_path / "usd_scenes" / f"{stage}.usda"
     code, out, err = run_cli(["info", path], capsys)
     assert code == 0, err
-    passes = {"valley_fog": "surfaces -> fog -> sky", "sunbeams": "surfaces -> heightfield -> sky"}[stage]
+    passes = {"valley_fog": "surfaces -> media -> fog -> sky", "sunbeams": "surfaces -> heightfield -> sky"}[stage]
     assert f"passes      {passes} -> composite" in out
     code, _, err = run_cli(["render", path, tmp_path / "f.####.exr", "--frames", "1", "--res", "16", "--float"],
                            capsys)
@@ -217,7 +222,8 @@ def test_shipped_stages_plan_and_render(tmp_path, capsys, stage):
 def test_the_analytic_sky_lights_surfaces_in_shadow_and_the_fog():
     """Under an atmosphere, a floor in a wall's shadow receives only the analytic sky: its radiance is albedo x E/pi
     of the sky's upper hemisphere (the Riley sky integrated over it); the fog's sky light is albedo L (1 - T) with
-    L the isotropic mean; without an atmosphere both are zero, as before."""
+    L the isotropic mean; without an atmosphere both are zero, as before. (The passes' single scattering alone:
+    with hybrid's multiple scattering on, its paths carry the sky's light instead.)"""
     import math
 
     from conftest import look_rotation
@@ -238,17 +244,19 @@ def test_the_analytic_sky_lights_surfaces_in_shadow_and_the_fog():
     sky = sky_light(scene, analytic=True)
     mean, e_over_pi = sky_hemisphere(scene)
     assert np.all(e_over_pi > 0.0) and e_over_pi[2] > e_over_pi[0]  # a blue sky
-    (surfaces,) = depth_layers(make_plan(scene, resolution=(8, 8)), scene)
+    single = {"multiple_scattering": "0"}
+    (surfaces,) = depth_layers(make_plan(scene, resolution=(8, 8), settings=single), scene)
     np.testing.assert_allclose(surfaces.radiance, np.broadcast_to(0.5 * e_over_pi, (8, 8, 3)), rtol=1e-5)
     dark = Scene(camera=camera, sun=sun, meshes=(floor, wall))
-    (unlit,) = depth_layers(make_plan(dark, resolution=(8, 8)), dark)
+    (unlit,) = depth_layers(make_plan(dark, resolution=(8, 8), settings=single), dark)
     assert np.all(unlit.radiance == 0.0)
     np.testing.assert_allclose(isotropic_ambient(scene, sky), 0.5 * (mean + 0.5 * e_over_pi))
 
 
 def test_terrain_shadows_the_sunlit_fog():
     """A 400 m wall with the sun 30 deg up behind it: fog in its shadow scatters no sunlight (nothing else lights
-    it here), the same fog without the wall does, and fog the shadow does not reach is unchanged."""
+    it here), the same fog without the wall does, and fog the shadow does not reach is unchanged (the fog pass
+    alone: hybrid's multiple scattering off)."""
     import math
 
     from conftest import look_rotation
@@ -267,7 +275,7 @@ def test_terrain_shadows_the_sunlit_fog():
                         near=0.5, far=1e4, projection="orthographic")
         for meshes in ((wall,), ()):
             scene = Scene(camera=camera, sun=sun, meshes=meshes, fogs=(fog,))
-            plan = make_plan(scene, resolution=(4, 4))
+            plan = make_plan(scene, resolution=(4, 4), settings={"multiple_scattering": "0"})
             assert plan.passes == (("surfaces", "fog") if meshes else ("fog",))
             parts = depth_layers(plan, scene)
             results[x, bool(meshes)] = parts[-1].radiance

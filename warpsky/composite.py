@@ -39,6 +39,11 @@ def composite(layers: list[Layer], far: float) -> Frame:
     depth = np.full((height, width), far, dtype=np.float32)
     aovs: dict[str, np.ndarray] = {}
     for layer in layers:
+        if layer.front is not None:  # already seen through what lies in front: ahead of the layer itself
+            radiance += transmittance * layer.front.radiance
+            for name, values in layer.front.aovs.items():
+                weight = transmittance**2 if name == "variance" else transmittance
+                aovs[name] = aovs.get(name, 0.0) + weight * values
         for name, values in layer.aovs.items():
             weight = transmittance**2 if name == "variance" else transmittance
             aovs[name] = aovs.get(name, 0.0) + weight * values
@@ -57,7 +62,9 @@ def merge_by_depth(layers: list[Layer], far: float) -> Layer:
 
     Exact where the layers do not interleave along the ray; where they do (a voxel cloud inside a stratiform
     layer's slab), the representative depths decide, as in Riley's split of the sky at the media's midplane.
-    Stats: ``seconds`` and ``lookups`` add up; each input's stats are kept under ``parts``.
+    Stats: ``seconds`` and ``lookups`` add up; each input's stats are kept under ``parts``. A layer's ``front``
+    light (already attenuated to the eye) is added unattenuated, as if in front of them all; the merged layer holds
+    it in its radiance and AOVs.
     """
     if not layers:
         raise ValueError("merge_by_depth needs at least one layer")
@@ -65,7 +72,8 @@ def merge_by_depth(layers: list[Layer], far: float) -> Layer:
     order = np.argsort(depths, axis=0, kind="stable")  # (N, H, W), front first; ties keep the given order
     radiance = np.stack([layer.radiance for layer in layers])
     trans = np.stack([layer.transmittance for layer in layers])
-    names = sorted({name for layer in layers for name in layer.aovs})
+    names = sorted({name for layer in layers for name in layer.aovs}
+                   | {name for layer in layers if layer.front is not None for name in layer.front.aovs})
     aov_stacks = {name: np.stack([layer.aovs.get(name, np.zeros_like(layer.radiance)) for layer in layers])
                   for name in names}
     height, width = depths.shape[1:]
@@ -73,6 +81,10 @@ def merge_by_depth(layers: list[Layer], far: float) -> Layer:
     out_trans = np.ones((height, width, 3), np.float32)
     out_depth = np.full((height, width), far, np.float32)
     out_aovs = {name: np.zeros((height, width, 3), np.float32) for name in names}
+    for front in (layer.front for layer in layers if layer.front is not None):
+        out_radiance += front.radiance
+        for name, values in front.aovs.items():
+            out_aovs[name] = out_aovs.get(name, 0.0) + values
     for rank in range(len(layers)):
         index = order[rank]
         pick3 = index[None, ..., None]
@@ -165,6 +177,9 @@ def add_light(layers: list[Layer], more: list[Layer]) -> list[Layer]:
         stats = dict(layer.stats)
         if "seconds" in extra.stats:
             stats["seconds"] = float(stats.get("seconds", 0.0)) + float(extra.stats["seconds"])
+        front = layer.front
+        if extra.front is not None:
+            front = extra.front if front is None else add_light([front], [extra.front])[0]
         out.append(Layer(layer.radiance + extra.radiance, layer.transmittance, layer.depth, stats, aovs,
-                         warnings=gathered_warnings([layer, extra])))
+                         warnings=gathered_warnings([layer, extra]), front=front))
     return out

@@ -24,6 +24,10 @@ class Layer:
             under the terrain); the frame gathers them from every layer.
         parts: The layers a depth merge combined (per pixel in the order of their depths), for deep output; empty
             for a layer drawn as one.
+        front: None, or light already attenuated on its way to the eye by everything it crossed (radiance and
+            AOVs of paths traced through the fog, the terrain and the media in front of the event that scattered
+            it): a depth merge and the composite add it in front of every layer they combine, unattenuated by
+            them (its transmittance and depth are not used).
     """
 
     radiance: np.ndarray
@@ -33,6 +37,7 @@ class Layer:
     aovs: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     parts: list = field(default_factory=list)
+    front: Layer | None = None
 
 
 def gathered_warnings(layers) -> list[str]:

@@ -127,7 +127,7 @@ def make_plan(
     renderer = cls(parse_settings(cls.Settings, own), device=device).resolve(scene)
     width, height = resolve_resolution(scene, resolution)
     check_refusals(scene, cls, classes)
-    running = [p for p in classes if p.runs(scene, cls)]
+    running = [p for p in classes if p.runs(scene, renderer)]  # the technique's settings may decide (media)
     runners = tuple(p(pass_settings.get(p.name), device=device, technique=renderer) for p in running)
     unused = tuple(prefix + name for prefix, values in by_prefix.items() if prefixes[prefix] not in running
                    for name in values)

@@ -55,6 +55,11 @@ class Pass:
         self.device = device
         self.technique = technique
 
+    def draws_ground(self, scene) -> bool:
+        """Whether the pass would draw the scene's ground plane in a frame of ``scene`` (of the running passes
+        that would, the one of lowest ``ground_rank`` does)."""
+        return self.ground_rank is not None
+
     def shadow(self, scene) -> Callable[[np.ndarray], np.ndarray] | None:
         """The shadow of what this pass draws, for the passes that light surfaces: a function of world points
         (N, 3) [m] giving the (N, 3) RGB transmittance of the sunlight from them towards the sun; None when it casts
@@ -63,7 +68,8 @@ class Pass:
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
-        """Whether the pass runs in a frame of ``scene`` rendered by the technique class ``technique``."""
+        """Whether the pass runs in a frame of ``scene`` rendered by ``technique`` (the plan's built technique, or
+        a technique class)."""
         raise NotImplementedError
 
     @classmethod

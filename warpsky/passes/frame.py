@@ -66,7 +66,7 @@ def ground_pass(runners, scene) -> str | None:
     """Name of the running pass that draws the scene's ground plane: the one of lowest ``ground_rank``."""
     if scene.ground is None:
         return None
-    ranked = [r for r in runners if r.ground_rank is not None]
+    ranked = [r for r in runners if r.ground_rank is not None and r.draws_ground(scene)]
     return min(ranked, key=lambda r: r.ground_rank).name if ranked else None
 
 
@@ -121,9 +121,24 @@ def _lit_by(plan, scene, technique) -> tuple[Layer, list[Layer]]:
     """Every pass run once on ``scene`` (lit by one light): (merged layer, layers front to back)."""
     wrapping = [runner for runner in plan.pass_runners if runner.wraps]
     frame = _depth_passes_run(frame_state(plan, scene, technique))
+    ahead = None
+    if wrapping:  # light already attenuated to the eye (through the air too) goes in front of the front air
+        ahead = front_light(frame.layers)
+        frame.layers = [replace(layer, front=None) for layer in frame.layers]
     main = merge_by_depth(frame.layers, far=scene.camera.far) if len(frame.layers) > 1 else frame.layers[0]
     frame.merged = main
     if not wrapping:
         return main, [main]
     front, back = wrapping[0].render(frame)
-    return main, [front, main, back]
+    return main, [replace(front, front=ahead), main, back]
+
+
+def front_light(layers: list[Layer]) -> Layer | None:
+    """The sum of ``layers``' ``front`` light (:class:`~warpsky.layer.Layer`), or None when none has any."""
+    fronts = [layer.front for layer in layers if layer.front is not None]
+    if not fronts:
+        return None
+    out = fronts[0]
+    for more in fronts[1:]:
+        out = add_light([out], [more])[0]
+    return out

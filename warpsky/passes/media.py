@@ -5,7 +5,9 @@ comes through the air above them (:meth:`~warpsky.light.frame.FrameLight.lit_at_
 the ground plane (the lowest stratiform layer), the technique renders the media without the ground and without what
 that pass draws from the scene (the layers), and where the ground was the only horizon, the sun becomes the light
 of its disk's visible part (:func:`~warpsky.light.sun.visible_sun`), so the ground still hides what has set. Not
-modelled there: shadows between voxel media and layers, and of voxel media on the ground.
+modelled there: shadows between voxel media and layers, and of voxel media on the ground. A technique that
+``scatters_scenery`` runs here in a stage of fog or meshes even without voxel media, for their multiple scattering;
+the surfaces pass then draws the ground plane (in the fog's shadow), on which the technique's paths bounce.
 """
 
 from __future__ import annotations
@@ -23,6 +25,13 @@ def has_scenery(scene) -> bool:
     return bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
 
 
+def scenery_traceable(scene) -> bool:
+    """Whether a ``scatters_scenery`` technique path traces ``scene``'s fog and meshes beyond their single
+    scattering: there are some, and no stratiform layer or height-field deck, whose light and shadows its paths
+    do not carry."""
+    return bool(scene.fogs or scene.meshes) and not (scene.layers or scene.heightfield_clouds)
+
+
 class MediaPass(Pass):
     """The technique's voxel media (and whatever the technique traces itself: voxelised layers, a deck)."""
 
@@ -34,9 +43,23 @@ class MediaPass(Pass):
     def runs(cls, scene, technique) -> bool:
         """With voxel media, with layers, a deck, fog or meshes the technique traces itself, or in a scene with
         nothing else to draw (the technique draws the ground, the sky or nothing)."""
+        scenery = technique.scatters_scenery and scenery_traceable(scene)
+        if scenery and not isinstance(technique, type):  # a built technique: its settings decide
+            scenery = technique.scenery_paths(scene)
+        return cls.renders_own(scene, technique) or scenery
+
+    @classmethod
+    def renders_own(cls, scene, technique) -> bool:
+        """Whether it runs for what the technique draws itself (not only for the scenery's multiple scattering,
+        :meth:`~warpsky.techniques.base.Technique.scenery_paths`)."""
         traced = ((scene.layers and technique.traces_layers) or (scene.heightfield_clouds and technique.traces_decks)
                   or (scene.fogs and technique.traces_fog) or (scene.meshes and technique.traces_meshes))
         return bool(scene.media) or bool(traced) or not (scene.layers or has_scenery(scene))
+
+    def draws_ground(self, scene) -> bool:
+        """Not where it runs only for the scenery's multiple scattering: the surfaces pass draws the ground there,
+        in the fog's shadow (the technique's paths still bounce on it)."""
+        return self.renders_own(scene, type(self.technique))
 
     @classmethod
     def describe(cls, scene, technique, settings) -> dict[str, str]:
@@ -45,6 +68,9 @@ class MediaPass(Pass):
             return {"media": f"{len(scene.media)} voxel grid(s), {voxels:,} voxels, {voxels * 4 / 2**20:.1f} MiB"}
         if scene.layers:
             return {"media": f"none: {technique.name} does not run, the layers are rendered by the stratiform pass"}
+        if cls.runs(scene, technique) and not cls.renders_own(scene, technique):
+            return {"media": f"none: {technique.name} path traces the multiple scattering of the fog and the "
+                             "meshes (the fog and surfaces passes draw their single scattering)"}
         return {"media": "none"}
 
     def memory_estimate(self, scene, width: int, height: int):
@@ -57,7 +83,11 @@ class MediaPass(Pass):
         return self.technique.tables(scene)
 
     def render(self, frame) -> list:
-        return [frame.technique.render(media_scene(frame), frame.width, frame.height)]
+        scene = media_scene(frame)
+        if frame.technique.scenery_paths(scene) and scene.ground is None and frame.scene.ground is not None:
+            # another pass draws the ground plane; the paths bounce on it
+            return [frame.technique.render(scene, frame.width, frame.height, paths_ground=frame.scene.ground)]
+        return [frame.technique.render(scene, frame.width, frame.height)]
 
 
 def media_scene(frame):

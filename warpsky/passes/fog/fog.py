@@ -195,7 +195,12 @@ class FogPass(Pass):
         return lambda points: fog_sun_transmittance(scene, points, self.device)
 
     def render(self, frame) -> list[Layer]:
+        """The fog's single scattering of the sun, and its ambient term unless the technique path traces the
+        sky's light on the fog (:meth:`~warpsky.techniques.base.Technique.scenery_paths`: its paths' first event
+        takes no sunlight but gathers the sky's and the dome's light, the light the ambient term approximates)."""
         seen = frame.light.lit_at_media(frame.scene)
         ambient = isotropic_ambient(seen, frame.light.sky)
+        if frame.technique.scenery_paths(frame.scene):
+            ambient = np.zeros(3)
         return [Fog(self.settings, device=self.device).render(seen, frame.width, frame.height, limit=frame.limit,
                                                               ambient=ambient, occluders=frame.occluders)]

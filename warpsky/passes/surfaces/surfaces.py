@@ -249,9 +249,12 @@ class SurfacesPass(Pass):
                 out = out * shadow(points)
             return out
 
+        # the sky's light on the surfaces, unless the technique's paths gather it (their first event on a surface
+        # takes no sunlight, then bounces: what the sky term approximates, occlusion and light between faces too)
+        sky = np.zeros(3) if frame.technique.scenery_paths(frame.scene) else frame.light.sky[1]
         renderer = kept_renderer(self.device)
         layer = renderer.render(seen, frame.width, frame.height, draw_ground=frame.ground == self.name,
-                                sun_transmittance=sun_transmittance if shadows else None, sky=frame.light.sky[1])
+                                sun_transmittance=sun_transmittance if shadows else None, sky=sky)
         frame.limit = layer.depth
         frame.occluders = renderer.occluders if seen.meshes else None
         return [layer]

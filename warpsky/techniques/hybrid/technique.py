@@ -35,6 +35,7 @@ from warpsky import device_buffers
 from warpsky.device import is_cpu
 from warpsky.layer import Layer
 from warpsky.light.sun import above_air
+from warpsky.passes.media import scenery_traceable
 from warpsky.passes.sky.front import front_air_transmittance
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
@@ -47,6 +48,7 @@ from warpsky.techniques.hybrid.denoise import (
     guided_upsample,
     require_denoiser,
 )
+from warpsky.techniques.hybrid.scenery import paths_scene, scenery_guide
 from warpsky.techniques.path_tracer.forward_cut import check_cut_settings, cut_feature
 from warpsky.techniques.path_tracer.technique import (
     PathTracer,
@@ -132,13 +134,17 @@ class Hybrid(Technique):
     work as with ``single_scatter``: the sky pass draws the air's single scattering around the media's layer,
     while the paths are traced through the air too (skylight on the media, light between air, media and ground,
     the air's own multiple scattering). Next to stratiform layers the front-air correction uses the media's own
-    depth. AOVs: ``single_scatter`` and ``multiple_scatter`` radiance, ``variance`` of the noisy
-    multiple-scattering mean.
+    depth. Next to the fog and surfaces passes its paths also trace the fog and the meshes and carry their light
+    beyond the sun's single scattering (:mod:`.scenery`). AOVs: ``single_scatter`` and ``multiple_scatter``
+    radiance, ``variance`` of the noisy multiple-scattering mean.
     """
 
     name = "hybrid"
     Settings = HybridSettings
     traces_dome = True
+    #: Next to the fog and surfaces passes its paths carry the fog's and the meshes' light beyond the sun's single
+    #: scattering (:mod:`.scenery`).
+    scatters_scenery = True
     aovs = {"variance": "RGB", "single_scatter": "RGB", "multiple_scatter": "RGB"}
     kernel_modules = SingleScatter.kernel_modules + PathTracer.kernel_modules
     settings_notes = ("--target-error E, --time-budget S, --spp N and --seed S are shorthands for --set "
@@ -169,7 +175,7 @@ class Hybrid(Technique):
         s = self.settings_for(scene)
         pixels = width * height
         estimate = SingleScatter(s.single_scatter(), device=self.device).memory_estimate(scene, width, height)
-        if not (s.multiple_scattering and scene.media):
+        if not (s.multiple_scattering and (scene.media or self.scenery_paths(scene))):
             return estimate
         scale = int(s.ms_scale)
         coarse = -(-width // scale) * -(-height // scale)
@@ -186,7 +192,7 @@ class Hybrid(Technique):
         counted with a time budget, which bounds them)."""
         s = self.settings_for(scene)
         items = march_work(scene, width * height, float(s.step_length), float(s.shadow_step_length))
-        if s.multiple_scattering and scene.media and s.time_budget is None:
+        if s.multiple_scattering and (scene.media or self.scenery_paths(scene)) and s.time_budget is None:
             scale = int(s.ms_scale)
             items.append(path_work(s.path_tracer(), -(-width // scale) * -(-height // scale)))
         return items
@@ -196,7 +202,15 @@ class Hybrid(Technique):
         s = self.settings_for(scene)
         return cut_feature(scene, float(s.forward_cut), features) if s.multiple_scattering else features
 
-    def render(self, scene: Scene, width: int, height: int) -> Layer:
+    def scenery_paths(self, scene: Scene) -> bool:
+        """With multiple scattering on, its paths trace the fog and the meshes in a scene without stratiform layers
+        or a height-field deck (:func:`~warpsky.passes.media.scenery_traceable`; :mod:`.scenery`)."""
+        return bool(self.settings_for(scene).multiple_scattering) and scenery_traceable(scene)
+
+    def render(self, scene: Scene, width: int, height: int, *, paths_ground=None) -> Layer:
+        """The media's layer; with :meth:`scenery_paths` the paths' light (the scenery's multiple scattering
+        included) is its ``front`` light (:mod:`.scenery`), and ``paths_ground`` is the ground plane another pass
+        draws, on which the paths bounce."""
         settings = self.settings_for(scene)
         if settings.multiple_scattering and settings.denoise:
             require_denoiser()
@@ -207,17 +221,26 @@ class Hybrid(Technique):
         stats = {"single_scatter_seconds": single.stats["seconds"], "lookups": single.stats["lookups"]}
         multiple = np.zeros_like(single.radiance)
         variance = np.zeros_like(single.radiance)
-        lit = (scene.sun is not None and scene.media) or (scene.dome is not None and (scene.media or scene.ground))
+        scenery = self.scenery_paths(scene)
+        paths = paths_scene(scene, paths_ground) if scenery else scene
+        lit = (scene.sun is not None and (scene.media or scenery)) or (
+            scene.dome is not None and (scene.media or scene.ground or scenery))
         if settings.multiple_scattering and lit:
+            guide = scenery_guide(scene, single, self.device) if scenery else single
             with device_buffers.exclusive(BUFFER_NAME, self.device):  # the halves and kept paths
-                multiple, variance, ms_stats = MultipleScattering(scene, width, height, settings, self.device).run(
-                    single, started)
+                multiple, variance, ms_stats = MultipleScattering(paths, width, height, settings, self.device,
+                                                                  scenery=scenery).run(guide, started)
             stats.update(ms_stats)
-            if scene.atmosphere is not None:
+            if scene.atmosphere is not None and not scenery:  # the scenery's paths go in front of the air's layer
                 multiple, variance = behind_front_air(scene, width, height, single.depth, multiple, variance,
                                                       self.device)
         stats["seconds"] = time.perf_counter() - started
         stats["settings"] = dataclasses.asdict(settings)
+        if scenery:  # the paths' light is attenuated to the eye: in front of the other passes' layers
+            front = Layer(multiple, np.ones_like(multiple), np.full(single.depth.shape, scene.camera.far, np.float32),
+                          aovs={"multiple_scatter": multiple, "variance": variance})
+            return Layer(single.radiance, single.transmittance, single.depth, stats=stats,
+                         aovs={"single_scatter": single.radiance}, warnings=stats.pop("warnings", []), front=front)
         return Layer(single.radiance + multiple, single.transmittance, single.depth, stats=stats,
                      aovs={"single_scatter": single.radiance, "multiple_scatter": multiple, "variance": variance},
                      warnings=stats.pop("warnings", []))
@@ -245,7 +268,8 @@ def behind_front_air(scene: Scene, width: int, height: int, depth: np.ndarray, m
 class MultipleScattering:
     """Progressive passes of multiple-scattering paths into two halves, the error estimate, and the denoising."""
 
-    def __init__(self, scene: Scene, width: int, height: int, settings: HybridSettings, device: str):
+    def __init__(self, scene: Scene, width: int, height: int, settings: HybridSettings, device: str, *,
+                 scenery: bool = False):
         self.settings = settings
         self.device = device
         self.scale = int(settings.ms_scale)
@@ -257,7 +281,8 @@ class MultipleScattering:
         self.tracing = PathTracing(above_air(scene), width, height, settings.path_tracer(), device,
                                    air=atmosphere is not None, multiple_only=True, scale=self.scale,
                                    buffer_name=BUFFER_NAME,
-                                   air_by_table=atmosphere is not None and atmosphere.multiple_scattering)
+                                   air_by_table=atmosphere is not None and atmosphere.multiple_scattering,
+                                   meshes=scenery and bool(scene.meshes), fog=scenery and bool(scene.fogs))
         shape = (self.tracing.height, self.tracing.width)
         self.halves = [pixel_sums(shape, device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
         self.counts = [0, 0]

@@ -341,12 +341,13 @@ def reduced_event_function(has_detail: bool, has_fog: bool = False):
 
 
 @functools.cache
-def media_first_function(has_detail: bool):
-    """``media_first(media, air, path, p) -> PathState``, specialised on animated detail."""
+def media_first_function(has_detail: bool, has_fog: bool = False):
+    """``media_first(media, majorants, air, path, p) -> PathState``, specialised on animated detail and analytic
+    fog (which counts with the media: the table holds the air's light alone)."""
     sample_media = media_functions(has_detail)
 
     @wp.func
-    def media_first(media: VoxelMedia, air: Air, path: PathState, p: wp.vec3) -> PathState:
+    def media_first(media: VoxelMedia, majorants: Majorants, air: Air, path: PathState, p: wp.vec3) -> PathState:
         """The first scattering event of a path whose air-only light a table already holds (the sky pass's
         multiple-scattering table): the event is the air's with probability q = sum of the air's scattering over
         the sum of all (over the channels), and then the path ends, its light being the table's; otherwise it is
@@ -356,6 +357,8 @@ def media_first_function(has_detail: bool):
         out = path
         air_s = air_scattering(air, p)
         media_part = sample_media(media, p).scattering
+        if wp.static(has_fog):
+            media_part = media_part + fog_coefficients(majorants.fog, p, 0).scattering
         total = air_s + media_part
         q = (air_s[0] + air_s[1] + air_s[2]) / wp.max(total[0] + total[1] + total[2], 1.0e-30)
         if q <= 0.0:

@@ -161,7 +161,7 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
     mesh_event = mesh_event_function(has_detail, has_fog)
     flight_end = surface_functions(has_ground)[1]
     scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail, has_fog)
-    media_first = media_first_function(has_detail)
+    media_first = media_first_function(has_detail, has_fog)
     first_event = first_event_function(has_ground, has_tables, has_detail, has_fog)
 
     @wp.func
@@ -231,7 +231,7 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                 path.events = path.events + 1
                 air_weight = float(1.0)
                 if bounce == 0 and settings.air_by_table != 0 and air.enabled != 0:
-                    path = media_first(here, air, path, p)
+                    path = media_first(here, bounds, air, path, p)
                     air_weight = 0.0
                     if path.alive == 0:
                         break
