@@ -85,16 +85,6 @@ def case_camera_missing_prim(tmp_path):
     return _stage(tmp_path), ["--camera", "/World/Nothing"], ["/World/Nothing"]
 
 
-def case_volume_without_fields(tmp_path):
-    from pxr import Usd, UsdVol
-
-    path = _stage(tmp_path)
-    stage = Usd.Stage.Open(str(path))
-    UsdVol.Volume.Define(stage, "/World/Empty")
-    stage.Save()
-    return path, [], ["/World/Empty", "no fields"]
-
-
 def case_field_file_missing(tmp_path):
     return _stage(tmp_path, volume_file=tmp_path / "missing.vdb"), [], ["/World/Cloud/density", "missing.vdb"]
 

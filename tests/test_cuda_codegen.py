@@ -1,4 +1,5 @@
-"""Every kernel module compiles for CUDA (sm_90 PTX), even on a machine without a GPU."""
+"""Every kernel module compiles for CUDA (sm_90 PTX), even on a machine without a GPU: every plain module, every
+variant of a kernel factory with up to 16, and of larger factories a set that gives each flag each of its values."""
 
 from __future__ import annotations
 
@@ -13,7 +14,9 @@ import pytest
 from warpsky.kernel_registry import compile_ptx, kernel_modules
 from warpsky.kernel_variants import registered_factories
 
-MODULES = kernel_modules()
+#: Every plain kernel module and every variant of each factory with up to 16, a covering set of the larger ones (each
+#: flag at each of its values: 8 of the path tracer's 64).
+MODULES = kernel_modules(covering=True)
 
 
 @pytest.fixture(scope="module")
@@ -24,7 +27,7 @@ def ptx_builds(request, tmp_path_factory):
                 if getattr(item, "originalname", "") == "test_module_compiles_to_sm90_ptx"}
     folder = tmp_path_factory.mktemp("ptx")
     pool = ProcessPoolExecutor(max(1, min(os.cpu_count() or 1, 4)), mp_context=multiprocessing.get_context("spawn"))
-    futures = {m.name: pool.submit(compile_ptx, i, str(folder / str(i))) for i, m in enumerate(MODULES)
+    futures = {m.name: pool.submit(compile_ptx, i, str(folder / str(i)), 90, True) for i, m in enumerate(MODULES)
                if m.name in selected}
     yield futures
     pool.shutdown(wait=True, cancel_futures=True)
@@ -85,3 +88,18 @@ def test_every_kernel_factory_declares_its_variants():
     registered = {factory.__wrapped__.__name__ for factory, _ in registered_factories()}
     undeclared = [name for name in undeclared if name.split(":")[1] not in registered]
     assert not undeclared, f"kernel factories without @kernel_variants: {undeclared}"
+
+
+def test_covering_variants_give_every_flag_each_value():
+    """A factory of six boolean flags compiles 8 variants in the code-generation test (all off, each alone on, all
+    on), in which every flag takes both values; up to 16 combinations every one is compiled."""
+    from warpsky.kernel_variants import covering_variants, variants
+
+    six = {f"f{i}": (False, True) for i in range(6)}
+    chosen = covering_variants(six)
+    assert len(chosen) == 8 and all(flags in variants(six) for flags in chosen)
+    assert all({flags[name] for flags in chosen} == {False, True} for name in six)
+    four = {f"f{i}": (False, True) for i in range(4)}
+    assert covering_variants(four) == variants(four)
+    mixed = {"a": (0, 1, 2), "b": (False, True), "c": (False, True), "d": (False, True), "e": (False, True)}
+    assert all({flags[n] for flags in covering_variants(mixed)} == set(mixed[n]) for n in mixed)
