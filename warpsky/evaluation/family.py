@@ -145,9 +145,20 @@ def family_reference_path(key: str) -> Path:
     return cache_dir() / "reference" / "family" / f"{key}.npz"
 
 
+def has_scenery(scene) -> bool:
+    """Whether ``scene`` holds terrain meshes, analytic fog or a height-field deck (the scenery family's stages)."""
+    return bool(scene.meshes or scene.fogs or scene.heightfield_clouds)
+
+
 def covered_pixels(scene, width: int, height: int, device: str) -> np.ndarray:
     """(H, W) bool: pixels where the media's luminance transmittance is below ``COVERED_TRANSMITTANCE``, from a
-    ``single_scatter`` render of the media alone (no ground, no atmosphere): noise-free."""
+    ``single_scatter`` render of the media alone (no ground, no atmosphere): noise-free. On a stage with scenery
+    (:func:`has_scenery`), the composited frame's transmittance without the air instead: every pixel that shows
+    terrain, ground, fog, the deck or its haze, or the media (open sky is left out)."""
+    if has_scenery(scene):
+        plan = frame_plan(dataclasses.replace(scene, atmosphere=None), "single_scatter", {}, width, height, device)
+        _, transmittance, _, _ = render_frame_radiance(plan, dataclasses.replace(scene, atmosphere=None))
+        return (transmittance @ LUMINANCE_WEIGHTS.astype(np.float32)) < COVERED_TRANSMITTANCE
     media_only = dataclasses.replace(scene, ground=None, atmosphere=None, layers=())
     plan = frame_plan(media_only, "single_scatter", {}, width, height, device)
     layer, _ = render_layers(plan, media_only)
@@ -163,12 +174,14 @@ def _members(family: dict, half: str) -> list[dict]:
 def _walk_ladder(scene, member: dict, name: str, width: int, height: int, device: str, share: float,
                  reference: np.ndarray, covered: np.ndarray, log, reference_variance=None) -> list[FamilyRow]:
     """``name``'s ladder on one member, after an untimed warm-up; stops once its time passes ``share``."""
-    voxel = min(float(m.voxel_size.min()) for m in scene.media)
+    voxel = min((float(m.voxel_size.min()) for m in scene.media), default=1.0)
     rows, spent = [], 0.0
     for rung_index, rung in enumerate(LADDERS[name]):
         values = {k: (v * voxel if k in VOXEL_SETTINGS else v) for k, v in rung.items()}
         plan = frame_plan(scene, name, values, width, height, device)
-        if rung_index == 0:
+        if rung_index == 0 and has_scenery(scene):  # compile / load every pass of the frame: not timed
+            render_frame_radiance(frame_plan(scene, name, values, min(width, 8), min(height, 8), device), scene)
+        elif rung_index == 0:
             plan.renderer.render(scene, min(width, 8), min(height, 8))  # compile / load: not timed
         started = time.perf_counter()
         radiance, _, _, _ = render_frame_radiance(plan, scene)
@@ -236,8 +249,9 @@ def run_family(
     share = budget_per_stage / max(len(techniques), 1)
     for member in members:
         scene = StageReader(family_dir / member["stage"]).scene_at(None)
-        if not scene.media:
-            raise UsageError(f"{member['stage']} holds no media: is {family_dir} a validation family?")
+        if not scene.media and not has_scenery(scene):
+            raise UsageError(f"{member['stage']} holds no media and no scenery: is {family_dir} a validation "
+                             "family?")
         radiance_ref, var_ref, info = _reference(scene, member, width, height, device, reference_spp,
                                                  reference_seed, use_cache, log)
         references.append(info)
