@@ -33,6 +33,11 @@ Height-field cloud decks (Max 1986) likewise: the reference path-traces the deck
 frame is the height-field pass's, measured once per mode (``height-field pass (Max 1986, exact)``, ``max``,
 ``sexp``) along ``heightfield.step_length``. That pass is single scattering only, so its bias against the
 path-traced multiple scattering is expected to be negative.
+
+Terrain meshes and analytic fog (Biri et al. 2002) likewise: the reference traces them
+(:mod:`warpsky.techniques.path_tracer.surfaces`, :mod:`~warpsky.techniques.path_tracer.fog_media`), the other
+techniques leave them to the surfaces and fog passes, so on a stage of fog over terrain without voxel media each
+technique's rows measure those passes.
 """
 
 from __future__ import annotations
@@ -235,9 +240,9 @@ def run_report(
     if unknown:
         raise UsageError(f"error-vs-time cannot measure {', '.join(unknown)} (yet); available: "
                          f"{', '.join(LADDERS)}")
-    if not scene.media and not scene.layers and not scene.heightfield_clouds:
-        raise UsageError("the stage holds no media, no stratiform layers and no height-field clouds: nothing to "
-                         "measure")
+    if not (scene.media or scene.layers or scene.heightfield_clouds or scene.fogs or scene.meshes):
+        raise UsageError("the stage holds no media, no stratiform layers, no height-field clouds, no analytic fog "
+                         "and no meshes: nothing to measure")
     scene = comparable_scene(scene, log)
     radiance_ref, trans_ref, var_ref, ref_seconds, cached = reference_image(
         scene, width, height, device, spp=reference_spp, seed=reference_seed, use_cache=use_cache)

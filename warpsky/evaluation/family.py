@@ -8,7 +8,9 @@ stops once its time on the member passes the member's budget / the number of tec
 :func:`~warpsky.evaluation.error_vs_time.error_metrics` on the composited frame radiance over the covered pixels.
 
 *Covered pixels* come from the media alone, rendered by ``single_scatter`` without ground and atmosphere (the
-ground would be opaque in the layer's transmittance, the air is never in it): luminance transmittance < 0.99.
+ground would be opaque in the layer's transmittance, the air is never in it): luminance transmittance < 0.99. On
+the scenery family's stages (:mod:`warpsky.evaluation.scenery_family`: terrain meshes, analytic fog, height-field
+decks) they are the pixels where the composited frame without the air transmits < 0.99: everything but open sky.
 
 *References* are keyed by :func:`family_reference_key`, a hash of the member's file contents (stage and fields),
 the image size, samples, seed and warpsky's version, and nothing about the device or where the files lie, so
@@ -72,6 +74,10 @@ the validation family (--family DIR):
   $WARPSKY_CACHE/reference/family/ by a hash of the member's files, size, spp and seed, not of the device:
   render them on a GPU with --references-only and copy the .npz files over.
   Covered pixels: where the media alone (single_scatter, no ground, no air) transmit < 0.99 of the light.
+  The scenery family (tools/make_scenery_family.py, make scenery-family: data/scenery_family, 96x64): terrain
+  meshes with thin and thick valley fog, a height-field deck with haze, cumulus cut by a ridge; the path tracer
+  traces all of it, the other techniques leave fog, terrain and deck to their passes. Covered pixels there:
+  where the frame without the air transmits < 0.99 (terrain, ground, fog, deck, haze, media; not open sky).
 
 family columns (per technique and ladder rung, over the stages that reached it):
   stages     stages measured at this rung (a ladder stops on a stage once it passes budget / techniques)
