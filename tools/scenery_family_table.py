@@ -98,11 +98,21 @@ def stage_table(report: dict, family: dict) -> str:
     return "\n".join(lines)
 
 
+def stage_rows(rows: list[dict]) -> list[dict]:
+    """A single stage's tabled rows; a technique whose ladder stopped (on its budget) before its tabled rungs
+    contributes its last rung instead."""
+    chosen = chosen_rows(rows)
+    for technique in dict.fromkeys(r["technique"] for r in rows):
+        if not any(r["technique"] == technique for r in chosen):
+            chosen.append([r for r in rows if r["technique"] == technique][-1])
+    return chosen
+
+
 def single_stage_table(reports: dict[str, dict]) -> str:
     lines = ["| stage | row | setting | net rel RMSE | bias | seconds | ref noise |",
              "|---|---|---|---:|---:|---:|---:|"]
     for name, report in reports.items():
-        for row in chosen_rows(report["rows"]):
+        for row in stage_rows(report["rows"]):
             lines.append(f"| {name} | {row['technique']} | {row['setting']} | {_fmt(row['net_rmse'])} | "
                          f"{_fmt(row['bias'], sign=True)} | {_fmt(row['seconds'], 2)} | "
                          f"{_fmt(report['reference']['rel_noise_per_pixel'])} |")

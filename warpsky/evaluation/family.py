@@ -48,8 +48,10 @@ from warpsky.evaluation.error_vs_time import (
     VOXEL_SETTINGS,
     error_metrics,
     frame_plan,
+    has_scenery,
     reference_image,
     render_frame_radiance,
+    scenery_covered,
     setting_label,
     write_rows_csv,
 )
@@ -151,20 +153,13 @@ def family_reference_path(key: str) -> Path:
     return cache_dir() / "reference" / "family" / f"{key}.npz"
 
 
-def has_scenery(scene) -> bool:
-    """Whether ``scene`` holds terrain meshes, analytic fog or a height-field deck (the scenery family's stages)."""
-    return bool(scene.meshes or scene.fogs or scene.heightfield_clouds)
-
-
 def covered_pixels(scene, width: int, height: int, device: str) -> np.ndarray:
     """(H, W) bool: pixels where the media's luminance transmittance is below ``COVERED_TRANSMITTANCE``, from a
     ``single_scatter`` render of the media alone (no ground, no atmosphere): noise-free. On a stage with scenery
     (:func:`has_scenery`), the composited frame's transmittance without the air instead: every pixel that shows
     terrain, ground, fog, the deck or its haze, or the media (open sky is left out)."""
     if has_scenery(scene):
-        plan = frame_plan(dataclasses.replace(scene, atmosphere=None), "single_scatter", {}, width, height, device)
-        _, transmittance, _, _ = render_frame_radiance(plan, dataclasses.replace(scene, atmosphere=None))
-        return (transmittance @ LUMINANCE_WEIGHTS.astype(np.float32)) < COVERED_TRANSMITTANCE
+        return scenery_covered(scene, width, height, device, COVERED_TRANSMITTANCE)
     media_only = dataclasses.replace(scene, ground=None, atmosphere=None, layers=())
     plan = frame_plan(media_only, "single_scatter", {}, width, height, device)
     layer, _ = render_layers(plan, media_only)
