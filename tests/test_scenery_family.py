@@ -88,3 +88,18 @@ def test_info_plans_every_kind(family, technique, capsys):
         assert "3,200 triangles" in out
         if technique == "path_tracer":
             assert "traced by path_tracer inside its paths" in out
+
+
+def test_sun_disk_pixels_are_left_out_of_the_measured_ones(family):
+    """A sun straight ahead marks the few pixels round the image centre, a sun behind the camera none."""
+    import dataclasses
+
+    from warpsky.evaluation.error_vs_time import sun_disk_pixels
+
+    scene = StageReader(family / _members(family)[0]["stage"]).scene_at(None)
+    forward = -np.asarray(scene.camera.rotation, dtype=np.float64).reshape(3, 3)[:, 2]
+    ahead = dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, direction=forward))
+    marked = sun_disk_pixels(ahead, 96, 64)
+    assert 1 <= marked.sum() <= 16 and marked[31:33, 47:49].all()
+    behind = dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, direction=-forward))
+    assert not sun_disk_pixels(behind, 96, 64).any()
