@@ -103,3 +103,18 @@ def test_sun_disk_pixels_are_left_out_of_the_measured_ones(family):
     assert 1 <= marked.sum() <= 16 and marked[31:33, 47:49].all()
     behind = dataclasses.replace(scene, sun=dataclasses.replace(scene.sun, direction=-forward))
     assert not sun_disk_pixels(behind, 96, 64).any()
+
+
+def test_error_vs_time_measures_a_fog_stage_without_media(family, tmp_path, monkeypatch):
+    """bench error-vs-time accepts fog over terrain (no voxel media): the passes' rows against the traced fog,
+    over every pixel but open sky, at 16 x 12."""
+    from warpsky.evaluation.error_vs_time import run_report
+
+    monkeypatch.setenv("WARPSKY_CACHE", str(tmp_path / "cache"))
+    fog = next(m for m in _members(family) if m["kind"] == "thick_fog" and not m["air"])
+    scene = StageReader(family / fog["stage"]).scene_at(None)
+    report = run_report(scene, techniques=["single_scatter", "path_tracer"], width=16, height=12, device="cpu",
+                        budget=0.2, reference_spp=16, log=lambda _: None)
+    assert {r.technique for r in report.rows} == {"single_scatter", "path_tracer"}
+    assert 0 < report.reference["covered_pixels"] < 16 * 12  # the sky above the hills is left out
+    assert all(np.isfinite(r.rel_rmse) for r in report.rows)
