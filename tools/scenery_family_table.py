@@ -6,7 +6,8 @@ one row per single stage measured with ``warpsky bench error-vs-time STAGE`` (``
 Net relative RMSE: the relative RMSE with the reference's own per-pixel variance taken out (``net_rmse``).
 
 Run:  python tools/scenery_family_table.py OUT/family_error_vs_time.json --family DIR \\
-          [--stage valley_fog=OUT_VF/error_vs_time.json ...] [--docs docs/scenery_family/scenery_error_vs_time.json]
+          [--stage valley_fog=OUT_VF/error_vs_time.json ...] [--other-half OUT_TUNE/family_error_vs_time.json]
+          [--docs docs/scenery_family/scenery_error_vs_time.json]
 """
 
 from __future__ import annotations
@@ -125,6 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--family", type=Path, required=True, help="the family directory (family.json)")
     parser.add_argument("--stage", action="append", default=[], metavar="NAME=JSON",
                         help="a single stage's error_vs_time.json, tabled under NAME (repeatable)")
+    parser.add_argument("--other-half", type=Path, metavar="JSON", help="the other half's family_error_vs_time.json: "
+                        "its technique table too (and its report in --docs)")
     parser.add_argument("--docs", type=Path, help="write the figures and the reports to this JSON")
     args = parser.parse_args(argv)
     report = json.loads(args.report.read_text())
@@ -137,11 +140,16 @@ def main(argv: list[str] | None = None) -> int:
     print(technique_table(summary), stage_table(report, family), sep="\n\n")
     if stages:
         print("\n" + single_stage_table(stages))
+    other = json.loads(args.other_half.read_text()) if args.other_half else None
+    if other:
+        print(f"\n{other['settings']['half']} half:\n" + technique_table(technique_summary(other["rows"])))
     if args.docs:
         args.docs.parent.mkdir(parents=True, exist_ok=True)
         blob = {"summary": summary, "family": {k: v for k, v in family.items() if k != "members"},
                 "members": family["members"], "family_report": report, "stages": stages,
                 "rungs": {k: list(v) for k, v in RUNGS.items()}, "other_rung": OTHER_RUNG}
+        if other:
+            blob.update(other_half_summary=technique_summary(other["rows"]), other_half_report=other)
         args.docs.write_text(json.dumps(blob, indent=1) + "\n")
         print(f"\nwrote {args.docs}")
     return 0
