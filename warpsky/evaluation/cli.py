@@ -35,7 +35,7 @@ def add_parser(sub, resolution_type) -> None:
     )
     evt.add_argument("stage", type=Path, nargs="?", help="USD stage (or give --family)")
     evt.add_argument("--family", type=Path, metavar="DIR", help="a validation family directory (family.json, "
-                     "written by tools/make_validation_family.py) instead of STAGE")
+                     "written by tools/make_validation_family.py or tools/make_scenery_family.py) instead of STAGE")
     evt.add_argument("--half", choices=("tune", "test", "all"), default="test",
                      help="--family: which half to measure (default test)")
     evt.add_argument("--references-only", action="store_true",
