@@ -7,7 +7,7 @@ PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind family family-thick terrain valley-fog sunbeams sundogs gallery
+	cumulus-wind family family-thick scenery-family terrain valley-fog sunbeams sundogs gallery
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
@@ -21,6 +21,8 @@ help:
 	@echo "make family             - generate the 24-stage validation family (seed 2026) in data/family"
 	@echo "make family-thick       - generate the 12-stage thick family (optical depth 100-1000, seed 2027) in"
 	@echo "                          data/family_thick"
+	@echo "make scenery-family     - generate the 12-stage scenery family (terrain with valley fog, a height-field deck"
+	@echo "                          with haze, cumulus cut by a ridge; seed 2028) in data/scenery_family"
 	@echo "make cumulus-wind       - 48 frames of the cumulus in wind (usd_scenes/cumulus_wind.usda) to out/"
 	@echo "make stratocumulus      - stratocumulus over water, sand and snow, radiosity on and off, to out/"
 	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
@@ -66,6 +68,14 @@ data/family_thick/family.json: tools/make_validation_family.py warpsky/evaluatio
 	$(PY) tools/make_validation_family.py --profile thick --out data/family_thick --seed 2027 --count 12
 
 family-thick: data/family_thick/family.json
+
+# The scenery family: 12 seeded terrain stages (fog, a deck with haze, a ridge cloud) at 96 x 64, for the path tracer's
+# references of terrain, analytic fog and height-field decks (warpsky bench error-vs-time --family data/scenery_family).
+data/scenery_family/family.json: tools/make_scenery_family.py warpsky/evaluation/scenery_family.py \
+		warpsky/evaluation/family_stages.py warpsky/evaluation/family_shapes.py $(STAMP)
+	$(PY) tools/make_scenery_family.py --out data/scenery_family --seed 2028 --count 12
+
+scenery-family: data/scenery_family/family.json
 
 demo: $(STAMP) data/cumulus.nvdb
 	$(VENV)/bin/warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png

@@ -35,7 +35,7 @@ def add_parser(sub, resolution_type) -> None:
     )
     evt.add_argument("stage", type=Path, nargs="?", help="USD stage (or give --family)")
     evt.add_argument("--family", type=Path, metavar="DIR", help="a validation family directory (family.json, "
-                     "written by tools/make_validation_family.py) instead of STAGE")
+                     "written by tools/make_validation_family.py or tools/make_scenery_family.py) instead of STAGE")
     evt.add_argument("--half", choices=("tune", "test", "all"), default="test",
                      help="--family: which half to measure (default test)")
     evt.add_argument("--references-only", action="store_true",
@@ -50,7 +50,7 @@ def add_parser(sub, resolution_type) -> None:
     evt.add_argument("--camera", metavar="PATH", help="camera prim path (STAGE only)")
     evt.add_argument("--res", type=resolution_type, default=None, metavar="WxH",
                      help="image size (default 128 wide: the camera's aspect for STAGE; for --family the family's "
-                     "own, family.json image_size: 128x128 thin, 64x64 thick)")
+                     "own, family.json image_size: 128x128 thin, 64x64 thick, 96x64 scenery)")
     evt.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
     evt.add_argument("--no-cache", action="store_true", help="render the reference even if it is cached")
     evt.add_argument("-o", "--output-dir", type=Path, default=Path("out"), help="where the CSV/JSON/PNG go")
@@ -91,8 +91,8 @@ def _bench_family(args, techniques: list[str], device: str, log) -> int:
     """``bench error-vs-time --family DIR``: the family report, or only its references."""
     if args.camera is not None or args.time is not None:
         raise UsageError("--camera and --time apply to a STAGE; a family's stages use their own camera and time")
-    size = int(load_family(args.family).get("image_size", 128))
-    width, height = args.res or (size, size)
+    size = load_family(args.family).get("image_size", 128)  # the scenery family's is [width, height]
+    width, height = args.res or ((int(size[0]), int(size[1])) if isinstance(size, list) else (int(size), int(size)))
     height = height or width
     report = run_family(
         args.family, techniques, width, height, device, half=args.half, reference_spp=args.reference_spp,

@@ -8,7 +8,9 @@ stops once its time on the member passes the member's budget / the number of tec
 :func:`~warpsky.evaluation.error_vs_time.error_metrics` on the composited frame radiance over the covered pixels.
 
 *Covered pixels* come from the media alone, rendered by ``single_scatter`` without ground and atmosphere (the
-ground would be opaque in the layer's transmittance, the air is never in it): luminance transmittance < 0.99.
+ground would be opaque in the layer's transmittance, the air is never in it): luminance transmittance < 0.99. On
+the scenery family's stages (:mod:`warpsky.evaluation.scenery_family`: terrain meshes, analytic fog, height-field
+decks) they are the pixels where the composited frame without the air transmits < 0.99: everything but open sky.
 
 *References* are keyed by :func:`family_reference_key`, a hash of the member's file contents (stage and fields),
 the image size, samples, seed and warpsky's version, and nothing about the device or where the files lie, so
@@ -46,8 +48,10 @@ from warpsky.evaluation.error_vs_time import (
     VOXEL_SETTINGS,
     error_metrics,
     frame_plan,
+    has_scenery,
     reference_image,
     render_frame_radiance,
+    scenery_covered,
     setting_label,
     write_rows_csv,
 )
@@ -72,6 +76,10 @@ the validation family (--family DIR):
   $WARPSKY_CACHE/reference/family/ by a hash of the member's files, size, spp and seed, not of the device:
   render them on a GPU with --references-only and copy the .npz files over.
   Covered pixels: where the media alone (single_scatter, no ground, no air) transmit < 0.99 of the light.
+  The scenery family (tools/make_scenery_family.py, make scenery-family: data/scenery_family, 96x64): terrain
+  meshes with thin and thick valley fog, a height-field deck with haze, cumulus cut by a ridge; the path tracer
+  traces all of it, the other techniques leave fog, terrain and deck to their passes. Covered pixels there:
+  where the frame without the air transmits < 0.99 (terrain, ground, fog, deck, haze, media; not open sky).
 
 family columns (per technique and ladder rung, over the stages that reached it):
   stages     stages measured at this rung (a ladder stops on a stage once it passes budget / techniques)
@@ -147,7 +155,11 @@ def family_reference_path(key: str) -> Path:
 
 def covered_pixels(scene, width: int, height: int, device: str) -> np.ndarray:
     """(H, W) bool: pixels where the media's luminance transmittance is below ``COVERED_TRANSMITTANCE``, from a
-    ``single_scatter`` render of the media alone (no ground, no atmosphere): noise-free."""
+    ``single_scatter`` render of the media alone (no ground, no atmosphere): noise-free. On a stage with scenery
+    (:func:`has_scenery`), the composited frame's transmittance without the air instead: every pixel that shows
+    terrain, ground, fog, the deck or its haze, or the media (open sky is left out)."""
+    if has_scenery(scene):
+        return scenery_covered(scene, width, height, device, COVERED_TRANSMITTANCE)
     media_only = dataclasses.replace(scene, ground=None, atmosphere=None, layers=())
     plan = frame_plan(media_only, "single_scatter", {}, width, height, device)
     layer, _ = render_layers(plan, media_only)
@@ -163,12 +175,14 @@ def _members(family: dict, half: str) -> list[dict]:
 def _walk_ladder(scene, member: dict, name: str, width: int, height: int, device: str, share: float,
                  reference: np.ndarray, covered: np.ndarray, log, reference_variance=None) -> list[FamilyRow]:
     """``name``'s ladder on one member, after an untimed warm-up; stops once its time passes ``share``."""
-    voxel = min(float(m.voxel_size.min()) for m in scene.media)
+    voxel = min((float(m.voxel_size.min()) for m in scene.media), default=1.0)
     rows, spent = [], 0.0
     for rung_index, rung in enumerate(LADDERS[name]):
         values = {k: (v * voxel if k in VOXEL_SETTINGS else v) for k, v in rung.items()}
         plan = frame_plan(scene, name, values, width, height, device)
-        if rung_index == 0:
+        if rung_index == 0 and has_scenery(scene):  # compile / load every pass of the frame: not timed
+            render_frame_radiance(frame_plan(scene, name, values, min(width, 8), min(height, 8), device), scene)
+        elif rung_index == 0:
             plan.renderer.render(scene, min(width, 8), min(height, 8))  # compile / load: not timed
         started = time.perf_counter()
         radiance, _, _, _ = render_frame_radiance(plan, scene)
@@ -236,8 +250,9 @@ def run_family(
     share = budget_per_stage / max(len(techniques), 1)
     for member in members:
         scene = StageReader(family_dir / member["stage"]).scene_at(None)
-        if not scene.media:
-            raise UsageError(f"{member['stage']} holds no media: is {family_dir} a validation family?")
+        if not scene.media and not has_scenery(scene):
+            raise UsageError(f"{member['stage']} holds no media and no scenery: is {family_dir} a validation "
+                             "family?")
         radiance_ref, var_ref, info = _reference(scene, member, width, height, device, reference_spp,
                                                  reference_seed, use_cache, log)
         references.append(info)
