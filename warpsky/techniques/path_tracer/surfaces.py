@@ -60,13 +60,8 @@ class MeshFlight:
 
 
 @wp.func
-def mesh_flight_end(surfaces: SurfaceMeshes, origin: wp.vec3, d: wp.vec3, bounce: int, first_hit: SurfaceHit,
-                    end: RayEnd) -> MeshFlight:
-    """``end`` (the flight's end without meshes), or the nearest mesh hit before it: for the camera ray (bounce 0)
-    ``first_hit``, the hit its own query found (:func:`camera_mesh_end`), for later flights the BVH's."""
-    hit = first_hit
-    if bounce > 0:
-        hit = mesh_hit(surfaces, origin, d, end.t)
+def ended_on(hit: SurfaceHit, end: RayEnd) -> MeshFlight:
+    """``end``, or the mesh ``hit`` where there is one (it lies before ``end``)."""
     stop = end
     if hit.hit != 0:
         stop.t = hit.t
@@ -78,17 +73,20 @@ def mesh_flight_end(surfaces: SurfaceMeshes, origin: wp.vec3, d: wp.vec3, bounce
 
 
 @wp.func
+def mesh_flight_end(surfaces: SurfaceMeshes, origin: wp.vec3, d: wp.vec3, bounce: int, first_hit: SurfaceHit,
+                    end: RayEnd) -> MeshFlight:
+    """``end`` (the flight's end without meshes), or the nearest mesh hit before it: for the camera ray (bounce 0)
+    ``first_hit``, the hit its own query found (:func:`camera_mesh_end`), for later flights the BVH's."""
+    hit = first_hit
+    if bounce > 0:
+        hit = mesh_hit(surfaces, origin, d, end.t)
+    return ended_on(hit, end)
+
+
+@wp.func
 def camera_mesh_end(surfaces: SurfaceMeshes, origin: wp.vec3, view: wp.vec3, first: RayEnd) -> MeshFlight:
     """The camera ray's end ``first`` (far distance, ground, sea level), or its nearest mesh hit before that."""
-    hit = mesh_hit(surfaces, origin, view, first.t)
-    stop = first
-    if hit.hit != 0:
-        stop.t = hit.t
-        stop.surface = SURFACE_MESH
-    out = MeshFlight()
-    out.end = stop
-    out.hit = hit
-    return out
+    return ended_on(mesh_hit(surfaces, origin, view, first.t), first)
 
 
 @wp.func
