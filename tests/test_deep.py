@@ -121,6 +121,27 @@ def test_merged_layers_are_samples_of_their_own_in_depth_order_and_the_air_spans
     np.testing.assert_allclose(alone.channels["Z"], FAR)
 
 
+def test_light_already_seen_through_a_layer_is_a_clear_sample_ahead_of_it():
+    """A layer's ``front`` light (paths already attenuated to the eye, as hybrid's over fog and terrain) is a
+    sample of alpha 0 at the group's nearest depth, after the air in front: flattening gives the composite, merged
+    or not."""
+    from warpsky.composite import merge_by_depth
+
+    shape = (1, 2)
+    air = layer([0.01, 0.02, 0.05], [0.95, 0.9, 0.8], FAR, shape)
+    fog = layer([0.2, 0.2, 0.2], [0.4, 0.4, 0.4], np.array([[30.0, 50.0]]), shape)
+    fog.front = layer([0.3, 0.25, 0.2], 1.0, FAR, shape)
+    terrain = layer([0.1, 0.1, 0.1], 0.0, np.array([[40.0, 45.0]]), shape)
+    for layers in ([air, merge_by_depth([fog, terrain], FAR)], [air, fog, terrain]):
+        deep = deep_from_layers(layers, FAR)
+        np.testing.assert_allclose(flatten(deep), composite(layers, FAR).rgba, rtol=1e-5, atol=1e-7)
+    deep = deep_from_layers([air, merge_by_depth([fog, terrain], FAR)], FAR)
+    assert list(deep.counts.reshape(-1)) == [4, 3]  # air, the paths' light, the parts (the fog behind the terrain
+    # in the second pixel is hidden)
+    np.testing.assert_allclose(deep.channels["A"][[1, 5]], 0.0)
+    np.testing.assert_allclose(deep.channels["Z"][:4], [0.0, 30.0, 30.0, 40.0])
+
+
 def test_a_missing_deep_file_renders_the_frame_again(tmp_path, homogeneous_npy, capsys):
     """A batch with --deep resumes a frame whose flat EXR is up to date but whose deep EXR is gone."""
     stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))

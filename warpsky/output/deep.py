@@ -58,13 +58,18 @@ class DeepPixels:
 def _stacks(layers, region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(radiance (N, H, W, 3), transmittance (N, H, W, 3), depth (N, H, W)) float64 of the layers as composited
     front to back, a merged layer expanded into its parts in the per-pixel order of their depths (as the merge
-    composited them), cropped to ``region`` (x, y, width, height; None: all)."""
+    composited them), a part's ``front`` light (already attenuated to the eye) as a clear sample ahead of the group,
+    cropped to ``region`` (x, y, width, height; None: all)."""
     x, y, width, height = region if region is not None else (0, 0, layers[0].depth.shape[1], layers[0].depth.shape[0])
     rows = (slice(y, y + height), slice(x, x + width))
     radiance, transmittance, depth = [], [], []
     for layer in layers:
         group = layer.parts or [layer]
         d = np.stack([np.asarray(part.depth, np.float64)[rows] for part in group])
+        for front in (part.front for part in group if part.front is not None):  # light already seen through the
+            radiance.append(np.asarray(front.radiance, np.float64)[rows])       # group: a clear sample at its
+            transmittance.append(np.ones_like(radiance[-1]))                    # nearest depth, ahead of it
+            depth.append(d.min(axis=0))
         order = np.argsort(d, axis=0, kind="stable")
         r = np.stack([np.asarray(part.radiance, np.float64)[rows] for part in group])
         t = np.stack([np.asarray(part.transmittance, np.float64)[rows] for part in group])
