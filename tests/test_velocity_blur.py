@@ -136,3 +136,22 @@ def test_a_vec3_vdb_grid_reads_as_a_dense_velocity(tmp_path):
     closest = x / np.linalg.norm(x, axis=1, keepdims=True)  # the sphere's closest point, in closed form
     error = np.linalg.norm(grid.values[on] - closest, axis=1) / voxel
     assert np.median(error) < 0.1 and error.max() < 2.5  # a narrow band's first-order transform, exact near it
+
+
+def test_a_batch_renders_a_blurred_frame_again_when_its_velocity_file_changes(smoke, tmp_path, capsys):
+    """The resume hash holds the velocity field's file as it holds the density's: a second run leaves the frame
+    alone, a rewritten velocity grid renders it again (a new settings hash in its header)."""
+    from conftest import run_cli
+
+    from warpsky.output.exr import read_exr
+
+    out = tmp_path / "b.0001.exr"
+    args = ["render", str(smoke["velocity"]), tmp_path / "b.####.exr", "--frames", "1", "--res", "16x8",
+            "--motion-samples", "2", "--device", "cpu", "--technique", "single_scatter", "--set", "step_length=2"]
+    assert run_cli(args, capsys)[0] == 0
+    first = (out.stat().st_mtime_ns, read_exr(out).metadata["settingsHash"])
+    assert run_cli(args, capsys)[0] == 0
+    assert (out.stat().st_mtime_ns, read_exr(out).metadata["settingsHash"]) == first  # up to date: skipped
+    np.save(tmp_path / "vel.npy", np.broadcast_to(np.array([SPEED, 1.0, 0.0], np.float32), (24, 24, 24, 3)).copy())
+    assert run_cli(args, capsys)[0] == 0
+    assert read_exr(out).metadata["settingsHash"] != first[1]

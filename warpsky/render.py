@@ -235,12 +235,14 @@ def check_outputs(outputs, plan: RenderPlan) -> None:
 
 def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None = None) -> str:
     """Short hash of what changes a frame's pixels: the resolved settings, resolution, camera and format, and (with
-    ``scene``) the identity of its input files — the stage, every medium's field file and the dome's texture by size
-    and modification time — so a batch re-renders frames whose data were rewritten (used to resume batches)."""
+    ``scene``) the identity of its input files — the stage, every medium's field file (and velocity file) and the
+    dome's texture by size and modification time — so a batch re-renders frames whose data were rewritten (used to
+    resume batches)."""
     inputs = []
     if scene is not None:
         dome = [scene.dome.source] if scene.dome is not None and scene.dome.source else []
-        for path in [scene.source, *(m.source for m in scene.media), *dome]:
+        velocity = [m.velocity_source for m in scene.media if m.velocity_source]
+        for path in [scene.source, *(m.source for m in scene.media), *velocity, *dome]:
             try:
                 info = os.stat(path)
                 inputs.append([str(path), info.st_size, info.st_mtime_ns])

@@ -172,6 +172,8 @@ class VoxelMedium:
             warpsky:slicing:xi`` on the Volume), or None for the technique's ``xi`` setting.
         detail: Animated density detail (:class:`DetailSpec`, ``warpsky:detail:*`` on the Volume), or None.
         ice: How an ice field's crystals are oriented (:class:`IceCrystals`), or None (random orientation).
+        velocity_source: The file of the Volume's velocity field ("" without one), which moves the density within
+            a motion-blurred frame; a batch's resume hash includes it.
     """
 
     name: str
@@ -185,6 +187,7 @@ class VoxelMedium:
     slicing_xi: float | None = None
     detail: DetailSpec | None = None
     ice: IceCrystals | None = None
+    velocity_source: str = ""
 
     def __post_init__(self):
         if self.ice is not None and self.species != "ice":

@@ -135,7 +135,7 @@ class VolumeReading(StagePrims):
                 media.append(VoxelMedium(
                     f"{path}:{name}" if species else path, values, volume_world @ local_from_index, scale,
                     albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi, detail,
-                    ice,
+                    ice, self._velocity_source(fields, tc),
                 ))
             except SceneError as exc:
                 raise SceneError(f"Volume {path}: {exc}") from None
@@ -178,6 +178,17 @@ class VolumeReading(StagePrims):
         if velocity.size == 0:
             return values, local_from_index
         return advected_grid(values, local_from_index, velocity * np.float32(scale), vel_from_index, seconds)
+
+    def _velocity_source(self, fields: dict, tc) -> str:
+        """The resolved file of the Volume's velocity field at ``tc`` ("" without one or when it does not resolve)."""
+        from pxr import UsdVol
+
+        name = next((n for n in VELOCITY_FIELDS if n in fields), None)
+        prim = self.stage.GetPrimAtPath(fields[name]) if name else None
+        if not prim or not prim.IsA(UsdVol.OpenVDBAsset):
+            return ""
+        asset = UsdVol.OpenVDBAsset(prim).GetFilePathAttr().Get(tc)
+        return str(asset.resolvedPath) if asset is not None and asset.resolvedPath else ""
 
     def _load_velocity(self, prim, vel_prim, tc) -> tuple[np.ndarray, np.ndarray]:
         """A velocity field's (X, Y, Z, 3) values [stage units per second] and its index-to-Volume matrix."""
