@@ -115,26 +115,41 @@ def looking_down(mu: float, position) -> Camera:
                   far=1.0e4)
 
 
+#: The cosine to the downward vertical at which the slab's reflected radiance is compared.
+SLAB_MU = 0.7
+
+
+def slab_scene(g: float, **surface) -> Scene:
+    """A constant fog slab of optical depth 1 (albedo 0.9, HG ``g``) from 0 to 10 m under a zenith sun, seen from
+    30 m at :data:`SLAB_MU`, over the ``surface`` (``ground=`` a plane or ``meshes=``) of albedo 0.5."""
+    fog = AnalyticFog("slab", [ConstantTerm(0.1)], floor=0.0, top=10.0, albedo=np.full(3, 0.9), g=g)
+    return Scene(looking_down(SLAB_MU, (0.0, 30.0, 0.0)), Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), fogs=(fog,),
+                 **surface)
+
+
+def against_adding_doubling(layer, g: float, what: str) -> tuple[float, float, float, float]:
+    """(mean, its standard error, adding-doubling's radiance, z) of the green channel of :func:`slab_scene`'s
+    layer."""
+    from adding_doubling import ground_reflected_radiance
+
+    expected = ground_reflected_radiance(lambda c: phase_numpy(PhaseKind.HG, g, c), 1.0, 0.9, 0.5, SLAB_MU)
+    mean = layer.radiance[..., 1].astype(np.float64).mean()
+    sigma = np.sqrt(layer.aovs["variance"][..., 1].astype(np.float64).sum()) / layer.radiance[..., 1].size
+    z = (mean - expected) / sigma
+    print(f"\nfog slab {what}: path tracer {mean:.5f} +- {sigma:.5f}, adding-doubling {expected:.5f}, z = {z:.2f}")
+    return mean, sigma, expected, z
+
+
 @pytest.mark.parametrize("g,order", [(0.5, 0), (0.0, 1)])
 def test_fog_slab_over_ground_against_adding_doubling(g, order, device):
     """A constant fog slab of optical depth 1 (albedo 0.9, HG g) on a Lambertian ground (albedo 0.5) under a zenith
     sun, no air: the radiance leaving it at mu = 0.7 (every order of scattering and ground bounce) agrees with
     adding-doubling, |z| < 3. With g = 0 high-order similarity from the first event changes nothing (the reduced
     fog is the fog): the same agreement through the reduced flights, events and shadow rays."""
-    mu = 0.7
-    fog = AnalyticFog("slab", [ConstantTerm(0.1)], floor=0.0, top=10.0, albedo=np.full(3, 0.9), g=g)
-    scene = Scene(looking_down(mu, (0.0, 30.0, 0.0)), Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), fogs=(fog,),
-                  ground=Ground(0.0, np.full(3, 0.5)))
+    scene = slab_scene(g, ground=Ground(0.0, np.full(3, 0.5)))
     settings = PathTracerSettings(spp=4096, seed=3, similarity_order=order)
     layer = PathTracer(settings, device=device).render(scene, 4, 4)
-    from adding_doubling import ground_reflected_radiance
-
-    expected = ground_reflected_radiance(lambda c: phase_numpy(PhaseKind.HG, g, c), 1.0, 0.9, 0.5, mu)
-    mean = layer.radiance[..., 1].astype(np.float64).mean()
-    sigma = np.sqrt(layer.aovs["variance"][..., 1].astype(np.float64).sum()) / layer.radiance[..., 1].size
-    z = (mean - expected) / sigma
-    print(f"\nfog slab over ground, g = {g}, similarity order {order}: path tracer {mean:.5f} +- {sigma:.5f}, "
-          f"adding-doubling {expected:.5f}, z = {z:.2f}")
+    mean, sigma, expected, z = against_adding_doubling(layer, g, f"over ground, g = {g}, similarity order {order}")
     assert abs(z) < 3.0
     assert np.allclose(layer.radiance[..., 0], layer.radiance[..., 1]) and sigma < 0.005 * expected
 
@@ -143,24 +158,14 @@ def test_fog_slab_over_a_terrain_mesh_against_adding_doubling(device):
     """The same fog slab (g = 0.5) over a flat Lambertian mesh instead of the ground plane: the meshes and the fog
     meet in one walk (the mesh bounce's sunlight through the fog's closed-form transmittance), |z| < 3 against
     adding-doubling."""
-    from adding_doubling import ground_reflected_radiance
-
     from warpsky.scene.terrain import TerrainMesh
 
-    mu, g = 0.7, 0.5
-    fog = AnalyticFog("slab", [ConstantTerm(0.1)], floor=0.0, top=10.0, albedo=np.full(3, 0.9), g=g)
     half = 500.0  # wide enough for every path in the slab; its rays leave 2e-5 x (1 m + 707 m) = 1.4 cm off it
     floor = TerrainMesh("floor", np.array([[-half, 0.0, -half], [half, 0.0, -half], [half, 0.0, half],
                                            [-half, 0.0, half]]), np.array([[0, 2, 1], [0, 3, 2]]), (0.5, 0.5, 0.5))
-    scene = Scene(looking_down(mu, (0.0, 30.0, 0.0)), Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), fogs=(fog,),
-                  meshes=(floor,))
-    layer = PathTracer(PathTracerSettings(spp=4096, seed=5), device=device).render(scene, 4, 4)
-    expected = ground_reflected_radiance(lambda c: phase_numpy(PhaseKind.HG, g, c), 1.0, 0.9, 0.5, mu)
-    mean = layer.radiance[..., 1].astype(np.float64).mean()
-    sigma = np.sqrt(layer.aovs["variance"][..., 1].astype(np.float64).sum()) / layer.radiance[..., 1].size
-    z = (mean - expected) / sigma
-    print(f"\nfog slab over a mesh: path tracer {mean:.5f} +- {sigma:.5f}, adding-doubling {expected:.5f}, "
-          f"z = {z:.2f}")
+    layer = PathTracer(PathTracerSettings(spp=4096, seed=5), device=device).render(slab_scene(0.5, meshes=(floor,)),
+                                                                                   4, 4)
+    _, sigma, expected, z = against_adding_doubling(layer, 0.5, "over a mesh")
     assert abs(z) < 3.0 and sigma < 0.005 * expected
 
 
