@@ -58,6 +58,11 @@ SCALAR_DATA_TYPES = ("float", "half", "double")
 GRID_CLASS_ATTRS = ("fieldClass", "vdbGridClass")
 
 
+def velocity_field(fields: dict) -> str | None:
+    """The name of a Volume's velocity field among its ``fields`` (:data:`VELOCITY_FIELDS`), or None."""
+    return next((name for name in VELOCITY_FIELDS if name in fields), None)
+
+
 class VolumeReading(StagePrims):
     """The stage reader's voxel media."""
 
@@ -159,7 +164,7 @@ class VolumeReading(StagePrims):
         from pxr import UsdVol
 
         origin = self.motion_origin
-        velocity_name = next((n for n in VELOCITY_FIELDS if n in fields), None)
+        velocity_name = velocity_field(fields)
         if origin is None or velocity_name is None:
             return values, local_from_index
         samples = UsdVol.OpenVDBAsset(field_prim).GetFilePathAttr().GetTimeSamples()
@@ -183,7 +188,7 @@ class VolumeReading(StagePrims):
         """The resolved file of the Volume's velocity field at ``tc`` ("" without one or when it does not resolve)."""
         from pxr import UsdVol
 
-        name = next((n for n in VELOCITY_FIELDS if n in fields), None)
+        name = velocity_field(fields)
         prim = self.stage.GetPrimAtPath(fields[name]) if name else None
         if not prim or not prim.IsA(UsdVol.OpenVDBAsset):
             return ""
@@ -206,10 +211,18 @@ class VolumeReading(StagePrims):
         name = asset.GetFieldNameAttr().Get(tc)
         index = vel_prim.GetAttribute("fieldIndex")
         index = int(index.Get(tc)) if index and index.HasAuthoredValue() else 0
+        resolved = asset_path.resolvedPath
         try:
-            grid = load_vector_field(asset_path.resolvedPath, grid_name=str(name) if name else None, grid_index=index)
-        except SceneError as exc:
-            raise SceneError(f"field {field_path}: {exc}") from None
+            stat = os.stat(resolved)
+        except OSError as exc:
+            raise SceneError(f"field {field_path}: cannot read {resolved}: {exc.strerror}") from None
+        key = (resolved, str(name) if name else None, index, stat.st_mtime_ns, stat.st_size, "vector")
+        if key not in self._field_cache:  # read once for all the sub-frames and fields of a frame
+            try:
+                self._field_cache[key] = load_vector_field(resolved, grid_name=key[1], grid_index=index)
+            except SceneError as exc:
+                raise SceneError(f"field {field_path}: {exc}") from None
+        grid = self._field_cache[key]
         if grid.local_from_index is None:
             return grid.values, self._extent_placement(prim, tc, grid.values.shape[:3])
         return grid.values, grid.local_from_index
