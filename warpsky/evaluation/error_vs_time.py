@@ -62,6 +62,7 @@ from warpsky.files import atomic_write, cache_dir
 from warpsky.passes.frame import render_layers
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.registry import technique_class
+from warpsky.passes.media import scenery_traceable
 from warpsky.techniques.path_tracer.deck_media import traces_decks
 from warpsky.version import __version__
 
@@ -231,7 +232,10 @@ def measured_rows(scene, techniques: list[str]) -> list[tuple[str, str, list[dic
     measured once along :data:`STRATIFORM_LADDER`."""
     out = []
     for name in techniques:
-        if scene.heightfield_clouds and not traces_decks(technique_class(name)):
+        cls = technique_class(name)
+        if scene.heightfield_clouds and cls.scatters_scenery and scenery_traceable(scene):
+            out.append((name, name, LADDERS[name]))  # its paths carry the deck's multiple scattering
+        elif scene.heightfield_clouds and not traces_decks(cls):
             out += heightfield_rows(scene, name, out)
         elif not scene.layers or not technique_class(name).renders_layers:
             out.append((name, name, LADDERS[name]))

@@ -26,10 +26,10 @@ def has_scenery(scene) -> bool:
 
 
 def scenery_traceable(scene) -> bool:
-    """Whether a ``scatters_scenery`` technique path traces ``scene``'s fog and meshes beyond their single
-    scattering: there are some, and no stratiform layer or height-field deck, whose light and shadows its paths
-    do not carry."""
-    return bool(scene.fogs or scene.meshes) and not (scene.layers or scene.heightfield_clouds)
+    """Whether a ``scatters_scenery`` technique path traces ``scene``'s fog, height-field deck and meshes beyond
+    their single scattering: there are some, and no stratiform layer, whose light and shadows its paths do not
+    carry."""
+    return bool(scene.fogs or scene.meshes or scene.heightfield_clouds) and not scene.layers
 
 
 class MediaPass(Pass):
@@ -69,8 +69,11 @@ class MediaPass(Pass):
         if scene.layers:
             return {"media": f"none: {technique.name} does not run, the layers are rendered by the stratiform pass"}
         if cls.runs(scene, technique) and not cls.renders_own(scene, technique):
-            return {"media": f"none: {technique.name} path traces the multiple scattering of the fog and the "
-                             "meshes (the fog and surfaces passes draw their single scattering)"}
+            kinds = [kind for kind, present in (("the fog", scene.fogs), ("the height-field deck",
+                     scene.heightfield_clouds), ("the meshes", scene.meshes)) if present]
+            named = ", ".join(kinds[:-1]) + " and " + kinds[-1] if len(kinds) > 1 else kinds[0]
+            return {"media": f"none: {technique.name} path traces the multiple scattering of {named} (their "
+                             "passes draw the single scattering)"}
         return {"media": "none"}
 
     def memory_estimate(self, scene, width: int, height: int):

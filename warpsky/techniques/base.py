@@ -34,10 +34,10 @@ class Technique:
     - ``traces_dome``: a dome's light is path traced exactly (else it is an ambient light of the marching models).
     - ``traces_meshes``: it traces the scene's triangle meshes itself (light bounces between them, the media and
       the ground), so no surfaces pass runs: it draws the ground plane and the meshes in its own layer.
-    - ``scatters_scenery``: next to the fog and surfaces passes (which draw the fog's and the meshes' single
-      scattering: the sun once) it path traces the light those scatter more than once, and the sky's and the
-      dome's light on them (:meth:`scenery_paths`), so the media pass runs in a frame of fog or meshes even without
-      voxel media.
+    - ``scatters_scenery``: next to the fog, height-field and surfaces passes (which draw the fog's, the deck's and
+      the meshes' single scattering: the sun once) it path traces the light those scatter more than once, and the
+      sky's and the dome's light on them (:meth:`scenery_paths`), so the media pass runs in a frame of fog, a deck
+      or meshes even without voxel media.
     - ``aovs``: the extra outputs its layer holds, name -> components (``variance``: ``RGB``), which RenderVars
       may name.
     - ``kernel_modules``: the modules whose kernel factories it launches (the first-compile notice checks Warp's
@@ -95,9 +95,9 @@ class Technique:
         return self
 
     def scenery_paths(self, scene: Scene) -> bool:
-        """Whether its render of ``scene`` path traces the fog's and the meshes' light beyond the sun's single
-        scattering, the sky's and the dome's included (then the fog pass leaves out its ambient term and the
-        surfaces pass its sky light); False unless ``scatters_scenery``."""
+        """Whether its render of ``scene`` path traces the fog's, the deck's and the meshes' light beyond the sun's
+        single scattering, the sky's and the dome's included (then the fog and height-field passes leave out their
+        ambient terms and the surfaces pass its sky light); False unless ``scatters_scenery``."""
         return False
 
     def render(self, scene: Scene, width: int, height: int) -> Layer:

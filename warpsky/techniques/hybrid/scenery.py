@@ -1,15 +1,20 @@
-"""The hybrid technique's paths through the scenery: analytic fog and triangle meshes (terrain) drawn by other passes.
+"""The hybrid technique's paths through the scenery: analytic fog, height-field cloud decks with their haze and
+triangle meshes (terrain), whose single scattering other passes draw.
 
 Who counts what, so that no light counts twice:
 
 * the fog pass: the fog's single scattering of the sun (Biri 2002's closed form), without its ambient term;
+* the height-field pass: the deck's and the haze's single scattering of the sun (Max 1986), without its ambient
+  term;
 * the surfaces pass: the meshes' (and a ground plane's, where it draws it) direct sunlight, without its sky term;
 * the paths (:class:`~warpsky.techniques.path_tracer.technique.PathTracing` with ``meshes`` and ``fog``, the
   camera's opaque depth dropped so that they start on the meshes themselves): everything else. Their first event,
   in the fog, the media or on a surface, takes no sunlight (``multiple_only``, as for the voxel media and the
   ground), then the path gathers the sun at its later events and the sky's and the dome's light wherever it goes:
   that is the light the fog's ambient term and the surfaces' sky term approximated (isotropic, unshadowed, no light
-  between faces), now traced with the terrain's occlusion, so both terms are left out. A path whose first event
+  between faces; the deck's ambient light from straight above), now traced with the terrain's occlusion, so those
+terms are left out. Beyond the deck's square the paths see clear air: there the deck keeps its single scattering
+only (the square's automatic size dims the light from beyond it below 1 % along the frame's rays). A path whose first event
   is the air's ends there (``air_by_table``: the sky pass's tables hold the air's own light).
 
 The paths' radiance is already attenuated on its way to the eye (the fog's closed-form transmittance, the media and
@@ -26,31 +31,40 @@ import numpy as np
 
 from warpsky.layer import Layer
 from warpsky.passes.fog.fog import Fog
+from warpsky.passes.heightfield.heightfield import HeightField
 from warpsky.scene.model import Scene
+from warpsky.techniques.path_tracer.deck_media import with_deck_as_media
 
 
-def paths_scene(scene: Scene, paths_ground=None) -> Scene:
+def paths_scene(scene: Scene, paths_ground, settings, width: int, height: int) -> Scene:
     """The scene the paths trace: ``scene`` with ``paths_ground`` as its ground plane where another pass draws it,
-    and no opaque depth on the camera (the surfaces pass's meshes and ground, which the paths trace themselves)."""
+    no opaque depth on the camera (the surfaces pass's meshes and ground, which the paths trace themselves) and its
+    height-field deck voxelised into its media (``settings``: the path tracer's, for the deck's square and voxels;
+    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`)."""
     ground = scene.ground if scene.ground is not None else paths_ground
     camera = dataclasses.replace(scene.camera, opaque_depth=None)
-    return dataclasses.replace(scene, ground=ground, camera=camera)
+    traced = dataclasses.replace(scene, ground=ground, camera=camera)
+    return with_deck_as_media(traced, settings, width, height)
 
 
 def scenery_guide(scene: Scene, single: Layer, device: str) -> Layer:
     """The single-scattering layer as the paths' error estimate and denoiser read it: its transmittance times the
-    fogs' (closed form, to the opaque depth; :class:`~warpsky.passes.fog.fog.Fog` without light), zero where the
-    camera ray ends on an opaque surface another pass drew (the camera's opaque depth)."""
+    fogs' (closed form, to the opaque depth; :class:`~warpsky.passes.fog.fog.Fog` without light) and the deck's
+    and haze's (:class:`~warpsky.passes.heightfield.heightfield.HeightField` without light), zero where the camera
+    ray ends on an opaque surface another pass drew (the camera's opaque depth)."""
     height, width = single.depth.shape
     opaque = scene.camera.opaque_depth
     depth = None
     if opaque is not None:
         depth = np.asarray(opaque.numpy() if hasattr(opaque, "numpy") else opaque, dtype=np.float32)
     transmittance = single.transmittance
+    dark = dataclasses.replace(scene, sun=None, extra_suns=(), dome=None)
     if scene.fogs:
-        dark = dataclasses.replace(scene, sun=None, extra_suns=(), dome=None)
         fog = Fog(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
         transmittance = transmittance * fog.transmittance
+    if scene.heightfield_clouds:
+        deck = HeightField(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
+        transmittance = transmittance * deck.transmittance
     if depth is not None:
         transmittance = np.where((depth < scene.camera.far)[..., None], 0.0, transmittance)
     return Layer(single.radiance, transmittance.astype(np.float32), single.depth, single.stats)

@@ -49,6 +49,7 @@ from warpsky.techniques.hybrid.denoise import (
     require_denoiser,
 )
 from warpsky.techniques.hybrid.scenery import paths_scene, scenery_guide
+from warpsky.techniques.path_tracer.deck_media import deck_plan, deck_voxel_memory
 from warpsky.techniques.path_tracer.forward_cut import check_cut_settings, cut_feature
 from warpsky.techniques.path_tracer.technique import (
     PathTracer,
@@ -113,6 +114,14 @@ class HybridSettings(Settings):
                                         auto="0.5 x the smallest voxel edge")
     shadow_step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering shadow step",
                                                auto="1 x the smallest voxel edge")
+    deck_extent: float | None = setting(None, unit="m", range="> 0", help="half-size of the square around the "
+                                        "camera over which the paths trace a height-field deck and its haze "
+                                        "voxelised (the height-field pass draws their single scattering everywhere)",
+                                        auto="as the path tracer's")
+    deck_voxel_width: float | None = setting(None, unit="m", range="> 0", help="horizontal edge of those voxels",
+                                             auto="as the path tracer's")
+    deck_voxel: float | None = setting(None, unit="m", range="> 0", help="vertical edge of those voxels",
+                                       auto="as the path tracer's")
 
     def single_scatter(self) -> SingleScatterSettings:
         # skylight off: the paths carry the sky's light (traced through the air) and the dome's, first scattering
@@ -124,7 +133,9 @@ class HybridSettings(Settings):
         return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,
                                   majorant_block=self.majorant_block, samples_per_pass=self.samples_per_pass,
                                   pixel_jitter=self.ms_scale > 1, similarity_order=self.similarity_order,
-                                  bake_detail=self.bake_detail, forward_cut=self.forward_cut)
+                                  bake_detail=self.bake_detail, forward_cut=self.forward_cut,
+                                  deck_extent=self.deck_extent, deck_voxel_width=self.deck_voxel_width,
+                                  deck_voxel=self.deck_voxel)
 
 
 class Hybrid(Technique):
@@ -183,6 +194,8 @@ class Hybrid(Technique):
                                            int(s.samples_per_pass), film_pixels=coarse,
                                            bake_detail=bool(s.bake_detail)))
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
+        if scene.heightfield_clouds and self.scenery_paths(scene):
+            estimate.merge(deck_voxel_memory(scene, s.path_tracer(), width, height))
         if scene.atmosphere is not None:
             estimate.add("sky", host=pixels * 64, device=pixels * 40)
         return estimate.add("AOVs", host=3 * pixels * AOV_BYTES)
@@ -198,9 +211,13 @@ class Hybrid(Technique):
         return items
 
     def features(self, scene: Scene, width: int, height: int, features: dict[str, str]) -> dict[str, str]:
-        """The ``forward cut`` line of its multiple-scattering paths."""
+        """The ``forward cut`` line of its multiple-scattering paths, and how they trace a height-field deck."""
         s = self.settings_for(scene)
-        return cut_feature(scene, float(s.forward_cut), features) if s.multiple_scattering else features
+        if not s.multiple_scattering:
+            return features
+        if scene.heightfield_clouds and self.scenery_paths(scene):
+            features = deck_paths_features(scene, s.path_tracer(), width, height, features)
+        return cut_feature(scene, float(s.forward_cut), features)
 
     def scenery_paths(self, scene: Scene) -> bool:
         """With multiple scattering on, its paths trace the fog and the meshes in a scene without stratiform layers
@@ -222,7 +239,7 @@ class Hybrid(Technique):
         multiple = np.zeros_like(single.radiance)
         variance = np.zeros_like(single.radiance)
         scenery = self.scenery_paths(scene)
-        paths = paths_scene(scene, paths_ground) if scenery else scene
+        paths = paths_scene(scene, paths_ground, settings.path_tracer(), width, height) if scenery else scene
         lit = (scene.sun is not None and (scene.media or scenery)) or (
             scene.dome is not None and (scene.media or scene.ground or scenery))
         if settings.multiple_scattering and lit:
@@ -244,6 +261,20 @@ class Hybrid(Technique):
         return Layer(single.radiance + multiple, single.transmittance, single.depth, stats=stats,
                      aovs={"single_scatter": single.radiance, "multiple_scatter": multiple, "variance": variance},
                      warnings=stats.pop("warnings", []))
+
+
+def deck_paths_features(scene: Scene, settings: PathTracerSettings, width: int, height: int,
+                        features: dict[str, str]) -> dict[str, str]:
+    """``features`` with the height-field line saying that the paths trace the deck voxelised (square, voxels)
+    beside the height-field pass's single scattering."""
+    clouds, grid, sub = deck_plan(scene, settings, width, height)
+    line = (f"; multiple scattering path traced by hybrid through the deck{' and haze' if clouds.haze else ''} "
+            f"voxelised over a square of half-size {0.5 * grid.width[0] * grid.shape[0]:.4g} m around the camera "
+            f"({grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} = {grid.voxels:,} voxels, {sub}x{sub} sub-columns); "
+            "the pass's ambient term left to the paths")
+    out = dict(features)
+    out["heightfield"] = features.get("heightfield", clouds.name) + line
+    return out
 
 
 def next_check(passes: int, estimate: float, target: float) -> int:
