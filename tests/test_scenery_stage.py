@@ -209,7 +209,8 @@ def test_shipped_stages_plan_and_render(tmp_path, capsys, stage):
     path = tmp_path / "usd_scenes" / f"{stage}.usda"
     code, out, err = run_cli(["info", path], capsys)
     assert code == 0, err
-    passes = {"valley_fog": "surfaces -> media -> fog -> sky", "sunbeams": "surfaces -> media -> heightfield -> sky"}[stage]
+    passes = {"valley_fog": "surfaces -> media -> fog -> sky",
+              "sunbeams": "surfaces -> media -> heightfield -> sky"}[stage]
     assert f"passes      {passes} -> composite" in out
     code, _, err = run_cli(["render", path, tmp_path / "f.####.exr", "--frames", "1", "--res", "16", "--float"],
                            capsys)

@@ -60,9 +60,9 @@ from warpsky.composite import composite
 from warpsky.errors import UsageError
 from warpsky.files import atomic_write, cache_dir
 from warpsky.passes.frame import render_layers
+from warpsky.passes.media import scenery_traceable
 from warpsky.plan import RenderPlan, make_plan
 from warpsky.registry import technique_class
-from warpsky.passes.media import scenery_traceable
 from warpsky.techniques.path_tracer.deck_media import traces_decks
 from warpsky.version import __version__
 

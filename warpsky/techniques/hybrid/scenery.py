@@ -8,14 +8,16 @@ Who counts what, so that no light counts twice:
   term;
 * the surfaces pass: the meshes' (and a ground plane's, where it draws it) direct sunlight, without its sky term;
 * the paths (:class:`~warpsky.techniques.path_tracer.technique.PathTracing` with ``meshes`` and ``fog``, the
-  camera's opaque depth dropped so that they start on the meshes themselves): everything else. Their first event,
-  in the fog, the media or on a surface, takes no sunlight (``multiple_only``, as for the voxel media and the
-  ground), then the path gathers the sun at its later events and the sky's and the dome's light wherever it goes:
-  that is the light the fog's ambient term and the surfaces' sky term approximated (isotropic, unshadowed, no light
-  between faces; the deck's ambient light from straight above), now traced with the terrain's occlusion, so those
-terms are left out. Beyond the deck's square the paths see clear air: there the deck keeps its single scattering
-only (the square's automatic size dims the light from beyond it below 1 % along the frame's rays). A path whose first event
-  is the air's ends there (``air_by_table``: the sky pass's tables hold the air's own light).
+  camera's opaque depth dropped so that they start on the meshes themselves, the deck and its haze voxelised over
+  a square around the camera as the path tracer traces them, :mod:`~warpsky.techniques.path_tracer.deck_media`):
+  everything else. Their first event, in the fog, the deck, the media or on a surface, takes no sunlight
+  (``multiple_only``, as for the voxel media and the ground), then the path gathers the sun at its later events
+  and the sky's and the dome's light wherever it goes: that is the light the fog's and the deck's ambient terms
+  and the surfaces' sky term approximated (isotropic, unshadowed or shadowed straight above only, no light
+  between faces), now traced with the terrain's occlusion, so those terms are left out. A path whose first event
+  is the air's ends there (``air_by_table``: the sky pass's tables hold the air's own light). Beyond the deck's
+  square the paths see clear air: there the deck keeps its single scattering only (the square's automatic size
+  dims the light from beyond it below 1 % along the frame's rays).
 
 The paths' radiance is already attenuated on its way to the eye (the fog's closed-form transmittance, the media and
 the air are tracked along the camera ray), so it is not composited by depth behind the fog's or the terrain's layer:
