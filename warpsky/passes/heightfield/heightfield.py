@@ -12,8 +12,10 @@ setting             unit  default                       range     meaning
 ``step_length``     m     min(0.25 / sigma_max,         > 0       step inside the cloud
                           feature / 16)
 ``haze_step_length`` m    min(0.25 / sigma_haze,        > 0       step in clear haze (resolves the shafts);
-                          shadow feature / 8), longer             authored: that step everywhere
+                          shadow feature / 16), longer            authored: that step everywhere
                           along rays close to the sun
+``haze_steps_per_   --    16                            1..1024   automatic haze step: steps per shortest feature of
+feature``                                                         the deck's shadow (tune half of the scenery family)
 ``max_steps``       --    4096                          >= 1      most steps per piece of constant extinction
 ``min_transmittance`` --  1e-4                          [0, 1)    stop once the view is this opaque
 =================== ===== ============================= ========= =================================================
@@ -70,12 +72,19 @@ def haze_step_bound(clouds: HeightFieldClouds) -> float:
     return 0.25 / sigma if sigma > 0.0 else 1.0e30
 
 
-def automatic_steps(clouds: HeightFieldClouds) -> tuple[float, float]:
+#: Steps per shortest feature of the deck's shadow in clear haze by default (``haze_steps_per_feature``): chosen
+#: on the scenery family's tune half (``tools/choose_scenery_settings.py``) as the cheapest rule whose worst
+#: quadrature error there is within 1 %.
+HAZE_STEPS_PER_FEATURE = 16
+
+
+def automatic_steps(clouds: HeightFieldClouds, haze_steps_per_feature: int = HAZE_STEPS_PER_FEATURE
+                    ) -> tuple[float, float]:
     """(cloud step, shortest haze step) [m] from the deck's extinction and smallest features (module docstring)."""
     feature = feature_length(clouds)
     sigma = float(np.max(clouds.extinction))
     cloud = min(0.25 / sigma, feature / 16.0) if sigma > 0.0 else feature / 16.0
-    return cloud, min(haze_step_bound(clouds), shadow_feature(clouds) / 8.0)
+    return cloud, min(haze_step_bound(clouds), shadow_feature(clouds) / haze_steps_per_feature)
 
 
 @documented
@@ -94,8 +103,11 @@ class HeightFieldSettings(Settings):
                                         auto="min(0.25 / sigma_max, feature / 16)")
     haze_step_length: float | None = setting(None, unit="m", range="> 0", help="step in clear haze (resolves the "
                                              "shafts); authored: that step everywhere",
-                                             auto="min(0.25 / sigma_haze, shadow feature / 8), longer along rays "
-                                             "close to the sun")
+                                             auto="min(0.25 / sigma_haze, shadow feature / haze_steps_per_feature), "
+                                             "longer along rays close to the sun")
+    haze_steps_per_feature: int = setting(HAZE_STEPS_PER_FEATURE, range="1..1024", help="automatic haze step: "
+                                          "steps per shortest feature of the deck's shadow (chosen on the scenery "
+                                          "family's tune half: worst quadrature error 1 %)")
     max_steps: int = setting(4096, range=">= 1", help="most steps per piece of constant extinction")
     min_transmittance: float = setting(1.0e-4, range="[0, 1)", help="stop once the view is this opaque")
 
@@ -115,11 +127,11 @@ class HeightField:
     def march_settings(self, scene: Scene, clouds: HeightFieldClouds, has_limit: bool,
                        ambient=None) -> HeightFieldMarch:
         s = self.settings
-        cloud_auto, haze_auto = automatic_steps(clouds)
+        cloud_auto, haze_auto = automatic_steps(clouds, s.haze_steps_per_feature)
         march = HeightFieldMarch()
         march.cloud_step = float(s.step_length or cloud_auto)
         march.haze_step = float(s.haze_step_length or haze_auto)
-        march.haze_feature = 0.0 if s.haze_step_length else shadow_feature(clouds)
+        march.haze_feature = 0.0 if s.haze_step_length else shadow_feature(clouds) / s.haze_steps_per_feature
         march.shadow = int(s.mode != "exact")
         march.haze_step_max = haze_step_bound(clouds)
         march.max_steps = s.max_steps

@@ -5,9 +5,14 @@ interval search (:func:`~warpsky.media.heightfield.hf_next_interval`), so the ra
 constant extinction: clear haze, cloud, or cloud inside haze. Each piece is integrated in equal steps. Along the view
 ray the optical depth is then exactly linear; the optical depth towards the sun is found at the step's ends (cloud:
 the exact length of the sun ray inside the deck, or in ``max`` mode Max's thickness rule :func:`deck_shadow_length`;
-haze: its closed-form path to the slab's top) and taken as linear between them, and the step's exp(-(tau_view +
-tau_sun)) is integrated in closed form (:func:`~warpsky.numerics.exp_lerp_mean3`), which keeps any optical
-depth per step finite.
+haze: its closed-form path to the slab's top). In cloud it is taken as linear between them, and the step's
+exp(-(tau_view + tau_sun)) is integrated in closed form (:func:`~warpsky.numerics.exp_lerp_mean3`), which keeps any
+optical depth per step finite. In clear haze the deck's part of the sun's optical depth is not smooth: it jumps
+where the step crosses the edge of a cloud's shadow (a shaft), and the exp-lerp mean of a jump is the logarithmic
+mean of the two ends' transmittances, always below their average, which is what a step crossing an edge at an
+unknown place gives on average. There the view's and the haze's own parts keep their closed form and the deck's
+transmittance towards the sun is averaged over the step's ends (trapezoid): on the tune half of the scenery family the exp-lerp march at the automatic haze step was 3.2 %
+too dark against an eight times finer march (relative RMSE 4.5 %), and halving the step only halved that.
 
 Sources per metre: sigma_s p(theta) E_sun exp(-tau_sun) from the sun (cloud and haze, each with its own
 Henyey-Greenstein phase) and sigma_s L_mean exp(-tau_zenith) from the sky's ambient light L_mean
@@ -52,7 +57,7 @@ class HeightFieldMarch:
 
     cloud_step: float  # step inside cloud pieces [m]
     haze_step: float  # shortest step in clear haze [m]
-    haze_feature: float  # shortest horizontal feature of the deck's shadow pattern [m]
+    haze_feature: float  # shortest horizontal feature of the deck's shadow pattern / steps per feature [m]
     haze_step_max: float  # longest step in clear haze, 0.25 / sigma_haze [m]
     shadow: int  # 0: exact optical depth along the sun ray; 1: Max's thickness rule (:func:`deck_shadow_length`)
     max_steps: int  # most steps per piece (a longer piece takes longer steps)
@@ -113,7 +118,8 @@ def sun_depth(hf: HeightField, haze: HazeSlab, p: wp.vec3, sun_dir: wp.vec3, sha
 def haze_step_along(march: HeightFieldMarch, view: wp.vec3, sun_dir: wp.vec3) -> float:
     """Step [m] of clear haze along ``view``: the shadow pattern seen along the ray changes as fast as the point
     where the ray towards the sun meets a horizontal plane moves, |view_xz - (view_y / sun_y) sun_xz| per metre, so
-    a feature of ``haze_feature`` metres gets 8 steps; never below ``haze_step``, nor above ``haze_step_max`` (a
+    a feature of the shadow gets ``haze_steps_per_feature`` steps (``haze_feature`` is the feature over that
+    count); never below ``haze_step``, nor above ``haze_step_max`` (a
     quarter of the haze's mean free path: the sky light's occlusion is taken at the step's middle)."""
     rate = wp.sqrt(view[0] * view[0] + view[2] * view[2])
     if sun_dir[1] > 1.0e-6:
@@ -121,7 +127,7 @@ def haze_step_along(march: HeightFieldMarch, view: wp.vec3, sun_dir: wp.vec3) ->
         dx = view[0] - k * sun_dir[0]
         dz = view[2] - k * sun_dir[2]
         rate = wp.sqrt(dx * dx + dz * dz)
-    step = wp.max(march.haze_step, march.haze_feature / (8.0 * wp.max(rate, 1.0e-6)))
+    step = wp.max(march.haze_step, march.haze_feature / wp.max(rate, 1.0e-6))
     return wp.min(step, wp.max(march.haze_step_max, march.haze_step))
 
 
@@ -165,22 +171,33 @@ def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldMar
     use_sexp = march.sexp != 0 and cloud_on > 0.0
     tau_start = state.tau
     tau_sun_a = wp.vec3(0.0)
+    haze_sun_a = wp.vec3(0.0)
     # node j = 0 .. count at a + j dt: the sun's optical depth at each node (one call site: it inlines the whole
     # interval search), step j - 1 integrated once both its ends are known
     for j in range(count + 1):
         tau_sun_b = wp.vec3(0.0)
+        haze_sun_b = wp.vec3(0.0)
         if sunlit and not use_sexp:
-            tau_sun_b = sun_depth(hf, haze, o + (a + float(j) * dt) * view, sun.direction, march.shadow)
+            node = o + (a + float(j) * dt) * view
+            tau_sun_b = sun_depth(hf, haze, node, sun.direction, march.shadow)
+            haze_sun_b = haze.extinction * haze_path(haze, node, sun.direction)
         if j == 0:
             tau_sun_a = tau_sun_b
+            haze_sun_a = haze_sun_b
             continue
         ta = a + float(j - 1) * dt
         tm = ta + 0.5 * dt
         tau_b = out.tau + sigma_t * dt
         if sunlit and not use_sexp:
             mean = exp_lerp_mean3(out.tau + tau_sun_a, tau_b + tau_sun_b)
+            if cloud_on == 0.0:  # clear haze: the deck's part of the sun's depth jumps at the shafts' edges
+                deck_a = tau_sun_a - haze_sun_a
+                deck_b = tau_sun_b - haze_sun_b
+                mean = wp.cw_mul(exp_lerp_mean3(out.tau + haze_sun_a, tau_b + haze_sun_b),
+                                 0.5 * (exp3(deck_a) + exp3(deck_b)))
             out.light += wp.cw_mul(wp.cw_mul(sigma_cloud + sigma_haze, sun.irradiance), mean) * dt
             tau_sun_a = tau_sun_b
+            haze_sun_a = haze_sun_b
         if sunlit and use_sexp and sun.direction[1] > 0.0:
             p = o + tm * view
             column = hf_column_above(hf, p) / sun.direction[1]
