@@ -14,7 +14,7 @@ thread per pixel, each on the rays its pass rendered:
   march a shadow ray per step.
 * :data:`fog_profile`, analytic fog (Biri 2002): its closed-form optical depth
   (:func:`~warpsky.media.analytic_fog.fogs_optical_depth`) over the slabs' span, each edge placed by bisection on
-  the distance to 2^-32 of the span.
+  the distance to 2^-24 of the span.
 
 Where the edges go sets the error. A compositor splits a bin's alpha as if its extinction were uniform, so an
 object placed inside a bin sees a visibility off by at most the bin's share of the opacity, and by less the shorter
@@ -54,8 +54,8 @@ STEP_VOXELS = 0.5
 CUT = 1.0e-6
 #: Halvings that place a quantile inside a march step (its position to 2^-24 of the step).
 STEP_BISECTIONS = 24
-#: Halvings that place a fog quantile along the fog's span (to 2^-32 of it).
-FOG_BISECTIONS = 32
+#: Halvings that place a fog edge along the fog's span (to 2^-24 of it: 6 mm over 100 km).
+FOG_BISECTIONS = 24
 
 
 @wp.struct
