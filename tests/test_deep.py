@@ -67,20 +67,25 @@ def read_deep(path) -> dict:
 
 @pytest.mark.parametrize("colorspace", ["lin_rec709", "ACEScg"])
 def test_render_writes_a_deep_exr_that_flattens_to_the_frame(tmp_path, homogeneous_npy, capsys, colorspace):
-    """warpsky render --deep: beside the flat frame a deep scanline EXR whose samples, read back with OpenEXR and
-    flattened, give the frame's RGBA within 1e-3 (its 32-bit floats), with the frame's header attributes."""
+    """warpsky render --deep --deep-samples 5: beside the flat frame a deep scanline EXR whose samples, read back
+    with OpenEXR and flattened, give the frame's RGBA within 1e-3 (its 32-bit floats), with the frame's header
+    attributes; the box is at most 5 volume samples per pixel (and the ground a point behind them)."""
     from warpsky.output.deep import DeepPixels
 
     stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40),
                                                        ground=(-12.0, 0.3)))
     out = tmp_path / "f.exr"
-    code, _, err = run(["render", stage, out, "--res", "24x16", "--deep", "--float", "--colorspace", colorspace,
-                        *FAST], capsys)
+    code, _, err = run(["render", stage, out, "--res", "24x16", "--deep", "--deep-samples", "5", "--float",
+                        "--colorspace", colorspace, *FAST], capsys)
     assert code == 0, err
     header, channels = read_deep(deep_path(out))
     assert str(header["type"]).endswith("deepscanline") and sorted(channels) == ["A", "B", "G", "R", "Z", "ZBack"]
     assert header["warpsky/colorspace"] == colorspace and "worldToCamera" in header and "chromaticities" in header
+    assert header["warpsky/deepSamples"] == 5
     counts = np.vectorize(lambda samples: 0 if samples is None else len(samples), otypes=[int])(channels["A"])
+    volume = np.vectorize(lambda z, back: 0 if z is None else int(np.sum(z < back)), otypes=[int])(channels["Z"],
+                                                                                                 channels["ZBack"])
+    assert volume.max() == 5 and counts.max() == 6
     flat = read_exr(out)
     rgba = np.stack([flat.channels[c].astype(np.float64) for c in "RGBA"], axis=-1)
     assert counts.shape == (16, 24) and np.all(counts[rgba.max(axis=-1) > 0.0] >= 1)  # a sample wherever it shows
@@ -159,7 +164,8 @@ def test_a_deep_raster_product_is_a_deep_exr_that_flattens_to_its_raster_sibling
                                                                                   capsys, monkeypatch):
     """A RenderProduct of productType deepRaster (as Solaris writes for Nuke) is written as a deep scanline EXR at
     its productName, with no flat file: it flattens to the raster product of the same camera within 1e-3, a
-    RenderVar a deep image cannot hold is named in one warning, and a second run finds the frame up to date."""
+    RenderVar a deep image cannot hold is named in one warning, its int warpsky:deepSamples sets the volume samples
+    per pixel, and a second run finds the frame up to date."""
     from test_usd_render import add_render
 
     from warpsky.output.deep import DeepPixels
@@ -173,6 +179,11 @@ def test_a_deep_raster_product_is_a_deep_exr_that_flattens_to_its_raster_sibling
                                                   ("tau", "transmittance", "color3f", "raw")],
                  {"productType": "deepRaster"}),
     }, second_camera=False)
+    from pxr import Sdf, Usd
+
+    usd = Usd.Stage.Open(str(stage))
+    usd.GetPrimAtPath("/Render/Deep").CreateAttribute("warpsky:deepSamples", Sdf.ValueTypeNames.Int).Set(3)
+    usd.Save()
     code, stdout, err = run(["render", stage, "--frames", "1", "--float", *FAST], capsys)
     assert code == 0, err
     assert "RenderVar /Render/Deep/tau (transmittance): a deep product holds" in err
@@ -182,6 +193,9 @@ def test_a_deep_raster_product_is_a_deep_exr_that_flattens_to_its_raster_sibling
     counts = np.vectorize(lambda samples: 0 if samples is None else len(samples), otypes=[int])(channels["A"])
     deep = DeepPixels(counts, {name: np.concatenate([v for v in values.reshape(-1) if v is not None])
                                for name, values in channels.items()})
+    assert header["warpsky/deepSamples"] == 3 and np.sum(deep.channels["Z"] < deep.channels["ZBack"]) > 0
+    assert np.max(np.add.reduceat((deep.channels["Z"] < deep.channels["ZBack"]).astype(int),
+                                  np.cumsum(counts.reshape(-1)) - counts.reshape(-1))[counts.reshape(-1) > 0]) == 3
     flat = read_exr(tmp_path / "out/beauty.0001.exr")
     rgba = np.stack([flat.channels[c].astype(np.float64) for c in "RGBA"], axis=-1)
     np.testing.assert_allclose(flatten(deep), rgba, atol=1e-3 * rgba[..., :3].max())

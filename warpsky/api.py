@@ -31,7 +31,7 @@ def render_options(*, technique: str = DEFAULT_TECHNIQUE, resolution=None, camer
                    load: str = "all", variants=(), purposes=None, **more) -> RenderOptions:
     """:class:`~warpsky.render.RenderOptions` from keyword arguments; ``resolution`` is (width, height), (width,
     None) or a width; ``variants`` are (set, selection) pairs or ``"SET=SELECTION"`` strings; the rest
-    (``half``, ``png``, ``exposure``, ``max_memory``, ``work_limit``) pass through."""
+    (``half``, ``png``, ``exposure``, ``max_memory``, ``work_limit``, ``deep``, ``deep_samples``) pass through."""
     from warpsky.device import resolve_device
     from warpsky.scene.usd_composition import StageOptions, parse_variant
 
@@ -39,6 +39,12 @@ def render_options(*, technique: str = DEFAULT_TECHNIQUE, resolution=None, camer
         resolution = (resolution, None)
     variants = tuple(parse_variant(v) if isinstance(v, str) else tuple(v) for v in variants)
     stage = StageOptions(load=load, variants=variants, **({} if purposes is None else {"purposes": tuple(purposes)}))
+    if more.get("deep_samples") is not None:
+        from warpsky.output.deep_bins import check_deep_samples
+
+        more["deep_samples"] = check_deep_samples(more["deep_samples"], "deep_samples")
+    else:
+        more.pop("deep_samples", None)
     return RenderOptions(technique=technique, settings=dict(settings or {}),
                          resolution=None if resolution is None else tuple(resolution), device=resolve_device(device),
                          camera=camera, colorspace=check_colorspace(colorspace or DEFAULT_COLORSPACE), stage=stage,
@@ -71,10 +77,12 @@ def with_render_settings(options: RenderOptions, spec: RenderSpec | None, *, exp
 
 def with_product(options: RenderOptions, product: ProductSpec, *, explicit: set[str] = frozenset()
                  ) -> RenderOptions:
-    """``options`` with a RenderProduct's camera, resolution, pixel aspect, data window, vars and type (its own
-    values or those it inherits from its settings), except what ``explicit`` names."""
+    """``options`` with a RenderProduct's camera, resolution, pixel aspect, data window, vars, type and deep samples
+    (its own values or those it inherits from its settings), except what ``explicit`` names."""
     changes = {"pixel_aspect": product.pixel_aspect, "data_window": product.data_window, "outputs": product.outputs,
                "deep_product": product.deep}
+    if "deep_samples" not in explicit and product.deep_samples is not None:
+        changes["deep_samples"] = product.deep_samples
     if "camera" not in explicit and product.camera is not None:
         changes["camera"] = product.camera
     if "resolution" not in explicit and product.resolution is not None:

@@ -40,6 +40,7 @@ from warpsky.evaluation.cli import run as run_bench
 from warpsky.interrupt import Interrupted, report_interrupt, sigint_stops_renders
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
+from warpsky.output.deep_bins import DEEP_SAMPLES, MAX_DEEP_SAMPLES
 from warpsky.output.png import DEFAULT_VIEW, DISPLAY, check_view
 from warpsky.output.preview import contact_sheet, stage_preview
 from warpsky.output.products import FULL_WINDOW
@@ -133,8 +134,12 @@ def add_output_files(render) -> None:
     render.add_argument("--float", dest="full_float", action="store_true", help="write RGBA as 32-bit float "
                         "instead of half")
     render.add_argument("--deep", action="store_true", help="also write a deep scanline EXR beside each frame "
-                        "(NAME.deep.exr: R, G, B, A, Z, ZBack; a point sample per layer, media, surfaces and sky, "
-                        "that flattens to the frame's beauty)")
+                        "(NAME.deep.exr: R, G, B, A, Z, ZBack) that flattens to the frame's beauty: voxel media and "
+                        "fog as volume samples along depth, every other layer a point sample")
+    render.add_argument("--deep-samples", type=int, default=None, metavar="N",
+                        help=f"volume samples per pixel of each volume layer in a deep image, at equal shares of its "
+                        f"opacity (1..{MAX_DEEP_SAMPLES}, default {DEEP_SAMPLES}; also a deepRaster RenderProduct's "
+                        "int warpsky:deepSamples)")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -57,11 +57,19 @@ def _render_spec_lines(spec, products) -> list[str]:
     for product in products:
         res = "x".join(map(str, product.resolution)) if product.resolution else "default"
         lines.append(f"product     {product.path} -> {product.name}: camera {product.camera or 'default'}, "
-                     f"resolution {res}" + (", deep scanline EXR (R, G, B, A, Z, ZBack)" if product.deep else ""))
+                     f"resolution {res}" + (f", deep scanline EXR (R, G, B, A, Z, ZBack), {deep_samples(product)} "
+                                            "volume samples per volume" if product.deep else ""))
         for var in (() if product.deep else product.outputs):
             precision = "half" if var.half else "float"
             lines.append(f"  var       {var.prim}: {var.source} -> {', '.join(var.channels)} ({precision})")
     return lines
+
+
+def deep_samples(product) -> int:
+    """Volume samples per volume a deep product gets: its ``warpsky:deepSamples``, else the default."""
+    from warpsky.output.deep_bins import DEEP_SAMPLES
+
+    return DEEP_SAMPLES if product.deep_samples is None else product.deep_samples
 
 
 def cmd_info(args) -> int:

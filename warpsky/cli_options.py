@@ -11,6 +11,7 @@ from warpsky.api import render_options
 from warpsky.errors import UsageError
 from warpsky.motion import DEFAULT_SAMPLES
 from warpsky.output.color import colorspace_argument
+from warpsky.output.deep_bins import DEEP_SAMPLES, check_deep_samples
 from warpsky.output.png import DEFAULT_VIEW, check_view
 from warpsky.plan import DEFAULT_WIDTH
 from warpsky.registry import DEFAULT_TECHNIQUE, technique_class, technique_classes, technique_names
@@ -200,6 +201,8 @@ def options_from_args(args) -> object:
         half=not getattr(args, "full_float", False),
         png=getattr(args, "png", False),
         deep=getattr(args, "deep", False),
+        deep_samples=check_deep_samples(DEEP_SAMPLES if getattr(args, "deep_samples", None) is None
+                                        else args.deep_samples),
         exposure=getattr(args, "exposure", None),
         view=check_view(getattr(args, "view", DEFAULT_VIEW)),
         max_memory=args.max_memory,
@@ -211,5 +214,6 @@ def options_from_args(args) -> object:
 
 def explicit_options(args) -> set[str]:
     """Options given on the command line, which win over the stage's render settings and products."""
-    given = {"camera": args.camera, "resolution": args.res, "purposes": args.purposes, "colorspace": args.colorspace}
+    given = {"camera": args.camera, "resolution": args.res, "purposes": args.purposes, "colorspace": args.colorspace,
+             "deep_samples": getattr(args, "deep_samples", None)}
     return {name for name, value in given.items() if value}

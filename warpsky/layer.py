@@ -4,8 +4,12 @@ one channel for warnings (a layer's ``warnings`` reach the command line, the bat
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from warpsky.output.deep_bins import DepthProfile
 
 
 @dataclass
@@ -28,6 +32,9 @@ class Layer:
             AOVs of paths traced through the fog, the terrain and the media in front of the event that scattered
             it): a depth merge and the composite add it in front of every layer they combine, unattenuated by
             them (its transmittance and depth are not used).
+        profile: None, or the layer's extinction along each pixel's camera ray in bins
+            (:class:`~warpsky.output.deep_bins.DepthProfile`), which deep output turns into that many volume
+            samples; drawn only when a frame asks for deep output.
     """
 
     radiance: np.ndarray
@@ -38,6 +45,7 @@ class Layer:
     warnings: list[str] = field(default_factory=list)
     parts: list = field(default_factory=list)
     front: Layer | None = None
+    profile: DepthProfile | None = None
 
 
 def gathered_warnings(layers) -> list[str]:

@@ -29,6 +29,7 @@ from warpsky.motion import (
 )
 from warpsky.output.color import DEFAULT_COLORSPACE, colour_attributes, convert_frame
 from warpsky.output.deep import average_deep
+from warpsky.output.deep_bins import DEEP_SAMPLES
 from warpsky.output.exr import write_channels
 from warpsky.output.png import DEFAULT_VIEW, auto_exposure, shown_view, write_png
 from warpsky.output.products import (
@@ -74,6 +75,8 @@ class RenderOptions:
         png: Also write a tone-mapped PNG preview next to the EXR.
         deep: Also write a deep scanline EXR next to it (:mod:`warpsky.output.deep`).
         deep_product: The output is itself a deep scanline EXR (a ``deepRaster`` RenderProduct): no flat frame.
+        deep_samples: Volume samples per pixel of each volume layer (voxel media, analytic fog) in a deep image,
+            1..64 (:mod:`warpsky.output.deep_bins`).
         shutter: (open, close) [frames] overriding the camera's shutter (:mod:`warpsky.motion`); None: the camera's.
         motion_samples: Sub-frames of a frame whose shutter is open (:mod:`warpsky.motion`).
         exposure: Preview exposure in stops on top of the sun-based normalisation (a white surface facing the sun ->
@@ -97,6 +100,7 @@ class RenderOptions:
     png: bool = False
     deep: bool = False
     deep_product: bool = False
+    deep_samples: int = DEEP_SAMPLES
     shutter: tuple[float, float] | None = None
     motion_samples: int = DEFAULT_SAMPLES
     exposure: float | None = None
@@ -254,6 +258,7 @@ def settings_hash(plan: RenderPlan, options: RenderOptions, scene: Scene | None 
          "pixelAspect": options.pixel_aspect, "window": list(options.data_window), "colorspace": options.colorspace,
          "stage": repr(options.stage), **({"deep": True} if options.deep else {}),
          **({"deepProduct": True} if options.deep_product else {}),
+         **({"deepSamples": options.deep_samples} if options.deep or options.deep_product else {}),
          **({"shutter": list(shutter_interval(scene, options)), "motionSamples": options.motion_samples}
             if scene is not None and blurs(scene, options, 0.0) else {})},
         sort_keys=True,
@@ -308,7 +313,8 @@ def rendered_image(scene: Scene, plan: RenderPlan, options: RenderOptions, timin
     timings = dict(timings or {})
     started = _time.perf_counter()
     bounds = render_bounds(options.data_window, plan.width, plan.height)
-    layer, layers = render_layers(*overscanned(plan, scene, bounds))
+    deep = options.deep or options.deep_product
+    layer, layers = render_layers(*overscanned(plan, scene, bounds), deep_samples=options.deep_samples if deep else 0)
     timings["passes"] = _time.perf_counter() - started
     linear = composite(layers, far=scene.camera.far)
     frame = convert_frame(linear, options.colorspace)
@@ -317,7 +323,7 @@ def rendered_image(scene: Scene, plan: RenderPlan, options: RenderOptions, timin
     preview = linear.rgba[y:y + plan.height, x:x + plan.width, :3]
     image = RenderedImage(frame, {}, {}, {}, None, preview, scene, plan, layer, timings,
                           warnings=gathered_warnings(layers), origin=(bounds[0], bounds[1]))
-    if options.deep or options.deep_product:
+    if deep:
         image.deep = image_deep(layers, scene, options, (x, y, plan.width, plan.height))
     capped = capped_paths_warning(quality_stats(layer), plan)
     if capped:
@@ -463,6 +469,8 @@ def _metadata(scene: Scene, plan: RenderPlan, options: RenderOptions, layer: Lay
     }
     for key, value in quality_stats(layer).items():
         metadata[_camel(key)] = value
+    if options.deep or options.deep_product:
+        metadata["deepSamples"] = int(options.deep_samples)
     if blurs(scene, options, time_code):
         metadata["shutterOpen"], metadata["shutterClose"] = (float(v) for v in shutter_interval(scene, options))
         metadata["motionSamples"] = int(options.motion_samples)

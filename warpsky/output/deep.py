@@ -1,10 +1,16 @@
 """Deep EXR: a frame's layers as OpenEXR deep samples, for compositors that merge volumes with other renders.
 
-Each layer the frame composites becomes at most one sample per pixel where it shows something (radiance or
-attenuation): the depth-merged passes (the technique's media, stratiform decks, fog, height-field decks, meshes)
-each on its own, in the per-pixel order of their depths, between the air in front and the sky behind. A layer
-with a depth is a point sample (``Z`` = ``ZBack``) there; the air in front is a volume sample from the camera
-to the first sample behind it, the sky a point at the far clip.
+Each layer the frame composites becomes samples of its own where it shows something (radiance or attenuation): the
+depth-merged passes (the technique's media, stratiform decks, fog, height-field decks, meshes) each on its own, in the
+per-pixel order of their depths, between the air in front and the sky behind. A volume layer that drew a depth
+profile (the technique's voxel media and analytic fog, when a frame asks for deep output) is K volume samples
+(``Z < ZBack``, ``--deep-samples``, default 8) between its media's entry and exit along each pixel's ray, each
+holding a bounded share of its opacity, plus a point on the ground it drew behind them
+(:mod:`warpsky.output.deep_bins`): a render merged into the volume is seen through the part in front of it and hides
+the part behind. Every other layer with a
+depth (stratiform and height-field decks, meshes, a volume pixel its media do not reach) is a point sample
+(``Z`` = ``ZBack``) there; the air in front is a volume sample from the camera to the first sample behind it, the
+sky a point at the far clip.
 
 Deep samples carry one alpha per sample while a layer attenuates each colour channel by its own transmittance
 T_k, so the samples are built for OpenEXR's flattening ("Interpreting OpenEXR Deep Pixels": front to back,
@@ -16,10 +22,10 @@ with L_k the layer's radiance, P_k the per-channel product of the transmittances
 luminance weights of the frame's alpha. The alphas telescope, prod_{j<k} (1 - A_j) = lum(P_k), so the flattened
 colour is sum_k L_k P_k, the beauty, and the flattened alpha is the beauty's alpha. What is approximate is only a
 merge with other deep images: a sample inserted between two of warpsky's is attenuated by the luminance of the
-transmittance in front, not per channel. Depths are made non-decreasing along each pixel's samples (a layer's
-representative depth can sit in front of the one composited before it; the sample order is the compositing
-order). A volume is one sample per layer: a render placed inside a cloud is composited in front of or behind all
-of it. With extra suns the merged layer is written as one sample.
+transmittance in front, not per channel. Depths are made non-decreasing and samples non-overlapping along each
+pixel (a layer's representative depth can sit in front of the one composited before it, a volume can reach into
+the next layer: the sample order is the compositing order, and a sample starts no nearer than the one before it
+ends). With extra suns the merged layer is written as one sample.
 """
 
 from __future__ import annotations
@@ -30,10 +36,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpsky.files import OutputError, atomic_write
+from warpsky.output.deep_bins import profile_samples
 from warpsky.scene.model import LUMINANCE_WEIGHTS
 
+#: A deep image's channels, in the order they are written.
+CHANNELS = ("R", "G", "B", "A", "Z", "ZBack")
 #: Below this luminance of the transmittance in front, a layer is hidden and gets no sample.
 HIDDEN_BELOW = 1e-12
+#: Pixels built at once: the frame's deep samples are made in bands of rows of about this many pixels, so that the
+#: per-sample stacks (float64, every layer's K + 2 samples) stay at tens of MB whatever the image size.
+BAND_PIXELS = 2**16
 
 
 @dataclass
@@ -55,14 +67,37 @@ class DeepPixels:
         return out.reshape(height, width)
 
 
-def _stacks(layers, region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(radiance (N, H, W, 3), transmittance (N, H, W, 3), depth (N, H, W)) float64 of the layers as composited
-    front to back, a merged layer expanded into its parts in the per-pixel order of their depths (as the merge
-    composited them), a part's ``front`` light (already attenuated to the eye) as a clear sample ahead of the group,
-    cropped to ``region`` (x, y, width, height; None: all)."""
-    x, y, width, height = region if region is not None else (0, 0, layers[0].depth.shape[1], layers[0].depth.shape[0])
+def _samples(layer, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(radiance, transmittance, Z, ZBack) of one layer's samples in ``rows``, with a leading sample axis: its
+    profile's bins (:func:`~warpsky.output.deep_bins.profile_samples`), or one point at its depth."""
+    if layer.profile is not None:
+        return profile_samples(layer, rows)
+    depth = np.asarray(layer.depth, np.float64)[rows][None]
+    return (np.asarray(layer.radiance, np.float64)[rows][None], np.asarray(layer.transmittance, np.float64)[rows][None],
+            depth, depth)
+
+
+def _padded(samples, count: int):
+    """``samples`` (:func:`_samples`) grown to ``count`` samples by clear ones that carry nothing."""
+    missing = count - len(samples[0])
+    if missing == 0:
+        return samples
+    radiance, through, z, back = samples
+    last = np.repeat(z[-1:], missing, axis=0)
+    return (np.concatenate([radiance, np.zeros((missing, *radiance.shape[1:]))]),
+            np.concatenate([through, np.ones((missing, *through.shape[1:]))]),
+            np.concatenate([z, last]), np.concatenate([back, last]))
+
+
+def _stacks(layers, region) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(radiance (N, H, W, 3), transmittance (N, H, W, 3), Z (N, H, W), ZBack (N, H, W)) float64 of the samples of
+    the layers as composited front to back, a merged layer expanded into its parts in the per-pixel order of their
+    depths (as the merge composited them), each part into its samples (:func:`_samples`), a part's ``front`` light
+    (already attenuated to the eye) as a clear sample ahead of the group, cropped to ``region`` (x, y, width,
+    height)."""
+    x, y, width, height = region
     rows = (slice(y, y + height), slice(x, x + width))
-    radiance, transmittance, depth = [], [], []
+    radiance, transmittance, depth, back = [], [], [], []
     for layer in layers:
         group = layer.parts or [layer]
         d = np.stack([np.asarray(part.depth, np.float64)[rows] for part in group])
@@ -70,41 +105,59 @@ def _stacks(layers, region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             radiance.append(np.asarray(front.radiance, np.float64)[rows])       # group: a clear sample at its
             transmittance.append(np.ones_like(radiance[-1]))                    # nearest depth, ahead of it
             depth.append(d.min(axis=0))
-        order = np.argsort(d, axis=0, kind="stable")
-        r = np.stack([np.asarray(part.radiance, np.float64)[rows] for part in group])
-        t = np.stack([np.asarray(part.transmittance, np.float64)[rows] for part in group])
-        radiance += list(np.take_along_axis(r, order[..., None], axis=0))
-        transmittance += list(np.take_along_axis(t, order[..., None], axis=0))
-        depth += list(np.take_along_axis(d, order, axis=0))
-    return np.stack(radiance), np.stack(transmittance), np.stack(depth)
+            back.append(depth[-1])
+        samples = [_samples(part, rows) for part in group]
+        count = max(len(s[0]) for s in samples)
+        samples = [_padded(s, count) for s in samples]
+        order = np.argsort(d, axis=0, kind="stable")[:, None]  # (parts, 1, H, W): each part's samples stay together
+        for i, out in enumerate((radiance, transmittance, depth, back)):
+            stacked = np.stack([s[i] for s in samples])  # (parts, samples, H, W[, 3])
+            pick = order[..., None] if stacked.ndim == 5 else order
+            out += list(np.take_along_axis(stacked, pick, axis=0).reshape(-1, *stacked.shape[2:]))
+    return np.stack(radiance), np.stack(transmittance), np.stack(depth), np.stack(back)
 
 
-def _sample_depths(depth: np.ndarray, present: np.ndarray, far: float) -> tuple[np.ndarray, np.ndarray]:
-    """(Z, ZBack) (N, H, W) of the samples: a layer with a depth in front of ``far`` is a point there (never in
-    front of the sample before it); an unbounded one (the air in front, the sky) spans from the sample before it
-    (or the camera) to the one after it, or is a point at ``far`` when nothing bounded lies behind it."""
+def _sample_depths(depth: np.ndarray, back: np.ndarray, present: np.ndarray,
+                   far: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Z, ZBack) (N, H, W) of the samples: one with a depth in front of ``far`` spans [depth, back] (a point where
+    they are equal), moved back so that it starts no nearer than the sample before it ends; an unbounded one (the
+    air in front, the sky) spans from the sample before it (or the camera) to the one after it, or is a point at
+    ``far`` when nothing bounded lies behind it."""
     bounded = present & (depth < far)
     z = np.zeros_like(depth)
+    z_back = np.zeros_like(depth)
     last = np.zeros(depth.shape[1:])
     for k in range(depth.shape[0]):
         z[k] = np.where(bounded[k], np.maximum(depth[k], last), last)
-        last = np.where(bounded[k], z[k], last)
-    back = z.copy()
+        z_back[k] = np.where(bounded[k], np.maximum(back[k], z[k]), z[k])
+        last = np.where(bounded[k], z_back[k], last)
     following = np.full(depth.shape[1:], np.inf)
     for k in reversed(range(depth.shape[0])):
         unbounded = present[k] & ~bounded[k]
-        back[k] = np.where(unbounded, following, back[k])
+        z_back[k] = np.where(unbounded, following, z_back[k])
         following = np.where(bounded[k], z[k], following)
-    sky = ~np.isfinite(back)
-    return np.where(sky, far, z), np.where(sky, far, back)
+    sky = ~np.isfinite(z_back)
+    return np.where(sky, far, z), np.where(sky, far, z_back)
 
 
 def deep_from_layers(layers, far: float, matrix: np.ndarray | None = None, region=None) -> DeepPixels:
     """The deep samples of ``layers`` (:class:`~warpsky.layer.Layer`, composited front to back) in ``region``
     (x, y, width, height of their pixels; None: all), with colours taken to the output colour space by ``matrix``
-    (3x3, applied to column vectors; None: unchanged)."""
+    (3x3, applied to column vectors; None: unchanged); built in bands of :data:`BAND_PIXELS`."""
+    x, y, width, height = region if region is not None else (0, 0, layers[0].depth.shape[1], layers[0].depth.shape[0])
+    rows = max(1, BAND_PIXELS // max(width, 1))
+    bands = [_deep_band(layers, far, matrix, (x, top, width, min(rows, y + height - top)))
+             for top in range(y, y + height, rows)]
+    if not bands:
+        return DeepPixels(np.zeros((0, width), np.int64), {c: np.zeros(0, np.float32) for c in CHANNELS})
+    return DeepPixels(np.concatenate([band.counts for band in bands]),
+                      {c: np.concatenate([band.channels[c] for band in bands]) for c in CHANNELS})
+
+
+def _deep_band(layers, far: float, matrix, region) -> DeepPixels:
+    """:func:`deep_from_layers` of the pixels ``region`` (x, y, width, height)."""
     weights = LUMINANCE_WEIGHTS.astype(np.float64)
-    radiance, transmittance, depth = _stacks(layers, region)
+    radiance, transmittance, depth, back = _stacks(layers, region)
     front = np.cumprod(np.concatenate([np.ones_like(transmittance[:1]), transmittance[:-1]]), axis=0)  # P_k
     seen = front @ weights
     present = ((radiance.max(axis=-1) > 0.0) | (transmittance.min(axis=-1) < 1.0)) & (seen > HIDDEN_BELOW)
@@ -113,7 +166,7 @@ def deep_from_layers(layers, far: float, matrix: np.ndarray | None = None, regio
     colour = radiance * front / safe[..., None]
     if matrix is not None:
         colour = colour @ np.asarray(matrix, dtype=np.float64).T
-    z, z_back = _sample_depths(depth, present, far)
+    z, z_back = _sample_depths(depth, back, present, far)
     pick = np.moveaxis(present, 0, -1)  # (H, W, N): pixel after pixel, front to back within each
 
     def flat(values):
@@ -122,6 +175,26 @@ def deep_from_layers(layers, far: float, matrix: np.ndarray | None = None, regio
     channels = {c: flat(colour[..., i]) for i, c in enumerate("RGB")}
     channels.update(A=flat(alpha), Z=flat(z), ZBack=flat(z_back))
     return DeepPixels(pick.sum(axis=-1).astype(np.int64), channels)
+
+
+def visibility_in_front(deep: DeepPixels, depth) -> np.ndarray:
+    """(H, W) float64 fraction of the light from a point at camera-space ``depth`` [m] (a number or (H, W)) that
+    reaches the eye through the samples in front of it, as a deep merge sees it: prod (1 - A) of the samples with
+    ``ZBack <= depth``, times (1 - A)^f of a volume sample that ``depth`` cuts, f the fraction of its
+    [Z, ZBack] in front ("Interpreting OpenEXR Deep Pixels")."""
+    counts = deep.counts.reshape(-1)
+    depth = np.broadcast_to(np.asarray(depth, np.float64), deep.counts.shape).reshape(-1)
+    owner = np.repeat(np.arange(counts.size), counts)
+    z = deep.channels["Z"].astype(np.float64)
+    z_back = deep.channels["ZBack"].astype(np.float64)
+    at = depth[owner]
+    span = z_back - z
+    fraction = np.where(z_back <= at, 1.0, np.where(span > 0.0, np.clip((at - z) / np.where(span > 0.0, span, 1.0),
+                                                                         0.0, 1.0), 0.0))
+    clear = 1.0 - deep.channels["A"].astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_clear = np.where(fraction > 0.0, fraction * np.log(clear), 0.0)
+    return np.exp(np.bincount(owner, weights=log_clear, minlength=counts.size)).reshape(deep.counts.shape)
 
 
 def _visibility(deep: DeepPixels) -> tuple[np.ndarray, np.ndarray]:

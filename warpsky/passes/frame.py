@@ -42,6 +42,8 @@ class FrameState:
             camera's far distance where none is hit); the marches after it stop there.
         occluders: The frame's meshes on the device, relative to the camera, for shadow rays (None: no meshes).
         merged: The depth-merged layer, for a wrapping pass.
+        deep_samples: Volume samples per pixel a volume pass profiles its layer into for deep output
+            (:class:`~warpsky.output.deep_bins.DepthProfile`); 0: none, the frame writes no deep image.
     """
 
     scene: object
@@ -56,6 +58,7 @@ class FrameState:
     limit: np.ndarray | None = None
     occluders: object | None = None
     merged: Layer | None = None
+    deep_samples: int = 0
 
     def runs(self, name: str) -> bool:
         """Whether the pass called ``name`` runs in this frame."""
@@ -70,12 +73,14 @@ def ground_pass(runners, scene) -> str | None:
     return min(ranked, key=lambda r: r.ground_rank).name if ranked else None
 
 
-def render_layers(plan, scene, technique=None) -> tuple[Layer, list[Layer]]:
+def render_layers(plan, scene, technique=None, *, deep_samples: int = 0) -> tuple[Layer, list[Layer]]:
     """Run ``plan``'s passes (``plan.pass_runners``) on ``scene``: (the depth-merged layer of the technique and
     the other passes; every layer front to back for :func:`~warpsky.composite.composite`). ``technique`` is the
-    plan's ``renderer`` (the default) or another with the same capabilities."""
+    plan's ``renderer`` (the default) or another with the same capabilities. With ``deep_samples``, the volume
+    passes profile their layers for deep output in that many bins (not with extra suns, whose merged layer is one
+    sample)."""
     technique = plan.renderer if technique is None else technique
-    main, layers = _lit_by(plan, scene, technique)
+    main, layers = _lit_by(plan, scene, technique, 0 if scene.extra_suns else deep_samples)
     if scene.extra_suns:
         again = technique.for_extra_light()
         for sun in scene.extra_suns:
@@ -90,12 +95,12 @@ def render_layers(plan, scene, technique=None) -> tuple[Layer, list[Layer]]:
     return main, layers
 
 
-def frame_state(plan, scene, technique=None) -> FrameState:
+def frame_state(plan, scene, technique=None, deep_samples: int = 0) -> FrameState:
     """The :class:`FrameState` of ``plan``'s passes on ``scene`` (lit by one light), before any pass ran."""
     runners = plan.pass_runners
     return FrameState(scene, plan.renderer if technique is None else technique, runners, plan.width, plan.height,
                       plan.device, FrameLight(scene, through_air=any(runner.wraps for runner in runners)),
-                      ground=ground_pass(runners, scene))
+                      ground=ground_pass(runners, scene), deep_samples=deep_samples)
 
 
 def render_pass(plan, scene, name: str) -> list[Layer]:
@@ -117,10 +122,10 @@ def _depth_passes_run(frame: FrameState) -> FrameState:
     return frame
 
 
-def _lit_by(plan, scene, technique) -> tuple[Layer, list[Layer]]:
+def _lit_by(plan, scene, technique, deep_samples: int = 0) -> tuple[Layer, list[Layer]]:
     """Every pass run once on ``scene`` (lit by one light): (merged layer, layers front to back)."""
     wrapping = [runner for runner in plan.pass_runners if runner.wraps]
-    frame = _depth_passes_run(frame_state(plan, scene, technique))
+    frame = _depth_passes_run(frame_state(plan, scene, technique, deep_samples))
     ahead = None
     if wrapping:  # light already attenuated to the eye (through the air too) goes in front of the front air
         ahead = front_light(frame.layers)

@@ -86,11 +86,20 @@ class MediaPass(Pass):
         return self.technique.tables(scene)
 
     def render(self, frame) -> list:
+        """The technique's layer; for deep output with the voxel media's depth profile on the technique's rays
+        (:func:`~warpsky.passes.depth_profile.media_profile`)."""
         scene = media_scene(frame)
         if frame.technique.scenery_paths(scene) and scene.ground is None and frame.scene.ground is not None:
             # another pass draws the ground plane; the paths bounce on it
-            return [frame.technique.render(scene, frame.width, frame.height, paths_ground=frame.scene.ground)]
-        return [frame.technique.render(scene, frame.width, frame.height)]
+            layer = frame.technique.render(scene, frame.width, frame.height, paths_ground=frame.scene.ground)
+        else:
+            layer = frame.technique.render(scene, frame.width, frame.height)
+        if frame.deep_samples > 0 and scene.media:
+            from warpsky.passes.depth_profile import media_profile
+
+            layer = dataclasses.replace(layer, profile=media_profile(scene, frame.width, frame.height,
+                                                                     frame.deep_samples, frame.device))
+        return [layer]
 
 
 def media_scene(frame):

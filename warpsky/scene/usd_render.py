@@ -71,6 +71,7 @@ class ProductSpec:
     data_window: tuple[float, float, float, float]
     outputs: tuple[OutputVar, ...]
     deep: bool = False  # productType "deepRaster": the file is a deep EXR (R, G, B, A, Z, ZBack), no flat frame
+    deep_samples: int | None = None  # int warpsky:deepSamples on a deepRaster product: volume samples per pixel
 
 
 #: The RenderProduct types warpsky writes: a flat OpenEXR image, or a deep scanline one.
@@ -264,7 +265,22 @@ def _product(stage, product, base, sources: dict[str, str], warnings: list[str])
     if deep:
         warnings += [f"RenderVar {o.prim} ({o.source}): a deep product holds R, G, B, A, Z and ZBack only; left out "
                      f"of product {path}" for o in outputs if o.source not in DEEP_SOURCES]
-    return ProductSpec(path, name, *values, tuple(outputs), deep)
+    return ProductSpec(path, name, *values, tuple(outputs), deep, deep_samples(prim) if deep else None)
+
+
+def deep_samples(prim) -> int | None:
+    """A deepRaster product's ``int warpsky:deepSamples`` (volume samples per pixel of each volume layer), or None
+    when unauthored; a SceneError names the attribute when it is not a whole number in 1..64."""
+    from warpsky.output.deep_bins import MAX_DEEP_SAMPLES
+
+    attr = prim.GetAttribute("warpsky:deepSamples")
+    if not attr or not attr.HasAuthoredValue():
+        return None
+    value = attr.Get()
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_DEEP_SAMPLES:
+        raise SceneError(f"{prim.GetPath()}.warpsky:deepSamples must be an int in 1..{MAX_DEEP_SAMPLES} (volume "
+                         f"samples per pixel of each volume layer), got {value!r}")
+    return int(value)
 
 
 def read_var(var, sources: dict[str, str] = SOURCES) -> OutputVar:

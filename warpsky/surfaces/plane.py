@@ -19,3 +19,15 @@ def ground_struct(ground, camera_position) -> Ground:
     out.offset = float(ground.height - camera_position[1]) if ground is not None else 0.0
     out.albedo = wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist())
     return out
+
+
+@wp.func
+def ground_end(ground: Ground, origin: wp.vec3, view: wp.vec3, t_near: float, t_end: float):
+    """(where the ray ``origin + t * view`` ends [m], 1 when the ground plane ends it): the plane is opaque, so it
+    ends the ray where it lies between ``t_near`` and ``t_end`` (the part of the sun below it is already out of
+    sun.irradiance)."""
+    if view[1] != 0.0:
+        t_ground = (ground.offset - origin[1]) / view[1]
+        if t_ground > t_near and t_ground < t_end:
+            return t_ground, 1
+    return t_end, 0

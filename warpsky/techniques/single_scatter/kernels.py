@@ -32,7 +32,7 @@ from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions, media_s
 from warpsky.numerics import exp3, exp_lerp_mean3, luminance
 from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.oriented_phase import OrientedPhases
-from warpsky.surfaces.plane import Ground
+from warpsky.surfaces.plane import Ground, ground_end
 
 oriented_correction = oriented_correction_function(medium_phase)[0]
 
@@ -74,18 +74,6 @@ def eye_march_start() -> EyeMarch:
     out.tau_sun = wp.vec3(0.0)
     out.sun_known = 0
     return out
-
-
-@wp.func
-def ground_end(ground: Ground, origin: wp.vec3, view: wp.vec3, t_near: float, t_end: float):
-    """(where the ray ``origin + t * view`` ends [m], 1 when the ground plane ends it): the plane is opaque, so it
-    ends the ray where it lies between ``t_near`` and ``t_end`` (the part of the sun below it is already out of
-    sun.irradiance)."""
-    if view[1] != 0.0:
-        t_ground = (ground.offset - origin[1]) / view[1]
-        if t_ground > t_near and t_ground < t_end:
-            return t_ground, 1
-    return t_end, 0
 
 
 @functools.cache
