@@ -11,8 +11,9 @@ optical depth per step finite. In clear haze the deck's part of the sun's optica
 where the step crosses the edge of a cloud's shadow (a shaft), and the exp-lerp mean of a jump is the logarithmic
 mean of the two ends' transmittances, always below their average, which is what a step crossing an edge at an
 unknown place gives on average. There the view's and the haze's own parts keep their closed form and the deck's
-transmittance towards the sun is averaged over the step's ends (trapezoid): on the tune half of the scenery family the exp-lerp march at the automatic haze step was 3.2 %
-too dark against an eight times finer march (relative RMSE 4.5 %), and halving the step only halved that.
+transmittance towards the sun is averaged over the step's ends (trapezoid): on a deck of the scenery family's tune
+half the exp-lerp march at the automatic haze step was 3.2 % too dark against a march of 64 steps per feature
+(relative RMSE 4.5 %), the trapezoid 0.2 % (2.5 %), and halving the exp-lerp step only halved its bias.
 
 Sources per metre: sigma_s p(theta) E_sun exp(-tau_sun) from the sun (cloud and haze, each with its own
 Henyey-Greenstein phase) and sigma_s L_mean exp(-tau_zenith) from the sky's ambient light L_mean
