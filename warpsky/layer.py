@@ -4,12 +4,8 @@ one channel for warnings (a layer's ``warnings`` reach the command line, the bat
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from warpsky.output.deep_bins import DepthProfile
 
 
 @dataclass
@@ -45,7 +41,7 @@ class Layer:
     warnings: list[str] = field(default_factory=list)
     parts: list = field(default_factory=list)
     front: Layer | None = None
-    profile: DepthProfile | None = None
+    profile: object | None = None  # a DepthProfile (warpsky.output.deep_bins, above this module's layer)
 
 
 def gathered_warnings(layers) -> list[str]:

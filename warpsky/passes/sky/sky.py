@@ -16,6 +16,7 @@ from warpsky.media.air_multiple import floor_of, multiple_struct, scene_table
 from warpsky.passes.base import Pass
 from warpsky.passes.sky.kernels import sky_kernel
 from warpsky.passes.sky.round_sky import launch_round_sky, round_description
+from warpsky.passes.sky.shadowed_air import shadowed_front
 from warpsky.resources import MemoryEstimate
 from warpsky.scene.model import Projection, Scene
 from warpsky.surfaces.plane import ground_struct
@@ -145,9 +146,17 @@ class SkyPass(Pass):
     def render(self, frame) -> list[Layer]:
         """[front, back]: the air in front runs to the nearest opaque surface where one is hit (the haze and fog in
         front of it are thin enough that the order of air and fog along the ray matters little), else to the
-        merged layer's depth."""
+        merged layer's depth; the sun's single scattering in it that the scenery shades (the meshes, the fog, the
+        deck) is taken out (:mod:`~warpsky.passes.sky.shadowed_air`)."""
         main, opaque = frame.merged, frame.limit
         far = frame.scene.camera.far
         air_depth = main.depth if opaque is None else np.where(opaque < far, opaque, main.depth)
         front, back = Sky(device=self.device).render(frame.scene, frame.width, frame.height, media_depth=air_depth)
+        seen = frame.light.lit_at_media(frame.scene)
+        shadows = [shadow for runner in frame.runners if runner is not self
+                   for shadow in [runner.shadow(seen)] if shadow is not None]
+        shaded = shadowed_front(frame, air_depth, shadows)  # the scenery's shadows in the air in front
+        if shaded is not None:
+            front.radiance = np.maximum(front.radiance - shaded, 0.0).astype(np.float32)
+            front.stats["shadowed_air"] = float(shaded.mean())
         return [front, back]
