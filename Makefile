@@ -139,15 +139,17 @@ data/terrain.usda: tools/make_terrain.py $(STAMP)
 terrain: data/terrain.usda
 
 valley-fog: $(STAMP) data/terrain.usda
-	$(VENV)/bin/warpsky render usd_scenes/valley_fog.usda out/valley_fog/valley_fog.####.exr --png
+	$(VENV)/bin/warpsky render usd_scenes/valley_fog.usda out/valley_fog/valley_fog.####.exr --png --time-budget 10
 	$(VENV)/bin/warpsky contact-sheet out/valley_fog/valley_fog.####.exr -o out/valley_fog/sheet.png
 
 sunbeams: $(STAMP) data/terrain.usda
-	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/sunbeams.####.exr --frames 1 --png
-	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/drift.####.exr --frames 1,17,33,48 --res 192 --png
+	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/sunbeams.####.exr --frames 1 --png \
+		--time-budget 120
+	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/drift.####.exr --frames 1,17,33,48 --res 192 --png \
+		--time-budget 20
 	$(VENV)/bin/warpsky contact-sheet out/sunbeams/drift.####.exr -o out/sunbeams/drift_sheet.png
 	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/max-rule.####.exr --frames 1 --png \
-		--set heightfield.mode=max
+		--set heightfield.mode=max --time-budget 20
 
 # The gallery: one hero frame per shipped stage (tools/make_gallery.py runs each warpsky render command).
 gallery: $(STAMP) data/cumulus.nvdb data/storm/.complete data/terrain.usda

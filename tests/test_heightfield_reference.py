@@ -74,6 +74,18 @@ def test_deck_grid_over_the_budget_is_refused_naming_the_setting():
 
 
 # ---------------------------------------------------------------------------------- against the height-field pass
+def thin_deck() -> tuple[HeightFieldClouds, Camera]:
+    """An optically thin deck (density 0.002 1/m, tau <= 0.3, albedo 1) 1.5 km up with haze of 2e-4 /m, and a
+    camera 300 m up looking at it from below."""
+    k = np.array([[2.0 * math.pi / 700.0, 0.0], [0.0035, 0.0060]])
+    clouds = HeightFieldClouds("/World/Deck", 1500.0, [2.0], k, [20.0, 14.0], [0.3, 1.7], rounding=100.0,
+                               bottom_depth=80.0, density=0.002, g=0.85, haze=HazeSpec(np.full(3, 2e-4), g=0.7))
+    look = np.array([0.2, 1.0, -0.4]) / math.sqrt(1.2)
+    camera = Camera("cam", np.array([40.0, 300.0, -20.0]), look_rotation(look), 24.0, 36.0, 24.0, near=1.0,
+                    far=1.0e5)
+    return clouds, camera
+
+
 def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
     """An optically thin deck (density 0.002 1/m, tau <= 0.3, albedo 1) with haze, sun overhead, seen from below:
     the path tracer limited to single scattering (max_bounces = 1) and the height-field pass (exact mode) agree on
@@ -83,12 +95,7 @@ def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
     from warpsky.passes.heightfield.heightfield import HeightField
     from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
 
-    k = np.array([[2.0 * math.pi / 700.0, 0.0], [0.0035, 0.0060]])
-    clouds = HeightFieldClouds("/World/Deck", 1500.0, [2.0], k, [20.0, 14.0], [0.3, 1.7], rounding=100.0,
-                               bottom_depth=80.0, density=0.002, g=0.85, haze=HazeSpec(np.full(3, 2e-4), g=0.7))
-    look = np.array([0.2, 1.0, -0.4]) / math.sqrt(1.2)
-    camera = Camera("cam", np.array([40.0, 300.0, -20.0]), look_rotation(look), 24.0, 36.0, 24.0, near=1.0,
-                    far=1.0e5)
+    clouds, camera = thin_deck()
     scene = Scene(camera, Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), heightfield_clouds=(clouds,))
     expected = float(HeightField(device=device).render(scene, 24, 16).radiance[..., 1].mean())
     settings = PathTracerSettings(spp=2048, seed=5, max_bounces=1, deck_extent=2500.0)

@@ -75,18 +75,12 @@ def test_without_multiple_scattering_the_passes_draw_it_alone():
 
 
 def thin_deck_scene(dome: bool) -> Scene:
-    """An optically thin height-field deck (density 0.002 1/m, tau <= 0.3, albedo 1) with haze, 1.5 km over a
-    ground plane of albedo 0.4, the sun 55 deg up, optionally a uniform dome; the camera 300 m up looks at the deck
-    from below (its single scattering is checked against the voxelised deck in the height-field reference's tests:
-    -0.09 % +- 0.27 %)."""
-    from warpsky.scene.heightfield_clouds import HazeSpec, HeightFieldClouds
+    """The height-field reference's thin deck with haze (its single scattering there matches the voxelised deck's:
+    -0.09 % +- 0.27 %) 1.5 km over a ground plane of albedo 0.4, the sun 55 deg up, optionally a uniform dome;
+    the camera 300 m up looks at the deck from below."""
+    from test_heightfield_reference import thin_deck
 
-    k = np.array([[2.0 * np.pi / 700.0, 0.0], [0.0035, 0.0060]])
-    clouds = HeightFieldClouds("/World/Deck", 1500.0, [2.0], k, [20.0, 14.0], [0.3, 1.7], rounding=100.0,
-                               bottom_depth=80.0, density=0.002, g=0.85, haze=HazeSpec(np.full(3, 2e-4), g=0.7))
-    look = np.array([0.2, 1.0, -0.4]) / np.sqrt(1.2)
-    camera = Camera("cam", np.array([40.0, 300.0, -20.0]), look_rotation(look), 24.0, 36.0, 24.0, near=1.0,
-                    far=1.0e5)
+    clouds, camera = thin_deck()
     d = np.array([0.4, 0.82, 0.3])
     extra = {"dome": Dome(np.full(3, 0.05))} if dome else {}
     return Scene(camera, Sun(d / np.linalg.norm(d), np.ones(3)), ground=Ground(0.0, np.full(3, 0.4)),

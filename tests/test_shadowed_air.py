@@ -66,7 +66,8 @@ def test_air_under_a_roof_loses_its_single_scattering():
                        light.air_sine, distance[..., None])
     expected = single * (3.0 / (16.0 * math.pi) * (1.0 + cos_theta**2))[..., None] * light.irradiance
     removed = open_air.radiance.astype(np.float64) - roofed.radiance
-    print(f"\nremoved {removed.mean():.4e}, closed form {expected.mean():.4e}, front air {open_air.radiance.mean():.4e}")
+    print(f"\nremoved {removed.mean():.4e}, closed form {expected.mean():.4e}, "
+          f"front air {open_air.radiance.mean():.4e}")
     np.testing.assert_allclose(removed[same], expected[same], rtol=5e-3)
     assert np.all(roofed.radiance >= 0.0) and removed[same].mean() > 0.3 * open_air.radiance[same].mean()
     np.testing.assert_allclose(open_air.transmittance[same], roofed.transmittance[same], rtol=1e-6)

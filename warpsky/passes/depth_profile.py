@@ -38,14 +38,14 @@ import functools
 import numpy as np
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, PrimaryRay, camera_forward, pinhole_camera, primary_ray
+from warpsky.camera_rays import PinholeCamera, PrimaryRay, pinhole_camera, primary_ray
 from warpsky.device import launch_rows
 from warpsky.kernel_variants import kernel_variants
 from warpsky.media.analytic_fog import FogSet, fog_struct, fogs_optical_depth
 from warpsky.media.voxel import MAX_MEDIA, VoxelMedia, VoxelMediaBuffers, media_functions, media_span
 from warpsky.numerics import exp3, exp_lerp_mean3, luminance
 from warpsky.output.deep_bins import DepthProfile
-from warpsky.passes.fog.kernels import exp3d, luminance64, slabs_span
+from warpsky.passes.fog.kernels import exp3d, fog_eye_ray, luminance64, slabs_span
 from warpsky.surfaces.plane import Ground, ground_end, ground_struct
 
 #: Step of the voxel media's optical-depth march, in units of the smallest voxel edge.
@@ -184,17 +184,11 @@ def fog_profile(fogs: FogSet, cam: PinholeCamera, limit: wp.array2d(dtype=float)
     ``limit``)."""
     tid_row, col = wp.tid()
     row = row_offset + tid_row
-    eye_ray = primary_ray(cam, row, col, 0.5, 0.5)
-    d32 = eye_ray.direction
-    o32 = eye_ray.origin
-    w = wp.normalize(wp.vec3d(wp.float64(d32[0]), wp.float64(d32[1]), wp.float64(d32[2])))
-    o = wp.vec3d(wp.float64(o32[0]), wp.float64(o32[1]), wp.float64(o32[2]))
-    forward = camera_forward(cam)
-    cos_axis = wp.dot(w, wp.vec3d(wp.float64(forward[0]), wp.float64(forward[1]), wp.float64(forward[2])))
-    far = wp.float64(cam.far)
-    if has_limit != 0:
-        far = wp.min(far, wp.float64(limit[row, col]))
-    span = slabs_span(fogs, o, w, wp.float64(cam.near) / cos_axis, far / cos_axis)
+    eye = fog_eye_ray(cam, limit, has_limit, row, col)
+    o = eye.origin
+    w = eye.direction
+    cos_axis = eye.cos_axis
+    span = slabs_span(fogs, o, w, eye.t_near, eye.t_far)
     if span[1] <= span[0]:
         return
     a = o + span[0] * w

@@ -290,6 +290,40 @@ def fog_ray(fogs: FogSet, march: FogMarch, o: wp.vec3d, w: wp.vec3d, t0: wp.floa
     return out
 
 
+@wp.struct
+class FogEyeRay:
+    """A pixel's camera ray in float64, as the fog's closed forms take it: origin, unit direction, the distances
+    [m] along it of the near plane and of the nearer of the far plane and the opaque limit, and the cosine to
+    the camera's axis (camera-space depth = distance x ``cos_axis``)."""
+
+    origin: wp.vec3d
+    direction: wp.vec3d
+    t_near: wp.float64
+    t_far: wp.float64
+    cos_axis: wp.float64
+
+
+@wp.func
+def fog_eye_ray(cam: PinholeCamera, limit: wp.array2d(dtype=float), has_limit: int, row: int,
+                col: int) -> FogEyeRay:
+    """The pixel centre's camera ray, from the near plane to the nearer of the far plane and ``limit``."""
+    eye_ray = primary_ray(cam, row, col, 0.5, 0.5)
+    d32 = eye_ray.direction
+    o32 = eye_ray.origin
+    out = FogEyeRay()
+    out.direction = wp.normalize(wp.vec3d(wp.float64(d32[0]), wp.float64(d32[1]), wp.float64(d32[2])))
+    out.origin = wp.vec3d(wp.float64(o32[0]), wp.float64(o32[1]), wp.float64(o32[2]))
+    forward = camera_forward(cam)
+    out.cos_axis = wp.dot(out.direction, wp.vec3d(wp.float64(forward[0]), wp.float64(forward[1]),
+                                                  wp.float64(forward[2])))
+    far = wp.float64(cam.far)
+    if has_limit != 0:
+        far = wp.min(far, wp.float64(limit[row, col]))
+    out.t_near = wp.float64(cam.near) / out.cos_axis
+    out.t_far = far / out.cos_axis
+    return out
+
+
 @wp.kernel
 def fog_kernel(fogs: FogSet, march: FogMarch, cam: PinholeCamera, limit: wp.array2d(dtype=float), has_limit: int,
                radiance: wp.array2d(dtype=wp.vec3), transmittance: wp.array2d(dtype=wp.vec3),
@@ -298,17 +332,9 @@ def fog_kernel(fogs: FogSet, march: FogMarch, cam: PinholeCamera, limit: wp.arra
     depths [m])."""
     tid_row, col = wp.tid()
     row = row_offset + tid_row
-    eye_ray = primary_ray(cam, row, col, 0.5, 0.5)
-    d32 = eye_ray.direction
-    o32 = eye_ray.origin
-    w = wp.normalize(wp.vec3d(wp.float64(d32[0]), wp.float64(d32[1]), wp.float64(d32[2])))
-    o = wp.vec3d(wp.float64(o32[0]), wp.float64(o32[1]), wp.float64(o32[2]))
-    forward = camera_forward(cam)
-    cos_axis = wp.dot(w, wp.vec3d(wp.float64(forward[0]), wp.float64(forward[1]), wp.float64(forward[2])))
-    far = wp.float64(cam.far)
-    if has_limit != 0:
-        far = wp.min(far, wp.float64(limit[row, col]))
-    ray = fog_ray(fogs, march, o, w, wp.float64(cam.near) / cos_axis, far / cos_axis)
+    eye = fog_eye_ray(cam, limit, has_limit, row, col)
+    cos_axis = eye.cos_axis
+    ray = fog_ray(fogs, march, eye.origin, eye.direction, eye.t_near, eye.t_far)
     radiance[row, col] = wp.vec3(float(ray.radiance[0]), float(ray.radiance[1]), float(ray.radiance[2]))
     transmittance[row, col] = wp.vec3(float(ray.transmittance[0]), float(ray.transmittance[1]),
                                       float(ray.transmittance[2]))
