@@ -37,6 +37,9 @@ class Pass:
     - ``draws``: the :class:`~warpsky.scene.model.Scene` fields it draws, which the technique then does not see
       (the stratiform pass's ``layers``).
     - ``kernel_modules``: modules of its kernel factories (the first-compile notice).
+    - ``shades_air``: its :meth:`shadow` also shades the air in front of the eye
+      (:mod:`~warpsky.passes.sky.shadowed_air`); not a stratiform layer's, below which the air is lit by the
+      layer's own diffuse light, which nothing draws into the air.
     """
 
     name: ClassVar[str]
@@ -47,6 +50,7 @@ class Pass:
     draws: ClassVar[tuple[str, ...]] = ()
     runs_technique: ClassVar[bool] = False
     kernel_modules: ClassVar[tuple[str, ...]] = ()
+    shades_air: ClassVar[bool] = False
 
     def __init__(self, settings: Settings | None = None, *, device: str = "cpu", technique=None):
         if settings is None and self.Settings is not None:

@@ -168,6 +168,7 @@ class FogPass(Pass):
     frame's meshes."""
 
     name = "fog"
+    shades_air = True
     Settings = FogSettings
 
     @classmethod

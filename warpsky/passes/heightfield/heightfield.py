@@ -206,6 +206,7 @@ class HeightFieldPass(Pass):
     """Max's clouds and haze shafts, stopped by the nearest opaque surface, lit through the frame's air."""
 
     name = "heightfield"
+    shades_air = True
     Settings = HeightFieldSettings
 
     @classmethod

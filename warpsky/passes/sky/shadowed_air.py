@@ -11,7 +11,8 @@ scattering in the air along that front stretch where the scenery shades it,
     S = E_sun sum_i [sigma_R(h_i) p_R + sigma_M(h_i) p_M] T_eye(t_i) T_air,sun(h_i) (1 - V_i) dt,
 
 over :data:`STEPS` midpoints t_i of the stretch, with V_i the scenery's transmittance towards the sun (the meshes'
-occlusion, the fog's and the deck's closed forms, :meth:`~warpsky.passes.base.Pass.shadow`), sigma the air's
+occlusion, the fog's and the deck's closed forms: the passes that ``shades_air``; not a stratiform layer, below
+which the air is lit by the layer's own diffuse light, which the tables do not hold either), sigma the air's
 Rayleigh and aerosol scattering at each point's altitude (the ozone layer, above 10 km, is left out), T_eye the air's
 transmittance back to the eye (the midpoint sum of its extinction), T_air,sun the air's towards the sun at that
 altitude (:meth:`~warpsky.light.frame.FrameLight.transmittance_at`). The sky pass subtracts it from its front light

@@ -153,7 +153,7 @@ class SkyPass(Pass):
         air_depth = main.depth if opaque is None else np.where(opaque < far, opaque, main.depth)
         front, back = Sky(device=self.device).render(frame.scene, frame.width, frame.height, media_depth=air_depth)
         seen = frame.light.lit_at_media(frame.scene)
-        shadows = [shadow for runner in frame.runners if runner is not self
+        shadows = [shadow for runner in frame.runners if runner.shades_air
                    for shadow in [runner.shadow(seen)] if shadow is not None]
         shaded = shadowed_front(frame, air_depth, shadows)  # the scenery's shadows in the air in front
         if shaded is not None:
