@@ -48,7 +48,7 @@ def front_air(scene: Scene):
 
 def test_air_under_a_roof_loses_its_single_scattering():
     """On the rays that meet the wall below the roof, front air without the roof minus with it equals Riley's
-    closed-form single scattering of the stretch to the wall (per pixel, within 0.5 %: 16 midpoints on a nearly
+    closed-form single scattering of the stretch to the wall (per pixel, within 0.5 %: 8 midpoints on a nearly
     uniform integrand); the air's transmittance is unchanged."""
     open_air, depth = front_air(scene_with(roof=False))
     roofed, roof_depth = front_air(scene_with(roof=True))

@@ -32,8 +32,10 @@ from warpsky.optics.phase import PhaseKind, phase_numpy
 from warpsky.scene.model import Projection
 from warpsky.surfaces.mesh import SurfaceMeshes, mesh_occluded
 
-#: Midpoints per pixel along the front stretch of air.
-STEPS = 16
+#: Midpoints per pixel along the front stretch of air: 8 and 16 gave the same frame on a family stage under a 5 deg
+#: sun (+1.49 % and +1.50 % against the path tracer); 8 costs 6.8 s at 1920 x 1080 on the valley-fog stage (2-core
+#: CPU), 16 cost 11.8 s.
+STEPS = 8
 #: Pixels per batch of points (bounds the host memory: STEPS x this x 3 float64).
 BATCH = 65536
 #: Altitudes at which the air's transmittance towards the sun is evaluated; log-linear between them.
@@ -69,12 +71,17 @@ def mesh_visibility(occluders, points: np.ndarray, sun: np.ndarray, device: str)
         return out.numpy().astype(np.float64)
 
 
-def sun_air_transmittance(light, altitudes: np.ndarray) -> np.ndarray:
-    """(N, 3) the air's transmittance towards the sun at stage altitudes ``altitudes`` (N,) [m]: the frame light's,
-    at :data:`SUN_ALTITUDES` altitudes over their range, interpolated log-linearly."""
-    low, high = float(altitudes.min()), float(altitudes.max())
+def sun_air_table(light, low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
+    """(altitudes (K,), log transmittance (K, 3)): the frame light's transmittance of the air towards the sun at
+    :data:`SUN_ALTITUDES` stage altitudes [m] from ``low`` to ``high``."""
     nodes = np.linspace(low, max(high, low + 1.0), SUN_ALTITUDES)
-    logs = np.log(np.maximum(np.stack([light.transmittance_at(float(h)) for h in nodes]), 1e-300))
+    return nodes, np.log(np.maximum(np.stack([light.transmittance_at(float(h)) for h in nodes]), 1e-300))
+
+
+def sun_air_transmittance(table: tuple[np.ndarray, np.ndarray], altitudes: np.ndarray) -> np.ndarray:
+    """(N, 3) the air's transmittance towards the sun at stage altitudes ``altitudes`` (N,) [m], log-linear in
+    ``table`` (:func:`sun_air_table`)."""
+    nodes, logs = table
     return np.exp(np.stack([np.interp(altitudes, nodes, logs[:, c]) for c in range(3)], axis=-1))
 
 
@@ -96,6 +103,12 @@ def shadowed_front(frame, air_depth: np.ndarray, shadows: list) -> np.ndarray | 
     sun = np.asarray(light.direction, np.float64)
     cos_theta = rays @ sun
     phases = (3.0 / (16.0 * math.pi) * (1.0 + cos_theta**2), phase_numpy(PhaseKind.HG, atm.mie_g, cos_theta))
+    if not len(ends):
+        return None
+    length = depth[ends] / np.maximum(rays[ends] @ forward, 1e-6)
+    heights = camera.position[1] + rays[ends, 1] * length
+    table = sun_air_table(frame.light, min(float(heights.min()), float(camera.position[1])),
+                          max(float(heights.max()), float(camera.position[1])))
     for start in range(0, len(ends), BATCH):
         pixels = ends[start:start + BATCH]
         length = depth[pixels] / np.maximum(rays[pixels] @ forward, 1e-6)
@@ -115,6 +128,6 @@ def shadowed_front(frame, air_depth: np.ndarray, shadows: list) -> np.ndarray | 
         eye = np.exp(-(np.cumsum(extinction, axis=1) - 0.5 * extinction) * step[:, None, None])
         source = (rayleigh * np.repeat(phases[0][pixels], STEPS)[:, None]
                   + mie * atm.mie_scattering[None, :] * np.repeat(phases[1][pixels], STEPS)[:, None])
-        source = source * sun_air_transmittance(frame.light, points[:, 1]) * (1.0 - seen)
+        source = source * sun_air_transmittance(table, points[:, 1]) * (1.0 - seen)
         out[pixels] = (source.reshape(-1, STEPS, 3) * eye).sum(axis=1) * step[:, None]
     return (out * np.asarray(light.irradiance, np.float64)).reshape(frame.height, frame.width, 3)
