@@ -220,8 +220,8 @@ class Hybrid(Technique):
         return cut_feature(scene, float(s.forward_cut), features)
 
     def scenery_paths(self, scene: Scene) -> bool:
-        """With multiple scattering on, its paths trace the fog and the meshes in a scene without stratiform layers
-        or a height-field deck (:func:`~warpsky.passes.media.scenery_traceable`; :mod:`.scenery`)."""
+        """With multiple scattering on, its paths trace the fog, the height-field deck and the meshes in a scene
+        without stratiform layers (:func:`~warpsky.passes.media.scenery_traceable`; :mod:`.scenery`)."""
         return bool(self.settings_for(scene).multiple_scattering) and scenery_traceable(scene)
 
     def render(self, scene: Scene, width: int, height: int, *, paths_ground=None) -> Layer:
