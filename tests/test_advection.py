@@ -302,6 +302,7 @@ def test_one_frame_per_hour_and_negative_time_codes(device):
     assert not np.array_equal(calm.at(-37.25 + 32.0).numpy(), before)
 
 
+@pytest.mark.slow
 def test_texture_4096(device):
     """A 4096^2 texture (64 km layer, 15.6 m texels) in one call: finite, mean and std within 5 %."""
     n = 4096

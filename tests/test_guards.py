@@ -244,6 +244,7 @@ def test_ctrl_c_stops_path_tracer_passes(tmp_path, box_stage):
     assert code == 130 and "Traceback" not in err and files_in(out_dir) == []
 
 
+@pytest.mark.slow
 def test_ctrl_c_under_workers_shuts_the_cluster_down_quietly(tmp_path, box_stage):
     """Under a LocalCluster (about 12 s with its start on two busy cores) the workers ignore the terminal's
     SIGINT; the client stops the batch's frames on them, closes the cluster and exits 130 without Dask noise."""

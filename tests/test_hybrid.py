@@ -138,6 +138,7 @@ def test_stiff_thick_cloud_is_finite_and_reports_capped_paths(box, device):
     assert layer.stats["capped_paths"] > 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("inside", [False, True])
 def test_stiff_droplet_cloud_with_the_cut(box, device, homogeneous_npy, species_phase, inside):
     """Mie droplets of optical depth 10^4 across the box at albedo exactly 1, the sun on the horizon, seen from

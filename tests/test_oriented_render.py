@@ -153,6 +153,7 @@ def test_slice_mixes_oriented_and_random_crystals_by_number_and_area(tmp_path, o
     assert values[0, row, columns, 1].max() > 20.0 * random
 
 
+@pytest.mark.slow
 def test_random_orientation_renders_exactly_as_without_attributes(tmp_path, device, optics_cache):
     plain = sheet_stage(tmp_path / "plain.usda")
     random = sheet_stage(tmp_path / "random.usda", attributes='token warpsky:ice:orientation = "random"')
@@ -162,6 +163,7 @@ def test_random_orientation_renders_exactly_as_without_attributes(tmp_path, devi
     assert np.array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_sundogs_sit_where_bravais_puts_them_on_both_sides(tmp_path, device, optics_cache):
     scene, image = render(sheet_stage(tmp_path / "dogs.usda", attributes=PLATES), "single_scatter", device)
     luminance = image @ np.array([0.2126, 0.7152, 0.0722])

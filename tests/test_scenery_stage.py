@@ -190,7 +190,7 @@ def test_scenery_pass_settings_come_from_set_and_bad_ones_are_named(tmp_path, ca
     assert a.stats["nodes"] == 1 and b.stats["nodes"] == 4
 
 
-@pytest.mark.parametrize("stage", ["valley_fog", "sunbeams"])
+@pytest.mark.parametrize("stage", ["valley_fog", pytest.param("sunbeams", marks=pytest.mark.slow)])
 def test_shipped_stages_plan_and_render(tmp_path, capsys, stage):
     """The two stages as shipped, over a coarse terrain made by the tool as ``make terrain`` makes it: their plans
     hold the passes they are for, and a tiny frame renders finite, non-negative and not black."""

@@ -142,6 +142,7 @@ def _floor_irradiance(scene, light) -> np.ndarray:
     return direct + (air_radiance(scene, light, 0.0, up) * (up[:, 1] * w)[:, None]).sum(axis=0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sun_elevation,albedo", [(60.0, 0.3), (10.0, 0.0)])
 def test_energy_is_conserved_with_aerosols_and_ozone(sun_elevation, albedo):
     """Sunlight in = light leaving the top + light the floor absorbs + light the aerosols and ozone absorb,
@@ -163,6 +164,7 @@ def test_energy_is_conserved_with_aerosols_and_ozone(sun_elevation, albedo):
     assert np.all(absorbed > 0.002 * incoming)  # the balance needs the absorbed part: it is not negligible
 
 
+@pytest.mark.slow
 def test_the_sky_matches_a_layered_adding_doubling_sky(device):
     """An independent reference: the plane-parallel sky under a zenith sun by adding-doubling over 120 homogeneous
     layers (each with its own Rayleigh / aerosol phase mixture) against the sky pass's table and the path tracer

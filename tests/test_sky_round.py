@@ -94,6 +94,7 @@ def _sky(scene, pixels: int = 4) -> np.ndarray:
     return Sky(device="cpu").render(scene, pixels, pixels)[0].radiance.reshape(-1, 3).mean(axis=0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("air", ["rayleigh", "earth"])
 def test_a_huge_round_earth_is_the_flat_one(air):
     """A planet of radius 1e9 m draws the flat earth's sky (Riley's closed form plus its multiple-scattering table)
@@ -105,6 +106,7 @@ def test_a_huge_round_earth_is_the_flat_one(air):
         np.testing.assert_allclose(_sky(huge), _sky(flat), rtol=0.012)
 
 
+@pytest.mark.slow
 def test_twilight_is_finite_continuous_and_decays_to_black():
     """Sun from +2 to -12 deg on the Earth: the sky stays finite and non-negative, falls monotonically at the zenith
     and towards the sun, without jumps (each step within a factor of the neighbouring steps' ratio), and is black
