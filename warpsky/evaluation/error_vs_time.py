@@ -237,7 +237,7 @@ def measured_rows(scene, techniques: list[str]) -> list[tuple[str, str, list[dic
             out.append((name, name, LADDERS[name]))  # its paths carry the deck's multiple scattering
         elif scene.heightfield_clouds and not traces_decks(cls):
             out += heightfield_rows(scene, name, out)
-        elif not scene.layers or not technique_class(name).renders_layers:
+        elif not scene.layers or not cls.renders_layers:
             out.append((name, name, LADDERS[name]))
         elif scene.media:
             out.append((f"{name} + stratiform pass", name, LADDERS[name]))
