@@ -3,6 +3,8 @@ multiple scattering (:mod:`warpsky.techniques.hybrid.scenery`) against the path 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import look_rotation
@@ -114,3 +116,39 @@ def test_deck_over_a_ground_matches_the_path_tracer(dome):
           f"alone {alone / b:.3f} of it")
     assert abs(z) < 4.0 and abs(a / b - 1.0) < 0.03
     assert alone < 0.9 * b
+
+
+def layered_slab_scene(floor: str) -> Scene:
+    """The fog slab over its floor (:func:`slab_scene`, no dome) under a broken stratiform layer 300 m up (an 8 x 8
+    map of 0-60 m over 2 km, N0 3e8 /m^3: column optical depth up to 2.8); the camera sees the floor through the
+    fog only."""
+    from warpsky.scene.layers import StratiformLayer
+
+    thickness = np.array([[60.0 * max(0.0, np.sin(0.9 * i) * np.cos(0.7 * j)) for j in range(8)] for i in range(8)])
+    layer = StratiformLayer(thickness.astype(np.float32), 300.0, (-1000.0, -1000.0), (2000.0, 2000.0),
+                            name="deck")
+    return dataclasses.replace(slab_scene(floor, False), layers=(layer,))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("floor", ["ground", "mesh"])
+def test_fog_under_a_stratiform_layer_matches_the_path_tracer(floor):
+    """Fog over a floor under a broken stratiform layer: the fog and surfaces passes' sunlight in the layer's shadow
+    (:mod:`~warpsky.media.layer_shadow`) plus hybrid's paths, which trace the layer voxelised beyond the camera
+    rays' first event, undenoised, equal the path tracer's frame (which traces the layer voxelised too): image means
+    within 4 sigma and 6 % (sigma about 2 %, most of it the path tracer's, whose sun in the fog is sampled; measured
+    z = 0.8 at 4096 paths per pixel over either floor). The passes alone (``multiple_scattering = 0``: the
+    stratiform pass draws the ground with its radiosity, the fog its isotropic ambient term) miss it by more than 15
+    %."""
+    scene = layered_slab_scene(floor)
+    plan, mine = frame(scene, "hybrid", spp=2048, target_error=0, denoise=0, seed=3)
+    assert plan.passes == ("surfaces", "media", "stratiform", "fog") and "stratiform layers" in plan.features["media"]
+    _, traced = frame(scene, "path_tracer", spp=16384, seed=5)
+    a, b = mine.rgba[..., 1].astype(np.float64).mean(), traced.rgba[..., 1].astype(np.float64).mean()
+    sigma = np.sqrt(mine.aovs["variance"][..., 1].sum() + traced.aovs["variance"][..., 1].sum()) / SIZE**2
+    _, alone = frame(scene, "hybrid", multiple_scattering=0)
+    z = (a - b) / sigma
+    print(f"\nfog under a layer over {floor}: hybrid {a:.5f}, path tracer {b:.5f} +- {sigma:.5f}, z = {z:.2f}; "
+          f"passes alone {alone.rgba[..., 1].mean() / b:.3f} of it")
+    assert abs(z) < 4.0 and abs(a / b - 1.0) < 0.06 and sigma < 0.03 * b
+    assert abs(alone.rgba[..., 1].mean() / b - 1.0) > 0.15

@@ -16,7 +16,12 @@ kind           (two fogs of each kind and one of each other kind per six members
                ``deck_haze``: a broken height-field deck 1.1-1.6 km above the valley floor (density 0.02-0.04 /m,
                albedo 1, g 0.85) with haze below it (1.5e-4-4e-4 /m, albedo 0.95, g 0.7), seen looking up;
                ``ridge_cloud``: a cumulus field (peak optical depth 4-30, albedo 1 or 0.9, HG g 0.85) whose base
-               lies 150-300 m below the crest of a ridge across the valley, so the terrain cuts it
+               lies 150-300 m below the crest of a ridge across the valley, so the terrain cuts it;
+               ``layer_fog``: a thin or a thick valley fog (as above) under a broken stratocumulus layer
+               (Bouthors 2006; base 700-1200 m above the valley floor, at most 60-260 m thick, N0 1.2e8-2.4e8
+               /m^3, so the thickest column's optical depth is 1.1-9.6; cover 45-75 %), appended after the
+               other members from a generator of their own (the others stay as they were), alternating between
+               the halves
 terrain        a 4 km square mesh of 40 x 40 cells (3200 triangles): sine waves and two hills around a valley
                running north-south, and a ridge across it for ``ridge_cloud``; albedo 0.22, 0.24, 0.16. A grey
                plane (albedo 0.08) 20 m below the mesh's lowest point carries the view beyond its edges
@@ -54,14 +59,15 @@ from warpsky.evaluation.family_stages import (
 
 #: Bumped whenever the generator's output changes for a seed.
 SCENERY_VERSION = 1
-KINDS = ("thin_fog", "thick_fog", "deck_haze", "ridge_cloud")
+KINDS = ("thin_fog", "thick_fog", "deck_haze", "ridge_cloud", "layer_fog")
 #: The kinds each half is dealt from, in turn: six members per half hold two of each fog and one of the others.
 KIND_CYCLE = ("thin_fog", "thick_fog", "deck_haze", "ridge_cloud", "thick_fog", "thin_fog")
 #: Vertical optical depth from the valley floor to the fog's top, per fog kind.
 FOG_OPTICAL_DEPTH = {"thin_fog": (0.3, 1.5), "thick_fog": (1.5, 5.0)}
 CLOUD_OPTICAL_DEPTH = (4.0, 30.0)
 ELEVATION = (5.0, 60.0)
-PITCH = {"thin_fog": (-6.0, -2.0), "thick_fog": (-6.0, -2.0), "deck_haze": (8.0, 14.0), "ridge_cloud": (0.0, 5.0)}
+PITCH = {"thin_fog": (-6.0, -2.0), "thick_fog": (-6.0, -2.0), "deck_haze": (8.0, 14.0), "ridge_cloud": (0.0, 5.0),
+         "layer_fog": (-6.0, -2.0)}
 TERRAIN_SIZE = 4000.0  # [m]
 TERRAIN_CELLS = 40
 #: Height [m] the terrain's waves, hills and valley are added to: its lowest point stays above sea level (y = 0).
@@ -71,6 +77,13 @@ LAKE_ALBEDO = 0.08
 IMAGE_SIZE = (96, 64)
 FOCAL_LENGTH, APERTURE = 24.0, (36.0, 24.0)
 CLOUD_RESOLUTION = 32
+#: Fog-under-a-layer members: the layer's map (texels per side), extent [m] and the ranges drawn.
+LAYER_TEXELS = 48
+LAYER_SIZE = 12000.0
+LAYER_BASE = (700.0, 1200.0)  # above the valley floor [m]
+LAYER_THICKNESS = (60.0, 260.0)  # the map's largest thickness [m]
+LAYER_NUMBER_DENSITY = (1.2e8, 2.4e8)  # [1/m^3]
+LAYER_COVER = (0.45, 0.75)
 
 
 @dataclass
@@ -101,8 +114,13 @@ class SceneryPlan:
         return f"{self.index:02d}_{self.kind}"
 
 
-def plan_scenery(seed: int, count: int) -> list[SceneryPlan]:
-    """Draw ``count`` members from ``seed`` (see the module docstring)."""
+def plan_scenery(seed: int, count: int, layered: int = 0) -> list[SceneryPlan]:
+    """Draw ``count`` members from ``seed``, then ``layered`` fog-under-a-layer members from a generator of their
+    own (see the module docstring)."""
+    return _plan_plain(seed, count) + _plan_layered(seed, count, layered)
+
+
+def _plan_plain(seed: int, count: int) -> list[SceneryPlan]:
     if count < 2:
         raise ValueError(f"a family needs at least 2 members (one per half), got {count}")
     rng = np.random.default_rng(seed)
@@ -127,9 +145,27 @@ def plan_scenery(seed: int, count: int) -> list[SceneryPlan]:
     return [_draw_member(rng, i, halves[i], kind[i], air[i], elevation[i], depth[i]) for i in range(count)]
 
 
+def _plan_layered(seed: int, first: int, count: int) -> list[SceneryPlan]:
+    """``count`` ``layer_fog`` members numbered from ``first``: per half, thin and thick fog in turn, Earth air
+    alternating, the sun spread over ``ELEVATION``."""
+    if count <= 0:
+        return []
+    rng = np.random.default_rng([seed, 1])
+    elevations = _spread(*ELEVATION, count, log=False)
+    order = rng.permutation(count)
+    plans = []
+    for n in range(count):
+        half, turn = HALVES[(first + n) % 2], n // 2
+        fog = ("thin_fog", "thick_fog")[turn % 2]
+        depth = float(np.exp(rng.uniform(*np.log(FOG_OPTICAL_DEPTH[fog]))))
+        plan = _draw_member(rng, first + n, half, "layer_fog", bool((turn + n) % 2), elevations[order[n]], depth)
+        plans.append(plan)
+    return plans
+
+
 def _draw_member(rng, index, half, kind, air, elevation, depth) -> SceneryPlan:
     side = 1.0 if rng.random() < 0.5 else -1.0
-    fog = kind in FOG_OPTICAL_DEPTH
+    fog = kind in FOG_OPTICAL_DEPTH or kind == "layer_fog"
     return SceneryPlan(
         index=index, half=half, kind=kind, air=bool(air), sun_elevation_deg=float(elevation),
         sun_azimuth_deg=float(side * rng.uniform(60.0, 150.0)), terrain_seed=int(rng.integers(0, 2**31 - 1)),
@@ -196,7 +232,8 @@ def build_scenery_member(plan: SceneryPlan) -> tuple[dict, Terrain, object]:
     lowest = float(terrain.mesh()[0][:, 1].min())
     eye_z = 1700.0
     eye = np.array([0.0, float(terrain.heights(0.0, eye_z)) + plan.camera_height_m, eye_z])
-    if plan.kind in FOG_OPTICAL_DEPTH:  # above the fog's top, looking down on it
+    foggy = plan.kind in FOG_OPTICAL_DEPTH or plan.kind == "layer_fog"
+    if foggy:  # above the fog's top, looking down on it
         eye[1] = max(eye[1], floor + plan.fog_depth_m + 40.0)
     forward = direction(0.0, plan.pitch_deg)
     sun = direction(plan.sun_azimuth_deg, plan.sun_elevation_deg)
@@ -204,9 +241,15 @@ def build_scenery_member(plan: SceneryPlan) -> tuple[dict, Terrain, object]:
               "lake_m": lowest - 20.0, "camera_position": eye.tolist(), "camera_forward": forward.tolist(),
               "sun_direction": sun.tolist(), "triangles": 2 * TERRAIN_CELLS**2}
     shape = None
-    if plan.kind in FOG_OPTICAL_DEPTH:
+    if foggy:
         top = floor + plan.fog_depth_m
         record.update(fog_floor_m=lowest - 50.0, fog_top_m=top, fog_extinction=plan.optical_depth / plan.fog_depth_m)
+    if plan.kind == "layer_fog":
+        rng = np.random.default_rng(plan.shape_seed + 2)
+        record.update(layer_map=f"{plan.name}_layer.npy", layer_base_m=floor + float(rng.uniform(*LAYER_BASE)),
+                      layer_size_m=LAYER_SIZE, layer_number_density=float(rng.uniform(*LAYER_NUMBER_DENSITY)))
+        shape = layer_map(rng)
+        record["layer_max_thickness_m"] = float(shape.max())
     elif plan.kind == "ridge_cloud":
         rng = np.random.default_rng(plan.shape_seed + 1)
         crest = float(terrain.heights(0.0, terrain.ridge_z))
@@ -218,20 +261,39 @@ def build_scenery_member(plan: SceneryPlan) -> tuple[dict, Terrain, object]:
         record.update(field=f"{plan.name}.npy", ridge_crest_m=crest, cloud_base_m=base,
                       extinction_scale=float(np.float32(plan.optical_depth / column)),
                       lower_m=shape.lower.tolist(), upper_m=shape.upper.tolist())
-    else:
+    elif plan.kind == "deck_haze":
         record.update(deck_mean_altitude_m=floor + plan.deck_altitude_m, haze_floor_m=lowest - 50.0)
     return record, terrain, shape
 
 
-def make_scenery_family(out: str | Path, *, seed: int = 2028, count: int = 12, log=None) -> Path:
-    """Write ``count`` members (a ``.usda`` stage each, a ``.npy`` field for a ridge cloud) and ``family.json``
-    into ``out``; returns the path of family.json."""
+def layer_map(rng) -> np.ndarray:
+    """A broken stratocumulus thickness map [m] (``LAYER_TEXELS`` square, axis 0 = x): cosine waves of 6-1.5 km
+    cut at the drawn cover's quantile and scaled to the drawn largest thickness."""
+    n = LAYER_TEXELS
+    axis = (np.arange(n) + 0.5) / n * LAYER_SIZE
+    x, z = np.meshgrid(axis, axis, indexing="ij")
+    field = np.zeros((n, n))
+    for wavelength in np.geomspace(6000.0, 1500.0, 5):
+        angle, phase = rng.uniform(0.0, 2.0 * math.pi, 2)
+        k = 2.0 * math.pi / wavelength
+        field += (wavelength / 6000.0) ** 0.5 * np.cos(k * (math.cos(angle) * x + math.sin(angle) * z) + phase)
+    cut = np.quantile(field, 1.0 - rng.uniform(*LAYER_COVER))
+    thick = np.clip(field - cut, 0.0, None)
+    return (thick / thick.max() * rng.uniform(*LAYER_THICKNESS)).astype(np.float32)
+
+
+def make_scenery_family(out: str | Path, *, seed: int = 2028, count: int = 12, layered: int = 0,
+                        log=None) -> Path:
+    """Write ``count`` members and ``layered`` fog-under-a-layer members (a ``.usda`` stage each, a ``.npy`` field
+    for a ridge cloud or a layer's map) and ``family.json`` into ``out``; returns the path of family.json."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     records = []
-    for plan in plan_scenery(seed, count):
+    for plan in plan_scenery(seed, count, layered):
         record, terrain, shape = build_scenery_member(plan)
-        if shape is not None:
+        if plan.kind == "layer_fog":
+            np.save(out / record["layer_map"], shape)
+        elif shape is not None:
             np.save(out / record["field"], shape.density)
         write_scenery_stage(out / record["stage"], record, terrain, seed=seed)
         records.append(record)
@@ -240,7 +302,7 @@ def make_scenery_family(out: str | Path, *, seed: int = 2028, count: int = 12, l
                 f"{record['albedo']:.3f} g {record['g']:.2f}  sun {record['sun_elevation_deg']:5.1f} deg "
                 f"az {record['sun_azimuth_deg']:+6.1f}  air {int(record['air'])}")
     blob = {"generator": "tools/make_scenery_family.py", "version": SCENERY_VERSION, "profile": "scenery",
-            "seed": seed, "count": count, "image_size": list(IMAGE_SIZE), "members": records}
+            "seed": seed, "count": count + layered, "image_size": list(IMAGE_SIZE), "members": records}
     path = out / "family.json"
     path.write_text(json.dumps(blob, indent=1) + "\n")
     return path
@@ -319,6 +381,19 @@ def _write_cloud(stage, record: dict) -> None:
     _attribute(volume.GetPrim(), "warpsky:phase:g", "Float", record["g"])
 
 
+def _write_layer_fog(stage, record: dict) -> None:
+    from pxr import Gf, Sdf
+
+    _write_fog(stage, record)
+    layer = stage.DefinePrim("/World/Stratocumulus", "Xform")
+    _kind(layer, "stratiformLayer")
+    layer.CreateAttribute("warpsky:stratiform:thicknessMap", Sdf.ValueTypeNames.Asset).Set(
+        Sdf.AssetPath(f"./{record['layer_map']}"))
+    _attribute(layer, "warpsky:stratiform:size", "Float2", Gf.Vec2f(record["layer_size_m"], record["layer_size_m"]))
+    _attribute(layer, "warpsky:stratiform:numberDensity", "Float", record["layer_number_density"])
+    _set_transform(layer, np.eye(3), (0.0, record["layer_base_m"], 0.0))
+
+
 def write_scenery_stage(path: Path, record: dict, terrain: Terrain, *, seed: int) -> Path:
     """One member as a Y-up, metre stage: camera, sun, terrain mesh, lake plane, its fog, deck or cloud, Earth air
     when drawn, 96 x 64 render settings."""
@@ -352,7 +427,7 @@ def write_scenery_stage(path: Path, record: dict, terrain: Terrain, *, seed: int
     lake.AddTranslateOp().Set(Gf.Vec3d(0.0, record["lake_m"], 0.0))
     _attribute(lake.GetPrim(), "warpsky:albedo", "Color3f", Gf.Vec3f(LAKE_ALBEDO))
     {"thin_fog": _write_fog, "thick_fog": _write_fog, "deck_haze": _write_deck,
-     "ridge_cloud": _write_cloud}[record["kind"]](stage, record)
+     "ridge_cloud": _write_cloud, "layer_fog": _write_layer_fog}[record["kind"]](stage, record)
     if record["air"]:
         atmosphere = stage.DefinePrim("/World/Atmosphere", "Scope")
         _attribute(atmosphere, "warpsky:atmosphere:altitude", "Float", 0.0)

@@ -27,9 +27,19 @@ def has_scenery(scene) -> bool:
 
 def scenery_traceable(scene) -> bool:
     """Whether a ``scatters_scenery`` technique path traces ``scene``'s fog, height-field deck and meshes beyond
-    their single scattering: there are some, and no stratiform layer, whose light and shadows its paths do not
-    carry."""
-    return bool(scene.fogs or scene.meshes or scene.heightfield_clouds) and not scene.layers
+    their single scattering: there are some, and stratiform layers only above fog and meshes, without voxel media
+    or a deck (the paths then trace the layers too, beyond a camera ray's first event; the stratiform pass draws
+    them)."""
+    scenery = bool(scene.fogs or scene.meshes or scene.heightfield_clouds)
+    return scenery and not (scene.layers and (scene.media or scene.heightfield_clouds))
+
+
+def scenery_paths(scene, technique) -> bool:
+    """Whether ``technique`` path traces ``scene``'s scenery (a technique class: whether it can; a built technique:
+    its settings decide, :meth:`~warpsky.techniques.base.Technique.scenery_paths`)."""
+    if not (technique.scatters_scenery and scenery_traceable(scene)):
+        return False
+    return isinstance(technique, type) or technique.scenery_paths(scene)
 
 
 class MediaPass(Pass):
@@ -43,10 +53,7 @@ class MediaPass(Pass):
     def runs(cls, scene, technique) -> bool:
         """With voxel media, with layers, a deck, fog or meshes the technique traces itself, or in a scene with
         nothing else to draw (the technique draws the ground, the sky or nothing)."""
-        scenery = technique.scatters_scenery and scenery_traceable(scene)
-        if scenery and not isinstance(technique, type):  # a built technique: its settings decide
-            scenery = technique.scenery_paths(scene)
-        return cls.renders_own(scene, technique) or scenery
+        return cls.renders_own(scene, technique) or scenery_paths(scene, technique)
 
     @classmethod
     def renders_own(cls, scene, technique) -> bool:
@@ -66,14 +73,16 @@ class MediaPass(Pass):
         if scene.media:
             voxels = sum(int(np.prod(m.shape)) for m in scene.media)
             return {"media": f"{len(scene.media)} voxel grid(s), {voxels:,} voxels, {voxels * 4 / 2**20:.1f} MiB"}
-        if scene.layers:
-            return {"media": f"none: {technique.name} does not run, the layers are rendered by the stratiform pass"}
         if cls.runs(scene, technique) and not cls.renders_own(scene, technique):
             kinds = [kind for kind, present in (("the fog", scene.fogs), ("the height-field deck",
                      scene.heightfield_clouds), ("the meshes", scene.meshes)) if present]
             named = ", ".join(kinds[:-1]) + " and " + kinds[-1] if len(kinds) > 1 else kinds[0]
+            layers = (", and the stratiform layers' light on them (the layers voxelised beyond the camera rays' "
+                      "first event, which the stratiform pass draws)") if scene.layers else ""
             return {"media": f"none: {technique.name} path traces the multiple scattering of {named} (their "
-                             "passes draw the single scattering)"}
+                             f"passes draw the single scattering){layers}"}
+        if scene.layers:
+            return {"media": f"none: {technique.name} does not run, the layers are rendered by the stratiform pass"}
         return {"media": "none"}
 
     def memory_estimate(self, scene, width: int, height: int):
@@ -89,9 +98,11 @@ class MediaPass(Pass):
         """The technique's layer; for deep output with the voxel media's depth profile on the technique's rays
         (:func:`~warpsky.passes.depth_profile.media_profile`)."""
         scene = media_scene(frame)
-        if frame.technique.scenery_paths(scene) and scene.ground is None and frame.scene.ground is not None:
-            # another pass draws the ground plane; the paths bounce on it
-            layer = frame.technique.render(scene, frame.width, frame.height, paths_ground=frame.scene.ground)
+        if frame.technique.scenery_paths(scene):
+            # another pass draws the ground plane and the layers; the paths bounce on the one and trace the other
+            ground = frame.scene.ground if scene.ground is None else None
+            layers = frame.scene.layers if not scene.layers else ()
+            layer = frame.technique.render(scene, frame.width, frame.height, paths_ground=ground, paths_layers=layers)
         else:
             layer = frame.technique.render(scene, frame.width, frame.height)
         if frame.deep_samples > 0 and scene.media:

@@ -40,6 +40,7 @@ from warpsky.layer import Layer
 from warpsky.light.dome import ambient_radiance, isotropic_ambient
 from warpsky.light.sun import sunlight
 from warpsky.media.analytic_fog import fog_struct
+from warpsky.media.layer_shadow import layer_shadows
 from warpsky.passes.base import Pass
 from warpsky.passes.fog.kernels import FogMarch, fog_kernel, sun_transmittance_kernel
 from warpsky.resources import LAYER_BYTES, MemoryEstimate
@@ -87,7 +88,8 @@ class Fog:
     def march(self, scene: Scene, ambient=None, occluders=None) -> FogMarch:
         """The kernel's quadrature settings and light for ``scene`` (``ambient``: the isotropic sky radiance, RGB;
         None: :func:`~warpsky.light.dome.ambient_radiance`, the dome's; ``occluders``: the
-        :class:`~warpsky.surfaces.mesh.MeshBuffers` of the frame's meshes, which shadow the fog, or None)."""
+        :class:`~warpsky.surfaces.mesh.MeshBuffers` of the frame's meshes, which shadow the fog, or None). The
+        scene's stratiform layers shadow the fog's sunlight too (:mod:`~warpsky.media.layer_shadow`)."""
         s = self.settings
         abscissae, weights = np.polynomial.legendre.leggauss(s.nodes)
         march = FogMarch()
@@ -102,6 +104,7 @@ class Fog:
         march.sun_irradiance = wp.vec3d(*(np.zeros(3) if light is None else light.irradiance).tolist())
         march.sun_on = int(light is not None and light.lit and direction[1] > 0.0)
         march.occluders = no_surfaces(self.device) if occluders is None else occluders.surfaces
+        march.layers = layer_shadows(scene.layers, scene.camera.position, self.device)
         ambient = ambient_radiance(scene) if ambient is None else ambient
         march.ambient = wp.vec3d(*np.asarray(ambient, dtype=np.float64).tolist())
         return march

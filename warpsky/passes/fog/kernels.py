@@ -27,6 +27,7 @@ import warp as wp
 
 from warpsky.camera_rays import PinholeCamera, camera_forward, primary_ray
 from warpsky.media.analytic_fog import FogSet, fog_density, fogs_optical_depth, slabs_exit_length
+from warpsky.media.layer_shadow import LayerShadows, layers_sun_transmittance
 from warpsky.surfaces.mesh import SurfaceMeshes, mesh_occluded
 
 FOUR_PI = wp.constant(wp.float64(4.0 * math.pi))
@@ -48,6 +49,7 @@ class FogMarch:
     sun_on: int  # 0: no sun term (none, unlit or at/below the horizon)
     ambient: wp.vec3d  # isotropic sky radiance [irradiance/sr], RGB
     occluders: SurfaceMeshes  # meshes that shadow the fog from the sun (terrain), camera-relative
+    layers: LayerShadows  # stratiform layers above the fog, whose shadow it lies in
 
 
 @wp.struct
@@ -276,7 +278,8 @@ def fog_ray(fogs: FogSet, march: FogMarch, o: wp.vec3d, w: wp.vec3d, t0: wp.floa
             out.opacity += weight * luminance64(seen)
             distance += weight * luminance64(seen) * s
             if march.sun_on != 0 and not sun_blocked(march, x):
-                lit = exp3d(sun_optical_depth(fogs, march, x))
+                lit = exp3d(sun_optical_depth(fogs, march, x)) * layers_sun_transmittance(march.layers, x,
+                                                                                           march.sun_direction)
                 sun += weight * wp.cw_mul(wp.cw_mul(point.sun_scattering, view), lit)
         tau += fogs_optical_depth(fogs, o + t * w, o + t_next * w)
         t = t_next

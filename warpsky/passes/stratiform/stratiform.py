@@ -250,6 +250,12 @@ class StratiformPass(Pass):
     def runs(cls, scene, technique) -> bool:
         return bool(scene.layers) and not technique.traces_layers
 
+    def draws_ground(self, scene) -> bool:
+        """Not where the technique's paths trace the scenery under the layers
+        (:meth:`~warpsky.techniques.base.Technique.scenery_paths`): the surfaces pass draws the ground's sunlight
+        in the layers' shadow then, and the paths its light from the layers (the radiosity's part)."""
+        return not (self.technique is not None and self.technique.scenery_paths(scene))
+
     @classmethod
     def refusal(cls, scene, technique):
         if cls.runs(scene, technique) and not technique.renders_layers:

@@ -30,6 +30,7 @@ from warpsky.light.dome import upper_hemisphere
 from warpsky.light.sun import sun_struct, sunlight
 from warpsky.media.voxel import VoxelMediaBuffers
 from warpsky.passes.base import Pass
+from warpsky.passes.media import scenery_paths
 from warpsky.passes.surfaces.kernels import (
     SurfaceImage,
     SurfaceLighting,
@@ -207,7 +208,7 @@ class SurfacesPass(Pass):
 
     name = "surfaces"
     ground_rank = 2
-    ground_note = "drawn by the surfaces pass (shadows of fog and height-field clouds)"
+    ground_note = "drawn by the surfaces pass (in the shadows of fog, height-field clouds and stratiform layers)"
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
@@ -215,7 +216,9 @@ class SurfacesPass(Pass):
             return False
         fog = bool(scene.fogs) and not technique.traces_fog  # else the technique draws the ground with its fog
         scenery = bool(scene.meshes or scene.heightfield_clouds or fog)
-        return bool(scene.meshes) or (scene.ground is not None and scenery and not scene.media and not scene.layers)
+        # under stratiform layers only where the technique's paths carry the layers' light on the ground
+        layered = bool(scene.layers) and not scenery_paths(scene, technique)
+        return bool(scene.meshes) or (scene.ground is not None and scenery and not scene.media and not layered)
 
     @classmethod
     def refusal(cls, scene, technique):

@@ -8,16 +8,19 @@ Who counts what, so that no light counts twice:
   term;
 * the surfaces pass: the meshes' (and a ground plane's, where it draws it) direct sunlight, without its sky term;
 * the paths (:class:`~warpsky.techniques.path_tracer.technique.PathTracing` with ``meshes`` and ``fog``, the
-  camera's opaque depth dropped so that they start on the meshes themselves, the deck and its haze voxelised over
-  a square around the camera as the path tracer traces them, :mod:`~warpsky.techniques.path_tracer.deck_media`):
-  everything else. Their first event, in the fog, the deck, the media or on a surface, takes no sunlight
-  (``multiple_only``, as for the voxel media and the ground), then the path gathers the sun at its later events
-  and the sky's and the dome's light wherever it goes: that is the light the fog's and the deck's ambient terms
-  and the surfaces' sky term approximated (isotropic, unshadowed or shadowed straight above only, no light
-  between faces), now traced with the terrain's occlusion, so those terms are left out. A path whose first event
-  is the air's ends there (``air_by_table``: the sky pass's tables hold the air's own light). Beyond the deck's
-  square the paths see clear air: there the deck keeps its single scattering only (the square's automatic size
-  dims the light from beyond it below 1 % along the frame's rays).
+  camera's opaque depth dropped so that they start on the meshes themselves, the deck and its haze voxelised over a
+  square around the camera as the path tracer traces them, :mod:`~warpsky.techniques.path_tracer.deck_media`):
+  everything else, the stratiform layers' light on the scenery included (the layers voxelised as the path tracer
+  traces them, :mod:`~warpsky.techniques.path_tracer.layer_media`: a camera ray whose first event lies in a layer's
+  altitude band ends there, since the stratiform pass draws the layers; the ground, in their shadow, is then the
+  surfaces pass's, its light from the layers the paths'). Their first event, in the fog, the deck, the media or on a
+  surface, takes no sunlight (``multiple_only``, as for the voxel media and the ground), then the path gathers the
+  sun at its later events and the sky's and the dome's light wherever it goes: that is the light the fog's and the
+  deck's ambient terms and the surfaces' sky term approximated (isotropic, unshadowed or shadowed straight above
+  only, no light between faces), now traced with the terrain's occlusion, so those terms are left out. A path whose
+  first event is the air's ends there (``air_by_table``: the sky pass's tables hold the air's own light). Beyond the
+  deck's square the paths see clear air: there the deck keeps its single scattering only (the square's automatic
+  size dims the light from beyond it below 1 % along the frame's rays).
 
 The paths' radiance is already attenuated on its way to the eye (the fog's closed-form transmittance, the media and
 the air are tracked along the camera ray), so it is not composited by depth behind the fog's or the terrain's layer:
@@ -36,17 +39,29 @@ from warpsky.passes.fog.fog import Fog
 from warpsky.passes.heightfield.heightfield import HeightField
 from warpsky.scene.model import Scene
 from warpsky.techniques.path_tracer.deck_media import with_deck_as_media
+from warpsky.techniques.path_tracer.layer_media import with_layers_as_media
 
 
-def paths_scene(scene: Scene, paths_ground, settings, width: int, height: int) -> Scene:
-    """The scene the paths trace: ``scene`` with ``paths_ground`` as its ground plane where another pass draws it,
-    no opaque depth on the camera (the surfaces pass's meshes and ground, which the paths trace themselves) and its
-    height-field deck voxelised into its media (``settings``: the path tracer's, for the deck's square and voxels;
-    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`)."""
+def paths_scene(scene: Scene, paths_ground, settings, width: int, height: int, paths_layers=(),
+                device: str = "cpu") -> tuple[Scene, tuple[float, float] | None]:
+    """(the scene the paths trace, the altitude band [m] where a camera ray's first event ends its path or None):
+    ``scene`` with ``paths_ground`` as its ground plane where another pass draws it, no opaque depth on the camera
+    (the surfaces pass's meshes and ground, which the paths trace themselves), its height-field deck voxelised into
+    its media (``settings``: the path tracer's, for the deck's square and voxels;
+    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`) and ``paths_layers``, the stratiform
+    layers another pass draws, voxelised into them too; their band is the one returned."""
     ground = scene.ground if scene.ground is not None else paths_ground
     camera = dataclasses.replace(scene.camera, opaque_depth=None)
     traced = dataclasses.replace(scene, ground=ground, camera=camera)
-    return with_deck_as_media(traced, settings, width, height)
+    band = None
+    if paths_layers:
+        layered = with_layers_as_media(dataclasses.replace(traced, layers=tuple(paths_layers)), settings, device)
+        added = layered.media[len(traced.media):]
+        if added:
+            heights = np.concatenate([m.world_corners()[:, 1] for m in added])
+            band = (float(heights.min()), float(heights.max()))
+        traced = layered
+    return with_deck_as_media(traced, settings, width, height), band
 
 
 def scenery_guide(scene: Scene, single: Layer, device: str) -> Layer:

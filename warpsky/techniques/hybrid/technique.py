@@ -51,6 +51,7 @@ from warpsky.techniques.hybrid.denoise import (
 from warpsky.techniques.hybrid.scenery import paths_scene, scenery_guide
 from warpsky.techniques.path_tracer.deck_media import deck_plan, deck_voxel_memory
 from warpsky.techniques.path_tracer.forward_cut import check_cut_settings, cut_feature
+from warpsky.techniques.path_tracer.layer_media import layer_voxel_memory
 from warpsky.techniques.path_tracer.technique import (
     PathTracer,
     PathTracerSettings,
@@ -196,6 +197,8 @@ class Hybrid(Technique):
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.heightfield_clouds and self.scenery_paths(scene):
             estimate.merge(deck_voxel_memory(scene, s.path_tracer(), width, height))
+        if scene.layers and self.scenery_paths(scene):  # the layers its paths trace, voxelised
+            estimate.merge(layer_voxel_memory(scene, s.path_tracer()))
         if scene.atmosphere is not None:
             estimate.add("sky", host=pixels * 64, device=pixels * 40)
         return estimate.add("AOVs", host=3 * pixels * AOV_BYTES)
@@ -220,14 +223,15 @@ class Hybrid(Technique):
         return cut_feature(scene, float(s.forward_cut), features)
 
     def scenery_paths(self, scene: Scene) -> bool:
-        """With multiple scattering on, its paths trace the fog, the height-field deck and the meshes in a scene
-        without stratiform layers (:func:`~warpsky.passes.media.scenery_traceable`; :mod:`.scenery`)."""
+        """With multiple scattering on, its paths trace the fog, the height-field deck and the meshes, and the
+        stratiform layers above fog and meshes (:func:`~warpsky.passes.media.scenery_traceable`; :mod:`.scenery`)."""
         return bool(self.settings_for(scene).multiple_scattering) and scenery_traceable(scene)
 
-    def render(self, scene: Scene, width: int, height: int, *, paths_ground=None) -> Layer:
+    def render(self, scene: Scene, width: int, height: int, *, paths_ground=None, paths_layers=()) -> Layer:
         """The media's layer; with :meth:`scenery_paths` the paths' light (the scenery's multiple scattering
-        included) is its ``front`` light (:mod:`.scenery`), and ``paths_ground`` is the ground plane another pass
-        draws, on which the paths bounce."""
+        included) is its ``front`` light (:mod:`.scenery`), ``paths_ground`` is the ground plane another pass
+        draws, on which the paths bounce, and ``paths_layers`` the stratiform layers another pass draws, which the
+        paths trace beyond their first event."""
         settings = self.settings_for(scene)
         if settings.multiple_scattering and settings.denoise:
             require_denoiser()
@@ -239,14 +243,17 @@ class Hybrid(Technique):
         multiple = np.zeros_like(single.radiance)
         variance = np.zeros_like(single.radiance)
         scenery = self.scenery_paths(scene)
-        paths = paths_scene(scene, paths_ground, settings.path_tracer(), width, height) if scenery else scene
+        paths, band = scene, None
+        if scenery:
+            paths, band = paths_scene(scene, paths_ground, settings.path_tracer(), width, height, paths_layers,
+                                      self.device)
         lit = (scene.sun is not None and (scene.media or scenery)) or (
             scene.dome is not None and (scene.media or scene.ground or scenery))
         if settings.multiple_scattering and lit:
             guide = scenery_guide(scene, single, self.device) if scenery else single
             with device_buffers.exclusive(BUFFER_NAME, self.device):  # the halves and kept paths
                 multiple, variance, ms_stats = MultipleScattering(paths, width, height, settings, self.device,
-                                                                  scenery=scenery).run(guide, started)
+                                                                  scenery=scenery, first_end=band).run(guide, started)
             stats.update(ms_stats)
             if scene.atmosphere is not None and not scenery:  # the scenery's paths go in front of the air's layer
                 multiple, variance = behind_front_air(scene, width, height, single.depth, multiple, variance,
@@ -300,7 +307,7 @@ class MultipleScattering:
     """Progressive passes of multiple-scattering paths into two halves, the error estimate, and the denoising."""
 
     def __init__(self, scene: Scene, width: int, height: int, settings: HybridSettings, device: str, *,
-                 scenery: bool = False):
+                 scenery: bool = False, first_end: tuple[float, float] | None = None):
         self.settings = settings
         self.device = device
         self.scale = int(settings.ms_scale)
@@ -313,7 +320,8 @@ class MultipleScattering:
                                    air=atmosphere is not None, multiple_only=True, scale=self.scale,
                                    buffer_name=BUFFER_NAME,
                                    air_by_table=atmosphere is not None and atmosphere.multiple_scattering,
-                                   meshes=scenery and bool(scene.meshes), fog=scenery and bool(scene.fogs))
+                                   meshes=scenery and bool(scene.meshes), fog=scenery and bool(scene.fogs),
+                                   first_end=first_end)
         shape = (self.tracing.height, self.tracing.width)
         self.halves = [pixel_sums(shape, device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
         self.counts = [0, 0]

@@ -80,6 +80,8 @@ class PathSettings:
     similarity_order: int  # after this many scattering events the media are reduced (high-order similarity); 0: never
     forward_cut: int  # 1: after the first event paths continue through the cut media (forward_cut.py)
     air_by_table: int  # 1: paths whose first event is the air's end there (a table holds the air's own light)
+    first_end_low: float  # a camera ray's event at a camera-relative altitude in [low, high] ends its path there
+    first_end_high: float  # (another pass draws what lies there: the stratiform layers); low > high: none
 
 
 @wp.struct
@@ -217,6 +219,9 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                                                                      bounce)
                 break
             p = path.origin + flight.t * path.direction
+            if bounce == 0 and flight.scattered == 1:
+                if p[1] >= settings.first_end_low and p[1] <= settings.first_end_high:
+                    break  # the pass that draws this band draws its light on the camera ray
             event_sun = sun_on
             if wp.static(has_meshes):  # a mesh's own event tests its shadow; no peak light is added on a mesh
                 event_sun = sun_on and (flight.scattered == 1 or end.surface != SURFACE_MESH)

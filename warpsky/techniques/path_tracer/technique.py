@@ -233,7 +233,8 @@ class PathTracing:
     at least twice, for techniques that march single scattering exactly; ``air_by_table`` leaves out the paths
     whose first event is in the air (the sky pass's multiple-scattering table holds their light); ``meshes``
     traces the scene's meshes inside the paths (else another pass draws them and camera rays end at its depth,
-    ``Camera.opaque_depth``). The media's
+    ``Camera.opaque_depth``); ``first_end`` (world altitudes low, high [m]) ends the paths whose camera ray
+    scatters first in that band (another pass draws it: the stratiform layers). The media's
     values (under :data:`MEDIA_CACHE`, shared with the single-scattering march) and majorants go through
     :func:`warpsky.device_buffers.upload`: the next frame of a batch with the same grids copies nothing; the sums
     and kept paths are :func:`warpsky.device_buffers.reusable` arrays under ``buffer_name``.
@@ -247,7 +248,7 @@ class PathTracing:
     def __init__(self, scene: Scene, width: int, height: int, settings: PathTracerSettings, device: str, *,
                  air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer",
                  per_sample: bool | None = None, air_by_table: bool = False, meshes: bool = False,
-                 fog: bool = False):
+                 fog: bool = False, first_end: tuple[float, float] | None = None):
         self.settings = settings
         self.air_by_table = bool(air_by_table and air)
         self.device = device
@@ -257,6 +258,7 @@ class PathTracing:
         self.width, self.height = width, height
         self.multiple_only = multiple_only
         self.camera = camera
+        self.first_end = None if first_end is None else tuple(v - float(camera.position[1]) for v in first_end)
         species = scene.species
         media_list, cache = scene.media, MEDIA_CACHE
         if settings.bake_detail and any(m.has_detail for m in scene.media):
@@ -310,14 +312,16 @@ class PathTracing:
         GPUs)."""
         if not self.samples_per_launch:
             launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only,
-                                   forward_cut=self.forward_cut, air_by_table=self.air_by_table)
+                                   forward_cut=self.forward_cut, air_by_table=self.air_by_table,
+                                   first_end=self.first_end)
             launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums, None], self.device)
             return
         end = first_sample + count
         while first_sample < end:
             chunk = min(self.samples_per_launch, end - first_sample)
             launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only,
-                                   forward_cut=self.forward_cut, air_by_table=self.air_by_table)
+                                   forward_cut=self.forward_cut, air_by_table=self.air_by_table,
+                                   first_end=self.first_end)
             launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, sums, self.samples],
                         self.device)
             launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
@@ -392,7 +396,8 @@ def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> Pi
 
 
 def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int, *,
-                  multiple_only: bool = False, forward_cut: bool = False, air_by_table: bool = False) -> PathSettings:
+                  multiple_only: bool = False, forward_cut: bool = False, air_by_table: bool = False,
+                  first_end: tuple[float, float] | None = None) -> PathSettings:
     """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``; with
     ``air_by_table`` a path whose first event is the air's ends there (:func:`~warpsky.techniques.path_tracer.
     events.media_first_function`)."""
@@ -407,6 +412,7 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     out.similarity_order = int(settings.similarity_order)
     out.forward_cut = int(forward_cut)
     out.air_by_table = int(air_by_table)
+    out.first_end_low, out.first_end_high = (1.0, -1.0) if first_end is None else (float(v) for v in first_end)
     return out
 
 
