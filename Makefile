@@ -21,8 +21,9 @@ help:
 	@echo "make family             - generate the 24-stage validation family (seed 2026) in data/family"
 	@echo "make family-thick       - generate the 12-stage thick family (optical depth 100-1000, seed 2027) in"
 	@echo "                          data/family_thick"
-	@echo "make scenery-family     - generate the 12-stage scenery family (terrain with valley fog, a height-field deck"
-	@echo "                          with haze, cumulus cut by a ridge; seed 2028) in data/scenery_family"
+	@echo "make scenery-family     - generate the 16-stage scenery family (terrain with valley fog, a height-field deck"
+	@echo "                          with haze, cumulus cut by a ridge, fog under a stratocumulus layer; seed 2028) in"
+	@echo "                          data/scenery_family"
 	@echo "make cumulus-wind       - 48 frames of the cumulus in wind (usd_scenes/cumulus_wind.usda) to out/"
 	@echo "make stratocumulus      - stratocumulus over water, sand and snow, radiosity on and off, to out/"
 	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
@@ -71,11 +72,12 @@ data/family_thick/family.json: tools/make_validation_family.py warpsky/evaluatio
 
 family-thick: data/family_thick/family.json
 
-# The scenery family: 12 seeded terrain stages (fog, a deck with haze, a ridge cloud) at 96 x 64, for the path tracer's
-# references of terrain, analytic fog and height-field decks (warpsky bench error-vs-time --family data/scenery_family).
+# The scenery family: 16 seeded terrain stages (fog, a deck with haze, a ridge cloud, fog under a stratocumulus layer)
+# at 96 x 64, for the path tracer's references of terrain, analytic fog, height-field decks and layers over them
+# (warpsky bench error-vs-time --family data/scenery_family).
 data/scenery_family/family.json: tools/make_scenery_family.py warpsky/evaluation/scenery_family.py \
 		warpsky/evaluation/family_stages.py warpsky/evaluation/family_shapes.py $(STAMP)
-	$(PY) tools/make_scenery_family.py --out data/scenery_family --seed 2028 --count 12
+	$(PY) tools/make_scenery_family.py --out data/scenery_family --seed 2028 --count 12 --layered 4
 
 scenery-family: data/scenery_family/family.json
 

@@ -152,3 +152,30 @@ def test_fog_under_a_stratiform_layer_matches_the_path_tracer(floor):
           f"passes alone {alone.rgba[..., 1].mean() / b:.3f} of it")
     assert abs(z) < 4.0 and abs(a / b - 1.0) < 0.06 and sigma < 0.03 * b
     assert abs(alone.rgba[..., 1].mean() / b - 1.0) > 0.15
+
+
+def test_error_estimate_is_relative_to_the_whole_frame():
+    """The paths' error estimate divides their noise by the frame's level, the fog's and the floor's sunlight that
+    the passes draw included (not by the paths' light alone, which made it conservative by the frame's ratio to
+    it): undenoised, it equals the RMS of the paths' standard error over the frame's mean, to rounding."""
+    import warpsky.techniques.hybrid.technique as hybrid
+
+    scene = slab_scene("ground", False)
+    stats = {}
+    run = hybrid.MultipleScattering.run
+
+    def keep(self, *args, **kwargs):
+        out = run(self, *args, **kwargs)
+        stats.update(out[2])
+        return out
+
+    hybrid.MultipleScattering.run = keep
+    try:
+        _, mine = frame(scene, "hybrid", spp=64, target_error=1e-6, denoise=0, seed=3)
+    finally:
+        hybrid.MultipleScattering.run = run
+    noise = np.sqrt(np.mean(mine.aovs["variance"].astype(np.float64)))
+    level = mine.rgba[..., :3].astype(np.float64).mean()
+    paths = mine.aovs["multiple_scatter"].astype(np.float64).mean()
+    assert paths < 0.95 * level  # the passes draw a part of the frame (its sunlit floor and fog)
+    assert stats["error_estimate"] == pytest.approx(noise / level, rel=1e-3)

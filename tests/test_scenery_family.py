@@ -1,5 +1,5 @@
-"""The scenery family: a deterministic generator of terrain stages with fog, a deck or a ridge cloud, split into
-disjoint halves that each hold every kind, whose stages ``warpsky info`` plans with the path tracer and the default
+"""The scenery family: a deterministic generator of terrain stages with fog, a deck, a ridge cloud or fog under a
+stratocumulus layer, split into disjoint halves that each hold every kind, whose stages ``warpsky info`` plans with the path tracer and the default
 technique. Nothing is rendered."""
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from warpsky.scene.usd import StageReader
 @pytest.fixture(scope="module")
 def family(tmp_path_factory):
     out = tmp_path_factory.mktemp("scenery")
-    make_scenery_family(out, seed=2028, count=12)
+    make_scenery_family(out, seed=2028, count=12, layered=4)
     return out
 
 
@@ -33,13 +33,15 @@ def _members(family):
 
 
 def test_generator_is_deterministic_for_a_seed(family, tmp_path):
-    make_scenery_family(tmp_path / "again", seed=2028, count=12)
+    make_scenery_family(tmp_path / "again", seed=2028, count=12, layered=4)
     assert (tmp_path / "again" / "family.json").read_bytes() == (family / "family.json").read_bytes()
     for m in _members(family):
         assert (tmp_path / "again" / m["stage"]).read_bytes() == (family / m["stage"]).read_bytes()
-        if "field" in m:
-            np.testing.assert_array_equal(np.load(tmp_path / "again" / m["field"]), np.load(family / m["field"]))
+        for key in ("field", "layer_map"):
+            if key in m:
+                np.testing.assert_array_equal(np.load(tmp_path / "again" / m[key]), np.load(family / m[key]))
     assert plan_scenery(7, 12) != plan_scenery(2028, 12)
+    assert plan_scenery(2028, 12, 4)[:12] == plan_scenery(2028, 12)  # the layered members leave the others alone
     points, triangles = Terrain(3).mesh()
     assert len(triangles) == 2 * TERRAIN_CELLS**2 and np.array_equal(points, Terrain(3).mesh()[0])
 
@@ -48,14 +50,17 @@ def test_halves_are_disjoint_and_each_holds_every_kind(family):
     members = _members(family)
     tune = {m["stage"] for m in members if m["half"] == "tune"}
     test = {m["stage"] for m in members if m["half"] == "test"}
-    assert not tune & test and len(tune) + len(test) == len(members) == 12
+    assert not tune & test and len(tune) + len(test) == len(members) == 16
     for half in ("tune", "test"):
         chosen = [m for m in members if m["half"] == half]
         assert {m["kind"] for m in chosen} == set(KINDS)
         assert {m["air"] for m in chosen} == {True, False}
     for m in members:
-        if m["kind"] in FOG_OPTICAL_DEPTH:
-            lo, hi = FOG_OPTICAL_DEPTH[m["kind"]]
+        if m["kind"] == "layer_fog":
+            assert 0.3 - 1e-9 <= m["optical_depth"] <= 5.0 + 1e-9
+            assert m["layer_base_m"] - m["fog_top_m"] > 400.0 and m["layer_max_thickness_m"] <= 260.0
+        if m["kind"] in FOG_OPTICAL_DEPTH or m["kind"] == "layer_fog":
+            lo, hi = FOG_OPTICAL_DEPTH.get(m["kind"], (0.3, 5.0))
             assert lo - 1e-9 <= m["optical_depth"] <= hi + 1e-9
             assert 0.9 <= m["albedo"] <= 1.0 and 0.7 <= m["g"] <= 0.9
             assert m["camera_position"][1] > m["fog_top_m"]  # looking down on the fog
@@ -68,7 +73,8 @@ def test_stages_read_back_with_their_scenery(family):
         scene = StageReader(family / m["stage"]).scene_at(None)
         assert len(scene.meshes) == 1 and scene.ground is not None
         assert (scene.atmosphere is not None) == m["air"]
-        assert bool(scene.fogs) == (m["kind"] in FOG_OPTICAL_DEPTH)
+        assert bool(scene.fogs) == (m["kind"] in FOG_OPTICAL_DEPTH or m["kind"] == "layer_fog")
+        assert bool(scene.layers) == (m["kind"] == "layer_fog")
         assert bool(scene.heightfield_clouds) == (m["kind"] == "deck_haze")
         assert bool(scene.media) == (m["kind"] == "ridge_cloud")
         assert scene.resolution == (96, 64)

@@ -102,7 +102,9 @@ class MediaPass(Pass):
             # another pass draws the ground plane and the layers; the paths bounce on the one and trace the other
             ground = frame.scene.ground if scene.ground is None else None
             layers = frame.scene.layers if not scene.layers else ()
-            layer = frame.technique.render(scene, frame.width, frame.height, paths_ground=ground, paths_layers=layers)
+            drawn = sum(layer.radiance for layer in frame.layers) if frame.layers else None
+            layer = frame.technique.render(scene, frame.width, frame.height, paths_ground=ground, paths_layers=layers,
+                                           drawn=drawn)
         else:
             layer = frame.technique.render(scene, frame.width, frame.height)
         if frame.deep_samples > 0 and scene.media:

@@ -64,24 +64,35 @@ def paths_scene(scene: Scene, paths_ground, settings, width: int, height: int, p
     return with_deck_as_media(traced, settings, width, height), band
 
 
-def scenery_guide(scene: Scene, single: Layer, device: str) -> Layer:
+def scenery_guide(scene: Scene, single: Layer, device: str, drawn: np.ndarray | None = None) -> Layer:
     """The single-scattering layer as the paths' error estimate and denoiser read it: its transmittance times the
-    fogs' (closed form, to the opaque depth; :class:`~warpsky.passes.fog.fog.Fog` without light) and the deck's
-    and haze's (:class:`~warpsky.passes.heightfield.heightfield.HeightField` without light), zero where the camera
-    ray ends on an opaque surface another pass drew (the camera's opaque depth)."""
+    fogs' (closed form, to the opaque depth; :class:`~warpsky.passes.fog.fog.Fog`) and the deck's and haze's
+    (:class:`~warpsky.passes.heightfield.heightfield.HeightField` without light), zero where the camera ray ends
+    on an opaque surface another pass drew (the camera's opaque depth). Its radiance, the level the error estimate
+    divides by, adds the light the passes draw beside the paths: the fog's single scattering of the sun (its
+    ambient term is the paths') and ``drawn``, the radiance of the surfaces behind the fog (the passes before the
+    media pass), seen through it; not the deck's (rendering its light costs as much as the height-field pass: left
+    out, the estimate stays conservative there) nor the stratiform layers'."""
     height, width = single.depth.shape
     opaque = scene.camera.opaque_depth
     depth = None
     if opaque is not None:
         depth = np.asarray(opaque.numpy() if hasattr(opaque, "numpy") else opaque, dtype=np.float32)
     transmittance = single.transmittance
+    radiance = single.radiance
     dark = dataclasses.replace(scene, sun=None, extra_suns=(), dome=None)
+    through = np.ones_like(transmittance)
     if scene.fogs:
-        fog = Fog(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
+        fog = Fog(device=device).render(dataclasses.replace(scene, extra_suns=(), dome=None), width, height,
+                                        limit=depth, ambient=np.zeros(3))
         transmittance = transmittance * fog.transmittance
+        radiance = radiance + fog.radiance
+        through = fog.transmittance
     if scene.heightfield_clouds:
         deck = HeightField(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
         transmittance = transmittance * deck.transmittance
+    if drawn is not None:
+        radiance = radiance + through * np.asarray(drawn, dtype=np.float32)
     if depth is not None:
         transmittance = np.where((depth < scene.camera.far)[..., None], 0.0, transmittance)
-    return Layer(single.radiance, transmittance.astype(np.float32), single.depth, single.stats)
+    return Layer(radiance.astype(np.float32), transmittance.astype(np.float32), single.depth, single.stats)

@@ -227,11 +227,13 @@ class Hybrid(Technique):
         stratiform layers above fog and meshes (:func:`~warpsky.passes.media.scenery_traceable`; :mod:`.scenery`)."""
         return bool(self.settings_for(scene).multiple_scattering) and scenery_traceable(scene)
 
-    def render(self, scene: Scene, width: int, height: int, *, paths_ground=None, paths_layers=()) -> Layer:
+    def render(self, scene: Scene, width: int, height: int, *, paths_ground=None, paths_layers=(),
+               drawn: np.ndarray | None = None) -> Layer:
         """The media's layer; with :meth:`scenery_paths` the paths' light (the scenery's multiple scattering
         included) is its ``front`` light (:mod:`.scenery`), ``paths_ground`` is the ground plane another pass
-        draws, on which the paths bounce, and ``paths_layers`` the stratiform layers another pass draws, which the
-        paths trace beyond their first event."""
+        draws, on which the paths bounce, ``paths_layers`` the stratiform layers another pass draws, which the
+        paths trace beyond their first event, and ``drawn`` the radiance the passes before drew (the surfaces),
+        which the error estimate counts in the frame's level (:func:`~.scenery.scenery_guide`)."""
         settings = self.settings_for(scene)
         if settings.multiple_scattering and settings.denoise:
             require_denoiser()
@@ -250,7 +252,7 @@ class Hybrid(Technique):
         lit = (scene.sun is not None and (scene.media or scenery)) or (
             scene.dome is not None and (scene.media or scene.ground or scenery))
         if settings.multiple_scattering and lit:
-            guide = scenery_guide(scene, single, self.device) if scenery else single
+            guide = scenery_guide(scene, single, self.device, drawn) if scenery else single
             with device_buffers.exclusive(BUFFER_NAME, self.device):  # the halves and kept paths
                 multiple, variance, ms_stats = MultipleScattering(paths, width, height, settings, self.device,
                                                                   scenery=scenery, first_end=band).run(guide, started)
