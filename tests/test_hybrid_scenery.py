@@ -179,3 +179,19 @@ def test_error_estimate_is_relative_to_the_whole_frame():
     paths = mine.aovs["multiple_scatter"].astype(np.float64).mean()
     assert paths < 0.95 * level  # the passes draw a part of the frame (its sunlit floor and fog)
     assert stats["error_estimate"] == pytest.approx(noise / level, rel=1e-3)
+
+
+def test_layers_over_a_textured_ground_leave_the_scenery_to_the_passes():
+    """A ground albedo map is read by the stratiform pass alone: under layers over such a ground hybrid's paths do
+    not trace the scenery (no media pass), the stratiform pass draws the textured ground; without the map they do."""
+    from warpsky.scene.layers import GroundTexture
+
+    scene = layered_slab_scene("ground")
+    texture = GroundTexture(np.full((4, 4, 3), 0.3), (-500.0, -500.0), (1000.0, 1000.0))
+    textured = dataclasses.replace(scene, ground=dataclasses.replace(scene.ground, albedo_map=texture))
+    from warpsky.passes.frame import ground_pass
+
+    plan = make_plan(textured, technique="hybrid", resolution=(SIZE, SIZE))
+    assert "media" not in plan.passes and ground_pass(plan.pass_runners, textured) == "stratiform"
+    plan = make_plan(scene, technique="hybrid", resolution=(SIZE, SIZE))
+    assert "media" in plan.passes and ground_pass(plan.pass_runners, scene) == "surfaces"

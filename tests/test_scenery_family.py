@@ -1,6 +1,6 @@
 """The scenery family: a deterministic generator of terrain stages with fog, a deck, a ridge cloud or fog under a
-stratocumulus layer, split into disjoint halves that each hold every kind, whose stages ``warpsky info`` plans with the path tracer and the default
-technique. Nothing is rendered."""
+stratocumulus layer, split into disjoint halves that each hold every kind, whose stages ``warpsky info`` plans with
+the path tracer and the default technique. Nothing is rendered."""
 
 from __future__ import annotations
 

@@ -27,11 +27,12 @@ def has_scenery(scene) -> bool:
 
 def scenery_traceable(scene) -> bool:
     """Whether a ``scatters_scenery`` technique path traces ``scene``'s fog, height-field deck and meshes beyond
-    their single scattering: there are some, and stratiform layers only above fog and meshes, without voxel media
-    or a deck (the paths then trace the layers too, beyond a camera ray's first event; the stratiform pass draws
-    them)."""
+    their single scattering: there are some, and stratiform layers only above fog and meshes, without voxel media,
+    a deck or a ground albedo map (the paths then trace the layers too, beyond a camera ray's first event; the
+    stratiform pass draws them, and the surfaces pass, which reads no albedo map, the ground)."""
     scenery = bool(scene.fogs or scene.meshes or scene.heightfield_clouds)
-    return scenery and not (scene.layers and (scene.media or scene.heightfield_clouds))
+    textured = scene.ground is not None and scene.ground.albedo_map is not None
+    return scenery and not (scene.layers and (scene.media or scene.heightfield_clouds or textured))
 
 
 def scenery_paths(scene, technique) -> bool:

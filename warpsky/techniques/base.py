@@ -37,7 +37,8 @@ class Technique:
     - ``scatters_scenery``: next to the fog, height-field and surfaces passes (which draw the fog's, the deck's and
       the meshes' single scattering: the sun once) it path traces the light those scatter more than once, and the
       sky's and the dome's light on them (:meth:`scenery_paths`), so the media pass runs in a frame of fog, a deck
-      or meshes even without voxel media.
+      or meshes even without voxel media; under stratiform layers its paths also carry the layers' light onto
+      them (the stratiform pass draws the layers and leaves the ground to the surfaces pass).
     - ``aovs``: the extra outputs its layer holds, name -> components (``variance``: ``RGB``), which RenderVars
       may name.
     - ``kernel_modules``: the modules whose kernel factories it launches (the first-compile notice checks Warp's
