@@ -13,6 +13,7 @@ the surfaces pass then draws the ground plane (in the fog's shadow), on which th
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,6 +34,17 @@ def scenery_traceable(scene) -> bool:
     scenery = bool(scene.fogs or scene.meshes or scene.heightfield_clouds)
     textured = scene.ground is not None and scene.ground.albedo_map is not None
     return scenery and not (scene.layers and (scene.media or scene.heightfield_clouds or textured))
+
+
+@dataclass(frozen=True)
+class SceneryFrame:
+    """What the frame's other passes draw around a technique whose paths trace the scenery
+    (:meth:`~warpsky.techniques.base.Technique.scenery_paths`)."""
+
+    ground: object | None = None  # the ground plane another pass draws: the paths bounce on it
+    layers: tuple = ()  # the stratiform layers the stratiform pass draws: traced beyond a camera ray's first event
+    drawn: np.ndarray | None = None  # (H, W, 3) radiance of the passes before (the surfaces), in the frame's level
+    occluders: object | None = None  # the frame's meshes on the device, whose shadows lie on the fog's sunlight
 
 
 def scenery_paths(scene, technique) -> bool:
@@ -100,12 +112,12 @@ class MediaPass(Pass):
         (:func:`~warpsky.passes.depth_profile.media_profile`)."""
         scene = media_scene(frame)
         if frame.technique.scenery_paths(scene):
-            # another pass draws the ground plane and the layers; the paths bounce on the one and trace the other
-            ground = frame.scene.ground if scene.ground is None else None
-            layers = frame.scene.layers if not scene.layers else ()
-            drawn = sum(layer.radiance for layer in frame.layers) if frame.layers else None
-            layer = frame.technique.render(scene, frame.width, frame.height, paths_ground=ground, paths_layers=layers,
-                                           drawn=drawn)
+            # other passes draw the ground plane and the layers; the paths bounce on the one and trace the other
+            around = SceneryFrame(ground=frame.scene.ground if scene.ground is None else None,
+                                  layers=tuple(frame.scene.layers) if not scene.layers else (),
+                                  drawn=sum(layer.radiance for layer in frame.layers) if frame.layers else None,
+                                  occluders=frame.occluders)
+            layer = frame.technique.render(scene, frame.width, frame.height, around=around)
         else:
             layer = frame.technique.render(scene, frame.width, frame.height)
         if frame.deep_samples > 0 and scene.media:

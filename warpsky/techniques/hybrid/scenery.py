@@ -37,25 +37,26 @@ import numpy as np
 from warpsky.layer import Layer
 from warpsky.passes.fog.fog import Fog
 from warpsky.passes.heightfield.heightfield import HeightField
+from warpsky.passes.media import SceneryFrame
 from warpsky.scene.model import Scene
 from warpsky.techniques.path_tracer.deck_media import with_deck_as_media
 from warpsky.techniques.path_tracer.layer_media import with_layers_as_media
 
 
-def paths_scene(scene: Scene, paths_ground, settings, width: int, height: int, paths_layers=(),
+def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height: int,
                 device: str = "cpu") -> tuple[Scene, tuple[float, float] | None]:
     """(the scene the paths trace, the altitude band [m] where a camera ray's first event ends its path or None):
-    ``scene`` with ``paths_ground`` as its ground plane where another pass draws it, no opaque depth on the camera
+    ``scene`` with ``around.ground`` as its ground plane where another pass draws it, no opaque depth on the camera
     (the surfaces pass's meshes and ground, which the paths trace themselves), its height-field deck voxelised into
     its media (``settings``: the path tracer's, for the deck's square and voxels;
-    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`) and ``paths_layers``, the stratiform
+    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`) and ``around.layers``, the stratiform
     layers another pass draws, voxelised into them too; their band is the one returned."""
-    ground = scene.ground if scene.ground is not None else paths_ground
+    ground = scene.ground if scene.ground is not None else around.ground
     camera = dataclasses.replace(scene.camera, opaque_depth=None)
     traced = dataclasses.replace(scene, ground=ground, camera=camera)
     band = None
-    if paths_layers:
-        layered = with_layers_as_media(dataclasses.replace(traced, layers=tuple(paths_layers)), settings, device)
+    if around.layers:
+        layered = with_layers_as_media(dataclasses.replace(traced, layers=tuple(around.layers)), settings, device)
         added = layered.media[len(traced.media):]
         if added:
             heights = np.concatenate([m.world_corners()[:, 1] for m in added])
@@ -64,15 +65,16 @@ def paths_scene(scene: Scene, paths_ground, settings, width: int, height: int, p
     return with_deck_as_media(traced, settings, width, height), band
 
 
-def scenery_guide(scene: Scene, single: Layer, device: str, drawn: np.ndarray | None = None) -> Layer:
+def scenery_guide(scene: Scene, single: Layer, device: str, around: SceneryFrame) -> Layer:
     """The single-scattering layer as the paths' error estimate and denoiser read it: its transmittance times the
     fogs' (closed form, to the opaque depth; :class:`~warpsky.passes.fog.fog.Fog`) and the deck's and haze's
     (:class:`~warpsky.passes.heightfield.heightfield.HeightField` without light), zero where the camera ray ends
     on an opaque surface another pass drew (the camera's opaque depth). Its radiance, the level the error estimate
-    divides by, adds the light the passes draw beside the paths: the fog's single scattering of the sun (its
-    ambient term is the paths') and ``drawn``, the radiance of the surfaces behind the fog (the passes before the
-    media pass), seen through it; not the deck's (rendering its light costs as much as the height-field pass: left
-    out, the estimate stays conservative there) nor the stratiform layers'."""
+    divides by, adds the light the passes draw beside the paths: the fog's single scattering of the sun as the fog
+    pass draws it (in the meshes' and the layers' shadows; its ambient term is the paths') and ``around.drawn``,
+    the radiance of the surfaces behind the fog (the passes before the media pass), seen through it; not the
+    deck's (rendering its light costs as much as the height-field pass: left out, the estimate stays conservative
+    there) nor the stratiform layers'."""
     height, width = single.depth.shape
     opaque = scene.camera.opaque_depth
     depth = None
@@ -83,16 +85,17 @@ def scenery_guide(scene: Scene, single: Layer, device: str, drawn: np.ndarray | 
     dark = dataclasses.replace(scene, sun=None, extra_suns=(), dome=None)
     through = np.ones_like(transmittance)
     if scene.fogs:
-        fog = Fog(device=device).render(dataclasses.replace(scene, extra_suns=(), dome=None), width, height,
-                                        limit=depth, ambient=np.zeros(3))
+        lit = dataclasses.replace(scene, extra_suns=(), dome=None, layers=tuple(scene.layers or around.layers))
+        fog = Fog(device=device).render(lit, width, height, limit=depth, ambient=np.zeros(3),
+                                        occluders=around.occluders)
         transmittance = transmittance * fog.transmittance
         radiance = radiance + fog.radiance
         through = fog.transmittance
     if scene.heightfield_clouds:
         deck = HeightField(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
         transmittance = transmittance * deck.transmittance
-    if drawn is not None:
-        radiance = radiance + through * np.asarray(drawn, dtype=np.float32)
+    if around.drawn is not None:
+        radiance = radiance + through * np.asarray(around.drawn, dtype=np.float32)
     if depth is not None:
         transmittance = np.where((depth < scene.camera.far)[..., None], 0.0, transmittance)
     return Layer(radiance.astype(np.float32), transmittance.astype(np.float32), single.depth, single.stats)

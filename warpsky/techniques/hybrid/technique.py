@@ -35,7 +35,7 @@ from warpsky import device_buffers
 from warpsky.device import is_cpu
 from warpsky.layer import Layer
 from warpsky.light.sun import above_air
-from warpsky.passes.media import scenery_traceable
+from warpsky.passes.media import SceneryFrame, scenery_traceable
 from warpsky.passes.sky.front import front_air_transmittance
 from warpsky.resources import AOV_BYTES, MemoryEstimate, WorkItem
 from warpsky.scene.model import LUMINANCE_WEIGHTS, Scene
@@ -227,13 +227,11 @@ class Hybrid(Technique):
         stratiform layers above fog and meshes (:func:`~warpsky.passes.media.scenery_traceable`; :mod:`.scenery`)."""
         return bool(self.settings_for(scene).multiple_scattering) and scenery_traceable(scene)
 
-    def render(self, scene: Scene, width: int, height: int, *, paths_ground=None, paths_layers=(),
-               drawn: np.ndarray | None = None) -> Layer:
+    def render(self, scene: Scene, width: int, height: int, *, around: SceneryFrame | None = None) -> Layer:
         """The media's layer; with :meth:`scenery_paths` the paths' light (the scenery's multiple scattering
-        included) is its ``front`` light (:mod:`.scenery`), ``paths_ground`` is the ground plane another pass
-        draws, on which the paths bounce, ``paths_layers`` the stratiform layers another pass draws, which the
-        paths trace beyond their first event, and ``drawn`` the radiance the passes before drew (the surfaces),
-        which the error estimate counts in the frame's level (:func:`~.scenery.scenery_guide`)."""
+        included) is its ``front`` light (:mod:`.scenery`), and ``around`` is what the frame's other passes draw
+        (:class:`~warpsky.passes.media.SceneryFrame`: the ground plane the paths bounce on, the stratiform layers
+        they trace beyond their first event, the light the error estimate counts in the frame's level)."""
         settings = self.settings_for(scene)
         if settings.multiple_scattering and settings.denoise:
             require_denoiser()
@@ -247,12 +245,12 @@ class Hybrid(Technique):
         scenery = self.scenery_paths(scene)
         paths, band = scene, None
         if scenery:
-            paths, band = paths_scene(scene, paths_ground, settings.path_tracer(), width, height, paths_layers,
-                                      self.device)
+            around = around or SceneryFrame()
+            paths, band = paths_scene(scene, around, settings.path_tracer(), width, height, self.device)
         lit = (scene.sun is not None and (scene.media or scenery)) or (
             scene.dome is not None and (scene.media or scene.ground or scenery))
         if settings.multiple_scattering and lit:
-            guide = scenery_guide(scene, single, self.device, drawn) if scenery else single
+            guide = scenery_guide(scene, single, self.device, around) if scenery else single
             with device_buffers.exclusive(BUFFER_NAME, self.device):  # the halves and kept paths
                 multiple, variance, ms_stats = MultipleScattering(paths, width, height, settings, self.device,
                                                                   scenery=scenery, first_end=band).run(guide, started)
