@@ -1,7 +1,7 @@
 """Error against run time on every shipped stage: ``warpsky bench error-vs-time`` on each ``usd_scenes/*.usda``
 (its first time code) with every technique that renders it, against the path tracer's reference, and one table
-for the README (per stage and technique: net relative RMSE, bias and seconds at the last rung the budget reached,
-and at the cheapest rung within 0.10 net where there is one).
+for the README (per stage and technique, or the pass that draws the stage for it: net relative RMSE, bias and
+seconds at the first rung of its ladder and at the last one the budget reached).
 
 Net relative RMSE: the relative RMSE with the reference's own per-pixel variance taken out. A technique that
 refuses a stage gets its refusal in the table instead of figures.
@@ -24,8 +24,6 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 
 TECHNIQUES = ("hybrid", "single_scatter", "slicing", "path_tracer")
-#: Net relative RMSE the "cheapest good rung" column looks for.
-GOOD = 0.10
 
 
 def measure(path: Path, *, width: int, budget: float, reference_spp: int, device: str, log) -> dict:
@@ -55,38 +53,34 @@ def measure(path: Path, *, width: int, budget: float, reference_spp: int, device
             "refused": refused}
 
 
-def _fmt(row: dict | None) -> str:
-    if row is None:
-        return "–"
+def _net(row: dict) -> float:
+    """The row's net relative RMSE, or its relative RMSE where the net one is undefined."""
     net = row.get("net_rmse")
-    net = row["rel_rmse"] if net is None or not math.isfinite(net) else net
-    return f"{net:.2f} / {row['bias']:+.0%} / {row['seconds']:.2g} s"
+    return row["rel_rmse"] if net is None or not math.isfinite(net) else net
+
+
+def _fmt(row: dict) -> str:
+    return f"{_net(row):.2f} / {row['bias']:+.0%} / {row['seconds']:.2g} s"
 
 
 def table(reports: list[dict]) -> str:
-    """Markdown: per stage and technique, the last rung reached and the cheapest rung within ``GOOD`` net."""
-    lines = ["| stage | ref noise | technique | last rung: setting | net / bias / s | cheapest ≤ 0.10 net |",
-             "|---|---:|---|---|---|---|"]
+    """Markdown: per stage and measured row family (a technique, or the pass that draws the stage for the
+    techniques that leave it to that pass), its first rung and the last one the budget reached."""
+    lines = ["| stage | ref noise | row | first rung: net / bias / s | last rung: net / bias / s |",
+             "|---|---:|---|---|---|"]
     for report in reports:
         noise = report["reference"].get("rel_noise_per_pixel")
-        first = True
-        for technique in TECHNIQUES:
-            label = f"{report['stage']}" if first else ""
-            noise_text = f"{noise:.3f}" if first and noise is not None else ""
-            first = False
-            if technique in report["refused"]:
-                lines.append(f"| {label} | {noise_text} | {technique} | refused: {report['refused'][technique]} | | |")
-                continue
-            mine = [r for r in report["rows"] if r["technique"] == technique or r["technique"].startswith(technique)]
+        labels = list(dict.fromkeys(r["technique"] for r in report["rows"]))
+        entries = [(label, [r for r in report["rows"] if r["technique"] == label]) for label in labels]
+        entries += [(f"{name}: refused ({why})", []) for name, why in report["refused"].items()]
+        for index, (label, mine) in enumerate(entries):
+            stage = report["stage"] if index == 0 else ""
+            noise_text = f"{noise:.3f}" if index == 0 and noise is not None else ""
             if not mine:
-                lines.append(f"| {label} | {noise_text} | {technique} | (no rung within the budget) | | |")
+                lines.append(f"| {stage} | {noise_text} | {label} | | |")
                 continue
-            good = [r for r in mine if (r.get("net_rmse") if r.get("net_rmse") is not None
-                                        and math.isfinite(r["net_rmse"]) else r["rel_rmse"]) <= GOOD]
-            cheapest = min(good, key=lambda r: r["seconds"]) if good else None
-            cheap = f"{cheapest['setting']}: {_fmt(cheapest)}" if cheapest else "–"
-            lines.append(f"| {label} | {noise_text} | {technique} | {mine[-1]['setting']} | {_fmt(mine[-1])} | "
-                         f"{cheap} |")
+            first, last = (r["setting"].replace(", target_error=0", "") for r in (mine[0], mine[-1]))
+            lines.append(f"| {stage} | {noise_text} | {label} | {first}: {_fmt(mine[0])} | {last}: {_fmt(mine[-1])} |")
     return "\n".join(lines)
 
 
