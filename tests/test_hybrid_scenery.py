@@ -183,7 +183,8 @@ def test_error_estimate_is_relative_to_the_whole_frame():
 
 def test_layers_over_a_textured_ground_leave_the_scenery_to_the_passes():
     """A ground albedo map is read by the stratiform pass alone: under layers over such a ground hybrid's paths do
-    not trace the scenery (no media pass), the stratiform pass draws the textured ground; without the map they do."""
+    not trace the scenery (no media pass), the stratiform pass draws the textured ground; without the map they do,
+    unless a fog reaches the layers' base."""
     from warpsky.scene.layers import GroundTexture
 
     scene = layered_slab_scene("ground")
@@ -195,3 +196,7 @@ def test_layers_over_a_textured_ground_leave_the_scenery_to_the_passes():
     assert "media" not in plan.passes and ground_pass(plan.pass_runners, textured) == "stratiform"
     plan = make_plan(scene, technique="hybrid", resolution=(SIZE, SIZE))
     assert "media" in plan.passes and ground_pass(plan.pass_runners, scene) == "surfaces"
+    # a fog reaching the layers' base: its first events there would end as the layers' do, so no paths either
+    fog = dataclasses.replace(scene.fogs[0], top=350.0)
+    plan = make_plan(dataclasses.replace(scene, fogs=(fog,)), technique="hybrid", resolution=(SIZE, SIZE))
+    assert "media" not in plan.passes

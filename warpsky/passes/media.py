@@ -28,12 +28,17 @@ def has_scenery(scene) -> bool:
 
 def scenery_traceable(scene) -> bool:
     """Whether a ``scatters_scenery`` technique path traces ``scene``'s fog, height-field deck and meshes beyond
-    their single scattering: there are some, and stratiform layers only above fog and meshes, without voxel media,
-    a deck or a ground albedo map (the paths then trace the layers too, beyond a camera ray's first event; the
-    stratiform pass draws them, and the surfaces pass, which reads no albedo map, the ground)."""
+    their single scattering: there are some, and stratiform layers only above the fog (every slab's top, moved by
+    its wind, below the lowest cloud base), without voxel media, a deck or a ground albedo map (the paths then trace
+    the layers too, beyond a camera ray's first event; the stratiform pass draws them, and the surfaces pass, which
+    reads no albedo map, the ground)."""
     scenery = bool(scene.fogs or scene.meshes or scene.heightfield_clouds)
+    if not scene.layers:
+        return scenery
     textured = scene.ground is not None and scene.ground.albedo_map is not None
-    return scenery and not (scene.layers and (scene.media or scene.heightfield_clouds or textured))
+    base = min(layer.base_altitude for layer in scene.layers)
+    below = all(fog.top + float(fog.wind[1]) * scene.time_s < base for fog in scene.fogs)
+    return scenery and below and not (scene.media or scene.heightfield_clouds or textured)
 
 
 @dataclass(frozen=True)
