@@ -99,20 +99,19 @@ def shadowed_front(frame, air_depth: np.ndarray, shadows: list) -> np.ndarray | 
     forward = np.asarray(camera.rotation, np.float64).reshape(3, 3) @ np.array([0.0, 0.0, -1.0])
     depth = np.asarray(air_depth, np.float64).reshape(-1)
     ends = np.flatnonzero(depth < float(camera.far))
+    if not len(ends):
+        return None
     out = np.zeros((rays.shape[0], 3))
     sun = np.asarray(light.direction, np.float64)
     cos_theta = rays @ sun
     phases = (3.0 / (16.0 * math.pi) * (1.0 + cos_theta**2), phase_numpy(PhaseKind.HG, atm.mie_g, cos_theta))
-    if not len(ends):
-        return None
-    length = depth[ends] / np.maximum(rays[ends] @ forward, 1e-6)
-    heights = camera.position[1] + rays[ends, 1] * length
+    lengths = depth[ends] / np.maximum(rays[ends] @ forward, 1e-6)  # along each ray to where it ends [m]
+    heights = camera.position[1] + rays[ends, 1] * lengths
     table = sun_air_table(frame.light, min(float(heights.min()), float(camera.position[1])),
                           max(float(heights.max()), float(camera.position[1])))
     for start in range(0, len(ends), BATCH):
         pixels = ends[start:start + BATCH]
-        length = depth[pixels] / np.maximum(rays[pixels] @ forward, 1e-6)
-        step = length / STEPS
+        step = lengths[start:start + BATCH] / STEPS
         t = (np.arange(STEPS) + 0.5)[None, :] * step[:, None]  # (P, STEPS)
         relative = rays[pixels, None, :] * t[..., None]
         points = (relative + camera.position).reshape(-1, 3)
