@@ -200,3 +200,31 @@ def test_layers_over_a_textured_ground_leave_the_scenery_to_the_passes():
     fog = dataclasses.replace(scene.fogs[0], top=350.0)
     plan = make_plan(dataclasses.replace(scene, fogs=(fog,)), technique="hybrid", resolution=(SIZE, SIZE))
     assert "media" not in plan.passes
+
+
+def test_fog_and_deck_layers_are_drawn_once_per_frame(monkeypatch):
+    """The error estimate reads the fog pass's and the height-field pass's own layers of the frame (drawn early
+    and kept for their turn), so a hybrid scenery frame draws the fog once and the deck once."""
+    from warpsky.passes.fog.fog import Fog
+    from warpsky.passes.heightfield.heightfield import HeightField
+
+    calls = {"fog": 0, "deck": 0}
+    fog_render, deck_render = Fog.render, HeightField.render
+
+    def counted_fog(self, *args, **kwargs):
+        calls["fog"] += 1
+        return fog_render(self, *args, **kwargs)
+
+    def counted_deck(self, *args, **kwargs):
+        calls["deck"] += 1
+        return deck_render(self, *args, **kwargs)
+
+    monkeypatch.setattr(Fog, "render", counted_fog)
+    monkeypatch.setattr(HeightField, "render", counted_deck)
+    plan, _ = frame(slab_scene("ground", False), "hybrid", spp=2, target_error=0, denoise=0)
+    assert "media" in plan.passes and calls["fog"] == 1
+    scene = thin_deck_scene(False)
+    plan = make_plan(scene, technique="hybrid", resolution=(24, 16),
+                     settings={"spp": "2", "target_error": "0", "denoise": "0", "deck_extent": "2500"})
+    render_layers(plan, scene)
+    assert "media" in plan.passes and calls["deck"] == 1

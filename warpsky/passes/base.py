@@ -64,6 +64,17 @@ class Pass:
         that would, the one of lowest ``ground_rank`` does)."""
         return self.ground_rank is not None
 
+    def own_layer(self, frame) -> Layer | None:
+        """The layer this pass draws in ``frame``, where another pass needs it before this pass's turn: drawn once
+        and kept in ``frame.kept`` (:meth:`keep`); None for a pass that offers none."""
+        return None
+
+    def keep(self, frame, draw: Callable[[], Layer]) -> Layer:
+        """``draw()`` the first time this pass asks in ``frame``, the kept layer after that."""
+        if self.name not in frame.kept:
+            frame.kept[self.name] = draw()
+        return frame.kept[self.name]
+
     def shadow(self, scene) -> Callable[[np.ndarray], np.ndarray] | None:
         """The shadow of what this pass draws, for the passes that light surfaces: a function of world points
         (N, 3) [m] giving the (N, 3) RGB transmittance of the sunlight from them towards the sun; None when it casts

@@ -42,6 +42,8 @@ class FrameState:
             camera's far distance where none is hit); the marches after it stop there.
         occluders: The frame's meshes on the device, relative to the camera, for shadow rays (None: no meshes).
         merged: The depth-merged layer, for a wrapping pass.
+        kept: Layers a pass drew for this frame before its turn, by pass name (:meth:`~warpsky.passes.base.Pass.
+            own_layer`: the media pass hands the fog's and the deck's to the technique's scenery paths).
         deep_samples: Volume samples per pixel a volume pass profiles its layer into for deep output
             (:class:`~warpsky.output.deep_bins.DepthProfile`); 0: none, the frame writes no deep image.
     """
@@ -59,6 +61,7 @@ class FrameState:
     occluders: object | None = None
     merged: Layer | None = None
     deep_samples: int = 0
+    kept: dict = field(default_factory=dict)
 
     def runs(self, name: str) -> bool:
         """Whether the pass called ``name`` runs in this frame."""

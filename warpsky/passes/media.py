@@ -50,6 +50,8 @@ class SceneryFrame:
     layers: tuple = ()  # the stratiform layers the stratiform pass draws: traced beyond a camera ray's first event
     drawn: np.ndarray | None = None  # (H, W, 3) radiance of the passes before (the surfaces), in the frame's level
     occluders: object | None = None  # the frame's meshes on the device, whose shadows lie on the fog's sunlight
+    fog: object | None = None  # the fog pass's layer of this frame (Layer), drawn early and kept for its turn
+    deck: object | None = None  # the height-field pass's, likewise
 
 
 def scenery_paths(scene, technique) -> bool:
@@ -118,10 +120,12 @@ class MediaPass(Pass):
         scene = media_scene(frame)
         if frame.technique.scenery_paths(scene):
             # other passes draw the ground plane and the layers; the paths bounce on the one and trace the other
+            kept = {runner.name: runner.own_layer(frame) for runner in frame.runners
+                    if runner.name in ("fog", "heightfield")}
             around = SceneryFrame(ground=frame.scene.ground if scene.ground is None else None,
                                   layers=tuple(frame.scene.layers) if not scene.layers else (),
                                   drawn=sum(layer.radiance for layer in frame.layers) if frame.layers else None,
-                                  occluders=frame.occluders)
+                                  occluders=frame.occluders, fog=kept.get("fog"), deck=kept.get("heightfield"))
             layer = frame.technique.render(scene, frame.width, frame.height, around=around)
         else:
             layer = frame.technique.render(scene, frame.width, frame.height)

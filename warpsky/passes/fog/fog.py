@@ -203,20 +203,28 @@ class FogPass(Pass):
     def shadow(self, scene):
         return lambda points: fog_sun_transmittance(scene, points, self.device)
 
-    def render(self, frame) -> list[Layer]:
+    def own_layer(self, frame) -> Layer:
         """The fog's single scattering of the sun, and its ambient term unless the technique path traces the
         sky's light on the fog (:meth:`~warpsky.techniques.base.Technique.scenery_paths`: its paths' first event
         takes no sunlight but gathers the sky's and the dome's light, the light the ambient term approximates);
-        for deep output with its depth profile."""
-        seen = frame.light.lit_at_media(frame.scene)
-        ambient = isotropic_ambient(seen, frame.light.sky)
-        if frame.technique.scenery_paths(frame.scene):
-            ambient = np.zeros(3)
-        layer = Fog(self.settings, device=self.device).render(seen, frame.width, frame.height, limit=frame.limit,
-                                                              ambient=ambient, occluders=frame.occluders)
+        drawn once per frame (the media pass hands it to those paths' error estimate)."""
+
+        def draw() -> Layer:
+            seen = frame.light.lit_at_media(frame.scene)
+            ambient = isotropic_ambient(seen, frame.light.sky)
+            if frame.technique.scenery_paths(frame.scene):
+                ambient = np.zeros(3)
+            return Fog(self.settings, device=self.device).render(seen, frame.width, frame.height, limit=frame.limit,
+                                                                 ambient=ambient, occluders=frame.occluders)
+
+        return self.keep(frame, draw)
+
+    def render(self, frame) -> list[Layer]:
+        """:meth:`own_layer`; for deep output with its depth profile."""
+        layer = self.own_layer(frame)
         if frame.deep_samples > 0:  # deep output: the fog's closed-form depth profile on the same rays
             from warpsky.passes.depth_profile import fog_depth_profile
 
-            layer.profile = fog_depth_profile(seen, frame.width, frame.height, frame.deep_samples, self.device,
-                                              limit=frame.limit)
+            layer.profile = fog_depth_profile(frame.light.lit_at_media(frame.scene), frame.width, frame.height,
+                                              frame.deep_samples, self.device, limit=frame.limit)
         return [layer]

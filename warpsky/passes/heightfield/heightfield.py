@@ -239,12 +239,20 @@ class HeightFieldPass(Pass):
         """By the exact sun-ray optical depth: Max's thickness rule fails for decks thicker than their features."""
         return lambda points: heightfield_sun_transmittance(scene, points, self.device, exact=True)
 
-    def render(self, frame) -> list[Layer]:
+    def own_layer(self, frame) -> Layer:
         """The deck's and the haze's single scattering of the sun, and their ambient term unless the technique
-        path traces the sky's light on them (:meth:`~warpsky.techniques.base.Technique.scenery_paths`)."""
-        seen = frame.light.lit_at_media(frame.scene)
-        ambient = isotropic_ambient(seen, frame.light.sky)
-        if frame.technique.scenery_paths(frame.scene):
-            ambient = np.zeros(3)
-        return [HeightField(self.settings, device=self.device).render(seen, frame.width, frame.height,
-                                                                      limit=frame.limit, ambient=ambient)]
+        path traces the sky's light on them (:meth:`~warpsky.techniques.base.Technique.scenery_paths`); drawn once
+        per frame (the media pass hands it to those paths' error estimate)."""
+
+        def draw() -> Layer:
+            seen = frame.light.lit_at_media(frame.scene)
+            ambient = isotropic_ambient(seen, frame.light.sky)
+            if frame.technique.scenery_paths(frame.scene):
+                ambient = np.zeros(3)
+            return HeightField(self.settings, device=self.device).render(seen, frame.width, frame.height,
+                                                                         limit=frame.limit, ambient=ambient)
+
+        return self.keep(frame, draw)
+
+    def render(self, frame) -> list[Layer]:
+        return [self.own_layer(frame)]

@@ -73,8 +73,9 @@ def scenery_guide(scene: Scene, single: Layer, device: str, around: SceneryFrame
     divides by, adds the light the passes draw beside the paths: the fog's single scattering of the sun as the fog
     pass draws it (in the meshes' and the layers' shadows; its ambient term is the paths') and ``around.drawn``,
     the radiance of the surfaces behind the fog (the passes before the media pass), seen through it; not the
-    deck's (rendering its light costs as much as the height-field pass: left out, the estimate stays conservative
-    there) nor the stratiform layers'."""
+    deck's (left out, as before the height-field pass's layer was at hand here: the estimate stays conservative
+    there) nor the stratiform layers'. In a frame of passes the fog's and the deck's layers are the passes' own
+    (``around.fog``, ``around.deck``, drawn once and kept for their turn); outside one they are drawn here."""
     height, width = single.depth.shape
     opaque = scene.camera.opaque_depth
     depth = None
@@ -85,14 +86,18 @@ def scenery_guide(scene: Scene, single: Layer, device: str, around: SceneryFrame
     dark = dataclasses.replace(scene, sun=None, extra_suns=(), dome=None)
     through = np.ones_like(transmittance)
     if scene.fogs:
-        lit = dataclasses.replace(scene, extra_suns=(), dome=None, layers=tuple(scene.layers or around.layers))
-        fog = Fog(device=device).render(lit, width, height, limit=depth, ambient=np.zeros(3),
-                                        occluders=around.occluders)
+        fog = around.fog
+        if fog is None:  # outside a frame of passes: drawn here as the fog pass would
+            lit = dataclasses.replace(scene, extra_suns=(), dome=None, layers=tuple(scene.layers or around.layers))
+            fog = Fog(device=device).render(lit, width, height, limit=depth, ambient=np.zeros(3),
+                                            occluders=around.occluders)
         transmittance = transmittance * fog.transmittance
         radiance = radiance + fog.radiance
         through = fog.transmittance
     if scene.heightfield_clouds:
-        deck = HeightField(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
+        deck = around.deck
+        if deck is None:  # outside a frame of passes: its transmittance alone, without light
+            deck = HeightField(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
         transmittance = transmittance * deck.transmittance
     if around.drawn is not None:
         radiance = radiance + through * np.asarray(around.drawn, dtype=np.float32)
