@@ -12,6 +12,7 @@ from conftest import run_cli
 
 from warpsky.evaluation.scenery_family import (
     FOG_OPTICAL_DEPTH,
+    FOGGY,
     KINDS,
     TERRAIN_CELLS,
     Terrain,
@@ -59,7 +60,7 @@ def test_halves_are_disjoint_and_each_holds_every_kind(family):
         if m["kind"] == "layer_fog":
             assert 0.3 - 1e-9 <= m["optical_depth"] <= 5.0 + 1e-9
             assert m["layer_base_m"] - m["fog_top_m"] > 400.0 and m["layer_max_thickness_m"] <= 260.0
-        if m["kind"] in FOG_OPTICAL_DEPTH or m["kind"] == "layer_fog":
+        if m["kind"] in FOGGY:
             lo, hi = FOG_OPTICAL_DEPTH.get(m["kind"], (0.3, 5.0))
             assert lo - 1e-9 <= m["optical_depth"] <= hi + 1e-9
             assert 0.9 <= m["albedo"] <= 1.0 and 0.7 <= m["g"] <= 0.9
@@ -73,7 +74,7 @@ def test_stages_read_back_with_their_scenery(family):
         scene = StageReader(family / m["stage"]).scene_at(None)
         assert len(scene.meshes) == 1 and scene.ground is not None
         assert (scene.atmosphere is not None) == m["air"]
-        assert bool(scene.fogs) == (m["kind"] in FOG_OPTICAL_DEPTH or m["kind"] == "layer_fog")
+        assert bool(scene.fogs) == (m["kind"] in FOGGY)
         assert bool(scene.layers) == (m["kind"] == "layer_fog")
         assert bool(scene.heightfield_clouds) == (m["kind"] == "deck_haze")
         assert bool(scene.media) == (m["kind"] == "ridge_cloud")

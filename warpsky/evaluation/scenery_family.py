@@ -64,6 +64,8 @@ KINDS = ("thin_fog", "thick_fog", "deck_haze", "ridge_cloud", "layer_fog")
 KIND_CYCLE = ("thin_fog", "thick_fog", "deck_haze", "ridge_cloud", "thick_fog", "thin_fog")
 #: Vertical optical depth from the valley floor to the fog's top, per fog kind.
 FOG_OPTICAL_DEPTH = {"thin_fog": (0.3, 1.5), "thick_fog": (1.5, 5.0)}
+#: The kinds whose stage holds valley fog (drawn from a fog kind's range).
+FOGGY = (*FOG_OPTICAL_DEPTH, "layer_fog")
 CLOUD_OPTICAL_DEPTH = (4.0, 30.0)
 ELEVATION = (5.0, 60.0)
 PITCH = {"thin_fog": (-6.0, -2.0), "thick_fog": (-6.0, -2.0), "deck_haze": (8.0, 14.0), "ridge_cloud": (0.0, 5.0),
@@ -165,7 +167,7 @@ def _plan_layered(seed: int, first: int, count: int) -> list[SceneryPlan]:
 
 def _draw_member(rng, index, half, kind, air, elevation, depth) -> SceneryPlan:
     side = 1.0 if rng.random() < 0.5 else -1.0
-    fog = kind in FOG_OPTICAL_DEPTH or kind == "layer_fog"
+    fog = kind in FOGGY
     return SceneryPlan(
         index=index, half=half, kind=kind, air=bool(air), sun_elevation_deg=float(elevation),
         sun_azimuth_deg=float(side * rng.uniform(60.0, 150.0)), terrain_seed=int(rng.integers(0, 2**31 - 1)),
@@ -232,8 +234,7 @@ def build_scenery_member(plan: SceneryPlan) -> tuple[dict, Terrain, object]:
     lowest = float(terrain.mesh()[0][:, 1].min())
     eye_z = 1700.0
     eye = np.array([0.0, float(terrain.heights(0.0, eye_z)) + plan.camera_height_m, eye_z])
-    foggy = plan.kind in FOG_OPTICAL_DEPTH or plan.kind == "layer_fog"
-    if foggy:  # above the fog's top, looking down on it
+    if plan.kind in FOGGY:  # above the fog's top, looking down on it
         eye[1] = max(eye[1], floor + plan.fog_depth_m + 40.0)
     forward = direction(0.0, plan.pitch_deg)
     sun = direction(plan.sun_azimuth_deg, plan.sun_elevation_deg)
@@ -241,7 +242,7 @@ def build_scenery_member(plan: SceneryPlan) -> tuple[dict, Terrain, object]:
               "lake_m": lowest - 20.0, "camera_position": eye.tolist(), "camera_forward": forward.tolist(),
               "sun_direction": sun.tolist(), "triangles": 2 * TERRAIN_CELLS**2}
     shape = None
-    if foggy:
+    if plan.kind in FOGGY:
         top = floor + plan.fog_depth_m
         record.update(fog_floor_m=lowest - 50.0, fog_top_m=top, fog_extinction=plan.optical_depth / plan.fog_depth_m)
     if plan.kind == "layer_fog":
