@@ -15,7 +15,7 @@ help:
 	@echo "make test               - install into $(VENV) and run every test on the CPU (894 tests, 8-14 min on 2 cores)"
 	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; under 3 min)"
 	@echo "make lint               - ruff"
-	@echo "make bench              - run benchmarks/bench_single_scatter.py (cuda too when present)"
+	@echo "make bench              - run evaluation/benchmarks/bench_single_scatter.py (cuda too when present)"
 	@echo "make venv               - create $(VENV) and install warpsky with all extras (redone when pyproject changes)"
 	@echo "make data               - generate the demo cumulus field data/cumulus.nvdb"
 	@echo "make family             - generate the 24-stage validation family (seed 2026) in data/family"
@@ -59,25 +59,25 @@ data/cumulus.nvdb: tools/make_cumulus.py $(STAMP)
 data: data/cumulus.nvdb
 
 # The validation family: 24 seeded stages, tune and test halves (warpsky bench error-vs-time --family data/family).
-data/family/family.json: tools/make_validation_family.py warpsky/evaluation/family_stages.py \
-		warpsky/evaluation/family_shapes.py $(STAMP)
-	$(PY) tools/make_validation_family.py --out data/family
+data/family/family.json: evaluation/scripts/make_validation_family.py evaluation/family_stages.py \
+		evaluation/family_shapes.py $(STAMP)
+	$(PY) evaluation/scripts/make_validation_family.py --out data/family
 
 family: data/family/family.json
 
 # The thick family: 12 seeded storms, dense decks and cumulus of peak optical depth 100-1000, at 64 x 64.
-data/family_thick/family.json: tools/make_validation_family.py warpsky/evaluation/family_stages.py \
-		warpsky/evaluation/family_shapes.py $(STAMP)
-	$(PY) tools/make_validation_family.py --profile thick --out data/family_thick --seed 2027 --count 12
+data/family_thick/family.json: evaluation/scripts/make_validation_family.py evaluation/family_stages.py \
+		evaluation/family_shapes.py $(STAMP)
+	$(PY) evaluation/scripts/make_validation_family.py --profile thick --out data/family_thick --seed 2027 --count 12
 
 family-thick: data/family_thick/family.json
 
 # The scenery family: 16 seeded terrain stages (fog, a deck with haze, a ridge cloud, fog under a stratocumulus layer)
 # at 96 x 64, for the path tracer's references of terrain, analytic fog, height-field decks and layers over them
 # (warpsky bench error-vs-time --family data/scenery_family).
-data/scenery_family/family.json: tools/make_scenery_family.py warpsky/evaluation/scenery_family.py \
-		warpsky/evaluation/family_stages.py warpsky/evaluation/family_shapes.py $(STAMP)
-	$(PY) tools/make_scenery_family.py --out data/scenery_family --seed 2028 --count 12 --layered 4
+data/scenery_family/family.json: evaluation/scripts/make_scenery_family.py evaluation/scenery_family.py \
+		evaluation/family_stages.py evaluation/family_shapes.py $(STAMP)
+	$(PY) evaluation/scripts/make_scenery_family.py --out data/scenery_family --seed 2028 --count 12 --layered 4
 
 scenery-family: data/scenery_family/family.json
 
@@ -91,10 +91,10 @@ test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check warpsky tests tools benchmarks
+	$(VENV)/bin/ruff check warpsky evaluation tests tools
 
 bench: $(STAMP) data/cumulus.nvdb
-	$(PY) benchmarks/bench_single_scatter.py
+	$(PY) evaluation/benchmarks/bench_single_scatter.py
 
 cumulus-wind: $(STAMP) data/cumulus.nvdb
 	$(VENV)/bin/warpsky render usd_scenes/cumulus_wind.usda out/cumulus_wind.####.exr --frames 1:48 --png

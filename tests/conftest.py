@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from warpsky.device import init_warp
-from warpsky.evaluation.family_stages import rotation_towards
+from evaluation.family_stages import rotation_towards
+from warpsky.core.device import init_warp
 
 init_warp()
 
@@ -161,9 +161,9 @@ def homogeneous_npy(tmp_path) -> Path:
 
 def render_layer(stage_path: Path, device: str, width: int, height: int, *, time=None, **settings):
     """Render a stage with the single-scattering technique; returns (scene, layer)."""
-    from warpsky.plan import make_plan
-    from warpsky.scene.usd import StageReader
-    from warpsky.techniques.single_scatter.technique import SingleScatter
+    from warpsky.render.plan import make_plan
+    from warpsky.techniques.single_scatter.single_scatter import SingleScatter
+    from warpsky.usd.stage import StageReader
 
     scene = StageReader(stage_path).scene_at(time)
     plan = make_plan(scene, technique="single_scatter", settings={k: str(v) for k, v in settings.items()},
@@ -173,9 +173,9 @@ def render_layer(stage_path: Path, device: str, width: int, height: int, *, time
 
 def path_traced(stage, device, size, **settings):
     """Render a stage with the path tracer at ``size`` x ``size``; returns the layer."""
-    from warpsky.plan import make_plan
-    from warpsky.scene.usd import StageReader
-    from warpsky.techniques.path_tracer.technique import PathTracer
+    from warpsky.render.plan import make_plan
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer
+    from warpsky.usd.stage import StageReader
 
     scene = StageReader(stage).scene_at(None)
     plan = make_plan(scene, technique="path_tracer", settings={k: str(v) for k, v in settings.items()},
@@ -222,7 +222,7 @@ def species_phase(optics_cache):
 
 def run_cli(args, capsys):
     """Run the ``warpsky`` command in this process: (exit code, stdout, stderr)."""
-    from warpsky.cli import main
+    from warpsky.cli.main import main
 
     code = main([str(a) for a in args])
     captured = capsys.readouterr()

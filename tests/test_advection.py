@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import warp as wp
 
-import warpsky.media.advection as advection
-from warpsky.errors import SceneError
-from warpsky.media.advection import (
+import warpsky.media.advection.advection as advection
+from warpsky.core.errors import SceneError
+from warpsky.media.advection.advection import (
     AdvectedDetail,
     AdvectedTexture,
     Flow2D,
@@ -21,7 +21,7 @@ from warpsky.media.advection import (
     layer_schedule,
     periodic_noise,
 )
-from warpsky.media.advection_kernels import DetailState, modulated_density
+from warpsky.media.advection.advection_kernels import DetailState, modulated_density
 
 EXTENT = (1000.0, 1000.0)  # [m], a 64^2 texture: 15.6 m texels
 MEAN, STD = 1.0, 0.25  # the test texture's statistics (a thickness-like map)

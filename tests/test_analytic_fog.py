@@ -10,11 +10,9 @@ import pytest
 import warp as wp
 from scipy.integrate import quad
 
-from warpsky.errors import SceneError
-from warpsky.media.analytic_fog import FogSet, fog_density, fog_optical_depth, fog_struct
-from warpsky.passes.fog.fog import Fog, fog_sun_transmittance
-from warpsky.passes.fog.kernels import FogMarch, fog_ray
-from warpsky.scene.analytic_fog import (
+from warpsky.core.errors import SceneError
+from warpsky.media.fog import FogSet, fog_density, fog_optical_depth, fog_struct
+from warpsky.model.fog import (
     AnalyticFog,
     BlobTerm,
     ConstantTerm,
@@ -22,7 +20,9 @@ from warpsky.scene.analytic_fog import (
     PolynomialTerm,
     read_analytic_fog,
 )
-from warpsky.scene.model import Camera, Scene, Sun
+from warpsky.model.scene import Camera, Scene, Sun
+from warpsky.passes.fog.fog import Fog, fog_sun_transmittance
+from warpsky.passes.fog.fog_kernels import FogMarch, fog_ray
 
 CAMERA = np.array([3.0, 10.0, -7.0])
 
@@ -345,8 +345,8 @@ def fog_camera(position=(0.0, 20.0, 0.0), far=1.0e6):
 def test_homogeneous_fog_matches_closed_form(sigma, albedo, device):
     """A constant fog around the camera (1 /m: T ~ 0, albedo exactly 1): the image equals the closed form, and
     stays finite, non-negative and below the single-scattering bound a (E p + L_ambient)."""
-    from warpsky.composite import pixel_directions
-    from warpsky.scene.lights import Dome
+    from warpsky.model.lights import Dome
+    from warpsky.passes.composite import pixel_directions
 
     fog = AnalyticFog("c", [ConstantTerm(sigma)], floor=-200.0, top=100.0, extinction_scale=[0.8, 1.0, 1.3],
                       albedo=[albedo, albedo * 0.9, albedo * 0.8], g=0.7)
@@ -372,7 +372,7 @@ def test_homogeneous_fog_matches_closed_form(sigma, albedo, device):
 
 def test_limit_cuts_the_fog_at_the_surface_depth(device):
     """With ``limit`` depths d the fog is integrated to d (ray distance d / cos): the closed form to that point."""
-    from warpsky.composite import pixel_directions
+    from warpsky.passes.composite import pixel_directions
 
     fog = AnalyticFog("c", [ConstantTerm(0.03)], floor=-200.0, top=100.0, extinction_scale=[0.8, 1.0, 1.3], g=0.5)
     sun = Sun(np.array([0.2, 0.7, -0.6]) / np.linalg.norm([0.2, 0.7, -0.6]), np.ones(3))
@@ -396,7 +396,7 @@ def test_limit_cuts_the_fog_at_the_surface_depth(device):
 
 def test_empty_and_zero_fog(device):
     """Density 0: transmittance exactly 1, radiance exactly 0, depth at the far plane; no fog at all likewise."""
-    from warpsky.scene.lights import Dome
+    from warpsky.model.lights import Dome
 
     sun = Sun(np.array([0.0, 1.0, 0.0]), np.ones(3))
     camera = fog_camera(far=5000.0)
@@ -409,7 +409,7 @@ def test_empty_and_zero_fog(device):
 @pytest.mark.parametrize("elevation", [0.0, -0.2])
 def test_sun_at_or_below_horizon_gives_sky_light_only(elevation, device):
     """A sun on or under the horizon adds nothing: the radiance is the sky's a L (1 - T) alone."""
-    from warpsky.scene.lights import Dome
+    from warpsky.model.lights import Dome
 
     fog = AnalyticFog("c", [ConstantTerm(0.02), CosineTerm(0.01, [0.0, 0.3, 0.1])], floor=-50.0, top=60.0,
                       albedo=[0.9, 0.8, 0.7])
@@ -518,7 +518,7 @@ def local_fog() -> AnalyticFog:
 
 
 def read_fog(path):
-    from warpsky.scene.usd import StageReader
+    from warpsky.usd.stage import StageReader
 
     reader = StageReader(path)
     return read_analytic_fog(reader, reader.stage.GetPrimAtPath("/World/Fog"), None, 0.0)

@@ -84,22 +84,21 @@ def _string_constants(path: Path) -> set[str]:
 
 
 #: The modules that run a frame around the techniques and passes: they must not name any of them.
-HALLWAY = ("warpsky.plan", "warpsky.render", "warpsky.api", "warpsky.composite", "warpsky.passes.frame",
-           "warpsky.passes.base", "warpsky.cli", "warpsky.cli_options", "warpsky.cli_info", "warpsky.kernel_cache",
-           "warpsky.kernel_registry", "warpsky.batch")
+HALLWAY = ("warpsky.render", "warpsky.batch", "warpsky.cli", "warpsky.api", "warpsky.passes.composite",
+           "warpsky.passes.frame", "warpsky.passes.render_pass")
 
 
 def test_no_technique_or_pass_is_named_outside_its_folder_and_the_registry():
     """No module but a technique's own (and the registry, and the evaluation code that compares techniques by name
     as a user would) names a technique; the modules that run a frame name no pass either: they read names and
     capabilities from the registered classes."""
-    from warpsky.registry import pass_classes, technique_classes
+    from warpsky.render.registry import pass_classes, technique_classes
 
     techniques = {cls.name for cls in technique_classes()}
     passes = {cls.name for cls in pass_classes()}
     named = []
     for module, path in sorted(modules().items()):
-        if module in ("warpsky.registry",) or module.startswith(("warpsky.techniques", "warpsky.evaluation")):
+        if module in ("warpsky.render.registry",) or module.startswith(("warpsky.techniques", "evaluation")):
             continue
         hallway = module in HALLWAY or module.startswith(tuple(prefix + "." for prefix in HALLWAY))
         for name in sorted(_string_constants(path) & (techniques | (passes if hallway else set()))):
@@ -114,11 +113,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpsky.layer import Layer
-from warpsky.passes.base import Pass
-from warpsky.resources import MemoryEstimate
-from warpsky.settings import Settings, documented, setting
-from warpsky.techniques.base import Technique
+from warpsky.core.image import ImageLayer
+from warpsky.passes.render_pass import Pass
+from warpsky.core.resources import MemoryEstimate
+from warpsky.core.settings import Settings, documented, setting
+from warpsky.techniques.technique import Technique
 
 
 @documented
@@ -144,9 +143,9 @@ class Glow(Technique):
     def render(self, scene, width, height):
         level = self.settings_for(scene).level
         radiance = np.full((height, width, 3), level, np.float32)
-        return Layer(radiance, np.full((height, width, 3), 0.5, np.float32),
-                     np.full((height, width), 1000.0, np.float32), aovs={"glow": radiance},
-                     warnings=["glow: made up"])
+        return ImageLayer(radiance, np.full((height, width, 3), 0.5, np.float32),
+                          np.full((height, width), 1000.0, np.float32), aovs={"glow": radiance},
+                          warnings=["glow: made up"])
 
 
 @documented
@@ -176,8 +175,8 @@ class VeilPass(Pass):
     def render(self, frame):
         shape = (frame.height, frame.width)
         opacity = self.settings.opacity
-        return [Layer(np.full((*shape, 3), opacity, np.float32), np.full((*shape, 3), 1.0 - opacity, np.float32),
-                      np.full(shape, 1.0, np.float32))]
+        return [ImageLayer(np.full((*shape, 3), opacity, np.float32), np.full((*shape, 3), 1.0 - opacity, np.float32),
+                           np.full(shape, 1.0, np.float32))]
 '''
 
 
@@ -185,8 +184,8 @@ def test_a_new_technique_and_a_new_pass_plug_in_through_the_registry(tmp_path, h
                                                                      monkeypatch):
     """Both are written outside the package; registering them is all it takes for ``--technique``, ``--set``,
     ``render --help``, ``warpsky info``, the frame, the EXR's channels and metadata and the warnings."""
-    from warpsky import registry
     from warpsky.output.exr import read_exr
+    from warpsky.render import registry
 
     (tmp_path / "toy_plugin.py").write_text(textwrap.dedent(PLUGIN))
     monkeypatch.syspath_prepend(str(tmp_path))

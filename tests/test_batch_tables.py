@@ -12,7 +12,7 @@ from warpsky.batch.run import FrameJob, InProcessExecutor, run_batch
 from warpsky.optics import tables
 from warpsky.optics.grid import angle_grid
 from warpsky.optics.species import Species
-from warpsky.render import RenderOptions
+from warpsky.render.frame import RenderOptions
 
 
 class DispatchRecorder(InProcessExecutor):
@@ -68,8 +68,8 @@ def test_first_run_says_it_compiles_kernels(tmp_path, monkeypatch):
     variant is enough to stay quiet."""
     import warp as wp
 
-    from warpsky.kernel_cache import compile_notice, technique_kernel_modules, variant_module_names
-    from warpsky.registry import technique_names
+    from warpsky.render.kernel_cache import compile_notice, technique_kernel_modules, variant_module_names
+    from warpsky.render.registry import technique_names
 
     assert all(technique_kernel_modules(name) for name in technique_names())
 

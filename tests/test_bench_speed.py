@@ -7,10 +7,10 @@ import re
 
 from conftest import StageSpec, look_rotation, write_stage
 
-from warpsky.cli import main
-from warpsky.evaluation.speed import STRATIFORM, monte_carlo, plan_rows
-from warpsky.evaluation.speed_table import COLUMNS, format_table
-from warpsky.layer import Layer
+from evaluation.speed import STRATIFORM, monte_carlo, plan_rows
+from evaluation.speed_table import COLUMNS, format_table
+from warpsky.cli.main import main
+from warpsky.core.image import ImageLayer
 
 
 def _box_stage(tmp_path, volume):
@@ -81,10 +81,10 @@ def test_table_cells_by_device():
 
 
 def test_monte_carlo_time_of_hybrid_leaves_out_the_march_and_the_denoiser():
-    layer = Layer(None, None, None, stats={"paths": 1000, "seconds": 1.0, "single_scatter_seconds": 0.25,
+    layer = ImageLayer(None, None, None, stats={"paths": 1000, "seconds": 1.0, "single_scatter_seconds": 0.25,
                                            "denoise_seconds": 0.25})
     assert monte_carlo(layer) == (1000, 0.5)
-    assert monte_carlo(Layer(None, None, None, stats={"seconds": 1.0})) is None
+    assert monte_carlo(ImageLayer(None, None, None, stats={"seconds": 1.0})) is None
 
 
 def test_stratiform_row_times_the_pass_alone(tmp_path, capsys):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warpsky.evaluation.billows import LATTICE, BillowParams, billow_grid_numpy, cellular_f1
+from evaluation.billows import LATTICE, BillowParams, billow_grid_numpy, cellular_f1
 
 
 @wp.kernel

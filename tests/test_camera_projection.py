@@ -10,10 +10,10 @@ import pytest
 import warp as wp
 from conftest import StageSpec, look_rotation, path_traced, render_layer, write_stage
 
-from warpsky.camera_rays import PinholeCamera, camera_ray_at, camera_ray_origin, pinhole_camera
-from warpsky.errors import UsageError
-from warpsky.scene.model import Camera, Projection, as_imath_rows
-from warpsky.scene.usd import StageReader
+from warpsky.core.errors import UsageError
+from warpsky.model.camera_rays import PinholeCamera, camera_ray_at, camera_ray_origin, pinhole_camera
+from warpsky.model.scene import Camera, Projection, as_imath_rows
+from warpsky.usd.stage import StageReader
 
 SIGMA = 0.05  # extinction of the test box [1/m]
 HALF = 10.0  # the box spans [-10, 10]^3 m
@@ -161,8 +161,8 @@ def test_orthographic_box_has_one_transmittance_path_tracer(tmp_path, homogeneou
 
 
 def test_orthographic_box_has_one_transmittance_hybrid(tmp_path, homogeneous_npy, device):
-    from warpsky.plan import make_plan
-    from warpsky.techniques.hybrid.technique import Hybrid
+    from warpsky.render.plan import make_plan
+    from warpsky.techniques.hybrid.hybrid import Hybrid
 
     scene = StageReader(orthographic_stage(tmp_path / "ortho.usda", homogeneous_npy)).scene_at(None)
     settings = {"spp": "4", "seed": "3", "target_error": "0", "denoise": "0"}
@@ -173,7 +173,7 @@ def test_orthographic_box_has_one_transmittance_hybrid(tmp_path, homogeneous_npy
 
 
 def test_slicing_refuses_an_orthographic_camera(tmp_path, homogeneous_npy):
-    from warpsky.plan import make_plan
+    from warpsky.render.plan import make_plan
 
     scene = StageReader(orthographic_stage(tmp_path / "ortho.usda", homogeneous_npy)).scene_at(None)
     with pytest.raises(UsageError, match=r"camera /World/Camera is orthographic.*single_scatter"):
@@ -183,8 +183,8 @@ def test_slicing_refuses_an_orthographic_camera(tmp_path, homogeneous_npy):
 def test_orthographic_sky_transmittance_follows_each_rows_altitude(device):
     """Parallel rays climbing at 30 degrees from a view window 4 km wide and 8 km tall: each row's air to space is
     the column above its own start, beta H exp(-h / H) / sin(30 deg), with h the row's altitude."""
+    from warpsky.model.scene import Atmosphere, Scene
     from warpsky.passes.sky.sky import Sky
-    from warpsky.scene.model import Atmosphere, Scene
 
     elevation = math.radians(30.0)
     forward = (0.0, math.sin(elevation), -math.cos(elevation))
@@ -203,9 +203,9 @@ def test_orthographic_stratiform_layer_maps_texels_to_pixels_at_any_distance(dev
     """Looking straight up through a 2.4 km window at 24 px, each pixel's vertical ray meets the centre of one
     100 m texel of an overcast at 1.5 km: a clear 3 x 2 texel block opens exactly 6 pixels, and the image is the
     same from the ground and from 1 km up (in perspective it would shrink with the distance)."""
+    from warpsky.model.scene import Atmosphere, Scene, Sun
+    from warpsky.model.stratiform import StratiformLayer
     from warpsky.passes.stratiform.stratiform import Stratiform
-    from warpsky.scene.layers import StratiformLayer
-    from warpsky.scene.model import Atmosphere, Scene, Sun
 
     thickness = np.full((24, 24), 300.0, np.float32)
     thickness[12:15, 4:6] = 0.0

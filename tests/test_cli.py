@@ -7,9 +7,9 @@ import pytest
 from conftest import StageSpec, write_stage
 from conftest import run_cli as run
 
-from warpsky.cli import main
+from warpsky.cli.main import main
 from warpsky.output.exr import read_exr
-from warpsky.render import EXR_CHANNELS
+from warpsky.render.frame import EXR_CHANNELS
 
 
 @pytest.fixture
@@ -216,8 +216,8 @@ def test_failed_frame_keeps_finished_frames(tmp_path, capsys):
 def test_every_technique_declares_the_protocol():
     import dataclasses
 
-    from warpsky.registry import technique_class, technique_names
-    from warpsky.settings import field_kinds
+    from warpsky.core.settings import field_kinds
+    from warpsky.render.registry import technique_class, technique_names
 
     for name in technique_names():
         cls = technique_class(name)
@@ -228,9 +228,9 @@ def test_every_technique_declares_the_protocol():
 
 
 def test_settings_are_parsed_by_their_declared_types(tmp_path, good_stage, capsys):
-    from warpsky.settings import parse_settings
-    from warpsky.techniques.path_tracer.technique import PathTracerSettings
-    from warpsky.techniques.slicing.technique import LightEquation, SlicingSettings
+    from warpsky.core.settings import parse_settings
+    from warpsky.techniques.path_tracer.path_tracer import PathTracerSettings
+    from warpsky.techniques.slicing.slicing import LightEquation, SlicingSettings
 
     s = parse_settings(SlicingSettings, {"slice_count": "12", "low_albedo": "true", "light_equation": "eq24",
                                          "xi": "auto", "orders": "8.0"})
@@ -259,7 +259,7 @@ def test_render_help_lists_every_setting_with_its_metadata(capsys):
     import dataclasses
 
     from warpsky.passes.stratiform.stratiform import StratiformSettings
-    from warpsky.registry import technique_class, technique_names
+    from warpsky.render.registry import technique_class, technique_names
 
     with pytest.raises(SystemExit):
         main(["render", "--help"])

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from conftest import StageSpec, write_stage
 
-from warpsky.errors import SceneError, UsageError
-from warpsky.scene.usd import StageReader
-from warpsky.scene.usd_composition import StageOptions, parse_variant
+from warpsky.core.errors import SceneError, UsageError
+from warpsky.usd.composition import StageOptions, parse_variant
+from warpsky.usd.stage import StageReader
 
 EXTENT = ((-10.0, -10.0, -10.0), (10.0, 10.0, 10.0))  # [m], the Volumes' authored extent
 
@@ -50,8 +50,8 @@ def media_names(reader, time=None) -> list[str]:
 
 
 def render(scene, size: int = 16) -> np.ndarray:
-    from warpsky.plan import make_plan
-    from warpsky.techniques.single_scatter.technique import SingleScatter
+    from warpsky.render.plan import make_plan
+    from warpsky.techniques.single_scatter.single_scatter import SingleScatter
 
     plan = make_plan(scene, technique="single_scatter", settings={}, resolution=(size, size), device="cpu")
     return SingleScatter(plan.settings, device="cpu").render(scene, size, size).radiance

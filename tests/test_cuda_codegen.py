@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from warpsky.kernel_registry import compile_ptx, kernel_modules
-from warpsky.kernel_variants import registered_factories
+from warpsky.cli.kernel_registry import compile_ptx, kernel_modules
+from warpsky.core.kernel_variants import registered_factories
 
 #: Every plain kernel module and every variant of each factory with up to 16, a covering set of the larger ones (each
 #: flag at each of its values: 8 of the path tracer's 64).
@@ -47,7 +47,7 @@ def test_registry_finds_every_module_with_kernels():
     """Every source file with a module-level ``@wp.kernel`` (read from its syntax tree, not imported) is one of the
     modules the registry compiles: a new technique or pass needs no entry anywhere for its kernels to be tested."""
     import warpsky
-    from warpsky.kernel_registry import plain_kernel_modules
+    from warpsky.cli.kernel_registry import plain_kernel_modules
 
     package = Path(warpsky.__file__).parent
     expected = set()
@@ -58,7 +58,7 @@ def test_registry_finds_every_module_with_kernels():
             expected.add(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
     found = set(plain_kernel_modules())
     assert expected <= found, f"kernel modules the registry misses: {sorted(expected - found)}"
-    assert {"warpsky.passes.sky.kernels", "warpsky.passes.fog.kernels", "warpsky.media.fields"} <= found
+    assert {"warpsky.passes.sky.sky_kernels", "warpsky.passes.fog.fog_kernels", "warpsky.media.voxels.fields"} <= found
 
 
 def _decorator_names(node) -> set[str]:
@@ -93,7 +93,7 @@ def test_every_kernel_factory_declares_its_variants():
 def test_covering_variants_give_every_flag_each_value():
     """A factory of six boolean flags compiles 8 variants in the code-generation test (all off, each alone on, all
     on), in which every flag takes both values; up to 16 combinations every one is compiled."""
-    from warpsky.kernel_variants import covering_variants, variants
+    from warpsky.core.kernel_variants import covering_variants, variants
 
     six = {f"f{i}": (False, True) for i in range(6)}
     chosen = covering_variants(six)

@@ -7,20 +7,20 @@ import pytest
 from conftest import StageSpec, write_stage
 from conftest import run_cli as run
 
-from warpsky.composite import composite
-from warpsky.layer import Layer
+from warpsky.core.image import ImageLayer
 from warpsky.output.deep import deep_from_layers, deep_path, flatten
 from warpsky.output.exr import read_exr
+from warpsky.passes.composite import composite
 
 FAR = 1.0e5
 FAST = ["--device", "cpu", "--technique", "single_scatter", "--set", "step_length=1"]
 
 
-def layer(radiance, transmittance, depth, shape=(2, 3)) -> Layer:
+def layer(radiance, transmittance, depth, shape=(2, 3)) -> ImageLayer:
     h, w = shape
-    return Layer(radiance=np.broadcast_to(np.asarray(radiance, np.float32), (h, w, 3)).copy(),
-                 transmittance=np.broadcast_to(np.asarray(transmittance, np.float32), (h, w, 3)).copy(),
-                 depth=np.broadcast_to(np.asarray(depth, np.float32), (h, w)).copy())
+    return ImageLayer(radiance=np.broadcast_to(np.asarray(radiance, np.float32), (h, w, 3)).copy(),
+                      transmittance=np.broadcast_to(np.asarray(transmittance, np.float32), (h, w, 3)).copy(),
+                      depth=np.broadcast_to(np.asarray(depth, np.float32), (h, w)).copy())
 
 
 def test_flattening_gives_back_the_composite_with_coloured_transmittance():
@@ -109,7 +109,7 @@ def test_merged_layers_are_samples_of_their_own_in_depth_order_and_the_air_spans
     """A merge of two layers whose depths cross between pixels gives one sample each, nearer first in every
     pixel; the air in front (no depth) is a volume sample from the camera to the first of them, the sky a point at
     the far clip; flattening still gives the composite."""
-    from warpsky.composite import merge_by_depth
+    from warpsky.passes.composite import merge_by_depth
 
     shape = (1, 2)
     a = layer([0.5, 0.4, 0.3], [0.5, 0.6, 0.7], np.array([[10.0, 30.0]]), shape)
@@ -130,7 +130,7 @@ def test_light_already_seen_through_a_layer_is_a_clear_sample_ahead_of_it():
     """A layer's ``front`` light (paths already attenuated to the eye, as hybrid's over fog and terrain) is a
     sample of alpha 0 at the group's nearest depth, after the air in front: flattening gives the composite, merged
     or not."""
-    from warpsky.composite import merge_by_depth
+    from warpsky.passes.composite import merge_by_depth
 
     shape = (1, 2)
     air = layer([0.01, 0.02, 0.05], [0.95, 0.9, 0.8], FAR, shape)

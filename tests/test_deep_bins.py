@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
-from warpsky.composite import composite, pixel_directions
-from warpsky.layer import Layer
+from warpsky.core.image import ImageLayer
+from warpsky.model.scene import Atmosphere, Camera, Ground, Scene, Sun, VoxelMedium
 from warpsky.output.deep import deep_from_layers, flatten, visibility_in_front
 from warpsky.output.deep_bins import DepthProfile
+from warpsky.passes.composite import composite, pixel_directions
 from warpsky.passes.frame import render_layers
-from warpsky.plan import make_plan
-from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun, VoxelMedium
+from warpsky.render.plan import make_plan
 
 SIZE = 24
 FAR = 1.0e4
@@ -176,7 +176,7 @@ def test_a_pixel_without_media_gets_no_volume_samples_and_bins_are_bounded_by_th
 def test_fog_slab_samples_follow_its_closed_form():
     """A constant analytic fog slab (Biri 2002), y from 0 to 20 m, seen from 50 m above looking down: its deep
     samples' visibility at any depth is exp(-c sigma (t - t_enter)) within 1e-6, flattening gives the frame."""
-    from warpsky.scene.analytic_fog import AnalyticFog, ConstantTerm
+    from warpsky.model.fog import AnalyticFog, ConstantTerm
 
     c = 0.04
     cam = camera(position=(0.0, 50.0, 0.0), forward=(0.0, -1.0, 0.0))
@@ -205,10 +205,10 @@ def test_split_of_a_layer_is_exact_with_coloured_opaque_and_clamped_profiles():
     through = np.exp(-tau[..., -1, :] * rng.uniform(0.3, 1.7, shape + (1,)))
     through[1, :] = 0.0
     through[2, 0] = [1.0, 0.5, 0.2]
-    volume = Layer(rng.uniform(0.0, 2.0, shape + (3,)).astype(np.float32), through.astype(np.float32),
-                   np.full(shape, 20.0, np.float32), profile=DepthProfile(edges.astype(np.float32),
+    volume = ImageLayer(rng.uniform(0.0, 2.0, shape + (3,)).astype(np.float32), through.astype(np.float32),
+                        np.full(shape, 20.0, np.float32), profile=DepthProfile(edges.astype(np.float32),
                                                                            tau.astype(np.float32), end))
-    sky = Layer(np.full(shape + (3,), 0.3, np.float32), np.ones(shape + (3,), np.float32), np.full(shape, FAR))
+    sky = ImageLayer(np.full(shape + (3,), 0.3, np.float32), np.ones(shape + (3,), np.float32), np.full(shape, FAR))
     deep = deep_from_layers([volume, sky], FAR)
     np.testing.assert_allclose(flatten(deep), composite([volume, sky], FAR).rgba, rtol=1e-5, atol=1e-6)
     assert np.all((deep.channels["A"] >= 0.0) & (deep.channels["A"] <= 1.0))

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from conftest import StageSpec, look_rotation, write_stage
 
-from warpsky.errors import SceneError
-from warpsky.media import detail as detail_module
-from warpsky.scene.model import DetailSpec
-from warpsky.scene.usd import StageReader
-from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
-from warpsky.techniques.slicing.technique import Slicing, SlicingSettings
+from warpsky.core.errors import SceneError
+from warpsky.media.voxels import detail as detail_module
+from warpsky.model.scene import DetailSpec
+from warpsky.techniques.single_scatter.single_scatter import SingleScatter, SingleScatterSettings
+from warpsky.techniques.slicing.slicing import Slicing, SlicingSettings
+from warpsky.usd.stage import StageReader
 
 SIZE = 16
 #: Detail features of 15 m on a 160 m blob: a tile of 480 m.
@@ -190,7 +190,7 @@ def test_the_path_tracer_renders_detail_without_bias(tmp_path, device):
     """With one bounce the path tracer estimates single scattering: through the detailed density (majorants scaled
     by the detail's bound 1 + 3a) it agrees with the single-scattering march of the same detailed field, and both
     differ clearly from the coarse field."""
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     scene = StageReader(detail_stage(tmp_path)).scene_at(7.0)
     coarse = dataclasses.replace(scene, media=tuple(dataclasses.replace(m, detail=None) for m in scene.media))
@@ -216,8 +216,8 @@ def test_baked_detail_resamples_the_detailed_field(tmp_path, device):
     6.7 m coarse voxels: 3 fine voxels per coarse edge), whose fine voxel 1 of each triple sits on the coarse centre;
     the detail raises the peak within its bound; single scattering traced through it stays within 3% of the march
     through the procedural field."""
-    from warpsky.media.detail_bake import baked_media, refinement
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.media.voxels.detail_bake import baked_media, refinement
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     fine_spec = dataclasses.replace(SPEC, scale=6.0)
     scene = StageReader(detail_stage(tmp_path, fine_spec)).scene_at(7.0)

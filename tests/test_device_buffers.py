@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers as buffers
+from warpsky.core import device_buffers as buffers
 
 
 def test_reusable_arrays_and_content_keyed_uploads(device):

@@ -11,13 +11,13 @@ import pytest
 import warp as wp
 from conftest import StageSpec, look_rotation, write_stage
 
-from warpsky.composite import composite
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
 from warpsky.light.dome import DomeLight, dome_radiance, dome_struct, mean_radiance, upper_hemisphere
+from warpsky.model.scene import Dome
+from warpsky.passes.composite import composite
 from warpsky.passes.frame import render_layers
-from warpsky.plan import make_plan
-from warpsky.scene.model import Dome
-from warpsky.scene.usd import StageReader
+from warpsky.render.plan import make_plan
+from warpsky.usd.stage import StageReader
 
 
 @wp.kernel
@@ -60,7 +60,7 @@ def add_distant_light(stage_path, name, direction, intensity):
     """Add a DistantLight ``/World/<name>`` shining from ``direction`` (warpsky Y-up axes, Y-up stage)."""
     from pxr import Gf, Usd, UsdGeom, UsdLux
 
-    from warpsky.evaluation.family_stages import rotation_towards
+    from evaluation.family_stages import rotation_towards
 
     stage = Usd.Stage.Open(str(stage_path))
     light = UsdLux.DistantLight.Define(stage, f"/World/{name}")
@@ -327,7 +327,7 @@ def test_dome_lies_beyond_the_air(tmp_path, device):
     horizon, hidden below it (sea level)."""
     from conftest import add_atmosphere
 
-    from warpsky.composite import pixel_directions
+    from warpsky.passes.composite import pixel_directions
 
     spec = StageSpec(sun_direction=(0.3, 0.5, 0.2), camera_rotation=look_rotation((0.0, 0.05, -1.0)),
                      camera_position=(0.0, 10.0, 0.0))

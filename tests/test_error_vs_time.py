@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from conftest import StageSpec, add_atmosphere, look_rotation, write_stage
 
-from warpsky.errors import UsageError
-from warpsky.evaluation.error_vs_time import error_metrics, run_report, write_outputs
-from warpsky.scene.usd import StageReader
+from evaluation.error_vs_time import error_metrics, run_report, write_outputs
+from warpsky.core.errors import UsageError
+from warpsky.usd.stage import StageReader
 
 
 def test_error_metrics_closed_forms():

@@ -9,8 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from warpsky.cli import main
-from warpsky.evaluation.family import (
+from evaluation.family import (
     family_reference_key,
     family_reference_path,
     format_family_table,
@@ -18,9 +17,10 @@ from warpsky.evaluation.family import (
     run_family,
     write_family_outputs,
 )
-from warpsky.evaluation.family_shapes import KINDS
-from warpsky.evaluation.family_stages import ALBEDOS, LIGHTING, PHASES
-from warpsky.scene.usd import StageReader
+from evaluation.family_shapes import KINDS
+from evaluation.family_stages import ALBEDOS, LIGHTING, PHASES
+from warpsky.cli.main import main
+from warpsky.usd.stage import StageReader
 
 
 @pytest.fixture(scope="module")
@@ -139,7 +139,7 @@ def test_cli_needs_exactly_one_of_stage_and_family(tmp_path, capsys):
 
 
 def test_thick_profile_storms_carry_three_species_at_their_optical_depths(tmp_path):
-    from warpsky.evaluation.family_stages import PROFILES, RAIN_OPTICAL_DEPTH
+    from evaluation.family_stages import PROFILES, RAIN_OPTICAL_DEPTH
 
     make_family(tmp_path / "thick", seed=2027, count=12, resolution=16, profile="thick")
     blob = json.loads((tmp_path / "thick" / "family.json").read_text())

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from conftest import StageSpec, render_layer, write_stage
 
-from warpsky.errors import SceneError
-from warpsky.media.fields import load_field
+from warpsky.core.errors import SceneError
+from warpsky.media.voxels.fields import load_field
 
 needs_tools = pytest.mark.skipif(
     not (shutil.which("vdb_tool") and shutil.which("nanovdb_convert")),

@@ -1,5 +1,5 @@
 """Frames of a batch reuse their device buffers: the second frame of the same stage allocates nothing through
-:mod:`warpsky.device_buffers` and gives the same pixels as a fresh render; the radiosity reads few values back."""
+:mod:`warpsky.core.device_buffers` and gives the same pixels as a fresh render; the radiosity reads few values back."""
 
 from __future__ import annotations
 
@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 from conftest import StageSpec, look_rotation, write_stage
 
-from warpsky import device_buffers
-from warpsky.plan import make_plan
-from warpsky.scene.usd import StageReader
-from warpsky.techniques.path_tracer.technique import (
+from warpsky.core import device_buffers
+from warpsky.render.plan import make_plan
+from warpsky.techniques.path_tracer.path_tracer import (
     PathTracerSettings,
     PathTracing,
     per_sample_launches,
     pixel_sums,
     sums_layer,
 )
+from warpsky.usd.stage import StageReader
 
 SIZE = 12
 
@@ -122,8 +122,8 @@ def test_small_gpu_frames_run_one_thread_per_path():
 
 
 def test_sky_pass_second_frame_allocates_nothing(device):
+    from warpsky.model.scene import Atmosphere, Camera, Ground, Scene, Sun
     from warpsky.passes.sky.sky import Sky
-    from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
 
     cam = Camera("c", np.array([0.0, 2.0, 0.0]), look_rotation((0.0, 0.3, -1.0)), 20.0, 36.0, 24.0, far=1e5)
     scene = Scene(cam, Sun((0.3, 0.8, 0.2), (1.0, 1.0, 1.0)), ground=Ground(0.0), atmosphere=Atmosphere())
@@ -140,9 +140,9 @@ def test_sky_pass_second_frame_allocates_nothing(device):
 
 
 def stratiform_frame(device, radiosity=True):
+    from warpsky.model.scene import Atmosphere, Camera, Ground, Scene, Sun
+    from warpsky.model.stratiform import StratiformLayer
     from warpsky.passes.stratiform.stratiform import Stratiform, StratiformSettings
-    from warpsky.scene.layers import StratiformLayer
-    from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
 
     cam = Camera("c", np.array([0.0, 2.0, 0.0]), look_rotation((0.0, 1.0, -0.2)), 20.0, 36.0, 24.0, far=1e5)
     scene = Scene(cam, Sun((0.3, 0.8, 0.2), (1.0, 1.0, 1.0)), ground=Ground(0.0, albedo=(0.6, 0.6, 0.6)),

@@ -16,9 +16,9 @@ import pytest
 from conftest import StageSpec, write_stage
 from conftest import run_cli as run
 
-from warpsky.cli import main
-from warpsky.device import RowBands
-from warpsky.resources import MAX_WORK_PER_PIXEL, format_size, parse_size
+from warpsky.cli.main import main
+from warpsky.core.device import RowBands
+from warpsky.core.resources import MAX_WORK_PER_PIXEL, format_size, parse_size
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -81,7 +81,7 @@ def test_huge_frame_is_refused_with_a_small_peak_memory(tmp_path, box_stage):
     out = tmp_path / "o" / "f.exr"
     env = dict(os.environ, PYTHONPATH=str(REPO))
     argv = ["render", str(box_stage), str(out), "--res", "100000x100000", "--device", "cpu"]
-    child = ("import sys\nfrom warpsky.cli import main\ncode = main(sys.argv[1:])\n"
+    child = ("import sys\nfrom warpsky.cli.main import main\ncode = main(sys.argv[1:])\n"
              "print(next(line for line in open('/proc/self/status') if line.startswith('VmHWM')))\nsys.exit(code)")
     proc = subprocess.run([sys.executable, "-c", child, *argv], capture_output=True, text=True, env=env, cwd=REPO)
     assert proc.returncode == 2, proc.stderr
@@ -117,9 +117,9 @@ def test_info_prints_the_estimates_and_the_limits(box_stage, capsys):
 
 
 def test_every_technique_estimates_memory_that_grows_with_the_frame(box_stage):
-    from warpsky.plan import make_plan
-    from warpsky.registry import technique_names
-    from warpsky.scene.usd import StageReader
+    from warpsky.render.plan import make_plan
+    from warpsky.render.registry import technique_names
+    from warpsky.usd.stage import StageReader
 
     scene = StageReader(box_stage).scene_at(None)
     for name in technique_names():
@@ -144,9 +144,9 @@ def test_tiny_step_is_refused_naming_the_setting_and_the_way_past(tmp_path, box_
 
 
 def test_huge_frame_work_is_refused_and_no_work_limit_plans_it(box_stage):
-    from warpsky.render import RenderOptions, plan_frame
-    from warpsky.resources import ResourceError
-    from warpsky.scene.usd import StageReader
+    from warpsky.core.errors import ResourceError
+    from warpsky.render.frame import RenderOptions, plan_frame
+    from warpsky.usd.stage import StageReader
 
     reader = StageReader(box_stage)
     options = RenderOptions(technique="path_tracer", settings={"spp": "60000"}, resolution=(2000, 2000),
@@ -169,7 +169,7 @@ def test_row_bands_are_sized_by_time_and_stop_on_request():
     assert bands.take()[1] == 16
     bands.record(16, 1.6)  # costly rows (0.1 s each): the estimate follows the slowest
     assert bands.take()[1] == 1
-    from warpsky.interrupt import clear_stop, request_stop
+    from warpsky.core.interrupt import clear_stop, request_stop
 
     request_stop("batch-a")
     assert RowBands(10, 1, stop_token="batch-b").take() is not None
@@ -277,7 +277,7 @@ def test_first_stumbles_get_one_line_and_leave_nothing(tmp_path, box_stage, caps
     def stopped(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("warpsky.cli.run_batch", stopped)
+    monkeypatch.setattr("warpsky.cli.main.run_batch", stopped)
     out = tmp_path / "new" / "deeper" / "o.exr"
     code, _, err = run(["render", box_stage, out, "--res", "8", "--technique", "single_scatter"], capsys)
     assert code == 130 and not (tmp_path / "new").exists()

@@ -14,7 +14,7 @@ from test_oriented_render import sheet_stage
 from warpsky.optics.grid import angle_grid
 from warpsky.optics.ice import ice_refractive_index
 from warpsky.optics.oriented_phase import OrientedPhases, frame_bins, oriented_phases, oriented_value
-from warpsky.scene.usd import StageReader
+from warpsky.usd.stage import StageReader
 
 SUN_ELEVATION = 8.0  # deg, as in usd_scenes/sundogs.usda
 PHOTONS = 2_000_000  # per channel: enough to place a sharp edge, a few seconds on two CPU cores

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from tests.conftest import look_rotation
-from warpsky.errors import SceneError
-from warpsky.media.heightfield import probe, ray_intervals, voxelize
+from warpsky.core.errors import SceneError
+from warpsky.media.deck.deck_geometry import probe, ray_intervals, voxelize
+from warpsky.model.deck import HazeSpec, HeightFieldClouds, read_heightfield_clouds, surface_heights
+from warpsky.model.scene import Camera, Dome, Ground, PhaseKind, Projection, Scene, Sun
 from warpsky.optics.phase import phase_numpy
-from warpsky.passes.heightfield.heightfield import HeightField, heightfield_sun_transmittance
-from warpsky.scene.heightfield_clouds import HazeSpec, HeightFieldClouds, read_heightfield_clouds, surface_heights
-from warpsky.scene.model import Camera, Dome, Ground, PhaseKind, Projection, Scene, Sun
-from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
+from warpsky.passes.deck.deck import HeightField, heightfield_sun_transmittance
+from warpsky.techniques.single_scatter.single_scatter import SingleScatter, SingleScatterSettings
 
 
 def wavy_deck(**kwargs) -> HeightFieldClouds:
@@ -384,7 +384,7 @@ def write_deck_stage(path, mpu: float, **overrides):
 def read_deck(path):
     from pxr import Usd
 
-    from warpsky.scene.usd import StageReader
+    from warpsky.usd.stage import StageReader
 
     reader = StageReader(path)
     return read_heightfield_clouds(reader, reader.stage.GetPrimAtPath("/World/Deck"), Usd.TimeCode.Default())

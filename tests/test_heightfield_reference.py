@@ -1,5 +1,6 @@
 """The path-traced reference for Max 1986 height-field cloud decks: the deck voxelised with exact column optical
-depths (warpsky.media.deck_voxels), traced by the path tracer against the height-field pass's single scattering, and
+depths (warpsky.media.deck.deck_voxels), traced by the path tracer against the height-field pass's single scattering,
+and
 through ``warpsky render`` / ``info`` / ``bench error-vs-time``."""
 
 from __future__ import annotations
@@ -10,10 +11,10 @@ import numpy as np
 import pytest
 from conftest import look_rotation, run_cli
 
-from warpsky.errors import UsageError
-from warpsky.media.deck_voxels import deck_grid, sub_column_offsets, voxelize_deck
-from warpsky.scene.heightfield_clouds import HazeSpec, HeightFieldClouds, surface_heights
-from warpsky.scene.model import Camera, PhaseKind, Scene, Sun
+from warpsky.core.errors import UsageError
+from warpsky.media.deck.deck_voxels import deck_grid, sub_column_offsets, voxelize_deck
+from warpsky.model.deck import HazeSpec, HeightFieldClouds, surface_heights
+from warpsky.model.scene import Camera, PhaseKind, Scene, Sun
 
 
 def wavy_deck(**kwargs) -> HeightFieldClouds:
@@ -92,8 +93,8 @@ def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
     the mean radiance within noise (z < 4, 0.3 % for the voxels in quadrature; measured on the CPU with 4096 spp:
     -0.09 % +- 0.27 %), and the noise is small enough (< 1 %) for a 5 % error to fail. All orders of scattering
     add about 15 % here."""
-    from warpsky.passes.heightfield.heightfield import HeightField
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.passes.deck.deck import HeightField
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     clouds, camera = thin_deck()
     scene = Scene(camera, Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), heightfield_clouds=(clouds,))
@@ -112,7 +113,7 @@ def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
 def test_render_and_info_trace_the_deck(tmp_path, capsys):
     """``warpsky render --technique path_tracer`` on the deck stage writes finite, non-negative pixels with the
     deck in them, and ``info`` says it is voxelised and how; with a Mesh too it traces both (no surfaces pass)."""
-    from warpsky.evaluation.deck_stage import write_deck_stage
+    from evaluation.deck_stage import write_deck_stage
     from warpsky.output.exr import read_exr
 
     stage = str(write_deck_stage(tmp_path / "deck.usda"))
@@ -151,9 +152,9 @@ def test_render_and_info_trace_the_deck(tmp_path, capsys):
 def test_error_vs_time_judges_the_heightfield_pass(tmp_path, monkeypatch):
     """On a deck stage the report's rows name the height-field pass, one family per mode along its step length,
     against the path-traced deck; single scattering shows as a negative bias."""
-    from warpsky.evaluation import error_vs_time
-    from warpsky.evaluation.deck_stage import deck_scene
-    from warpsky.evaluation.error_vs_time import HEIGHTFIELD_ROW, format_table, run_report
+    from evaluation import error_vs_time
+    from evaluation.deck_stage import deck_scene
+    from evaluation.error_vs_time import HEIGHTFIELD_ROW, format_table, run_report
 
     monkeypatch.setattr(error_vs_time, "cache_dir", lambda: tmp_path / "cache")
     scene = deck_scene(tmp_path / "deck.usda", haze=5.0e-3)  # a square of about 1 km: a small grid

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from conftest import StageSpec, add_field, look_rotation, path_traced, render_layer, write_stage
 
-from warpsky.errors import UsageError
-from warpsky.plan import make_plan
-from warpsky.scene.usd import StageReader
+from warpsky.core.errors import UsageError
+from warpsky.render.plan import make_plan
 from warpsky.techniques.hybrid.denoise import box_sum, keep_local_mean, sanitise
-from warpsky.techniques.hybrid.technique import Hybrid, HybridSettings
+from warpsky.techniques.hybrid.hybrid import Hybrid, HybridSettings
+from warpsky.usd.stage import StageReader
 
 STEP = {"step_length": 0.05, "shadow_step_length": 0.05}
 
@@ -303,7 +303,7 @@ def test_hybrid_frame_with_air_matches_the_path_tracer(box, device):
     the air's multiple scattering counted twice puts the sky 5-50 % high)."""
     from conftest import add_atmosphere
 
-    from warpsky.composite import composite
+    from warpsky.passes.composite import composite
     from warpsky.passes.frame import render_layers
 
     # sea level 100 m below the stage's origin: the ground plane (y = -12) lies above it

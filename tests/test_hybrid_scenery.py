@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
-from warpsky.composite import composite
+from warpsky.model.fog import AnalyticFog, ConstantTerm
+from warpsky.model.lights import Dome
+from warpsky.model.scene import Camera, Ground, Scene, Sun
+from warpsky.model.terrain import TerrainMesh
+from warpsky.passes.composite import composite
 from warpsky.passes.frame import render_layers
-from warpsky.plan import make_plan
-from warpsky.scene.analytic_fog import AnalyticFog, ConstantTerm
-from warpsky.scene.lights import Dome
-from warpsky.scene.model import Camera, Ground, Scene, Sun
-from warpsky.scene.terrain import TerrainMesh
+from warpsky.render.plan import make_plan
 
 SIZE = 8
 
@@ -122,7 +122,7 @@ def layered_slab_scene(floor: str) -> Scene:
     """The fog slab over its floor (:func:`slab_scene`, no dome) under a broken stratiform layer 300 m up (an 8 x 8
     map of 0-60 m over 2 km, N0 3e8 /m^3: column optical depth up to 2.8); the camera sees the floor through the
     fog only."""
-    from warpsky.scene.layers import StratiformLayer
+    from warpsky.model.stratiform import StratiformLayer
 
     thickness = np.array([[60.0 * max(0.0, np.sin(0.9 * i) * np.cos(0.7 * j)) for j in range(8)] for i in range(8)])
     layer = StratiformLayer(thickness.astype(np.float32), 300.0, (-1000.0, -1000.0), (2000.0, 2000.0),
@@ -134,10 +134,10 @@ def layered_slab_scene(floor: str) -> Scene:
 @pytest.mark.parametrize("floor", ["ground", "mesh"])
 def test_fog_under_a_stratiform_layer_matches_the_path_tracer(floor):
     """Fog over a floor under a broken stratiform layer: the fog and surfaces passes' sunlight in the layer's shadow
-    (:mod:`~warpsky.media.layer_shadow`) plus hybrid's paths, which trace the layer voxelised beyond the camera
-    rays' first event, undenoised, equal the path tracer's frame (which traces the layer voxelised too): image means
-    within 4 sigma and 6 % (sigma about 2 %, most of it the path tracer's, whose sun in the fog is sampled; measured
-    z = 0.8 at 4096 paths per pixel over either floor). The passes alone (``multiple_scattering = 0``: the
+    (:mod:`~warpsky.media.stratiform.stratiform_shadow`) plus hybrid's paths, which trace the layer voxelised beyond the
+    camera rays' first event, undenoised, equal the path tracer's frame (which traces the layer voxelised too): image
+    means within 4 sigma and 6 % (sigma about 2 %, most of it the path tracer's, whose sun in the fog is sampled;
+    measured z = 0.8 at 4096 paths per pixel over either floor). The passes alone (``multiple_scattering = 0``: the
     stratiform pass draws the ground with its radiosity, the fog its isotropic ambient term) miss it by more than 15
     %."""
     scene = layered_slab_scene(floor)
@@ -158,7 +158,7 @@ def test_error_estimate_is_relative_to_the_whole_frame():
     """The paths' error estimate divides their noise by the frame's level, the fog's and the floor's sunlight that
     the passes draw included (not by the paths' light alone, which made it conservative by the frame's ratio to
     it): undenoised, it equals the RMS of the paths' standard error over the frame's mean, to rounding."""
-    import warpsky.techniques.hybrid.technique as hybrid
+    import warpsky.techniques.hybrid.hybrid as hybrid
 
     scene = slab_scene("ground", False)
     stats = {}
@@ -185,7 +185,7 @@ def test_layers_over_a_textured_ground_leave_the_scenery_to_the_passes():
     """A ground albedo map is read by the stratiform pass alone: under layers over such a ground hybrid's paths do
     not trace the scenery (no media pass), the stratiform pass draws the textured ground; without the map they do,
     unless a fog reaches the layers' base."""
-    from warpsky.scene.layers import GroundTexture
+    from warpsky.model.stratiform import GroundTexture
 
     scene = layered_slab_scene("ground")
     texture = GroundTexture(np.full((4, 4, 3), 0.3), (-500.0, -500.0), (1000.0, 1000.0))
@@ -205,8 +205,8 @@ def test_layers_over_a_textured_ground_leave_the_scenery_to_the_passes():
 def test_fog_and_deck_layers_are_drawn_once_per_frame(monkeypatch):
     """The error estimate reads the fog pass's and the height-field pass's own layers of the frame (drawn early
     and kept for their turn), so a hybrid scenery frame draws the fog once and the deck once."""
+    from warpsky.passes.deck.deck import HeightField
     from warpsky.passes.fog.fog import Fog
-    from warpsky.passes.heightfield.heightfield import HeightField
 
     calls = {"fog": 0, "deck": 0}
     fog_render, deck_render = Fog.render, HeightField.render

@@ -8,7 +8,7 @@ import json
 import pytest
 from conftest import StageSpec, write_stage
 
-from warpsky.cli import main
+from warpsky.cli.main import main
 from warpsky.output.exr import read_exr
 
 #: A stage whose line 18 holds a doubled ``def``: USD's parser stops at column 9.

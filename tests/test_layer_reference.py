@@ -1,5 +1,6 @@
 """The path-traced reference for stratiform layers: a layer voxelised with exact column optical depths
-(warpsky.media.layer_voxels), traced by the path tracer against a plane-parallel slab solution, converged in the
+(warpsky.media.stratiform.stratiform_voxels), traced by the path tracer against a plane-parallel slab solution,
+converged in the
 voxel size, and through ``warpsky render`` / ``info`` / ``bench error-vs-time``."""
 
 from __future__ import annotations
@@ -11,12 +12,12 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
-from warpsky.errors import UsageError
-from warpsky.media.layer_voxels import VOXEL_BUDGET, layer_grid, voxelize_layer
-from warpsky.media.stratiform import procedural_thickness, sample_thickness, signed_thickness
-from warpsky.scene.layers import StratiformLayer, ThicknessAdvection
-from warpsky.scene.lights import Sun
-from warpsky.scene.model import Camera, Scene
+from warpsky.core.errors import UsageError
+from warpsky.media.stratiform.stratiform_voxels import VOXEL_BUDGET, layer_grid, voxelize_layer
+from warpsky.media.stratiform.thickness import procedural_thickness, sample_thickness, signed_thickness
+from warpsky.model.lights import Sun
+from warpsky.model.scene import Camera, Scene
+from warpsky.model.stratiform import StratiformLayer, ThicknessAdvection
 
 KAPPA = 3.0e8 * math.pi * 7.0e-6**2  # the default layer's extinction [1/m]
 
@@ -92,7 +93,7 @@ def test_bounds_keep_the_same_columns_and_the_budget_is_refused():
 
 def test_advected_layer_is_voxelised_at_its_time():
     """A wind-only advected map at t: the columns carry the thickness the stratiform pass samples at t."""
-    from warpsky.media.stratiform import at_time
+    from warpsky.media.stratiform.thickness import at_time
 
     layer = holey_layer(advection=ThicknessAdvection(wind_m_s=(12.0, -4.0)))
     t = 37.0
@@ -113,7 +114,7 @@ def delta_m_slab(tau: float, view_mu) -> tuple[np.ndarray, np.ndarray]:
     incidence by adding-doubling (tests/adding_doubling.py) with the tabulated phase function, delta-M truncated:
     the diffraction peak below 5° (a fraction f of the scattering) is counted as unscattered light, so the slab has
     optical depth (1 - f) τ and the rest of the table renormalised. Checked against the photon Monte Carlo of the
-    unmodified table (warpsky.evaluation.stratiform_reference, 4e6 photons, τ = 2): the bins' radiances agree within
+    unmodified table (evaluation.stratiform_reference, 4e6 photons, τ = 2): the bins' radiances agree within
     0.5 %, from 5 to 10° cuts alike."""
     from adding_doubling import slab_radiance
 
@@ -137,7 +138,7 @@ def test_flat_layer_against_the_slab_solution(device):
     radiance reflected at 60° from the vertical and transmitted at 45.6° (μ = 0.5, 0.7) equals the delta-M
     adding-doubling slab within noise (z < 4, the reference's 0.5 % added in quadrature; measured on the CPU:
     -0.6 % +- 2.1 % and +1.3 % +- 1.2 %), and the noise is small enough (< 3 %) for a 13 % error to fail."""
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     tau, height = 2.0, 10.0
     layer = StratiformLayer(np.full((2, 2), height, np.float32), 0.0, (-1.0e4, -1.0e4), (2.0e4, 2.0e4),
@@ -165,8 +166,8 @@ def test_halving_the_voxels_changes_a_cloudy_region_by_under_5_percent(device):
     """A broken 100 m deck (τ up to 4.6) seen from the ground, the sun 50° up: halving both automatic voxel edges
     (62.5 m x 3.125 m) changes the mean radiance of the pixels the cloud covers by less than 5 % (measured on the
     CPU: -0.2 % +- 1.1 %); the standard error of the difference stays below a third of that."""
-    from warpsky.techniques.path_tracer.layer_media import layer_voxel_sizes
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
+    from warpsky.techniques.path_tracer.stratiform_media import layer_voxel_sizes
 
     thickness = procedural_thickness(32, cover=0.9, max_thickness=100.0, seed=5, feature_texels=6.0)
     layer = StratiformLayer(thickness, 1000.0, (-2000.0, -2000.0), (4000.0, 4000.0))
@@ -223,9 +224,9 @@ def test_error_vs_time_judges_the_stratiform_pass(tmp_path, monkeypatch):
     voxelised layer; the ground's albedo map is left out of both sides."""
     from test_stratiform_scene import write_layer_stage
 
-    from warpsky.evaluation import error_vs_time
-    from warpsky.evaluation.error_vs_time import STRATIFORM_ROW, format_table, run_report
-    from warpsky.scene.usd import StageReader
+    from evaluation import error_vs_time
+    from evaluation.error_vs_time import STRATIFORM_ROW, format_table, run_report
+    from warpsky.usd.stage import StageReader
 
     monkeypatch.setattr(error_vs_time, "cache_dir", lambda: tmp_path / "cache")  # the reference only: not the optics
     scene = StageReader(write_layer_stage(tmp_path / "layer.usda")).scene_at(None)

@@ -1,4 +1,5 @@
-"""The sun's transmittance through stratiform layers on the device (:mod:`warpsky.media.layer_shadow`) against the
+"""The sun's transmittance through stratiform layers on the device (:mod:`warpsky.media.stratiform.stratiform_shadow`)
+against the
 host's closed form, and the fog pass's sunlight in a layer's shadow."""
 
 from __future__ import annotations
@@ -10,12 +11,12 @@ import numpy as np
 import warp as wp
 from conftest import look_rotation
 
-from warpsky.media.layer_shadow import LayerShadows, layer_shadows, layers_sun_transmittance
-from warpsky.media.stratiform import layer_sun_transmittance
+from warpsky.media.stratiform.stratiform_shadow import LayerShadows, layer_shadows, layers_sun_transmittance
+from warpsky.media.stratiform.thickness import layer_sun_transmittance
+from warpsky.model.fog import AnalyticFog, ConstantTerm
+from warpsky.model.scene import Camera, Scene, Sun
+from warpsky.model.stratiform import StratiformLayer
 from warpsky.passes.fog.fog import Fog
-from warpsky.scene.analytic_fog import AnalyticFog, ConstantTerm
-from warpsky.scene.layers import StratiformLayer
-from warpsky.scene.model import Camera, Scene, Sun
 
 
 @wp.kernel

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from conftest import StageSpec, look_rotation, path_traced, write_stage
 
-from warpsky.scene.usd import StageReader
+from warpsky.usd.stage import StageReader
 
 mitsuba = pytest.importorskip("mitsuba", reason="the compare extra (pip install warpsky[compare]) is not installed")
 
 
 def test_path_tracer_agrees_with_mitsuba_volpath(tmp_path):
-    from warpsky.evaluation import mitsuba as bridge
+    from evaluation import mitsuba as bridge
 
     rng = np.random.default_rng(0)
     density = (0.2 + rng.random((8, 8, 8))).astype(np.float32)
@@ -36,8 +36,8 @@ def test_path_tracer_agrees_with_mitsuba_volpath(tmp_path):
 
 
 def test_export_refuses_what_it_cannot_express(tmp_path, homogeneous_npy):
-    from warpsky.errors import UsageError
-    from warpsky.evaluation.mitsuba import scene_dict
+    from evaluation.mitsuba import scene_dict
+    from warpsky.core.errors import UsageError
 
     spec = StageSpec(volume_file=homogeneous_npy, ground=(-20.0, 0.3))
     scene = StageReader(write_stage(tmp_path / "g.usda", spec)).scene_at(None)

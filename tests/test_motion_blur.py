@@ -7,10 +7,10 @@ import pytest
 from conftest import run_cli as run
 
 import warpsky
-from warpsky.errors import SceneError
-from warpsky.motion import sub_frame_options, sub_frame_times
+from warpsky.core.errors import SceneError
 from warpsky.output.exr import read_exr
-from warpsky.render import RenderOptions
+from warpsky.render.frame import RenderOptions
+from warpsky.render.motion import sub_frame_options, sub_frame_times
 
 FAST = {"technique": "single_scatter", "resolution": (24, 16), "device": "cpu", "settings": {"step_length": "1"}}
 

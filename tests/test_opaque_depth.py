@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
-from warpsky.composite import composite
+from warpsky.model.scene import Camera, Scene, Sun, VoxelMedium
+from warpsky.model.terrain import TerrainMesh
+from warpsky.passes.composite import composite
 from warpsky.passes.frame import render_layers
-from warpsky.plan import make_plan
-from warpsky.scene.model import Camera, Scene, Sun, VoxelMedium
-from warpsky.scene.terrain import TerrainMesh
+from warpsky.render.plan import make_plan
 
 SIZE = 24
 SIGMA = 0.05  # 1/m

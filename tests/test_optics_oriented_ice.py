@@ -28,7 +28,7 @@ import math
 import numpy as np
 import pytest
 
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
 from warpsky.optics.grid import angle_grid, sphere_integral
 from warpsky.optics.ice import DIFFRACTED_SHARE, HABITS, diffraction_phase, ice_optics
 from warpsky.optics.oriented_ice import (

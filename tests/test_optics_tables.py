@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
 from warpsky.optics import analytic
 from warpsky.optics.grid import angle_grid, cumulative, normalise, sphere_integral
 

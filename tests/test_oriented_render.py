@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
 from warpsky.optics.grid import angle_grid
 from warpsky.optics.ice import ice_refractive_index
 from warpsky.optics.oriented_phase import frame_slices, oriented_media
-from warpsky.plan import make_plan
-from warpsky.scene.usd import StageReader
+from warpsky.render.plan import make_plan
+from warpsky.usd.stage import StageReader
 
 SUN_ELEVATION = 10.0  # deg
 WIDTH, HEIGHT = 96, 64

@@ -10,7 +10,7 @@ from test_oriented_render import PLATES
 
 from warpsky.optics import oriented_sampling
 from warpsky.optics.oriented_sampling import OrientedTables, directional_sample, directional_value
-from warpsky.scene.usd import StageReader
+from warpsky.usd.stage import StageReader
 
 ELEVATIONS = (0.0, 30.0, 60.0, 90.0)
 PHOTONS = 300_000

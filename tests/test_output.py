@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from warpsky.batch.frames import FramePattern, parse_frame_spec
-from warpsky.errors import UsageError
-from warpsky.output.exr import OutputError, read_exr, validate_exr, write_exr
+from warpsky.core.errors import OutputError, UsageError
+from warpsky.output.exr import read_exr, validate_exr, write_exr
 from warpsky.output.png import tonemap, write_png
 
 
@@ -126,7 +126,7 @@ def test_previews_go_through_the_filmic_view_with_an_automatic_exposure(tmp_path
     so a frame of a bright cloud in a dimmer sky shows the cloud near white with under 1 % of pixels clipped; the
     simple view is the old curve; an unknown view is refused with the choices."""
     pytest.importorskip("PyOpenColorIO")
-    from warpsky.errors import UsageError
+    from warpsky.core.errors import UsageError
     from warpsky.output.png import AUTO_LEVEL, DEFAULT_VIEW, SIMPLE_VIEW, auto_exposure, check_view, encode, views
 
     assert DEFAULT_VIEW in views() and SIMPLE_VIEW in views()
@@ -151,7 +151,7 @@ def test_previews_go_through_the_filmic_view_with_an_automatic_exposure(tmp_path
 def test_the_default_view_needs_no_opencolorio(monkeypatch):
     """Without OpenColorIO the default view is accepted (shown through the simple curve, so ``warpsky info`` and a
     render without --view work on a machine without the color extra); OpenColorIO's other views are refused."""
-    from warpsky.errors import UsageError
+    from warpsky.core.errors import UsageError
     from warpsky.output import png
 
     monkeypatch.setattr(png, "views", lambda: (png.SIMPLE_VIEW,))

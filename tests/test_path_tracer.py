@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import StageSpec, add_field, look_rotation, path_traced, render_layer, write_stage
 
-from warpsky.scene.usd import StageReader
 from warpsky.techniques.path_tracer.majorants import majorant_grid
-from warpsky.techniques.path_tracer.technique import PathTracer
+from warpsky.techniques.path_tracer.path_tracer import PathTracer
+from warpsky.usd.stage import StageReader
 
 
 @pytest.fixture
@@ -122,7 +122,7 @@ def test_grazing_sun_over_ground_is_finite(box, device):
 
 
 def test_cli_writes_a_variance_aov(box, tmp_path):
-    from warpsky.cli import main
+    from warpsky.cli.main import main
     from warpsky.output.exr import read_exr
 
     stage = box()
@@ -140,8 +140,8 @@ def test_homogeneous_slab_against_adding_doubling(tmp_path, homogeneous_npy, dev
     diffusely transmitted at 45.6 deg, against adding-doubling (tests/adding_doubling.py) within 2%."""
     from adding_doubling import slab_radiance
 
+    from warpsky.model.scene import PhaseKind
     from warpsky.optics.phase import phase_numpy
-    from warpsky.scene.model import PhaseKind
 
     kind = PhaseKind.HG if phase == "hg" else PhaseKind.ISOTROPIC
     views = {"up": (0.0, 1.0), "oblique": (np.sin(np.radians(60)), 0.5), "below": (np.sin(np.arccos(0.7)), -0.7)}
@@ -168,7 +168,7 @@ def test_chromatic_extinction_is_unbiased_per_channel(box, device):
     1, 0.9, 0.7 the single-scattering estimator still equals the single-scatter technique in every channel."""
     import dataclasses
 
-    from warpsky.techniques.single_scatter.technique import SingleScatter, SingleScatterSettings
+    from warpsky.techniques.single_scatter.single_scatter import SingleScatter, SingleScatterSettings
 
     scene = StageReader(box()).scene_at(None)
     medium = dataclasses.replace(scene.media[0], extinction_scale=np.array([0.02, 0.05, 0.12]),
@@ -201,7 +201,7 @@ def test_ground_at_sea_level_is_drawn_with_air(tmp_path, homogeneous_npy, device
     atmosphere (Riley Eq. 12), times > 0.99 of air up to the camera; the ratio-tracked T_sun is noisy per pixel."""
     from conftest import add_atmosphere
 
-    from warpsky.media.air_analytic import sun_transmittance
+    from warpsky.media.air.analytic import sun_transmittance
 
     spec = StageSpec(volume_file=homogeneous_npy, volume_translate=(500.0, 40.0, 0.0), extinction_scale=0.1,
                      camera_position=(0.0, 50.0, 0.0), camera_rotation=look_rotation((0.0, -1.0, 0.0001)),
@@ -230,8 +230,8 @@ def test_similarity_continuation_leaves_an_isotropic_medium_unchanged(tmp_path, 
     transmitted radiance of a slab of optical depth 2 agree with the exact path tracer and with adding-doubling."""
     from adding_doubling import slab_radiance
 
+    from warpsky.model.scene import PhaseKind
     from warpsky.optics.phase import phase_numpy
-    from warpsky.scene.model import PhaseKind
 
     reflected, transmitted = slab_radiance(lambda c: phase_numpy(PhaseKind.ISOTROPIC, 0.0, c), 2.0, 1.0, [1.0, 0.7])
     for (sideways, mu), expected in (((0.0, 1.0), reflected[0]), ((np.sin(np.arccos(0.7)), -0.7), transmitted[1])):
@@ -252,8 +252,8 @@ def test_similarity_continuation_on_a_thick_forward_scattering_slab(tmp_path, ho
     exact tracer's collisions."""
     from adding_doubling import slab_radiance
 
+    from warpsky.model.scene import PhaseKind
     from warpsky.optics.phase import phase_numpy
-    from warpsky.scene.model import PhaseKind
 
     reflected, transmitted = slab_radiance(lambda c: phase_numpy(PhaseKind.HG, 0.85, c), 100.0, 1.0, [1.0, 0.7],
                                            nodes=96, doublings=30)
@@ -294,7 +294,7 @@ def test_forward_cut_agrees_with_exact_paths_and_removes_the_peak_noise(tmp_path
 def test_forward_cut_leaves_analytic_phases_alone_and_refuses_similarity(box, device):
     """Henyey-Greenstein media have no table to cut: the image is the exact one bit for bit. Cutting and
     high-order similarity together are refused by name."""
-    from warpsky.errors import UsageError
+    from warpsky.core.errors import UsageError
 
     stage = box(phase="hg", g=0.85, extinction_scale=0.5)
     exact = path_traced(stage, device, 8, spp=16, seed=2)

@@ -11,15 +11,15 @@ import pytest
 import warp as wp
 from scipy.integrate import quad
 
-from warpsky.media.air import Air, air_struct
-from warpsky.media.voxel import VoxelMedia, VoxelMediaBuffers
+from warpsky.media.air.medium import Air, air_struct
+from warpsky.media.voxels.voxel import VoxelMedia, VoxelMediaBuffers
+from warpsky.model.fog import AnalyticFog, BlobTerm, ConstantTerm, CosineTerm, PolynomialTerm
+from warpsky.model.scene import Camera, Ground, PhaseKind, Scene, Sun
 from warpsky.optics.phase import phase_numpy
 from warpsky.passes.fog.fog import Fog
-from warpsky.scene.analytic_fog import AnalyticFog, BlobTerm, ConstantTerm, CosineTerm, PolynomialTerm
-from warpsky.scene.model import Camera, Ground, PhaseKind, Scene, Sun
 from warpsky.techniques.path_tracer.fog_media import density_bound, fog_tracking
 from warpsky.techniques.path_tracer.majorants import Majorants, upload_majorants
-from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 from warpsky.techniques.path_tracer.tracking import delta_track_function
 
 #: The fog pass's quadrature at the accuracy of tests/test_analytic_fog.py (relative 1e-5).
@@ -158,7 +158,7 @@ def test_fog_slab_over_a_terrain_mesh_against_adding_doubling(device):
     """The same fog slab (g = 0.5) over a flat Lambertian mesh instead of the ground plane: the meshes and the fog
     meet in one walk (the mesh bounce's sunlight through the fog's closed-form transmittance), |z| < 3 against
     adding-doubling."""
-    from warpsky.scene.terrain import TerrainMesh
+    from warpsky.model.terrain import TerrainMesh
 
     half = 500.0  # wide enough for every path in the slab; its rays leave 2e-5 x (1 m + 707 m) = 1.4 cm off it
     floor = TerrainMesh("floor", np.array([[-half, 0.0, -half], [half, 0.0, -half], [half, 0.0, half],
@@ -178,7 +178,7 @@ def test_fogs_and_a_voxel_slab_mix_against_adding_doubling(tmp_path, homogeneous
     from adding_doubling import slab_radiance
     from conftest import StageSpec, look_rotation, write_stage
 
-    from warpsky.scene.usd import StageReader
+    from warpsky.usd.stage import StageReader
 
     mu = 0.7
     look = np.array([np.sqrt(1.0 - mu * mu), -mu, 0.0])
@@ -251,7 +251,7 @@ def test_dense_and_cancelling_fogs_stay_finite_and_bounded(kind, device):
 def test_plan_traces_fog_with_the_path_tracer_and_keeps_the_fog_pass_for_the_others():
     """With the path tracer the fog needs no fog pass (nor the surfaces pass for the ground); with the hybrid the
     fog pass draws it as before."""
-    from warpsky.plan import make_plan
+    from warpsky.render.plan import make_plan
 
     scene = Scene(fog_camera(), oblique_sun(), fogs=(varied_fog(),), ground=Ground(0.0))
     traced = make_plan(scene, technique="path_tracer", resolution=(8, 8))

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
+from warpsky.model.scene import Camera, Ground, Scene, Sun, VoxelMedium
+from warpsky.model.stratiform import GroundTexture
+from warpsky.model.terrain import TerrainMesh
 from warpsky.passes.frame import render_layers
-from warpsky.plan import make_plan
-from warpsky.scene.layers import GroundTexture
-from warpsky.scene.model import Camera, Ground, Scene, Sun, VoxelMedium
-from warpsky.scene.terrain import TerrainMesh
-from warpsky.techniques.path_tracer.technique import PathTracer
+from warpsky.render.plan import make_plan
+from warpsky.techniques.path_tracer.path_tracer import PathTracer
 
 UP = (0.0, 1.0, 0.0)
 DOWN = (0.0, -1.0, 0.0)

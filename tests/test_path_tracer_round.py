@@ -17,12 +17,12 @@ import pytest
 import warp as wp
 from conftest import look_rotation
 
-from warpsky.evaluation.sky_error import case_scene, direction
-from warpsky.media.air import Air, air_coefficient, air_struct
-from warpsky.scene.model import EARTH_RADIUS, Atmosphere, Camera, Ground, Scene, Sun
+from evaluation.sky_error import case_scene, direction
+from warpsky.media.air.medium import Air, air_coefficient, air_struct
+from warpsky.model.scene import EARTH_RADIUS, Atmosphere, Camera, Ground, Scene, Sun
 from warpsky.techniques.path_tracer.majorants import air_segment
+from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 from warpsky.techniques.path_tracer.planet import floor_hit
-from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
 
 #: Pixels across a frame and its field [deg] (narrow: the pixels' mean is the centre's radiance).
 PIXELS = 8

@@ -344,7 +344,7 @@ def Volume "Cloud"
 def test_many_ignored_prims_of_one_type_are_counted_in_one_line(tmp_path, scene, capsys):
     """Twelve Spheres (OpenUSD's sphereGrid has a hundred): five lines name the first five, one more counts the
     other seven with the first and last of their paths; warpsky info lists the same six."""
-    from warpsky.scene.usd_ignored import WARNED_PER_TYPE
+    from warpsky.usd.ignored import WARNED_PER_TYPE
 
     spheres = "\n".join(f'    def Sphere "S{k:02d}"\n    {{\n        double radius = 1\n    }}' for k in range(12))
     stage = tmp_path / "grid.usda"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import StageSpec, look_rotation, write_stage
 
-from warpsky.cli import main
+from warpsky.cli.main import main
 
 
 def _png(path):

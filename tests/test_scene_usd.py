@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import StageSpec, add_field, look_rotation, render_layer, write_stage
 
-from warpsky.scene.usd import StageReader
+from warpsky.usd.stage import StageReader
 
 
 def cloud_grid(tmp_path):
@@ -142,7 +142,7 @@ def test_species_fields_become_media_with_their_cross_sections(tmp_path, homogen
 def test_bad_quantity(tmp_path, homogeneous_npy, field, quantity, message):
     from pxr import Sdf, Usd
 
-    from warpsky.errors import SceneError
+    from warpsky.core.errors import SceneError
 
     path = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy))
     if field == "density":

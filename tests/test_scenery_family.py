@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
-from warpsky.evaluation.scenery_family import (
+from evaluation.scenery_family import (
     FOG_OPTICAL_DEPTH,
     FOGGY,
     KINDS,
@@ -19,7 +19,7 @@ from warpsky.evaluation.scenery_family import (
     make_scenery_family,
     plan_scenery,
 )
-from warpsky.scene.usd import StageReader
+from warpsky.usd.stage import StageReader
 
 
 @pytest.fixture(scope="module")
@@ -101,7 +101,7 @@ def test_sun_disk_pixels_are_left_out_of_the_measured_ones(family):
     """A sun straight ahead marks the few pixels round the image centre, a sun behind the camera none."""
     import dataclasses
 
-    from warpsky.evaluation.error_vs_time import sun_disk_pixels
+    from evaluation.error_vs_time import sun_disk_pixels
 
     scene = StageReader(family / _members(family)[0]["stage"]).scene_at(None)
     forward = -np.asarray(scene.camera.rotation, dtype=np.float64).reshape(3, 3)[:, 2]
@@ -115,7 +115,7 @@ def test_sun_disk_pixels_are_left_out_of_the_measured_ones(family):
 def test_error_vs_time_measures_a_fog_stage_without_media(family, tmp_path, monkeypatch):
     """bench error-vs-time accepts fog over terrain (no voxel media): the passes' rows against the traced fog,
     over every pixel but open sky, at 16 x 12."""
-    from warpsky.evaluation.error_vs_time import run_report
+    from evaluation.error_vs_time import run_report
 
     monkeypatch.setenv("WARPSKY_CACHE", str(tmp_path / "cache"))
     fog = next(m for m in _members(family) if m["kind"] == "thick_fog" and not m["air"])

@@ -1,5 +1,5 @@
 """The quadrature of the height-field pass's haze shafts against a finer march, and the rule that chooses the
-scenery passes' quadrature settings on a family's tune half (:mod:`warpsky.evaluation.scenery_settings`)."""
+scenery passes' quadrature settings on a family's tune half (:mod:`evaluation.scenery_settings`)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import math
 import numpy as np
 from conftest import look_rotation
 
-from warpsky.evaluation.scenery_settings import Measured, choose
-from warpsky.passes.heightfield.heightfield import HeightField, automatic_steps, shadow_feature
-from warpsky.scene.heightfield_clouds import HazeSpec, HeightFieldClouds
-from warpsky.scene.model import Camera, Scene, Sun
+from evaluation.scenery_settings import Measured, choose
+from warpsky.model.deck import HazeSpec, HeightFieldClouds
+from warpsky.model.scene import Camera, Scene, Sun
+from warpsky.passes.deck.deck import HeightField, automatic_steps, shadow_feature
 
 
 def shafts_scene() -> Scene:

@@ -10,8 +10,8 @@ from conftest import run_cli
 
 from warpsky.output.exr import read_exr
 from warpsky.passes.frame import depth_layers
-from warpsky.plan import make_plan
-from warpsky.scene.usd import StageReader
+from warpsky.render.plan import make_plan
+from warpsky.usd.stage import StageReader
 
 SUN_AND_CAMERA = """
     def Camera "Camera"
@@ -157,8 +157,8 @@ def test_stratiform_layer_shadows_points_below_it_along_the_slant_path():
     whose ray towards the sun passes beside the map, or above the base, is not."""
     import math
 
-    from warpsky.media.stratiform import layer_sun_transmittance
-    from warpsky.scene.layers import StratiformLayer
+    from warpsky.media.stratiform.thickness import layer_sun_transmittance
+    from warpsky.model.stratiform import StratiformLayer
 
     layer = StratiformLayer(np.full((8, 8), 100.0, np.float32), 1000.0, (-500.0, -500.0), (1000.0, 1000.0))
     sun = np.array([math.cos(math.radians(30.0)), 0.5, 0.0])
@@ -231,8 +231,8 @@ def test_the_analytic_sky_lights_surfaces_in_shadow_and_the_fog():
 
     from warpsky.light.dome import isotropic_ambient
     from warpsky.light.sky import sky_hemisphere, sky_light
-    from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
-    from warpsky.scene.terrain import TerrainMesh
+    from warpsky.model.scene import Atmosphere, Camera, Scene, Sun
+    from warpsky.model.terrain import TerrainMesh
 
     floor = TerrainMesh("floor", np.array([[-500.0, 0, -500], [-500, 0, 500], [500, 0, 500], [500, 0, -500]]),
                         np.array([[0, 1, 2], [0, 2, 3]]), np.full(3, 0.5))
@@ -262,9 +262,9 @@ def test_terrain_shadows_the_sunlit_fog():
 
     from conftest import look_rotation
 
-    from warpsky.scene.analytic_fog import AnalyticFog, ConstantTerm
-    from warpsky.scene.model import Camera, Scene, Sun
-    from warpsky.scene.terrain import TerrainMesh
+    from warpsky.model.fog import AnalyticFog, ConstantTerm
+    from warpsky.model.scene import Camera, Scene, Sun
+    from warpsky.model.terrain import TerrainMesh
 
     wall = TerrainMesh("wall", np.array([[0.0, -10, -500], [0, 400, -500], [0, 400, 500], [0, -10, 500]]),
                        np.array([[0, 1, 2], [0, 2, 3]]), np.full(3, 0.5))

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpsky.evaluation.sky_quadrature import BETA, GAMMA, cases, quadrature
-from warpsky.media import air_analytic as sky
+from evaluation.sky_quadrature import BETA, GAMMA, cases, quadrature
+from warpsky.media.air import analytic as sky
 
 
 @pytest.mark.slow

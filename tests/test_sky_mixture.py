@@ -1,4 +1,4 @@
-"""Aerosols and ozone in the air (warpsky.media.air_mixture, air_mixture_kernels, the path tracer's air): the ray
+"""Aerosols and ozone in the air (warpsky.media.air.mixture, air_mixture_kernels, the path tracer's air): the ray
 integrals against brute-force quadrature, the device against the host, energy conservation with absorption, the
 table and the path tracer against an independent layered adding-doubling sky, the USD attributes."""
 
@@ -13,14 +13,14 @@ from adding_doubling import stack_radiance
 from conftest import add_atmosphere
 from test_sky_multiple import sphere, sun_at
 
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
 from warpsky.light.sun import sunlight
-from warpsky.media import air_mixture
-from warpsky.media.air_analytic import AnalyticAir, air_sine, analytic_air
-from warpsky.media.air_mixture_kernels import air_optical_depth, air_scatter
-from warpsky.media.air_multiple import air_radiance
-from warpsky.scene.model import EARTH_AEROSOLS, EARTH_OZONE, Atmosphere, Camera, Ground, Scene, Sun
-from warpsky.scene.usd import StageReader
+from warpsky.media.air import mixture as air_mixture
+from warpsky.media.air.analytic import AnalyticAir, air_sine, analytic_air
+from warpsky.media.air.mixture_kernels import air_optical_depth, air_scatter
+from warpsky.media.air.multiple_kernels import air_radiance
+from warpsky.model.scene import EARTH_AEROSOLS, EARTH_OZONE, Atmosphere, Camera, Ground, Scene, Sun
+from warpsky.usd.stage import StageReader
 
 EARTH = Atmosphere(**EARTH_AEROSOLS, **EARTH_OZONE)
 
@@ -171,7 +171,7 @@ def test_the_sky_matches_a_layered_adding_doubling_sky(device):
     (grey air, aerosols of scale height 1.2 km, g = 0.6) at three view elevations: the table within 1.5 % (measured
     -1.01 % at 10 deg, -0.29 % at 45 deg, -0.06 % at 80 deg: its orders >= 3 are isotropic), the path tracer within
     3 sigma + 0.3 %."""
-    from warpsky.evaluation import sky_error as se
+    from evaluation import sky_error as se
 
     beta, mie, height, g = 1e-5, 1e-5, 1200.0, 0.6
     se.AIRS["test-grey"] = {"beta_sea_level": np.full(3, beta), "mie_scattering": np.full(3, mie),

@@ -1,5 +1,5 @@
-"""The air's multiple scattering (warpsky.media.air_multiple): energy conservation of the table's sky, the sky pass
-against the path tracer's air, the view table against per-ray integration, front + back = the whole ray, host and
+"""The air's multiple scattering (warpsky.media.air.multiple_kernels): energy conservation of the table's sky, the sky
+pass against the path tracer's air, the view table against per-ray integration, front + back = the whole ray, host and
 device alike."""
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ import pytest
 import warp as wp
 from conftest import look_rotation
 
-from warpsky.camera_rays import PinholeCamera, pinhole_camera, primary_ray
 from warpsky.light.sun import sunlight
-from warpsky.media import air_multiple
-from warpsky.media.air_analytic import transmittance
-from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
+from warpsky.media.air import multiple_kernels as air_multiple
+from warpsky.media.air.analytic import transmittance
+from warpsky.model.camera_rays import PinholeCamera, pinhole_camera, primary_ray
+from warpsky.model.scene import Atmosphere, Camera, Ground, Scene, Sun
 
 
 def sun_at(elevation_deg: float) -> np.ndarray:
@@ -105,7 +105,7 @@ def test_sky_pass_matches_the_path_traced_air(device, sun_elevation, view, albed
     """The sky pass (single scattering in closed form + the table) against the path tracer, which traces the same
     air with every order: within 2.5 % per channel plus 4 standard errors, on 8x8 pixels 1 deg across."""
     from warpsky.passes.sky.sky import Sky
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     scene = sky_scene(sun_elevation, albedo, view=view_at(*view), focal=2000.0, height=height)
     front, _ = Sky(device=device).render(scene, 8, 8)
@@ -172,7 +172,7 @@ def test_the_far_clip_does_not_end_the_air(device):
     and a 200 km far clip gives the same paths, bit for bit (the air beyond 1 km holds most of the horizon's
     light), and matches the sky pass, which never clipped the air."""
     from warpsky.passes.sky.sky import Sky
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     images = []
     for far in (1.0e3, 2.0e5):

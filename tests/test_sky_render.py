@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 from conftest import StageSpec, add_atmosphere, look_rotation, write_stage
 
-from warpsky.errors import SceneError
-from warpsky.scene.usd import StageReader
+from warpsky.core.errors import SceneError
+from warpsky.usd.stage import StageReader
 
 
 def frame(stage_path, device, width=16, height=16):
-    from warpsky.composite import composite
+    from warpsky.passes.composite import composite
     from warpsky.passes.frame import render_layers
-    from warpsky.plan import make_plan
-    from warpsky.techniques.single_scatter.technique import SingleScatter
+    from warpsky.render.plan import make_plan
+    from warpsky.techniques.single_scatter.single_scatter import SingleScatter
 
     scene = StageReader(stage_path).scene_at(None)
     plan = make_plan(scene, technique="single_scatter", resolution=(width, height), device=device)
@@ -64,7 +64,7 @@ def test_sky_scales_with_irradiance_and_night_is_black(tmp_path, device):
 
 
 def test_sun_disk_is_seen_through_the_air(tmp_path, device):
-    from warpsky.media.air_analytic import transmittance
+    from warpsky.media.air.analytic import transmittance
 
     sun = np.array([0.0, 0.5, -1.0]) / np.linalg.norm([0.0, 0.5, -1.0])
     spec = StageSpec(camera_position=(0.0, 0.0, 0.0), camera_rotation=look_rotation(sun), focal_length=2000.0,
@@ -79,8 +79,8 @@ def test_sun_disk_is_seen_through_the_air(tmp_path, device):
 
 
 def test_horizon_column_has_no_banding(device):
+    from warpsky.model.scene import Atmosphere, Camera, Scene, Sun
     from warpsky.passes.sky.sky import Sky
-    from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
 
     camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.0, 0.0, -1.0)), 50.0, 36.0, 36.0)
     scene = Scene(camera, Sun(np.array([0.3, 0.2, -1.0]) / np.linalg.norm([0.3, 0.2, -1.0]), np.ones(3)),
@@ -99,9 +99,9 @@ def test_horizon_column_has_no_banding(device):
 def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
     """The path tracer with the air as a medium, one bounce: Riley's analytic single-scattering sky within noise,
     and the analytic transmittance of the air to space."""
+    from warpsky.model.scene import Atmosphere, Camera, Scene, Sun
     from warpsky.passes.sky.sky import Sky
-    from warpsky.scene.model import Atmosphere, Camera, Scene, Sun
-    from warpsky.techniques.path_tracer.technique import PathTracer, PathTracerSettings
+    from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     camera = Camera("cam", np.array([0.0, 10.0, 0.0]), look_rotation((0.3, 0.9, -1.0)), 24.0, 36.0, 36.0)
     sun = Sun(np.array([-0.4, 0.25, -1.0]) / np.linalg.norm([-0.4, 0.25, -1.0]), np.ones(3))
@@ -121,9 +121,9 @@ def test_path_tracer_single_scattering_matches_the_analytic_sky(device):
 def test_front_air_transmittance_is_the_sky_passs_bit_for_bit(device, projection):
     """The front-air kernel and the sky pass share the ray's air: same transmittance to the last bit, looking up
     and down at a ground plane, with media at random depths in some pixels and none in others."""
+    from warpsky.model.scene import Atmosphere, Camera, Ground, Scene, Sun
     from warpsky.passes.sky.front import front_air_transmittance
     from warpsky.passes.sky.sky import Sky
-    from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
 
     aperture = (36.0, 36.0) if projection == "perspective" else (900.0, 600.0)  # [mm] film, [m] view window
     camera = Camera("cam", np.array([0.0, 400.0, 0.0]), look_rotation((0.2, -0.1, -1.0)), 18.0, *aperture,

@@ -1,5 +1,6 @@
-"""A round earth's air (warpsky.media.air_round*, the sky pass on it): the panel quadrature and the optical depth
-table against brute-force float64 quadrature, the sun's transmittance with each point's horizon, a planet of huge
+"""A round earth's air (warpsky.media.air.round_earth_kernels*, the sky pass on it): the panel quadrature and the
+optical depth table against brute-force float64 quadrature, the sun's transmittance with each point's horizon, a planet
+of huge
 radius against Riley's flat earth, twilight, the front transmittance shared with hybrid, the USD attribute."""
 
 from __future__ import annotations
@@ -12,13 +13,13 @@ import pytest
 import warp as wp
 from conftest import add_atmosphere
 
-from warpsky.errors import SceneError
-from warpsky.evaluation import sky_error as se
-from warpsky.media import air_round as ar
-from warpsky.media import air_round_host
-from warpsky.media.air_analytic import analytic_air
-from warpsky.scene.model import EARTH_AEROSOLS, EARTH_OZONE, EARTH_RADIUS, Atmosphere
-from warpsky.scene.usd import StageReader
+from evaluation import sky_error as se
+from warpsky.core.errors import SceneError
+from warpsky.media.air import round_earth as air_round_host
+from warpsky.media.air import round_earth_kernels as ar
+from warpsky.media.air.analytic import analytic_air
+from warpsky.model.scene import EARTH_AEROSOLS, EARTH_OZONE, EARTH_RADIUS, Atmosphere
+from warpsky.usd.stage import StageReader
 
 EARTH = Atmosphere(planet_radius=EARTH_RADIUS, **EARTH_AEROSOLS, **EARTH_OZONE)
 SMOOTH = Atmosphere(planet_radius=EARTH_RADIUS, **EARTH_AEROSOLS)  # no ozone: no kinks in the profile

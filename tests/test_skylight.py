@@ -29,12 +29,12 @@ from warpsky.light.skylight import (
     projection,
 )
 from warpsky.light.sun import sunlight
-from warpsky.media.air_analytic import inscatter, rayleigh
+from warpsky.media.air.analytic import inscatter, rayleigh
 from warpsky.passes.frame import render_layers
-from warpsky.plan import make_plan
-from warpsky.scene.usd import StageReader
-from warpsky.techniques.hybrid.technique import HybridSettings
+from warpsky.render.plan import make_plan
+from warpsky.techniques.hybrid.hybrid import HybridSettings
 from warpsky.techniques.slicing.occlusion import SkyShadow, sky_transmittances
+from warpsky.usd.stage import StageReader
 
 
 def scene_of(stage):
@@ -232,8 +232,8 @@ def test_slicing_occlusion_grid_holds_column_optical_depths(device):
     """Two stacked homogeneous boxes (extinction 0.3 and 0.1 /m, RGB 0.3 / 0.2 / 0.1 scaled): the grid's optical
     depth towards the zenith and nadir at every node equals sigma times the length of media above / below it, and
     the transmittances it gives a point between nodes are exp(-tau) of the interpolated depth."""
-    from warpsky.media.voxel import VoxelMediaBuffers
-    from warpsky.scene.model import VoxelMedium
+    from warpsky.media.voxels.voxel import VoxelMediaBuffers
+    from warpsky.model.scene import VoxelMedium
     from warpsky.techniques.slicing.occlusion import sky_shadow
 
     def box(name, y0, scale):

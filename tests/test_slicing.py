@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import StageSpec, add_field, look_rotation, render_layer, write_stage
 
-from warpsky.plan import make_plan
-from warpsky.scene.usd import StageReader
-from warpsky.techniques.slicing.technique import Slicing
+from warpsky.render.plan import make_plan
+from warpsky.techniques.slicing.slicing import Slicing
+from warpsky.usd.stage import StageReader
 
 
 def pixel_radius(scene, size: int, centre: np.ndarray) -> np.ndarray:
@@ -89,7 +89,8 @@ def smooth_blob(path, size: int = 16):
 def test_slice_count_convergence(tmp_path, device, equation):
     """|I_512 - I_256| <= 1/2 |I_256 - I_128|. Measured (12x12, cpu, defaults): equation 0 5.8e-7 then 1.26e-7
     (ratio 0.22: second order); Riley's Eq. 24 9.2e-6 then 4.5e-6 (0.49: first order), so it is held to the
-    issue's 1/2 with a 5% margin. `python benchmarks/bench_slicing.py --convergence` prints the longer sequence."""
+    issue's 1/2 with a 5% margin. `python evaluation/benchmarks/bench_slicing.py --convergence` prints the longer
+    sequence."""
     spec = StageSpec(volume_file=smooth_blob(tmp_path / "blob.npy"), extinction_scale=0.3,
                      camera_position=(3.0, 4.0, 42.0), camera_rotation=look_rotation((-0.05, -0.06, -1.0)),
                      sun_direction=(0.4, 0.8, 0.3), phase="hg", g=0.8)
@@ -226,7 +227,7 @@ def test_xi_per_volume_from_usd(tmp_path, homogeneous_npy, device):
     """``warpsky:slicing:xi`` on a Volume overrides the technique's ``xi`` for that medium only."""
     from pxr import Sdf, Usd
 
-    from warpsky.errors import SceneError
+    from warpsky.core.errors import SceneError
 
     spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.2, camera_position=(0.0, 0.0, 40.0),
                      sun_direction=(0.3, 0.8, 0.5), phase="hg", g=0.85)

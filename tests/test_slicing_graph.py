@@ -12,11 +12,11 @@ import warp as wp
 from conftest import StageSpec, look_rotation, write_stage
 from test_slicing import smooth_blob
 
-from warpsky import device_buffers
-from warpsky.plan import make_plan
-from warpsky.scene.usd import StageReader
+from warpsky.core import device_buffers
+from warpsky.render.plan import make_plan
 from warpsky.techniques.slicing import sweep
-from warpsky.techniques.slicing.technique import Slicing
+from warpsky.techniques.slicing.slicing import Slicing
+from warpsky.usd.stage import StageReader
 
 SIZE = 16
 SETTINGS = {"slice_count": "8", "light_resolution": "16"}

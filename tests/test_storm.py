@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from warpsky.cli import main
+from warpsky.cli.main import main
 from warpsky.output.exr import read_exr
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))

@@ -51,7 +51,7 @@ def test_albedo_one_conserves_energy_and_no_order_adds_energy():
 
 
 def test_device_1d_model_matches_host(device):
-    from warpsky.evaluation.stratiform_slab import order_energies_kernel
+    from evaluation.stratiform_slab import order_energies_kernel
 
     h, theta = (a.ravel() for a in np.meshgrid(THICKNESSES, ANGLES[:-1], indexing="ij"))
     host = model1d.order_energies(h, theta, kappa_s=0.025)
@@ -67,7 +67,7 @@ def test_device_1d_model_matches_host(device):
 
 
 def _terms(device, mu_l, mu_v, depth):
-    from warpsky.evaluation.stratiform_slab import slab_terms_kernel
+    from evaluation.stratiform_slab import slab_terms_kernel
 
     n = len(mu_l)
     with wp.ScopedDevice(device):
@@ -130,7 +130,7 @@ def test_slab_model_against_monte_carlo(slab_optics, device):
     in S events). Tolerances are the measured errors plus margin (see the printed table and the notes):
     single scattering is exact up to the 5° embedding; the 1D fits (Appendix B, fitted for the paper's phase
     function) drift most for thin slabs at grazing sun, where T_ms overshoots."""
-    from warpsky.evaluation.stratiform_compare import compare_case, format_table
+    from evaluation.stratiform_compare import compare_case, format_table
 
     cases = [compare_case(slab_optics, h, th, 100_000, seed=7, device=device)
              for h in (5.0, 100.0, 500.0) for th in (30.0, 70.0, 80.0)]

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from adding_doubling import slab_radiance
 
-from warpsky.evaluation.stratiform_reference import slab_monte_carlo
+from evaluation.stratiform_reference import slab_monte_carlo
+from warpsky.model.scene import PhaseKind
 from warpsky.optics.grid import angle_grid, normalise
 from warpsky.optics.phase import phase_numpy
-from warpsky.scene.model import PhaseKind
 
 
 @pytest.mark.parametrize("g,tau", [(0.0, 1.0), (0.8, 4.0)])

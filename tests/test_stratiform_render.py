@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
-from warpsky.media.stratiform import procedural_thickness
+from warpsky.media.stratiform.thickness import procedural_thickness
+from warpsky.model.scene import Atmosphere, Camera, Ground, Scene, Sun
+from warpsky.model.stratiform import GroundTexture, StratiformLayer
 from warpsky.passes.stratiform.stratiform import Stratiform, StratiformSettings
-from warpsky.scene.layers import GroundTexture, StratiformLayer
-from warpsky.scene.model import Atmosphere, Camera, Ground, Scene, Sun
 
 EXTENT = ((-10000.0, -10000.0), (20000.0, 20000.0))
 

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
-from warpsky.cli import main
-from warpsky.composite import merge_by_depth
-from warpsky.errors import SceneError
-from warpsky.layer import Layer
-from warpsky.media import stratiform
-from warpsky.media.stratiform import thickness_at_time
+from warpsky.cli.main import main
+from warpsky.core.errors import SceneError
+from warpsky.core.image import ImageLayer
+from warpsky.media.stratiform import thickness as stratiform
+from warpsky.media.stratiform.thickness import thickness_at_time
 from warpsky.output.exr import read_exr
-from warpsky.scene.usd import StageReader
+from warpsky.passes.composite import merge_by_depth
+from warpsky.usd.stage import StageReader
 
 SIZE = 20000.0  # [m] of the layer and the ground texture
 MAP = 32  # texels per side of the test thickness map
@@ -226,9 +226,9 @@ def test_merge_by_depth_orders_each_pixel():
     far = 1.0e6
     shape = (1, 2)
     near_first = np.array([[10.0, 50.0]], np.float32)
-    a = Layer(np.full((*shape, 3), 1.0, np.float32), np.full((*shape, 3), 0.5, np.float32), near_first)
-    b = Layer(np.full((*shape, 3), 2.0, np.float32), np.full((*shape, 3), 0.25, np.float32),
-              np.array([[20.0, 30.0]], np.float32))
+    a = ImageLayer(np.full((*shape, 3), 1.0, np.float32), np.full((*shape, 3), 0.5, np.float32), near_first)
+    b = ImageLayer(np.full((*shape, 3), 2.0, np.float32), np.full((*shape, 3), 0.25, np.float32),
+                   np.array([[20.0, 30.0]], np.float32))
     merged = merge_by_depth([a, b], far)
     # pixel 0: a in front (1 + 0.5 * 2 = 2); pixel 1: b in front (2 + 0.25 * 1 = 2.25)
     np.testing.assert_allclose(merged.radiance[0, :, 0], [2.0, 2.25])

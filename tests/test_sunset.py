@@ -15,10 +15,10 @@ import math
 import numpy as np
 import pytest
 
-from warpsky.composite import composite
+from warpsky.model.scene import Atmosphere, Camera, Ground, PhaseKind, PhaseModel, Scene, Sun, VoxelMedium
+from warpsky.passes.composite import composite
 from warpsky.passes.frame import render_layers
-from warpsky.plan import make_plan
-from warpsky.scene.model import Atmosphere, Camera, Ground, PhaseKind, PhaseModel, Scene, Sun, VoxelMedium
+from warpsky.render.plan import make_plan
 
 #: Sun elevations of the sequence [deg]: 1/24 deg apart, one frame exactly on the horizon.
 ELEVATIONS_DEG = np.linspace(-1.0, 1.0, 49)
@@ -64,7 +64,7 @@ def sunset_scene(elevation_deg: float, *, air: bool, layer: bool = False) -> Sce
     sun = Sun(sun_towards(elevation_deg), np.array([1.0, 0.97, 0.92]), math.radians(SUN_ANGLE_DEG))
     atmosphere = Atmosphere() if air else None
     if layer:
-        from warpsky.scene.layers import StratiformLayer
+        from warpsky.model.stratiform import StratiformLayer
 
         thickness = np.full((8, 8), 200.0, np.float32)
         thickness[2:5, 3:6] = 0.0  # a hole: shadow and light on the ground
@@ -160,7 +160,7 @@ def test_visible_fraction_is_the_segment_above_the_horizon():
 
 
 def test_air_mass_is_finite_and_continuous_through_the_horizon():
-    from warpsky.media.air_analytic import air_sine, horizon_air_mass
+    from warpsky.media.air.analytic import air_sine, horizon_air_mass
 
     gamma = 1.0 / 8000.0
     sines = np.linspace(-0.2, 0.3, 50001)

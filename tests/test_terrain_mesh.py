@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from conftest import look_rotation
 
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
+from warpsky.model.scene import Camera, Dome, Ground, Scene, Sun, VoxelMedium
+from warpsky.model.stratiform import GroundTexture
+from warpsky.model.terrain import TerrainMesh, read_mesh, read_meshes, triangulate
 from warpsky.passes.surfaces.surfaces import Surfaces
-from warpsky.scene.layers import GroundTexture
-from warpsky.scene.model import Camera, Dome, Ground, Scene, Sun, VoxelMedium
-from warpsky.scene.terrain import TerrainMesh, read_mesh, read_meshes, triangulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
 import make_terrain  # noqa: E402
@@ -268,7 +268,7 @@ def _stage(tmp_path, *, up="Y", mpu=1.0):
 
 
 def _reader(stage):
-    from warpsky.scene.usd import StageReader
+    from warpsky.usd.stage import StageReader
 
     stage.GetRootLayer().Save()
     return StageReader(stage.GetRootLayer().realPath)

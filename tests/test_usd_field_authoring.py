@@ -12,10 +12,10 @@ import pytest
 from conftest import StageSpec, render_layer, write_stage
 from test_formats import needs_tools
 
-from warpsky.cli import main
-from warpsky.errors import SceneError
-from warpsky.media.fields import load_field
-from warpsky.scene.usd import StageReader
+from warpsky.cli.main import main
+from warpsky.core.errors import SceneError
+from warpsky.media.voxels.fields import load_field
+from warpsky.usd.stage import StageReader
 
 pytestmark = needs_tools
 ASSET = "/World/Cloud/density"

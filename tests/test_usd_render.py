@@ -380,7 +380,7 @@ def test_husk_tokens_ff_fps_and_a_frame_directory(tmp_path, stage, capsys, monke
     a frame placeholder in a directory name puts each frame in its directory and the shot's log beside them."""
     from pxr import Usd
 
-    from warpsky.scene.usd_render import frame_placeholder
+    from warpsky.usd.render_settings import frame_placeholder
 
     assert frame_placeholder("img.$FF.exr") == "img.#.exr"
     assert frame_placeholder("$FPS_a.$F4.exr", 24.0) == "24_a.####.exr"

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import warpsky
-from warpsky.media.fields import load_vector_field
-from warpsky.media.velocity import advected_grid
+from warpsky.media.voxels.fields import load_vector_field
+from warpsky.media.voxels.velocity import advected_grid
 
 FAST = {"technique": "single_scatter", "resolution": (32, 16), "device": "cpu", "settings": {"step_length": "0.5"}}
 #: A speed [m/s] that moves the blob 8 voxels (of 1 m) per frame at 24 frames per second.

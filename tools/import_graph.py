@@ -10,27 +10,24 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent.parent / "warpsky"
 
-#: The layers, bottom first: a module imports only from its own layer or those below (docs/architecture.md).
-#: Longest prefix wins, so the stage readers (``scene.usd*``) sit above the media and optics whose file loaders
-#: they use, while the scene's plain dataclasses sit at the bottom.
+#: The layers, bottom first: each is one or two folders of the package (the application also holds the package's
+#: top-level modules), and a module imports only from its own layer or those below (docs/architecture.md).
 LAYERS = (
-    ("core", ("warpsky.errors", "warpsky.version", "warpsky.interrupt", "warpsky.files", "warpsky.settings",
-              "warpsky.device", "warpsky.device_buffers", "warpsky.kernel_variants", "warpsky.numerics",
-              "warpsky.layer", "warpsky.resources")),
-    ("scene", ("warpsky.scene", "warpsky.camera_rays", "warpsky.output")),
-    ("optics", ("warpsky.optics",)),
-    ("media", ("warpsky.media", "warpsky.surfaces")),
-    ("stage", tuple(f"warpsky.scene.{name}" for name in ("usd", "usd_composition", "usd_ignored", "usd_layers",
-                                                         "usd_lights", "usd_prims", "usd_render", "usd_scenery",
-                                                         "usd_surfaces", "usd_volumes"))),
-    ("light", ("warpsky.light",)),
-    ("composite", ("warpsky.composite",)),
-    ("techniques and passes", ("warpsky.techniques", "warpsky.passes")),
-    ("plan", ("warpsky.registry", "warpsky.plan", "warpsky.kernel_cache")),
-    ("frame, batch, cli", ("warpsky", "warpsky.render", "warpsky.api", "warpsky.batch", "warpsky.evaluation",
-                           "warpsky.cli", "warpsky.cli_options", "warpsky.cli_info", "warpsky.kernel_registry",
-                           "warpsky.__main__")),
+    ("core", ("core",)),
+    ("model", ("model",)),
+    ("output", ("output",)),
+    ("surfaces", ("surfaces",)),
+    ("optics", ("optics",)),
+    ("media", ("media",)),
+    ("usd", ("usd",)),
+    ("light", ("light",)),
+    ("passes and techniques", ("passes", "techniques")),
+    ("render", ("render",)),
+    ("batch", ("batch",)),
+    ("cli and api", ("cli", "", "api", "__main__")),
 )
+
+
 def modules() -> dict[str, Path]:
     out = {}
     for path in PACKAGE.rglob("*.py"):
@@ -64,11 +61,10 @@ def imports(modules: dict[str, Path]) -> dict[str, set[str]]:
 
 
 def layer_of(module: str) -> int:
-    best = None
-    for rank, (_, prefixes) in enumerate(LAYERS):
-        for prefix in prefixes:
-            if (module == prefix or module.startswith(prefix + ".")) and (best is None or len(prefix) > best[1]):
-                best = (rank, len(prefix))
-    if best is None:
-        raise KeyError(f"{module} is in no layer of LAYERS")
-    return best[0]
+    """The rank in :data:`LAYERS` of ``module``'s top-level folder (``""`` for the package itself)."""
+    parts = module.split(".")
+    top = parts[1] if len(parts) > 1 else ""
+    for rank, (_, folders) in enumerate(LAYERS):
+        if top in folders:
+            return rank
+    raise KeyError(f"{module}: the folder {top!r} is in no layer of LAYERS")

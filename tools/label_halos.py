@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     from PIL import Image, ImageDraw, ImageFont
 
     from warpsky.optics.ice import ice_refractive_index
-    from warpsky.scene.usd import StageReader
+    from warpsky.usd.stage import StageReader
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("stage", help="the rendered USD stage")

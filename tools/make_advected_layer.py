@@ -33,8 +33,8 @@ def main(argv=None) -> int:
 
     import numpy as np
 
-    from warpsky.device import init_warp, resolve_device
-    from warpsky.media.advection import AdvectedTexture, Flow2D, periodic_noise
+    from warpsky.core.device import init_warp, resolve_device
+    from warpsky.media.advection.advection import AdvectedTexture, Flow2D, periodic_noise
 
     init_warp()
     size = 128 if args.test else args.size

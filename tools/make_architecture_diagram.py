@@ -22,7 +22,7 @@ BLUE, INK, SAND, BROWN = "#eef4fb", "#14324d", "#fbf3e8", "#5a3a12"
 
 def flow_boxes() -> list[tuple[str, str]]:
     """(title, text) of each step of a frame, left to right; the passes as the registry orders them."""
-    from warpsky.registry import pass_classes, technique_names
+    from warpsky.render.registry import pass_classes, technique_names
 
     passes = []
     for cls in pass_classes():
@@ -31,11 +31,11 @@ def flow_boxes() -> list[tuple[str, str]]:
     return [
         ("stage", "USD stage\n.usda .nvdb .vdb .npy"),
         ("scene", "scene/usd*: StageReader\nScene: dataclasses, SI, Y up"),
-        ("plan", "plan.py + registry.py\nRenderPlan: technique, passes,\nsettings, features, costs"),
+        ("plan", "render/plan.py + render/registry.py\nRenderPlan: technique, passes,\nsettings, features, costs"),
         ("light", "light/: sun above the air +\ntransmittance, dome, sky light,\nskylight (FrameLight)"),
         ("passes", "passes/frame.py, in order:\n" + "\n".join(passes)),
         ("technique", "techniques/<name>:\n" + "\n".join(technique_names())),
-        ("composite", "composite.py\nlayers front to back"),
+        ("composite", "passes/composite.py\nlayers front to back"),
         ("output", "output/: EXR (atomic),\nPNG, products"),
     ]
 
@@ -72,8 +72,8 @@ def draw_flow(ax, boxes) -> None:
                         arrowprops={"arrowstyle": "->", "color": INK, "lw": 1.2})
     ax.add_patch(FancyBboxPatch((-0.45, -0.8), len(boxes) - 0.1, 0.35, boxstyle="round,pad=0.02", fc=SAND,
                                 ec=BROWN))
-    ax.text((len(boxes) - 1) / 2, -0.62, "cli.py → batch/ (frame lists, resume, Dask) → render.py: read the stage, "
-            "plan, run the passes per light, composite, write; a failed frame never costs finished ones",
+    ax.text((len(boxes) - 1) / 2, -0.62, "cli/main.py → batch/ (frame lists, resume, Dask) → render/frame.py: read the "
+            "stage, plan, run the passes per light, composite, write; a failed frame never costs finished ones",
             ha="center", va="center", fontsize=8.5, color=BROWN)
 
 

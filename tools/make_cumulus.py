@@ -2,7 +2,7 @@
 
 A cumulus congestus 2.4 km across: soft spheres (a central tower, shoulders low and wide, turrets biased upwards)
 give the macro shape; cauliflower billows of inverted cellular noise, a wispy, eroded edge and a flat base come
-from :mod:`warpsky.evaluation.billows` (one Warp kernel). Values in [0, 1]. ``usd_scenes/cumulus.usda``
+from :mod:`evaluation.billows` (one Warp kernel). Values in [0, 1]. ``usd_scenes/cumulus.usda``
 references ``data/cumulus.nvdb``. The default 192 x 128 x 192 grid (12.5 m voxels) takes a few seconds.
 
 ``--shape spheres --res 96`` writes the earlier demo field instead (soft spheres eroded by value noise, no billows),
@@ -21,8 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.evaluation.billows import billow_grid_numpy
-from warpsky.evaluation.family_shapes import fbm, soft_spheres, with_turrets
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+
+from evaluation.billows import billow_grid_numpy  # noqa: E402
+from evaluation.family_shapes import fbm, soft_spheres, with_turrets  # noqa: E402
 
 #: Cloud footprint [m] along x and z, and height [m] along y; the grid spans this box.
 EXTENT_XZ = 2400.0
@@ -71,7 +74,7 @@ def cumulus_density(resolution: int = RESOLUTION, seed: int = 7, kind: str = "bi
 def write_all(out: Path, resolution: int, seed: int, kind: str = "billows") -> list[Path]:
     import warp as wp
 
-    from warpsky.device import init_warp
+    from warpsky.core.device import init_warp
 
     init_warp()
     out.mkdir(parents=True, exist_ok=True)

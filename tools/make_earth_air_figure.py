@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def flat_rayleigh(text: str) -> str:
     """The stage text without the Earth's attributes: Riley's flat earth of pure Rayleigh air."""
-    from warpsky.scene.model import EARTH_AIR_ATTRIBUTES
+    from warpsky.model.scene import EARTH_AIR_ATTRIBUTES
 
     for name in EARTH_AIR_ATTRIBUTES:
         text = re.sub(rf"\n\s*custom \w+ warpsky:atmosphere:{name} = [^\n]*", "", text)

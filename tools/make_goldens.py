@@ -72,7 +72,7 @@ def write_inputs(folder: Path) -> dict[str, Path]:
     import make_storm
     import make_stratocumulus
 
-    from warpsky.media.stratiform import procedural_thickness
+    from warpsky.media.stratiform.thickness import procedural_thickness
 
     data = folder / "data"
     make_cumulus.write_all(data, 20, 7)
@@ -92,7 +92,7 @@ def write_inputs(folder: Path) -> dict[str, Path]:
 
 def render_case(case: Case, stages: dict[str, Path], folder: Path) -> dict[str, np.ndarray]:
     """Render ``case`` through the command line (32-bit float EXR, CPU) and read it back."""
-    from warpsky.cli import main
+    from warpsky.cli.main import main
     from warpsky.output.exr import read_exr
 
     out = folder / "out" / f"{case.name}.####.exr"
@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", default=None, help="comma-separated case names (e.g. cumulus-slicing)")
     args = parser.parse_args(argv)
     cases = [c for c in CASES if args.only is None or c.name in args.only.split(",")]
-    from warpsky.device import init_warp
+    from warpsky.core.device import init_warp
 
     init_warp()
     GOLDEN.mkdir(parents=True, exist_ok=True)

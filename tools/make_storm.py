@@ -168,7 +168,7 @@ def write_frames(out: Path, frames: int, res: int, seed: int = 11, *, only: list
     """Write every field of every frame (1-based) as ``out/<field>.<frame>.nvdb``."""
     import warp as wp
 
-    from warpsky.device import init_warp
+    from warpsky.core.device import init_warp
 
     init_warp()
     out.mkdir(parents=True, exist_ok=True)
@@ -204,7 +204,7 @@ def write_stage(path: Path, data: Path, frames: int) -> Path:
 
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdRender, UsdVol
 
-    from warpsky.scene.usd_authoring import author_earth_air
+    from warpsky.usd.authoring import author_earth_air
 
     stage = Usd.Stage.CreateInMemory()
     stage.GetRootLayer().documentation = (

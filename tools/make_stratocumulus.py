@@ -107,7 +107,7 @@ def Xform "World"
 
 def render(stage: Path, out: Path, *, width: int, device: str) -> int:
     """``warpsky render`` the still stage with radiosity on and off (EXR + PNG each); returns the exit code."""
-    from warpsky.cli import main as warpsky
+    from warpsky.cli.main import main as warpsky
 
     for radiosity in ("on", "off"):
         args = ["render", str(stage), str(out / f"stratocumulus-radiosity-{radiosity}.exr"), "--res", str(width),
@@ -150,8 +150,8 @@ def main(argv=None) -> int:
     if args.radiosity_light is not None:
         write_radiosity_light(args.radiosity_light)
         return 0
-    from warpsky.media.stratiform import procedural_thickness
-    from warpsky.scene.usd_authoring import earth_air_lines
+    from warpsky.media.stratiform.thickness import procedural_thickness
+    from warpsky.usd.authoring import earth_air_lines
 
     data = args.out / "stratocumulus"
     data.mkdir(parents=True, exist_ok=True)

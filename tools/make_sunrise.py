@@ -24,7 +24,7 @@ def main(argv=None) -> int:
 
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdVol
 
-    from warpsky.scene.usd_authoring import author_earth_air
+    from warpsky.usd.authoring import author_earth_air
 
     stage = Usd.Stage.CreateInMemory()
     stage.GetRootLayer().documentation = (

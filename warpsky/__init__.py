@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import warp as _wp
 
-from warpsky.errors import SceneError, UsageError, WarpskyError
-from warpsky.version import __version__
+from warpsky.core.errors import SceneError, UsageError, WarpskyError
+from warpsky.core.version import __version__
 
 _wp.config.enable_backward = False
 

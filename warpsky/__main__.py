@@ -1,5 +1,5 @@
 import sys
 
-from warpsky.cli import main
+from warpsky.cli.main import main
 
 sys.exit(main())

@@ -18,22 +18,22 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
-from warpsky.errors import SceneError, UsageError
+from warpsky.core.errors import SceneError, UsageError
 from warpsky.output.color import DEFAULT_COLORSPACE, check_colorspace, resolve_colorspace
 from warpsky.output.products import FULL_WINDOW
-from warpsky.registry import DEFAULT_TECHNIQUE, aov_components
-from warpsky.render import RenderedImage, RenderOptions, plan_frame, render_image, write_frame
-from warpsky.scene.usd_render import ProductSpec, RenderSpec, read_render_spec
+from warpsky.render.frame import RenderedImage, RenderOptions, plan_frame, render_image, write_frame
+from warpsky.render.registry import DEFAULT_TECHNIQUE, aov_components
+from warpsky.usd.render_settings import ProductSpec, RenderSpec, read_render_spec
 
 
 def render_options(*, technique: str = DEFAULT_TECHNIQUE, resolution=None, camera: str | None = None,
                    device: str = "auto", settings: dict | None = None, colorspace: str | None = None,
                    load: str = "all", variants=(), purposes=None, **more) -> RenderOptions:
-    """:class:`~warpsky.render.RenderOptions` from keyword arguments; ``resolution`` is (width, height), (width,
+    """:class:`~warpsky.render.frame.RenderOptions` from keyword arguments; ``resolution`` is (width, height), (width,
     None) or a width; ``variants`` are (set, selection) pairs or ``"SET=SELECTION"`` strings; the rest
     (``half``, ``png``, ``exposure``, ``max_memory``, ``work_limit``, ``deep``, ``deep_samples``) pass through."""
-    from warpsky.device import resolve_device
-    from warpsky.scene.usd_composition import StageOptions, parse_variant
+    from warpsky.core.device import resolve_device
+    from warpsky.usd.composition import StageOptions, parse_variant
 
     if isinstance(resolution, int):
         resolution = (resolution, None)
@@ -93,7 +93,7 @@ def with_product(options: RenderOptions, product: ProductSpec, *, explicit: set[
 def open_stage(stage, options: RenderOptions, settings_prim: str | None, *, explicit: set[str] = frozenset()):
     """(reader, render spec or None, options with the render settings applied): the stage opened with the options'
     composition, reopened when the settings' ``includedPurposes`` change what renders."""
-    from warpsky.scene.usd import StageReader
+    from warpsky.usd.stage import StageReader
 
     reader = StageReader(stage, options.stage)
     spec = read_render_spec(reader.stage, settings_prim, reader.meters_per_unit, aovs=aov_components())
@@ -105,7 +105,7 @@ def open_stage(stage, options: RenderOptions, settings_prim: str | None, *, expl
 
 def _planned(stage, time, product: str | None, settings_prim: str | None, kwargs: dict):
     """(reader, scene, plan, options) of one frame of ``stage``, with ``product``'s outputs when given."""
-    from warpsky.device import init_warp
+    from warpsky.core.device import init_warp
 
     init_warp()
     explicit = {k for k, v in kwargs.items() if v is not None}
@@ -126,7 +126,7 @@ def render_stage(stage: str | os.PathLike, time: float | None = None, *, product
 
     Keyword arguments are :func:`render_options`' (``technique``, ``resolution``, ``camera``, ``device``,
     ``settings``, ``colorspace``, ``load``, ``variants``, ``purposes``, ...). Returns a
-    :class:`~warpsky.render.RenderedImage`: ``frame.rgba`` / ``frame.transmittance`` / ``frame.depth`` /
+    :class:`~warpsky.render.frame.RenderedImage`: ``frame.rgba`` / ``frame.transmittance`` / ``frame.depth`` /
     ``frame.aovs``, the output's ``channels``, its ``metadata`` and OpenEXR ``attributes``.
     """
     reader, scene, plan, options = _planned(stage, time, product, settings_prim, kwargs)

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from warpsky.errors import UsageError
-from warpsky.files import PLACEHOLDER
+from warpsky.core.errors import UsageError
+from warpsky.core.files import PLACEHOLDER
 
 GRAMMAR = "examples: 1 | 1:48 | 1:48x2 | 1.5:3x0.5 | 1,5,9:12"
 

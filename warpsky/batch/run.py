@@ -26,14 +26,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from warpsky.batch.frames import PLACEHOLDER
-from warpsky.device import init_warp
-from warpsky.errors import UsageError, WarpskyError
-from warpsky.files import atomic_write
-from warpsky.interrupt import Interrupted, request_stop, sigint_ignored, stop_requested, stop_scope
+from warpsky.core.device import init_warp
+from warpsky.core.errors import UsageError, WarpskyError
+from warpsky.core.files import atomic_write
+from warpsky.core.interrupt import Interrupted, request_stop, sigint_ignored, stop_requested, stop_scope
 from warpsky.output.exr import validate_exr
 from warpsky.output.products import window_pixels
-from warpsky.render import check_outputs, plan_frame, settings_hash, write_frame
-from warpsky.scene.usd import StageReader
+from warpsky.render.frame import check_outputs, plan_frame, settings_hash, write_frame
+from warpsky.usd.stage import StageReader
 
 FAIL_FRAMES_ENV = "WARPSKY_FAIL_FRAMES"
 
@@ -45,7 +45,7 @@ class FrameJob:
     stage: str
     time_code: float | None
     out: str
-    options: object  # warpsky.render.RenderOptions
+    options: object  # warpsky.render.frame.RenderOptions
     overwrite: bool = False
     siblings: tuple = ()  # (out, RenderOptions) of products with the same camera and resolution: one render
 
@@ -335,8 +335,8 @@ def prepare_batch(jobs: list[FrameJob]) -> None:
     need other tables still build them themselves."""
     if not jobs or all(Path(job.out).is_file() and not job.overwrite for job in jobs):
         return  # nothing to render unless a finished frame is stale, which then builds what it needs itself
-    from warpsky.kernel_cache import compile_notice
     from warpsky.optics.prepare import prepare_tables
+    from warpsky.render.kernel_cache import compile_notice
 
     job = jobs[0]
     try:

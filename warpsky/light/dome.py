@@ -1,7 +1,7 @@
 """The dome (``UsdLuxDomeLight``) as kernels see it, and the ambient light the fast techniques take from it.
 
 The path tracer looks the dome up where a path escapes (:func:`dome_radiance`: a constant, or a bilinear lookup of
-the lat-long texture in the convention of :class:`~warpsky.scene.model.Dome`), so it integrates the dome exactly.
+the lat-long texture in the convention of :class:`~warpsky.model.scene.Dome`), so it integrates the dome exactly.
 The marching techniques (single_scatter, slicing, the stratiform layers) cannot afford that integral per sample:
 they light every point with the mean radiance L_mean arriving there (:func:`ambient_radiance`: the dome's mean over
 the sphere, solid-angle weighted; with a ground plane its lower half is the ground lit by the dome) as an ambient
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warpsky.numerics import exp3
+from warpsky.core.numerics import exp3
 
 
 @wp.struct
@@ -31,7 +31,7 @@ class DomeLight:
 
 
 def dome_struct(dome, device) -> DomeLight:
-    """Kernel view of a :class:`~warpsky.scene.model.Dome` (None: black, untextured); the texture is uploaded."""
+    """Kernel view of a :class:`~warpsky.model.scene.Dome` (None: black, untextured); the texture is uploaded."""
     out = DomeLight()
     out.color = wp.vec3(*(dome.color if dome is not None else np.zeros(3)).tolist())
     rotation = dome.rotation if dome is not None else np.eye(3)

@@ -3,7 +3,7 @@
 A frame whose air is drawn by a pass (the sky pass: Riley's analytic air around the media) lights its media, layers
 and scenery through that air: the sun arrives reddened by the air above them (Riley 2004, Eq. 12). The frame does
 not hand them a reddened sun. It hands the sun as it arrives at the top of the atmosphere, with the air's
-transmittance towards it in :attr:`~warpsky.scene.model.Sun.transmittance` (:meth:`FrameLight.lit_at_media`,
+transmittance towards it in :attr:`~warpsky.model.scene.Sun.transmittance` (:meth:`FrameLight.lit_at_media`,
 :meth:`FrameLight.lit_at`), taken once per frame. The kernels get the product (:func:`~warpsky.light.sun.sunlight`);
 whoever needs the sun before the air (a technique tracing the air, the sky's own light) takes
 :func:`~warpsky.light.sun.above_air`, which drops the factor instead of dividing it back out.
@@ -24,7 +24,7 @@ import numpy as np
 
 from warpsky.light.sky import sky_light
 from warpsky.light.sun import light_elevation_sine
-from warpsky.media.air_mixture import sunlight_transmittance
+from warpsky.media.air.mixture import sunlight_transmittance
 
 
 def media_altitude(scene) -> float:
@@ -74,7 +74,7 @@ class FrameLight:
             return np.ones(3)
         atm = scene.atmosphere
         if atm.round:
-            from warpsky.media import air_round_host
+            from warpsky.media.air import round_earth as air_round_host
 
             return air_round_host.sunlight_transmittance(
                 atm, air_round_host.scene_floor(scene), sea_level_altitude(atm), float(scene.sun.direction[1]),

@@ -2,8 +2,8 @@
 with a uniform-equivalent sky (the surfaces, fog and height-field passes).
 
 The sky's radiance along a direction above the horizon is the air to infinity as the sky pass draws it
-(:func:`~warpsky.media.air_multiple.air_radiance`: Riley's single scattering E_sun P_R(theta) inscatter(v) plus the
-multiple-scattering table's light), with the unreddened sun E_sun. Averaged on an equal-area grid of the upper
+(:func:`~warpsky.media.air.multiple_kernels.air_radiance`: Riley's single scattering E_sun P_R(theta) inscatter(v) plus
+the multiple-scattering table's light), with the unreddened sun E_sun. Averaged on an equal-area grid of the upper
 hemisphere it gives the mean radiance and E / pi, the uniform radiance that gives a horizontal surface the sky's
 irradiance.
 """
@@ -14,7 +14,7 @@ import numpy as np
 
 from warpsky.light.dome import hemisphere_directions, upper_hemisphere
 from warpsky.light.sun import lights_air, sunlight
-from warpsky.media.air_multiple import air_radiance
+from warpsky.media.air.multiple_kernels import air_radiance
 
 
 def sky_hemisphere(scene, samples: int = 64) -> tuple[np.ndarray, np.ndarray]:

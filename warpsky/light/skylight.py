@@ -7,7 +7,7 @@ comes from, world axes, Y up):
 * upper hemisphere (w_y > 0): the dome, and with a sky pass (an atmosphere the technique does not trace, a lit
   sun) Riley's single-scattering air to infinity seen from the media's altitude h,
   L_sky(w) = E_sun P_R(w . l) inscatter(h, w_y) plus the multiple-scattering table's light
-  (:func:`~warpsky.media.air_multiple.air_radiance`, what the sky pass draws and
+  (:func:`~warpsky.media.air.multiple_kernels.air_radiance`, what the sky pass draws and
   :func:`~warpsky.light.sky.sky_hemisphere` averages), from the sun as it
   arrives at the top of the air (the technique receives it reddened by the air above the media and
   :func:`~warpsky.light.sun.above_air` leaves that out). With an atmosphere the dome lies
@@ -49,9 +49,9 @@ import warp as wp
 from warpsky.light.dome import ambient_radiance, hemisphere_directions, upper_hemisphere
 from warpsky.light.frame import media_altitude
 from warpsky.light.sun import above_air, lights_air, sunlight
-from warpsky.media.air_mixture import transmittance as air_transmittance
-from warpsky.media.air_multiple import air_radiance
-from warpsky.media.voxel import MediaPoint, VoxelMedia
+from warpsky.media.air.mixture import transmittance as air_transmittance
+from warpsky.media.air.multiple_kernels import air_radiance
+from warpsky.media.voxels.voxel import MediaPoint, VoxelMedia
 from warpsky.optics.tables import mean_cosine
 
 #: Cells of the equal-area grid per hemisphere: SAMPLES x 2 SAMPLES.
@@ -99,14 +99,14 @@ def projection(radiance: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray
 def _upper_radiance(scene, atmosphere, light, directions: np.ndarray, altitude: float) -> np.ndarray:
     """(N, 3) radiance from the upper-hemisphere ``directions`` at ``altitude`` above sea level [m]: ``scene``'s
     dome (beyond the ``atmosphere``'s transmittance when there is one) plus, with the sunlight ``light``, the air as
-    the sky pass draws it (:func:`~warpsky.media.air_multiple.air_radiance`)."""
+    the sky pass draws it (:func:`~warpsky.media.air.multiple_kernels.air_radiance`)."""
     out = np.zeros((len(directions), 3))
     up = directions[:, 1:2]
     dome = scene.dome
     if dome is not None:
         dome = dome.radiance(directions)
         if atmosphere is not None and atmosphere.round:
-            from warpsky.media import air_round_host
+            from warpsky.media.air import round_earth as air_round_host
 
             dome = dome * air_round_host.space_transmittance(atmosphere, air_round_host.scene_floor(scene), altitude,
                                                              directions)
@@ -152,7 +152,7 @@ def media_environment(scene, *, traces_air: bool = False, samples: int = SAMPLES
         distance = max(altitude - floor, 0.0) / -down[:, 1]
         lower = np.zeros((len(down), 3))
         if albedo is not None and atmosphere.round:
-            from warpsky.media import air_round_host
+            from warpsky.media.air import round_earth as air_round_host
 
             lower = lower + albedo * ground_sky * air_round_host.floor_transmittance(
                 atmosphere, air_round_host.scene_floor(scene), altitude, down)
@@ -205,7 +205,7 @@ def environment_struct(environment: Environment | None, media, device) -> SkyEnv
     out.lower_moment = wp.mat33(*np.asarray(env.lower_moment, np.float64).reshape(-1).tolist())
     out.lower_lit = int(env.lower_lit)
     g = np.array([mean_cosine(m) for m in media], dtype=np.float32).reshape(-1, 3) if media else np.zeros((1, 3))
-    from warpsky import device_buffers
+    from warpsky.core import device_buffers
 
     out.asymmetry = device_buffers.upload("skylight:asymmetry", g.astype(np.float32), wp.vec3, device)
     return out

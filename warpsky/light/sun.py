@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.media.air_analytic import air_sine
-from warpsky.media.air_round_host import air_lit, scene_floor
+from warpsky.media.air.analytic import air_sine
+from warpsky.media.air.round_earth import air_lit, scene_floor
 
 
 def visible_fraction(elevation: float, radius: float) -> float:
@@ -94,7 +94,7 @@ def toward_elevation(direction: np.ndarray, elevation: float) -> np.ndarray:
 
 
 def sun_sunlight(sun, *, horizon: bool, gamma: float | None = None) -> Sunlight | None:
-    """The :class:`Sunlight` of a :class:`~warpsky.scene.model.Sun` (None: None) above a flat horizon when
+    """The :class:`Sunlight` of a :class:`~warpsky.model.scene.Sun` (None: None) above a flat horizon when
     ``horizon``; ``gamma`` [1/m] is the air's inverse scale height (None: no air)."""
     if sun is None:
         return None
@@ -112,7 +112,7 @@ def sun_sunlight(sun, *, horizon: bool, gamma: float | None = None) -> Sunlight 
 
 def round_sunlight(sun, atm, floor: float) -> Sunlight | None:
     """The :class:`Sunlight` of ``sun`` over a round earth: the whole disk along its centre, lit while any of it
-    stands above the horizon seen from the top of the air (:func:`~warpsky.media.air_round_host.air_lit`; each point
+    stands above the horizon seen from the top of the air (:func:`~warpsky.media.air.round_earth.air_lit`; each point
     takes its own horizon's share in its transmittance)."""
     if sun is None:
         return None
@@ -151,7 +151,7 @@ def light_elevation_sine(sun) -> float:
 
 
 def visible_sun(sun):
-    """A :class:`~warpsky.scene.model.Sun` without a disk giving the sunlight of ``sun`` above a horizon, for a
+    """A :class:`~warpsky.model.scene.Sun` without a disk giving the sunlight of ``sun`` above a horizon, for a
     scene that loses its horizon (the ground drawn by another pass); None when none of the disk is visible. Its
     transmittance through the air is ``sun``'s."""
     light = sun_sunlight(sun, horizon=True)

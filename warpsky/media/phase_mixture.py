@@ -24,9 +24,9 @@ import functools
 
 import warp as wp
 
-from warpsky.media.air import AirPart, part_pdf, part_phase, part_sample_cos, part_total
-from warpsky.media.voxel import MediaPoint, VoxelMedia
-from warpsky.numerics import mean3
+from warpsky.core.numerics import mean3
+from warpsky.media.air.medium import AirPart, part_pdf, part_phase, part_sample_cos, part_total
+from warpsky.media.voxels.voxel import MediaPoint, VoxelMedia
 from warpsky.optics.kernels import TABLE_KIND, medium_phase, sample_table, scattering_angle
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
 from warpsky.optics.oriented_sampling import directional_sample, directional_value

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
 
 INV_FOUR_PI = 1.0 / (4.0 * math.pi)
 

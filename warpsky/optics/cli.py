@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.files import atomic_write
+from warpsky.core.files import atomic_write
+from warpsky.model.scene import SPECIES_NAMES
 from warpsky.optics.grid import angle_grid
 from warpsky.optics.tables import ams_table, build_tables, phase_table
-from warpsky.scene.model import SPECIES_NAMES
 
 CHANNEL_COLOURS = ("#d62728", "#2ca02c", "#1f77b4")
 

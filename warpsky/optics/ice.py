@@ -41,8 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.device import cpu_thread_count, resolve_device
-from warpsky.errors import SceneError
+from warpsky.core.device import cpu_thread_count, resolve_device
+from warpsky.core.errors import SceneError
 from warpsky.optics import ice_kernels as kernels
 from warpsky.optics.analytic import henyey_greenstein
 from warpsky.optics.grid import angle_grid, normalise, sphere_integral, sphere_weights

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.numerics import cdf_search
+from warpsky.core.numerics import cdf_search
 from warpsky.optics.grid import angle_grid, cumulative, segment_table
 from warpsky.optics.phase import phase_eval
 

@@ -21,7 +21,7 @@ grid costs ~0.4 s at x = 1e4, linear in x):
   forward peak and the glory are left untouched. ``sun_diameter_deg=0`` turns it off.
 
 Defaults cost ~5 s for cloud droplets (200 samples per channel) and ~35 s for rain (24) on a 2-core CPU
-(``benchmarks/bench_optics.py``).
+(``evaluation/benchmarks/bench_optics.py``).
 
 Distributions
 =============

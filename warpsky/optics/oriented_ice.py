@@ -46,9 +46,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from warpsky.device import cpu_thread_count, resolve_device
-from warpsky.errors import SceneError
-from warpsky.files import atomic_write, cache_dir
+from warpsky.core.device import cpu_thread_count, resolve_device
+from warpsky.core.errors import SceneError
+from warpsky.core.files import atomic_write, cache_dir
 from warpsky.optics import oriented_ice_kernels as kernels
 from warpsky.optics.grid import angle_grid
 from warpsky.optics.ice import (

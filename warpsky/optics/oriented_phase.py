@@ -18,8 +18,8 @@ two parts apart (:func:`oriented_value`): the oriented table, built for the fram
 (:data:`FRAME_BIN_DEG`), bilinearly between their centres; the random crystals' phase from the ``ice`` species'
 table by theta (the shared angle grid, 0.1° steps at the halos). Mixed on the sky bins instead, the 22° halo's
 inner edge took the bins' steps: up to 3 pixels from one position angle to the next in the 768-wide sundogs frame,
-0.6 since (``benchmarks/bench_halo_edge.py``). The field's extinction stays what the stage gives, the same from
-every direction (oriented crystals present more area to some directions than others; that dependence is left
+0.6 since (``evaluation/benchmarks/bench_halo_edge.py``). The field's extinction stays what the stage gives, the same
+from every direction (oriented crystals present more area to some directions than others; that dependence is left
 out).
 
 Which light uses the slice: the sunlight scattered once towards the eye (single_scatter, hybrid's march, slicing's
@@ -35,7 +35,7 @@ import math
 import numpy as np
 import warp as wp
 
-from warpsky.numerics import bilinear_cell, bilinear_mix
+from warpsky.core.numerics import bilinear_cell, bilinear_mix
 from warpsky.optics.kernels import scattering_angle, table_phase
 from warpsky.optics.oriented_ice_kernels import SkyGrid
 
@@ -160,7 +160,7 @@ def frame_slices(scene, *, photons: int | None = None) -> tuple[np.ndarray, np.n
 @functools.lru_cache(maxsize=8)
 def _frame_slice(spec, elevation_deg: float, photons: int) -> tuple[np.ndarray, float]:
     """(the oriented table's slice, the random crystals' share 1 - w) of an ice field's crystals
-    (:class:`~warpsky.scene.model.IceCrystals`) for a sun at ``elevation_deg``, kept per process: the frames of a
+    (:class:`~warpsky.model.scene.IceCrystals`) for a sun at ``elevation_deg``, kept per process: the frames of a
     batch, and hybrid's march and paths within a frame, share it instead of loading the table again (callers must
     not write into it)."""
     from warpsky.optics.oriented_ice import IceOrientation, oriented_ice_table
@@ -204,8 +204,8 @@ def oriented_phases(scene, device, *, cache: str | None = None) -> OrientedPhase
     """The kernels' :class:`OrientedPhases` for ``scene`` on ``device``. Without oriented media it is an empty
     struct (count 0) that kernels skip. With ``cache`` (a name such as ``"slicing"``) the arrays are kept on the
     device under ``<cache>:oriented*`` and uploaded only when their contents change
-    (:func:`warpsky.device_buffers.upload`), so a batch's frames pass the same addresses."""
-    from warpsky import device_buffers
+    (:func:`warpsky.core.device_buffers.upload`), so a batch's frames pass the same addresses."""
+    from warpsky.core import device_buffers
     from warpsky.optics.oriented_ice import sun_frame
     from warpsky.optics.tables import phase_table
 

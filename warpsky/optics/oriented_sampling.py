@@ -27,7 +27,7 @@ import math
 import numpy as np
 import warp as wp
 
-from warpsky.numerics import cdf_search
+from warpsky.core.numerics import cdf_search
 from warpsky.optics.oriented_ice_kernels import SkyGrid
 
 #: Incoming elevations [deg] at which the continuation table is built (the sun's own light uses the frame's exact
@@ -154,7 +154,7 @@ def directional_sample(tables: OrientedTables, table: int, d: wp.vec3, state: wp
 @functools.lru_cache(maxsize=4)
 def _medium_tables(spec, elevations: tuple, photons: int) -> tuple[list, list, list]:
     """(mixed slices, green marginal CDFs, green conditional CDFs) of an ice field's crystals
-    (:class:`~warpsky.scene.model.IceCrystals`) at ``elevations``, kept per process so that the frames of a batch
+    (:class:`~warpsky.model.scene.IceCrystals`) at ``elevations``, kept per process so that the frames of a batch
     do not load, mix and integrate the table again (callers must not write into them)."""
     from warpsky.optics.oriented_ice import IceOrientation, SkyBins, oriented_ice_table, slice_cdf
     from warpsky.optics.oriented_phase import mixed_slice
@@ -181,7 +181,7 @@ def continuation_tables(scene, device, *, elevations=None, photons: int | None =
     ``photons`` per channel (default :data:`SAMPLING_PHOTONS`), cached on disk, mixed with the random crystals,
     renormalised per channel, with the green channel's CDFs. With ``cache`` (a name) the arrays are kept on the
     device under ``<cache>:continuation*`` and uploaded only when their contents change."""
-    from warpsky import device_buffers
+    from warpsky.core import device_buffers
     from warpsky.optics.oriented_ice import SkyBins
     from warpsky.optics.oriented_phase import oriented_media
 

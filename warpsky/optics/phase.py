@@ -13,7 +13,7 @@ import math
 import numpy as np
 import warp as wp
 
-from warpsky.scene.model import PhaseKind
+from warpsky.model.scene import PhaseKind
 
 INV_FOUR_PI = 1.0 / (4.0 * math.pi)
 RAYLEIGH_NORM = 3.0 / (16.0 * math.pi)

@@ -25,12 +25,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
+from warpsky.model.scene import FIELD_SPECIES, SPECIES_NAMES
 from warpsky.optics import mie
 from warpsky.optics.analytic import rayleigh
 from warpsky.optics.grid import SEGMENTS_DEG, angle_grid, normalise
 from warpsky.optics.ice import ice_optics, snow_optics
-from warpsky.scene.model import FIELD_SPECIES, SPECIES_NAMES
 
 __all__ = ["FIELD_SPECIES", "SPECIES", "SPECIES_NAMES", "Species", "get_species"]
 

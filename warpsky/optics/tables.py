@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.files import atomic_write, cache_dir
+from warpsky.core.files import atomic_write, cache_dir
+from warpsky.model.scene import PhaseKind
 from warpsky.optics.grid import angle_grid, sphere_integral
 from warpsky.optics.multiple import ams_tables, forward_fractions, modified_mie
 from warpsky.optics.species import get_species
-from warpsky.scene.model import PhaseKind
 
 #: Bump when a change to the builders changes table contents.
 CACHE_VERSION = 1
@@ -34,7 +34,8 @@ BUILD_LOG: list[tuple[str, str, float]] = []
 #: 3-6), one table after another, for the progress line; Ams tables at 60 orders, after their phase table (the
 #: time grows with the orders; rain's and ice's took 28-65 s and 41-53 s as the load varied, here their means).
 #: The storm's four species for slicing: about 3 minutes; phase tables only (the other techniques): about 70 s.
-#: ``benchmarks/bench_optics.py`` measured them on an idle machine: rain's phase 36 s, the four Ams tables 16 s.
+#: ``evaluation/benchmarks/bench_optics.py`` measured them on an idle machine: rain's phase 36 s, the four Ams tables 16
+#: s.
 BUILD_SECONDS = {
     ("cloud", "phase"): 8, ("cloud", "ams"): 2, ("rain", "phase"): 51, ("rain", "ams"): 45,
     ("ice", "phase"): 11, ("ice", "ams"): 45, ("snow", "phase"): 0.1, ("snow", "ams"): 3,

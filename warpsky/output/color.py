@@ -20,7 +20,7 @@ import functools
 
 import numpy as np
 
-from warpsky.errors import UsageError
+from warpsky.core.errors import UsageError
 
 #: Colour spaces an EXR may be written in, with their CIE xy chromaticities (R, G, B, white) as OpenEXR's
 #: ``chromaticities`` attribute holds them, and the OCIO colour space name.
@@ -103,7 +103,7 @@ def matrix_from_rec709(name: str) -> np.ndarray:
 
 
 def convert_frame(frame, name: str):
-    """A copy of a composited :class:`~warpsky.composite.Frame` with its colours in ``name`` (see the module
+    """A copy of a composited :class:`~warpsky.passes.composite.Frame` with its colours in ``name`` (see the module
     docstring for what is converted); the frame itself when ``name`` is lin_rec709."""
     from dataclasses import replace
 

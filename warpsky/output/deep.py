@@ -35,9 +35,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpsky.files import OutputError, atomic_write
+from warpsky.core.errors import OutputError
+from warpsky.core.files import atomic_write
+from warpsky.core.numerics import LUMINANCE_WEIGHTS
 from warpsky.output.deep_bins import profile_samples
-from warpsky.scene.model import LUMINANCE_WEIGHTS
 
 #: A deep image's channels, in the order they are written.
 CHANNELS = ("R", "G", "B", "A", "Z", "ZBack")
@@ -141,7 +142,7 @@ def _sample_depths(depth: np.ndarray, back: np.ndarray, present: np.ndarray,
 
 
 def deep_from_layers(layers, far: float, matrix: np.ndarray | None = None, region=None) -> DeepPixels:
-    """The deep samples of ``layers`` (:class:`~warpsky.layer.Layer`, composited front to back) in ``region``
+    """The deep samples of ``layers`` (:class:`~warpsky.core.image.ImageLayer`, composited front to back) in ``region``
     (x, y, width, height of their pixels; None: all), with colours taken to the output colour space by ``matrix``
     (3x3, applied to column vectors; None: unchanged); built in bands of :data:`BAND_PIXELS`."""
     x, y, width, height = region if region is not None else (0, 0, layers[0].depth.shape[1], layers[0].depth.shape[0])

@@ -32,8 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpsky.errors import UsageError
-from warpsky.scene.model import LUMINANCE_WEIGHTS
+from warpsky.core.errors import UsageError
+from warpsky.core.numerics import LUMINANCE_WEIGHTS
 
 #: Volume samples per volume layer and pixel unless asked otherwise (``--deep-samples``): the visibility of a point
 #: inside a density ramp rising 20-fold along the ray is then within 1e-2 of the closed form (4e-3 to 9e-3 measured),

@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.files import OutputError, atomic_write
+from warpsky.core.errors import OutputError
+from warpsky.core.files import atomic_write
 
-__all__ = ["OutputError", "ExrImage", "read_exr", "validate_exr", "write_channels", "write_exr"]
+__all__ = ["ExrImage", "read_exr", "validate_exr", "write_channels", "write_exr"]
 
 METADATA_PREFIX = "warpsky/"
 COMPRESSIONS = ("none", "zip", "piz", "dwaa", "zstd")

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.errors import UsageError
-from warpsky.files import atomic_write
+from warpsky.core.errors import UsageError
+from warpsky.core.files import atomic_write
 
 #: OpenColorIO's built-in config, its display, and the default view of the previews.
 OCIO_CONFIG = "ocio://default"

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.errors import UsageError
-from warpsky.files import PLACEHOLDER, OutputError, atomic_write
+from warpsky.core.errors import OutputError, UsageError
+from warpsky.core.files import PLACEHOLDER, atomic_write
 from warpsky.output.exr import read_exr
 from warpsky.output.png import DEFAULT_VIEW, auto_exposure, encode
 

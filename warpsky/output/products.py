@@ -3,7 +3,7 @@ which precision, over which data window.
 
 Without UsdRender prims a frame is written with warpsky's default channels (:func:`default_outputs`): the beauty
 as ``R, G, B, A``, ``transmittance.R/G/B``, ``depth.Z`` and every AOV the technique writes. A RenderProduct's
-``orderedVars`` choose and order the channels instead (:class:`~warpsky.scene.usd_render.OutputVar`).
+``orderedVars`` choose and order the channels instead (:class:`~warpsky.usd.render_settings.OutputVar`).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpsky.errors import SceneError
+from warpsky.core.errors import SceneError
 from warpsky.output.exr import as_half
 
 

@@ -5,15 +5,15 @@ bins per pixel beside their layer; :mod:`warpsky.output.deep_bins` turns it into
 thread per pixel, each on the rays its pass rendered:
 
 * :func:`media_profile_kernel`, the voxel media (every technique): the camera ray, clipped to the media's boxes
-  (:func:`~warpsky.media.voxel.media_span`), to the ground plane where the technique drew it and to the nearest
+  (:func:`~warpsky.media.voxels.voxel.media_span`), to the ground plane where the technique drew it and to the nearest
   opaque surface another pass drew, is marched twice in equal steps of at most :data:`STEP_VOXELS` of the smallest
-  voxel edge, the extinction from the media's own lookup (:func:`~warpsky.media.voxel.media_functions`) at each
+  voxel edge, the extinction from the media's own lookup (:func:`~warpsky.media.voxels.voxel.media_functions`) at each
   step's midpoint: first to its end (the exit, or the step after which the luminance transmittance is below
   :data:`CUT`: the rest is hidden), then again to place the edges, each inside the step that crosses its level by
   bisection on the step's (linear) optical depth. It costs two lookups per step and medium, where the techniques
   march a shadow ray per step.
 * :data:`fog_profile`, analytic fog (Biri 2002): its closed-form optical depth
-  (:func:`~warpsky.media.analytic_fog.fogs_optical_depth`) over the slabs' span, each edge placed by bisection on
+  (:func:`~warpsky.media.fog.fogs_optical_depth`) over the slabs' span, each edge placed by bisection on
   the distance to 2^-24 of the span.
 
 Where the edges go sets the error. A compositor splits a bin's alpha as if its extinction were uniform, so an
@@ -38,14 +38,14 @@ import functools
 import numpy as np
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, PrimaryRay, pinhole_camera, primary_ray
-from warpsky.device import launch_rows
-from warpsky.kernel_variants import kernel_variants
-from warpsky.media.analytic_fog import FogSet, fog_struct, fogs_optical_depth
-from warpsky.media.voxel import MAX_MEDIA, VoxelMedia, VoxelMediaBuffers, media_functions, media_span
-from warpsky.numerics import exp3, exp_lerp_mean3, luminance
+from warpsky.core.device import launch_rows
+from warpsky.core.kernel_variants import kernel_variants
+from warpsky.core.numerics import exp3, exp_lerp_mean3, luminance
+from warpsky.media.fog import FogSet, fog_struct, fogs_optical_depth
+from warpsky.media.voxels.voxel import MAX_MEDIA, VoxelMedia, VoxelMediaBuffers, media_functions, media_span
+from warpsky.model.camera_rays import PinholeCamera, PrimaryRay, pinhole_camera, primary_ray
 from warpsky.output.deep_bins import DepthProfile
-from warpsky.passes.fog.kernels import exp3d, fog_eye_ray, luminance64, slabs_span
+from warpsky.passes.fog.fog_kernels import exp3d, fog_eye_ray, luminance64, slabs_span
 from warpsky.surfaces.plane import Ground, ground_end, ground_struct
 
 #: Step of the voxel media's optical-depth march, in units of the smallest voxel edge.
@@ -232,7 +232,7 @@ def _outputs(width: int, height: int, count: int) -> tuple[wp.array, wp.array, w
 def media_profile(scene, width: int, height: int, count: int, device: str) -> DepthProfile | None:
     """The voxel media's :class:`DepthProfile` of ``count`` bins on the rays a technique rendered ``scene`` with
     (the camera conformed to ``width`` x ``height``, its ground plane and opaque depths); None without media or
-    with more than :data:`~warpsky.media.voxel.MAX_MEDIA` of them (the layer then stays one sample)."""
+    with more than :data:`~warpsky.media.voxels.voxel.MAX_MEDIA` of them (the layer then stays one sample)."""
     if not scene.media or len(scene.media) > MAX_MEDIA:
         return None
     camera = scene.camera.conformed(width, height)

@@ -1,16 +1,16 @@
 """One frame as a loop over its passes: the technique (in the ``media`` pass) and the registered passes that run,
-once per light, merged by depth, wrapped in the air, composited by :func:`warpsky.composite.composite`.
+once per light, merged by depth, wrapped in the air, composited by :func:`warpsky.passes.composite.composite`.
 
-The plan (:func:`warpsky.plan.make_plan`) decides which passes run and builds them with their settings; this
+The plan (:func:`warpsky.render.plan.make_plan`) decides which passes run and builds them with their settings; this
 module runs them. Every pass gets the same :class:`FrameState`: the scene with its sun above the air, the frame's
 light worked out once (:class:`~warpsky.light.frame.FrameLight`: the sun's transmittance through the air, the
 sky's light), which pass draws the ground plane, and what the passes before it drew (their layers, the depth of
 the nearest opaque surface, the meshes on the device for shadow rays).
 
 Light transport is linear in the lights: each of the scene's ``extra_suns`` runs every pass again with that light
-as the sun (the technique's :meth:`~warpsky.techniques.base.Technique.for_extra_light`) and the radiance adds up;
+as the sun (the technique's :meth:`~warpsky.techniques.technique.Technique.for_extra_light`) and the radiance adds up;
 transmittance and depth are the first run's. The dome lights the first run only, and shows behind everything
-(:func:`~warpsky.composite.dome_background`).
+(:func:`~warpsky.passes.composite.dome_background`).
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from warpsky.composite import add_light, dome_background, merge_by_depth, with_background
-from warpsky.layer import Layer
+from warpsky.core.image import ImageLayer
 from warpsky.light.frame import FrameLight
+from warpsky.passes.composite import add_light, dome_background, merge_by_depth, with_background
 
 
 @dataclass
@@ -42,7 +42,7 @@ class FrameState:
             camera's far distance where none is hit); the marches after it stop there.
         occluders: The frame's meshes on the device, relative to the camera, for shadow rays (None: no meshes).
         merged: The depth-merged layer, for a wrapping pass.
-        kept: Layers a pass drew for this frame before its turn, by pass name (:meth:`~warpsky.passes.base.Pass.
+        kept: Layers a pass drew for this frame before its turn, by pass name (:meth:`~warpsky.passes.render_pass.Pass.
             own_layer`: the media pass hands the fog's and the deck's to the technique's scenery paths).
         deep_samples: Volume samples per pixel a volume pass profiles its layer into for deep output
             (:class:`~warpsky.output.deep_bins.DepthProfile`); 0: none, the frame writes no deep image.
@@ -56,10 +56,10 @@ class FrameState:
     device: str
     light: FrameLight
     ground: str | None = None
-    layers: list[Layer] = field(default_factory=list)
+    layers: list[ImageLayer] = field(default_factory=list)
     limit: np.ndarray | None = None
     occluders: object | None = None
-    merged: Layer | None = None
+    merged: ImageLayer | None = None
     deep_samples: int = 0
     kept: dict = field(default_factory=dict)
 
@@ -76,9 +76,9 @@ def ground_pass(runners, scene) -> str | None:
     return min(ranked, key=lambda r: r.ground_rank).name if ranked else None
 
 
-def render_layers(plan, scene, technique=None, *, deep_samples: int = 0) -> tuple[Layer, list[Layer]]:
+def render_layers(plan, scene, technique=None, *, deep_samples: int = 0) -> tuple[ImageLayer, list[ImageLayer]]:
     """Run ``plan``'s passes (``plan.pass_runners``) on ``scene``: (the depth-merged layer of the technique and
-    the other passes; every layer front to back for :func:`~warpsky.composite.composite`). ``technique`` is the
+    the other passes; every layer front to back for :func:`~warpsky.passes.composite.composite`). ``technique`` is the
     plan's ``renderer`` (the default) or another with the same capabilities. With ``deep_samples``, the volume
     passes profile their layers for deep output in that many bins (not with extra suns, whose merged layer is one
     sample)."""
@@ -106,13 +106,13 @@ def frame_state(plan, scene, technique=None, deep_samples: int = 0) -> FrameStat
                       ground=ground_pass(runners, scene), deep_samples=deep_samples)
 
 
-def render_pass(plan, scene, name: str) -> list[Layer]:
+def render_pass(plan, scene, name: str) -> list[ImageLayer]:
     """The layers of ``plan``'s pass ``name`` alone on ``scene`` (benchmarks time one pass so)."""
     runner = next(runner for runner in plan.pass_runners if runner.name == name)
     return runner.render(frame_state(plan, scene))
 
 
-def depth_layers(plan, scene, technique=None) -> list[Layer]:
+def depth_layers(plan, scene, technique=None) -> list[ImageLayer]:
     """The layers of ``plan``'s depth-merged passes on ``scene`` (lit by one light), in pass order, unmerged."""
     return _depth_passes_run(frame_state(plan, scene, technique)).layers
 
@@ -125,7 +125,7 @@ def _depth_passes_run(frame: FrameState) -> FrameState:
     return frame
 
 
-def _lit_by(plan, scene, technique, deep_samples: int = 0) -> tuple[Layer, list[Layer]]:
+def _lit_by(plan, scene, technique, deep_samples: int = 0) -> tuple[ImageLayer, list[ImageLayer]]:
     """Every pass run once on ``scene`` (lit by one light): (merged layer, layers front to back)."""
     wrapping = [runner for runner in plan.pass_runners if runner.wraps]
     frame = _depth_passes_run(frame_state(plan, scene, technique, deep_samples))
@@ -141,8 +141,8 @@ def _lit_by(plan, scene, technique, deep_samples: int = 0) -> tuple[Layer, list[
     return main, [replace(front, front=ahead), main, back]
 
 
-def front_light(layers: list[Layer]) -> Layer | None:
-    """The sum of ``layers``' ``front`` light (:class:`~warpsky.layer.Layer`), or None when none has any."""
+def front_light(layers: list[ImageLayer]) -> ImageLayer | None:
+    """The sum of ``layers``' ``front`` light (:class:`~warpsky.core.image.ImageLayer`), or None when none has any."""
     fronts = [layer.front for layer in layers if layer.front is not None]
     if not fronts:
         return None

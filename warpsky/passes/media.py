@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpsky.light.sun import visible_sun
-from warpsky.passes.base import Pass
+from warpsky.passes.render_pass import Pass
 
 
 def has_scenery(scene) -> bool:
@@ -44,19 +44,19 @@ def scenery_traceable(scene) -> bool:
 @dataclass(frozen=True)
 class SceneryFrame:
     """What the frame's other passes draw around a technique whose paths trace the scenery
-    (:meth:`~warpsky.techniques.base.Technique.scenery_paths`)."""
+    (:meth:`~warpsky.techniques.technique.Technique.scenery_paths`)."""
 
     ground: object | None = None  # the ground plane another pass draws: the paths bounce on it
     layers: tuple = ()  # the stratiform layers the stratiform pass draws: traced beyond a camera ray's first event
     drawn: np.ndarray | None = None  # (H, W, 3) radiance of the passes before (the surfaces), in the frame's level
     occluders: object | None = None  # the frame's meshes on the device, whose shadows lie on the fog's sunlight
-    fog: object | None = None  # the fog pass's layer of this frame (Layer), drawn early and kept for its turn
+    fog: object | None = None  # the fog pass's layer of this frame (ImageLayer), drawn early and kept for its turn
     deck: object | None = None  # the height-field pass's, likewise
 
 
 def scenery_paths(scene, technique) -> bool:
     """Whether ``technique`` path traces ``scene``'s scenery (a technique class: whether it can; a built technique:
-    its settings decide, :meth:`~warpsky.techniques.base.Technique.scenery_paths`)."""
+    its settings decide, :meth:`~warpsky.techniques.technique.Technique.scenery_paths`)."""
     if not (technique.scatters_scenery and scenery_traceable(scene)):
         return False
     return isinstance(technique, type) or technique.scenery_paths(scene)
@@ -78,7 +78,7 @@ class MediaPass(Pass):
     @classmethod
     def renders_own(cls, scene, technique) -> bool:
         """Whether it runs for what the technique draws itself (not only for the scenery's multiple scattering,
-        :meth:`~warpsky.techniques.base.Technique.scenery_paths`)."""
+        :meth:`~warpsky.techniques.technique.Technique.scenery_paths`)."""
         traced = ((scene.layers and technique.traces_layers) or (scene.heightfield_clouds and technique.traces_decks)
                   or (scene.fogs and technique.traces_fog) or (scene.meshes and technique.traces_meshes))
         return bool(scene.media) or bool(traced) or not (scene.layers or has_scenery(scene))
@@ -146,7 +146,7 @@ def media_scene(frame):
         if scene.atmosphere is None:
             drawn["sun"] = visible_sun(scene.sun)
     if frame.limit is not None:  # an opaque surface drawn in front of the media: camera rays end there
-        from warpsky import device_buffers
+        from warpsky.core import device_buffers
 
         # kept by contents, so a batch's frames with the same view keep its address (and slicing its CUDA graph)
         opaque = device_buffers.upload("media:opaque", np.asarray(frame.limit, dtype=np.float32), float, frame.device)

@@ -1,12 +1,12 @@
 """Triangle meshes on the device: one Warp BVH (``wp.Mesh``) over every mesh of a frame, with their albedos.
 
-Like the voxel media (:mod:`warpsky.media.voxel`), kernels never see world coordinates: the host subtracts the
+Like the voxel media (:mod:`warpsky.media.voxels.voxel`), kernels never see world coordinates: the host subtracts the
 camera position from the float64 world points and uploads float32 camera-relative points, so terrain 100 km from
 the origin is hit as precisely as terrain at the origin (float32 spacing at 1 km from the eye is 0.06 mm).
 
 All meshes are concatenated into one ``wp.Mesh``; each triangle carries the index of its material (one per mesh,
 plus any the caller adds, such as the ground plane's), and a material is a uniform albedo or an albedo map over
-world (x, z) (:class:`~warpsky.scene.layers.GroundTexture`: texel centres at integer texel coordinates, bilinear,
+world (x, z) (:class:`~warpsky.model.stratiform.GroundTexture`: texel centres at integer texel coordinates, bilinear,
 edge texels continued beyond the map). When only the points move between frames (same triangles, or a camera
 that moved: a rigid shift of the camera-relative points), :meth:`MeshBuffers.update` refits the BVH instead of
 building it again (a refit keeps a rigid shift's tree as good as a fresh one).
@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.numerics import bilinear_cell, bilinear_mix
-from warpsky.scene.layers import GroundTexture
+from warpsky.core.numerics import bilinear_cell, bilinear_mix
+from warpsky.model.stratiform import GroundTexture
 
 #: Rays leaving a surface start this fraction of (1 m + the hit's scale) off it, along its normal; the scale is the
 #: largest distance from the eye of the hit point and its triangle's corners, which sets the float32 error of the
@@ -196,7 +196,7 @@ class MeshBuffers:
 
     @classmethod
     def build(cls, meshes, camera_position, device, *, extra_materials=()) -> MeshBuffers:
-        """Upload ``meshes`` (:class:`~warpsky.scene.terrain.TerrainMesh`) relative to ``camera_position`` [m]
+        """Upload ``meshes`` (:class:`~warpsky.model.terrain.TerrainMesh`) relative to ``camera_position`` [m]
         and build the BVH."""
         out = cls(str(device), None, None, None, None, None, None, 0, len(meshes), 0.0, False)
         out._upload_materials(meshes, camera_position, extra_materials)

@@ -14,7 +14,7 @@ class Ground:
     albedo: wp.vec3  # Lambertian albedo, RGB
 
 def ground_struct(ground, camera_position) -> Ground:
-    """Kernel view of a :class:`~warpsky.scene.model.Ground` seen from ``camera_position`` (None: a zero struct)."""
+    """Kernel view of a :class:`~warpsky.model.scene.Ground` seen from ``camera_position`` (None: a zero struct)."""
     out = Ground()
     out.offset = float(ground.height - camera_position[1]) if ground is not None else 0.0
     out.albedo = wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist())

@@ -1,1 +1,1 @@
-"""Rendering techniques: each a host class plus its kernels, returning a :class:`~warpsky.layer.Layer`."""
+"""Rendering techniques: each a host class plus its kernels, returning an :class:`~warpsky.core.image.ImageLayer`."""

@@ -18,8 +18,8 @@ stays right to first order, its pattern does not. The defaults (4 nodes, 4..64 p
 shortest feature along its ray) are the speed end of that: on the valley-fog stage (cosines of 630 and 270 m, a 100 m
 polynomial in height, terrain-cut rays of up to 4 km, the sun 16 deg up in the frame; 384 x 256) they differ from 8
 nodes and 16..256 pieces by at most 7e-4 of the brightest pixel (the median pixel not at all), at 7 times the speed.
-On the 48-member scenery family (``tools/choose_scenery_settings.py``: terrain that shadows the fog, so the sunlight
-along a ray has edges the pieces do not follow) against 16 nodes on 16..512 pieces, relative RMS error over the
+On the 48-member scenery family (``evaluation/scripts/choose_scenery_settings.py``: terrain that shadows the fog, so the
+sunlight along a ray has edges the pieces do not follow) against 16 nodes on 16..512 pieces, relative RMS error over the
 frame: tune half median 0.3 %, worst 1.7 %; test half median 0.8 %, p90 3.7 %, worst 4.8 %, mean bias -0.03 %.
 8 nodes would keep the tune half within 1 % (test worst 2.2 %) but take 1.9 times as long on the valley-fog stage
 at 1024 x 768 (7.4 s against 3.9 s on a shared 2-core CPU), so the default stays at 4 (``--set fog.nodes=8``).
@@ -33,19 +33,19 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.camera_rays import pinhole_camera
-from warpsky.device import is_cpu, launch_rows
-from warpsky.errors import UsageError
-from warpsky.layer import Layer
+from warpsky.core.device import is_cpu, launch_rows
+from warpsky.core.errors import UsageError
+from warpsky.core.image import ImageLayer
+from warpsky.core.resources import LAYER_BYTES, MemoryEstimate
+from warpsky.core.settings import Settings, documented, setting
 from warpsky.light.dome import ambient_radiance, isotropic_ambient
 from warpsky.light.sun import sunlight
-from warpsky.media.analytic_fog import fog_struct
-from warpsky.media.layer_shadow import layer_shadows
-from warpsky.passes.base import Pass
-from warpsky.passes.fog.kernels import FogMarch, fog_kernel, sun_transmittance_kernel
-from warpsky.resources import LAYER_BYTES, MemoryEstimate
-from warpsky.scene.model import Scene
-from warpsky.settings import Settings, documented, setting
+from warpsky.media.fog import fog_struct
+from warpsky.media.stratiform.stratiform_shadow import layer_shadows
+from warpsky.model.camera_rays import pinhole_camera
+from warpsky.model.scene import Scene
+from warpsky.passes.fog.fog_kernels import FogMarch, fog_kernel, sun_transmittance_kernel
+from warpsky.passes.render_pass import Pass
 from warpsky.surfaces.mesh import no_surfaces
 
 #: Length [m] a horizontal sun ray is followed through the slabs by :func:`fog_sun_transmittance`.
@@ -75,7 +75,7 @@ class FogSettings(Settings):
 
 
 class Fog:
-    """Renders a scene's analytic fogs (``scene.fogs``) into a :class:`~warpsky.layer.Layer`. Settings are a
+    """Renders a scene's analytic fogs (``scene.fogs``) into an :class:`~warpsky.core.image.ImageLayer`. Settings are a
     :class:`FogSettings`, or its fields as keywords."""
 
     def __init__(self, settings: FogSettings | None = None, *, device: str = "cpu", **values):
@@ -89,7 +89,7 @@ class Fog:
         """The kernel's quadrature settings and light for ``scene`` (``ambient``: the isotropic sky radiance, RGB;
         None: :func:`~warpsky.light.dome.ambient_radiance`, the dome's; ``occluders``: the
         :class:`~warpsky.surfaces.mesh.MeshBuffers` of the frame's meshes, which shadow the fog, or None). The
-        scene's stratiform layers shadow the fog's sunlight too (:mod:`~warpsky.media.layer_shadow`)."""
+        scene's stratiform layers shadow the fog's sunlight too (:mod:`~warpsky.media.stratiform.stratiform_shadow`)."""
         s = self.settings
         abscissae, weights = np.polynomial.legendre.leggauss(s.nodes)
         march = FogMarch()
@@ -110,7 +110,7 @@ class Fog:
         return march
 
     def render(self, scene: Scene, width: int, height: int, *, limit: np.ndarray | None = None,
-               ambient=None, occluders=None) -> Layer:
+               ambient=None, occluders=None) -> ImageLayer:
         """The fogs of ``scene`` at ``width`` x ``height`` (camera conformed to that aspect ratio).
 
         Args:
@@ -125,8 +125,8 @@ class Fog:
         started = time.perf_counter()
         camera = scene.camera.conformed(width, height)
         if not scene.fogs:
-            return Layer(np.zeros((height, width, 3), np.float32), np.ones((height, width, 3), np.float32),
-                         np.full((height, width), camera.far, np.float32), stats={"seconds": 0.0, "fogs": 0})
+            return ImageLayer(np.zeros((height, width, 3), np.float32), np.ones((height, width, 3), np.float32),
+                              np.full((height, width), camera.far, np.float32), stats={"seconds": 0.0, "fogs": 0})
         if limit is not None:
             limit = np.ascontiguousarray(limit, dtype=np.float32)
             if limit.shape != (height, width):
@@ -142,8 +142,8 @@ class Fog:
                       int(limit is not None), radiance, transmittance, depth]
             launch_rows(fog_kernel, height, width, inputs, device)
             wp.synchronize_device(device)
-            return Layer(radiance.numpy(), transmittance.numpy(), depth.numpy(),
-                         stats={"seconds": time.perf_counter() - started, "fogs": len(scene.fogs),
+            return ImageLayer(radiance.numpy(), transmittance.numpy(), depth.numpy(),
+                              stats={"seconds": time.perf_counter() - started, "fogs": len(scene.fogs),
                                 "nodes": self.settings.nodes, "max_pieces": self.settings.max_pieces})
 
 
@@ -203,13 +203,13 @@ class FogPass(Pass):
     def shadow(self, scene):
         return lambda points: fog_sun_transmittance(scene, points, self.device)
 
-    def own_layer(self, frame) -> Layer:
+    def own_layer(self, frame) -> ImageLayer:
         """The fog's single scattering of the sun, and its ambient term unless the technique path traces the
-        sky's light on the fog (:meth:`~warpsky.techniques.base.Technique.scenery_paths`: its paths' first event
+        sky's light on the fog (:meth:`~warpsky.techniques.technique.Technique.scenery_paths`: its paths' first event
         takes no sunlight but gathers the sky's and the dome's light, the light the ambient term approximates);
         drawn once per frame (the media pass hands it to those paths' error estimate)."""
 
-        def draw() -> Layer:
+        def draw() -> ImageLayer:
             seen = frame.light.lit_at_media(frame.scene)
             ambient = isotropic_ambient(seen, frame.light.sky)
             if frame.technique.scenery_paths(frame.scene):
@@ -219,7 +219,7 @@ class FogPass(Pass):
 
         return self.keep(frame, draw)
 
-    def render(self, frame) -> list[Layer]:
+    def render(self, frame) -> list[ImageLayer]:
         """:meth:`own_layer`; for deep output with its depth profile."""
         layer = self.own_layer(frame)
         if frame.deep_samples > 0:  # deep output: the fog's closed-form depth profile on the same rays

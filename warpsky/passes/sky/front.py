@@ -3,8 +3,8 @@ on a flat or a round earth.
 
 A technique that traces the air itself (hybrid's multiple scattering) carries the air between the camera and each
 event, while the frame's composite multiplies the media's layer by the sky pass's front transmittance; dividing by
-this (the same float operations as :func:`~warpsky.passes.sky.kernels.sky_kernel`, through the same
-:func:`~warpsky.media.air_analytic.air_ray`) gives back exactly what the tracer carried.
+this (the same float operations as :func:`~warpsky.passes.sky.sky_kernels.sky_kernel`, through the same
+:func:`~warpsky.media.air.analytic.air_ray`) gives back exactly what the tracer carried.
 """
 
 from __future__ import annotations
@@ -12,13 +12,13 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, pinhole_camera, primary_ray
+from warpsky.core.numerics import exp3
 from warpsky.light.sun import Sun
-from warpsky.media.air_analytic import AnalyticAir, air_ray, analytic_air
-from warpsky.media.air_mixture_kernels import split_transmittance
-from warpsky.media.air_round import RoundAir
-from warpsky.media.air_round_light import RoundMultiple
-from warpsky.numerics import exp3
+from warpsky.media.air.analytic import AnalyticAir, air_ray, analytic_air
+from warpsky.media.air.mixture_kernels import split_transmittance
+from warpsky.media.air.round_earth_kernels import RoundAir
+from warpsky.media.air.round_earth_light import RoundMultiple
+from warpsky.model.camera_rays import PinholeCamera, pinhole_camera, primary_ray
 from warpsky.passes.sky.round_kernels import RoundView, front_light, round_ray
 from warpsky.passes.sky.round_sky import round_front_inputs
 from warpsky.surfaces.plane import Ground, ground_struct

@@ -1,5 +1,5 @@
 """The sky pass on a round earth: per pixel the air in front of the media and behind them, and the sun's disk, from
-the ray integrals of :mod:`~warpsky.media.air_round_light`.
+the ray integrals of :mod:`~warpsky.media.air.round_earth_light`.
 
 For a pinhole camera every ray starts at the eye, so a frame's view table holds the whole rays' integrals against
 the view's elevation sine and its azimuth from the sun (the phase functions factor out); a pixel without media
@@ -11,12 +11,19 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, primary_ray
+from warpsky.core.numerics import exp3
 from warpsky.light.sun import Sun
-from warpsky.media.air_analytic import AnalyticAir
-from warpsky.media.air_round import RoundAir, altitude_at, floor_distance, make_line, table_depth, top_distance
-from warpsky.media.air_round_light import RoundLight, RoundMultiple, SunGeometry, round_light
-from warpsky.numerics import exp3
+from warpsky.media.air.analytic import AnalyticAir
+from warpsky.media.air.round_earth_kernels import (
+    RoundAir,
+    altitude_at,
+    floor_distance,
+    make_line,
+    table_depth,
+    top_distance,
+)
+from warpsky.media.air.round_earth_light import RoundLight, RoundMultiple, SunGeometry, round_light
+from warpsky.model.camera_rays import PinholeCamera, primary_ray
 from warpsky.optics.phase import phase_hg, phase_rayleigh
 
 

@@ -6,16 +6,16 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers
-from warpsky.camera_rays import pinhole_camera
+from warpsky.core import device_buffers
 from warpsky.light.sun import Sunlight, sun_struct, sunlight
-from warpsky.media.air_analytic import analytic_air
-from warpsky.media.air_multiple_build import floor_of
-from warpsky.media.air_round import DEPTH_MUS, DEPTH_RADII, air_top, round_struct
-from warpsky.media.air_round_host import air_lit, sun_radius
-from warpsky.media.air_round_multiple import HEIGHTS, SUNS, multiple_struct, round_table
+from warpsky.media.air.analytic import analytic_air
+from warpsky.media.air.multiple import floor_of
+from warpsky.media.air.round_earth import air_lit, sun_radius
+from warpsky.media.air.round_earth_kernels import DEPTH_MUS, DEPTH_RADII, air_top, round_struct
+from warpsky.media.air.round_earth_multiple import HEIGHTS, SUNS, multiple_struct, round_table
+from warpsky.model.camera_rays import pinhole_camera
+from warpsky.model.scene import Projection
 from warpsky.passes.sky.round_kernels import RoundView, round_sky_kernel, view_table_kernel
-from warpsky.scene.model import Projection
 
 #: The frame's view table: elevations (uniform in sign(mu) sqrt(|mu|)) x azimuths from the sun on [0, pi].
 VIEW_ELEVATIONS = 256

@@ -28,8 +28,8 @@ import numpy as np
 import warp as wp
 
 from warpsky.light.sun import sunlight
+from warpsky.model.scene import Projection
 from warpsky.optics.phase import PhaseKind, phase_numpy
-from warpsky.scene.model import Projection
 from warpsky.surfaces.mesh import SurfaceMeshes, mesh_occluded
 
 #: Midpoints per pixel along the front stretch of air: 8 and 16 gave the same frame on a family stage under a 5 deg

@@ -1,24 +1,24 @@
 """Host side of the sky pass: Riley 2004 §4.1's air in front of and behind the media, with the sun's disk, and the
-light the air scatters more than once (:mod:`warpsky.media.air_multiple`)."""
+light the air scatters more than once (:mod:`warpsky.media.air.multiple_kernels`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers
-from warpsky.camera_rays import pinhole_camera
-from warpsky.device import is_cpu
-from warpsky.layer import Layer
+from warpsky.core import device_buffers
+from warpsky.core.device import is_cpu
+from warpsky.core.image import ImageLayer
+from warpsky.core.resources import MemoryEstimate
 from warpsky.light.sun import sun_struct, sunlight
-from warpsky.media.air_analytic import analytic_air
-from warpsky.media.air_multiple import floor_of, multiple_struct, scene_table
-from warpsky.passes.base import Pass
-from warpsky.passes.sky.kernels import sky_kernel
+from warpsky.media.air.analytic import analytic_air
+from warpsky.media.air.multiple_kernels import floor_of, multiple_struct, scene_table
+from warpsky.model.camera_rays import pinhole_camera
+from warpsky.model.scene import Projection, Scene
+from warpsky.passes.render_pass import Pass
 from warpsky.passes.sky.round_sky import launch_round_sky, round_description
 from warpsky.passes.sky.shadowed_air import shadowed_front
-from warpsky.resources import MemoryEstimate
-from warpsky.scene.model import Projection, Scene
+from warpsky.passes.sky.sky_kernels import sky_kernel
 from warpsky.surfaces.plane import ground_struct
 
 #: Direction the sky pass gives an absent sun: below the horizon.
@@ -26,14 +26,14 @@ BELOW = (0.0, -1.0, 0.0)
 
 
 #: The sky pass's outputs (front radiance, front transmittance, back radiance): kept across frames as
-#: :func:`warpsky.device_buffers.reusable` arrays ``sky:NAME``, each downloaded once at the end of a frame.
+#: :func:`warpsky.core.device_buffers.reusable` arrays ``sky:NAME``, each downloaded once at the end of a frame.
 OUTPUTS = ("front", "front_transmittance", "back")
 
 
 def view_rays(scene: Scene, camera, light):
     """(atmosphere, eye altitude, floor altitude [m above sea level], the sun's air sine) for the sky pass's view
     table when every
-    camera ray starts at the eye (a pinhole), else None; the floor is where :func:`~warpsky.media.air_analytic.
+    camera ray starts at the eye (a pinhole), else None; the floor is where :func:`~warpsky.media.air.analytic.
     air_ray` ends a downward ray: the ground plane below the eye, else sea level."""
     if camera.projection != Projection.PERSPECTIVE:
         return None
@@ -63,14 +63,14 @@ def air_summary(atm) -> str:
 
 class Sky:
     """Air in front of the media (radiance + transmittance) and behind them (radiance, with the sun's disk), drawn
-    from Riley's closed form (:mod:`warpsky.media.air_analytic`) with the sun above the air, plus the multiple-
-    scattering table's light (:mod:`warpsky.media.air_multiple`) unless the atmosphere turns it off."""
+    from Riley's closed form (:mod:`warpsky.media.air.analytic`) with the sun above the air, plus the multiple-
+    scattering table's light (:mod:`warpsky.media.air.multiple_kernels`) unless the atmosphere turns it off."""
 
     def __init__(self, *, device: str = "cpu"):
         self.device = device
 
     def render(self, scene: Scene, width: int, height: int, media_depth: np.ndarray | None = None):
-        """(front Layer, back Layer); composite as [front, media, back]."""
+        """(front ImageLayer, back ImageLayer); composite as [front, media, back]."""
         atm = scene.atmosphere
         camera = scene.camera.conformed(width, height)
         far = float(camera.far)
@@ -97,8 +97,9 @@ class Sky:
                 ])
             images = [device_buffers.download(f"sky:{name}", array) for name, array in zip(OUTPUTS, outputs,
                                                                                            strict=True)]
-            front_layer = Layer(images[0], images[1], np.full(shape, far, np.float32))
-            back_layer = Layer(images[2], np.zeros((height, width, 3), np.float32), np.full(shape, far, np.float32))
+            front_layer = ImageLayer(images[0], images[1], np.full(shape, far, np.float32))
+            back_layer = ImageLayer(images[2], np.zeros((height, width, 3), np.float32),
+                                    np.full(shape, far, np.float32))
         return front_layer, back_layer
 
 
@@ -143,7 +144,7 @@ class SkyPass(Pass):
         return MemoryEstimate().add("sky", host=pixels * (20 + (0 if is_cpu(self.device) else 36)),
                                     device=pixels * 40)
 
-    def render(self, frame) -> list[Layer]:
+    def render(self, frame) -> list[ImageLayer]:
         """[front, back]: the air in front runs to the nearest opaque surface where one is hit (the haze and fog in
         front of it are thin enough that the order of air and fog along the ray matters little), else to the
         merged layer's depth; the sun's single scattering in it that the scenery shades (the meshes, the fog, the

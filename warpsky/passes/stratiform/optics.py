@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers
+from warpsky.core import device_buffers
 from warpsky.optics.grid import angle_grid, cumulative, sphere_integral
 from warpsky.optics.kernels import DevicePhaseTables
 from warpsky.optics.tables import modified_mie_table, phase_table
@@ -57,7 +57,7 @@ class StratiformOptics:
 
     def device_inputs(self, device, *, cache_name: str | None = None):
         """(SlabOptics struct, DevicePhaseTables of [P_S, P²], Appendix B as a flat float array) on ``device``.
-        With ``cache_name`` the tables and parameters go through :func:`warpsky.device_buffers.upload` (copied
+        With ``cache_name`` the tables and parameters go through :func:`warpsky.core.device_buffers.upload` (copied
         once while they stay the same)."""
         optics = SlabOptics()
         optics.kappa = float(self.kappa)

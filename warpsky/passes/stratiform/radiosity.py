@@ -15,7 +15,7 @@ reads them every ``check_every`` iterations (on a GPU each read waits for the de
 7 iterations run past convergence, each adding less than the tolerance; on the CPU a read is free: every
 iteration, the stopping point exactly).
 
-Buffers are :func:`warpsky.device_buffers.reusable` arrays (``radiosity:NAME``) kept across frames; a solve reads
+Buffers are :func:`warpsky.core.device_buffers.reusable` arrays (``radiosity:NAME``) kept across frames; a solve reads
 back R_G after the first gather (the total the residual divides by), the exchanged energies, and R_G and R_C at
 the end. :attr:`RadiosityResult.device_received` keeps R_G and R_C on the device for the shading kernel.
 
@@ -34,15 +34,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers
-from warpsky.device import is_cpu
+from warpsky.core import device_buffers
+from warpsky.core.device import is_cpu
+from warpsky.core.numerics import LUMINANCE_WEIGHTS
 from warpsky.passes.stratiform.radiosity_kernels import (
     downsample_kernel,
     exact_gather_kernel,
     ground_direct_kernel,
     ring_gather_kernel,
 )
-from warpsky.scene.model import LUMINANCE_WEIGHTS
 
 
 @dataclass
@@ -152,7 +152,7 @@ class Radiosity:
 
     def _buffer(self, name: str, shape, values=None) -> wp.array:
         """The kept (nu, nv) vec3 buffer ``radiosity:name``: zeroed, or, read-only, holding ``values`` (nu, nv[, 3])
-        (copied only when they changed since the last solve, :func:`warpsky.device_buffers.refill`)."""
+        (copied only when they changed since the last solve, :func:`warpsky.core.device_buffers.refill`)."""
         if values is not None:
             return device_buffers.refill(f"radiosity:{name}", _rgb(values, shape), wp.vec3, self.device)
         array = device_buffers.reusable(f"radiosity:{name}", shape, wp.vec3, self.device)

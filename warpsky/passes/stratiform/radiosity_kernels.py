@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.numerics import bilinear_cell, bilinear_mix, luminance
+from warpsky.core.numerics import bilinear_cell, bilinear_mix, luminance
 
 #: Ring weights v1, v2, v3 at MIP levels m, m + 1, m + 3 (§5.3, from f = 0.5, 0.3, 0.2).
 RING_W0 = wp.constant(0.4)

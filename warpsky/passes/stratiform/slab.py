@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.numerics import one_minus_exp_over_x
+from warpsky.core.numerics import one_minus_exp_over_x
 from warpsky.optics.kernels import table_phase
 
 #: Directional cosines are clamped to at least this (grazing sun or view) before dividing.

@@ -1,5 +1,5 @@
-"""Host side of the stratiform technique: a :class:`~warpsky.media.stratiform.StratiformLayer` over a (textured)
-ground, with the ground <-> cloud-base radiosity of Bouthors 2006 §5 (see :mod:`.kernels`).
+"""Host side of the stratiform technique: a :class:`~warpsky.media.stratiform.thickness.StratiformLayer` over a
+(textured) ground, with the ground <-> cloud-base radiosity of Bouthors 2006 §5 (see :mod:`.kernels`).
 
 A dome's upper hemisphere, as the uniform radiance giving the same irradiance on a horizontal surface
 (:func:`~warpsky.light.dome.upper_hemisphere`), is added to the uniform-equivalent sky C_sky that lights the
@@ -17,15 +17,16 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers
-from warpsky.camera_rays import pinhole_camera
-from warpsky.device import is_cpu, launch_rows
-from warpsky.layer import Layer
+from warpsky.core import device_buffers
+from warpsky.core.device import is_cpu, launch_rows
+from warpsky.core.image import ImageLayer
+from warpsky.core.resources import LAYER_BYTES, MemoryEstimate
+from warpsky.core.settings import Settings, documented, setting
 from warpsky.light.dome import upper_hemisphere
 from warpsky.light.sun import sun_struct, sunlight
-from warpsky.media.air_multiple import air_radiance
-from warpsky.media.layer_voxels import LAYER_SPECIES
-from warpsky.media.stratiform import (
+from warpsky.media.air.multiple_kernels import air_radiance
+from warpsky.media.stratiform.stratiform_voxels import LAYER_SPECIES
+from warpsky.media.stratiform.thickness import (
     GroundTexture,
     StratiformLayer,
     at_time,
@@ -33,16 +34,15 @@ from warpsky.media.stratiform import (
     sample_thickness,
     signed_thickness,
 )
+from warpsky.model.camera_rays import pinhole_camera
+from warpsky.model.scene import Scene
 from warpsky.optics.prepare import TableNeed
 from warpsky.optics.tables import modified_mie_table, phase_table
-from warpsky.passes.base import Pass
-from warpsky.passes.stratiform.kernels import LayerGeometry, stratiform_kernel
+from warpsky.passes.render_pass import Pass
 from warpsky.passes.stratiform.model1d import order_energies, reference_thickness
 from warpsky.passes.stratiform.optics import FORWARD_CUT_DEG, stratiform_optics
 from warpsky.passes.stratiform.radiosity import Radiosity, ground_direct, radiosity_bytes, radiosity_grid
-from warpsky.resources import LAYER_BYTES, MemoryEstimate
-from warpsky.scene.model import Scene
-from warpsky.settings import Settings, documented, setting
+from warpsky.passes.stratiform.stratiform_kernels import LayerGeometry, stratiform_kernel
 from warpsky.surfaces.plane import ground_struct
 
 
@@ -73,7 +73,8 @@ class StratiformSettings(Settings):
 
 def sky_radiance(scene: Scene, altitude: float, samples: int = 24) -> np.ndarray:
     """Uniform radiance [sun units/sr] with the same irradiance on a horizontal surface at ``altitude`` [m above
-    the stage's y = 0] as the sky pass's air above it (:func:`~warpsky.media.air_multiple.air_radiance`); 0 without
+    the stage's y = 0] as the sky pass's air above it (:func:`~warpsky.media.air.multiple_kernels.air_radiance`); 0
+    without
     an atmosphere or sunlight."""
     light = sunlight(scene)
     if scene.atmosphere is None or light is None or not light.lit:
@@ -96,7 +97,7 @@ def _sample(map2d: np.ndarray, origin, size, xs: np.ndarray, zs: np.ndarray) -> 
     return map2d[i, j]
 
 
-#: The pass's per-pixel outputs: kept across frames as :func:`warpsky.device_buffers.reusable` arrays
+#: The pass's per-pixel outputs: kept across frames as :func:`warpsky.core.device_buffers.reusable` arrays
 #: ``stratiform:NAME``, each downloaded once at the end of a frame.
 OUTPUTS = (("radiance", wp.vec3), ("transmittance", wp.vec3), ("depth", float))
 
@@ -166,7 +167,7 @@ class Stratiform:
         return box, solver.gather(source), np.zeros((*shape, 3), np.float32), None
 
     def render(self, scene: Scene, width: int, height: int, *, layer: StratiformLayer,
-               ground_texture: GroundTexture | None = None, draw_ground: bool = True) -> Layer:
+               ground_texture: GroundTexture | None = None, draw_ground: bool = True) -> ImageLayer:
         """Render ``layer`` (at its time, when advected) over the scene's ground, textured by ``ground_texture``
         (default: the ground's ``albedo_map``). ``draw_ground=False`` leaves the ground out of the image (another
         layer draws it) while the radiosity still lights this layer's base."""
@@ -229,14 +230,14 @@ class Stratiform:
             launch_rows(stratiform_kernel, height, width, inputs, self.device)
             wp.synchronize_device(self.device)
             stats["shading_seconds"] = time.perf_counter() - render_started
-            out = Layer(*(device_buffers.download(f"stratiform:{name}", array)
+            out = ImageLayer(*(device_buffers.download(f"stratiform:{name}", array)
                           for (name, _), array in zip(OUTPUTS, outputs, strict=True)), stats, warnings=warnings)
         stats["seconds"] = time.perf_counter() - started
         return out
 
 
 class StratiformPass(Pass):
-    """Every stratiform layer of the scene as its own Layer (Bouthors slab, plus the ground <-> cloud-base
+    """Every stratiform layer of the scene as its own ImageLayer (Bouthors slab, plus the ground <-> cloud-base
     radiosity when a ground lies below), each lit by the sun through the air down to its mid altitude; the lowest
     layer draws the ground (textured, in the layer's shadow, lit by the radiosity)."""
 
@@ -252,7 +253,7 @@ class StratiformPass(Pass):
 
     def draws_ground(self, scene) -> bool:
         """Not where the technique's paths trace the scenery under the layers
-        (:meth:`~warpsky.techniques.base.Technique.scenery_paths`): the surfaces pass draws the ground's sunlight
+        (:meth:`~warpsky.techniques.technique.Technique.scenery_paths`): the surfaces pass draws the ground's sunlight
         in the layers' shadow then, and the paths its light from the layers (the radiosity's part)."""
         return not (self.technique is not None and self.technique.scenery_paths(scene))
 
@@ -311,8 +312,8 @@ class StratiformPass(Pass):
         return {"stratiform": json.dumps([{k: part[k] for k in keys if k in part} for part in parts
                                           if "layer" in part])}
 
-    def render(self, frame) -> list[Layer]:
-        """One Layer per stratiform layer, in the scene's order; ``stats["layer"]`` names it."""
+    def render(self, frame) -> list[ImageLayer]:
+        """One ImageLayer per stratiform layer, in the scene's order; ``stats["layer"]`` names it."""
         scene, parts = frame.scene, []
         lowest = min(range(len(scene.layers)), key=lambda i: scene.layers[i].base_altitude)
         renderer = Stratiform(self.settings, device=self.device)

@@ -1,9 +1,9 @@
-"""Host side of the surfaces pass: opaque Lambertian meshes (terrain) and the ground plane as one Layer.
+"""Host side of the surfaces pass: opaque Lambertian meshes (terrain) and the ground plane as one ImageLayer.
 
-The pass draws what :mod:`warpsky.passes.surfaces.kernels` hits and shades: the scene's meshes
-(:class:`~warpsky.scene.terrain.TerrainMesh`, through one BVH, :mod:`warpsky.surfaces.mesh`) and, when asked, its
+The pass draws what :mod:`warpsky.passes.surfaces.surfaces_kernels` hits and shades: the scene's meshes
+(:class:`~warpsky.model.terrain.TerrainMesh`, through one BVH, :mod:`warpsky.surfaces.mesh`) and, when asked, its
 ground plane (with its albedo map), lit by the sun (self-shadowed, through the voxel media and a transmittance the
-caller computes at the hit points) and by the sky. The Layer is opaque where something is hit, so the lead
+caller computes at the hit points) and by the sky. The ImageLayer is opaque where something is hit, so the lead
 composites it with the media by depth; :meth:`Surfaces.depth_only` gives the other passes that depth as the
 limit of their marches.
 
@@ -22,16 +22,18 @@ import time
 import numpy as np
 import warp as wp
 
-from warpsky.camera_rays import pinhole_camera
-from warpsky.device import launch_rows
-from warpsky.errors import UsageError
-from warpsky.layer import Layer
+from warpsky.core.device import launch_rows
+from warpsky.core.errors import UsageError
+from warpsky.core.image import ImageLayer
+from warpsky.core.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.light.dome import upper_hemisphere
 from warpsky.light.sun import sun_struct, sunlight
-from warpsky.media.voxel import VoxelMediaBuffers
-from warpsky.passes.base import Pass
+from warpsky.media.voxels.voxel import VoxelMediaBuffers
+from warpsky.model.camera_rays import pinhole_camera
+from warpsky.model.scene import Scene
 from warpsky.passes.media import scenery_paths
-from warpsky.passes.surfaces.kernels import (
+from warpsky.passes.render_pass import Pass
+from warpsky.passes.surfaces.surfaces_kernels import (
     SurfaceImage,
     SurfaceLighting,
     SurfacePlane,
@@ -39,13 +41,11 @@ from warpsky.passes.surfaces.kernels import (
     shade_kernel,
     surface_hits,
 )
-from warpsky.resources import LAYER_BYTES, MemoryEstimate
-from warpsky.scene.model import Scene
 from warpsky.surfaces.mesh import SHADOW_BIAS, MeshBuffers
 
 
 class Surfaces:
-    """Opaque Lambertian surfaces: the scene's meshes and (``draw_ground``) its ground plane, as one Layer.
+    """Opaque Lambertian surfaces: the scene's meshes and (``draw_ground``) its ground plane, as one ImageLayer.
 
     Keeps its BVH between renders: a frame whose meshes have the triangles of the last one (points moved, or the
     camera did) refits it instead of building it again.
@@ -58,7 +58,7 @@ class Surfaces:
 
     # --------------------------------------------------------------------------------------------- public
     def render(self, scene: Scene, width: int, height: int, *, draw_ground: bool = True,
-               sun_transmittance=None, sky=None) -> Layer:
+               sun_transmittance=None, sky=None) -> ImageLayer:
         """Render the meshes (and the ground plane when ``draw_ground`` and the scene has one).
 
         Args:
@@ -70,7 +70,7 @@ class Surfaces:
             sky: E / pi [RGB] of the sky's upper hemisphere lighting the surfaces (None: the dome's).
 
         Returns:
-            A Layer: radiance, transmittance 0 where a surface is hit and 1 elsewhere, depth of the hit (the
+            An ImageLayer: radiance, transmittance 0 where a surface is hit and 1 elsewhere, depth of the hit (the
             camera's far distance elsewhere). Under the terrain (:meth:`camera_buried`) it is black and opaque at
             the near distance, with one line in its ``warnings``.
         """
@@ -82,9 +82,9 @@ class Surfaces:
             buried = self._buried_warning(scene, buffers, plane, camera.position)
             if buried is not None:
                 stats["seconds"] = time.perf_counter() - started
-                return Layer(np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3), np.float32),
-                             np.full((height, width), camera.near, np.float32), {**stats, "buried": True},
-                             warnings=[buried])
+                return ImageLayer(np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3), np.float32),
+                                  np.full((height, width), camera.near, np.float32), {**stats, "buried": True},
+                                  warnings=[buried])
             image = self._trace(buffers, plane, pinhole_camera(camera, width, height), width, height)
             hit = image.hit.numpy().astype(bool)
             factor = self._host_factor(sun_transmittance, image, hit, camera.position)
@@ -104,7 +104,7 @@ class Surfaces:
             launch_rows(shade_kernel(media.has_detail), height, width, inputs, self.device)
             wp.synchronize_device(self.device)
             stats.update(hits=int(hit.sum()), seconds=time.perf_counter() - started)
-            return Layer(radiance.numpy(), transmittance.numpy(), image.depth.numpy(), stats)
+            return ImageLayer(radiance.numpy(), transmittance.numpy(), image.depth.numpy(), stats)
 
     @property
     def occluders(self) -> MeshBuffers | None:
@@ -241,7 +241,7 @@ class SurfacesPass(Pass):
         return MemoryEstimate().add("meshes", host=40 * triangles,
                                     device=88 * triangles + width * height * LAYER_BYTES)
 
-    def render(self, frame) -> list[Layer]:
+    def render(self, frame) -> list[ImageLayer]:
         seen = frame.light.lit_at_media(frame.scene)
         shadows = [shadow for runner in frame.runners if runner is not self
                    for shadow in [runner.shadow(seen)] if shadow is not None]

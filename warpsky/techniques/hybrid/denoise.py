@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warpsky.device import is_cpu
-from warpsky.errors import UsageError
+from warpsky.core.device import is_cpu
+from warpsky.core.errors import UsageError
 
 #: The extra that installs the denoiser.
 DENOISE_EXTRA = "pip install 'warpsky[denoise]' (or pip install pyoidn)"

@@ -16,7 +16,7 @@ import functools
 import numpy as np
 import warp as wp
 
-from warpsky.device import is_cpu
+from warpsky.core.device import is_cpu
 
 
 class DeviceDenoiser:

@@ -7,11 +7,11 @@ Who counts what, so that no light counts twice:
 * the height-field pass: the deck's and the haze's single scattering of the sun (Max 1986), without its ambient
   term;
 * the surfaces pass: the meshes' (and a ground plane's, where it draws it) direct sunlight, without its sky term;
-* the paths (:class:`~warpsky.techniques.path_tracer.technique.PathTracing` with ``meshes`` and ``fog``, the
+* the paths (:class:`~warpsky.techniques.path_tracer.path_tracer.PathTracing` with ``meshes`` and ``fog``, the
   camera's opaque depth dropped so that they start on the meshes themselves, the deck and its haze voxelised over a
   square around the camera as the path tracer traces them, :mod:`~warpsky.techniques.path_tracer.deck_media`):
   everything else, the stratiform layers' light on the scenery included (the layers voxelised as the path tracer
-  traces them, :mod:`~warpsky.techniques.path_tracer.layer_media`: a camera ray whose first event lies in a layer's
+  traces them, :mod:`~warpsky.techniques.path_tracer.stratiform_media`: a camera ray whose first event lies in a layer's
   altitude band ends there, since the stratiform pass draws the layers; the ground, in their shadow, is then the
   surfaces pass's, its light from the layers the paths'). Their first event, in the fog, the deck, the media or on a
   surface, takes no sunlight (``multiple_only``, as for the voxel media and the ground), then the path gathers the
@@ -24,8 +24,8 @@ Who counts what, so that no light counts twice:
 
 The paths' radiance is already attenuated on its way to the eye (the fog's closed-form transmittance, the media and
 the air are tracked along the camera ray), so it is not composited by depth behind the fog's or the terrain's layer:
-it is the layer's ``front`` light (:class:`~warpsky.layer.Layer`), added unattenuated in front of the depth-merged
-layers and, with air, in front of the sky pass's front air (:func:`~warpsky.passes.frame.render_layers`).
+it is the layer's ``front`` light (:class:`~warpsky.core.image.ImageLayer`), added unattenuated in front of the
+depth-merged layers and, with air, in front of the sky pass's front air (:func:`~warpsky.passes.frame.render_layers`).
 """
 
 from __future__ import annotations
@@ -34,13 +34,13 @@ import dataclasses
 
 import numpy as np
 
-from warpsky.layer import Layer
+from warpsky.core.image import ImageLayer
+from warpsky.model.scene import Scene
+from warpsky.passes.deck.deck import HeightField
 from warpsky.passes.fog.fog import Fog
-from warpsky.passes.heightfield.heightfield import HeightField
 from warpsky.passes.media import SceneryFrame
-from warpsky.scene.model import Scene
 from warpsky.techniques.path_tracer.deck_media import with_deck_as_media
-from warpsky.techniques.path_tracer.layer_media import with_layers_as_media
+from warpsky.techniques.path_tracer.stratiform_media import with_layers_as_media
 
 
 def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height: int,
@@ -65,10 +65,10 @@ def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height
     return with_deck_as_media(traced, settings, width, height), band
 
 
-def scenery_guide(scene: Scene, single: Layer, device: str, around: SceneryFrame) -> Layer:
+def scenery_guide(scene: Scene, single: ImageLayer, device: str, around: SceneryFrame) -> ImageLayer:
     """The single-scattering layer as the paths' error estimate and denoiser read it: its transmittance times the
     fogs' (closed form, to the opaque depth; :class:`~warpsky.passes.fog.fog.Fog`) and the deck's and haze's
-    (:class:`~warpsky.passes.heightfield.heightfield.HeightField` without light), zero where the camera ray ends
+    (:class:`~warpsky.passes.deck.deck.HeightField` without light), zero where the camera ray ends
     on an opaque surface another pass drew (the camera's opaque depth). Its radiance, the level the error estimate
     divides by, adds the light the passes draw beside the paths: the fog's single scattering of the sun as the fog
     pass draws it (in the meshes' and the layers' shadows; its ambient term is the paths') and ``around.drawn``,
@@ -103,4 +103,4 @@ def scenery_guide(scene: Scene, single: Layer, device: str, around: SceneryFrame
         radiance = radiance + through * np.asarray(around.drawn, dtype=np.float32)
     if depth is not None:
         transmittance = np.where((depth < scene.camera.far)[..., None], 0.0, transmittance)
-    return Layer(radiance.astype(np.float32), transmittance.astype(np.float32), single.depth, single.stats)
+    return ImageLayer(radiance.astype(np.float32), transmittance.astype(np.float32), single.depth, single.stats)

@@ -1,5 +1,5 @@
 """Height-field cloud decks (Max 1986) for the path tracer: the scene's deck and its haze are voxelised
-(:func:`~warpsky.media.deck_voxels.voxelize_deck`) at the scene's time over a square around the camera and traced
+(:func:`~warpsky.media.deck.deck_voxels.voxelize_deck`) at the scene's time over a square around the camera and traced
 with the other media, the ground and the air, so the height-field pass (single scattering) can be measured against
 an unbiased reference of the same cloud.
 
@@ -10,14 +10,14 @@ Three path tracer settings, with these automatic values:
   the haze's smallest extinction (or, without haze, half the deck's smallest extinction: a grazing ray through a
   deck with gaps is about half in cloud); light from beyond the square is then dimmed below 1 % along such a ray.
   Capped at :data:`DECK_EXTENT_CAP`. What lies beyond is clear (the height-field pass's deck and haze go on).
-- ``deck_voxel_width``: horizontal voxel edge [m]. Auto: :func:`~warpsky.media.heightfield.feature_length` / 8
+- ``deck_voxel_width``: horizontal voxel edge [m]. Auto: :func:`~warpsky.media.deck.deck_geometry.feature_length` / 8
   (the shortest wavelength, the equator's rounding c, the polynomial's curvature length).
 - ``deck_voxel``: vertical voxel edge [m]. Auto: the band's height / :data:`DECK_VOXEL_ROWS`. Every column's optical
   depth is exact whatever the size (partial volume); the rows set where the tops and bases lie within a voxel.
 
-When the automatic sizes make a grid over :data:`~warpsky.media.layer_voxels.VOXEL_BUDGET` voxels they grow together
-by the smallest factor that fits; given sizes are kept, and a grid they make over the budget is refused with one
-line naming the settings. Each column is split into :func:`supersample` ^ 2 sub-columns (4 x 4 when cheap).
+When the automatic sizes make a grid over :data:`~warpsky.media.stratiform.stratiform_voxels.VOXEL_BUDGET` voxels they
+grow together by the smallest factor that fits; given sizes are kept, and a grid they make over the budget is refused
+with one line naming the settings. Each column is split into :func:`supersample` ^ 2 sub-columns (4 x 4 when cheap).
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ import math
 
 import numpy as np
 
-from warpsky.media.deck_voxels import deck_grid, voxelize_deck
-from warpsky.media.heightfield import feature_length, the_deck
-from warpsky.media.layer_voxels import VOXEL_BUDGET, ColumnGrid
-from warpsky.resources import MemoryEstimate
-from warpsky.scene.heightfield_clouds import HeightFieldClouds
-from warpsky.scene.model import Scene
+from warpsky.core.resources import MemoryEstimate
+from warpsky.media.deck.deck_geometry import feature_length, the_deck
+from warpsky.media.deck.deck_voxels import deck_grid, voxelize_deck
+from warpsky.media.stratiform.stratiform_voxels import VOXEL_BUDGET, ColumnGrid
+from warpsky.model.deck import HeightFieldClouds
+from warpsky.model.scene import Scene
 from warpsky.techniques.path_tracer.majorants import AUTO_BLOCKS
 
 #: Voxel rows over the deck's band when ``deck_voxel`` is auto.

@@ -19,7 +19,7 @@ import warp as wp
 
 from warpsky.light.dome import DomeLight, dome_radiance
 from warpsky.light.sun import Sun
-from warpsky.media.air import (
+from warpsky.media.air.medium import (
     Air,
     AirPart,
     air_part,
@@ -32,7 +32,7 @@ from warpsky.media.air import (
     vertical,
 )
 from warpsky.media.phase_mixture import mixture_functions, oriented_correction_function
-from warpsky.media.voxel import VoxelMedia, media_functions
+from warpsky.media.voxels.voxel import VoxelMedia, media_functions
 from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.phase import hg_sample_cos, isotropic_sample_cos, phase_hg
 from warpsky.optics.phase_sampling import PhaseTables, rotate_about
@@ -53,7 +53,7 @@ oriented_mixture_correction = oriented_correction_function(medium_phase)[1]
 
 #: What ends a ray before the far distance: nothing, the ground plane, sea level (the air's floor), an opaque
 #: surface another pass draws behind the media (a mesh: the camera ray ends there, the path with nothing more), or a
-#: mesh the path tracer traces itself (:mod:`~warpsky.techniques.path_tracer.surfaces`: a Lambertian bounce).
+#: mesh the path tracer traces itself (:mod:`~warpsky.techniques.path_tracer.surface_hits`: a Lambertian bounce).
 SURFACE_NONE = wp.constant(0)
 SURFACE_GROUND = wp.constant(1)
 SURFACE_SEA = wp.constant(2)

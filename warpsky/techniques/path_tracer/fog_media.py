@@ -1,6 +1,6 @@
 """Analytic fog (Biri et al. 2002) as a participating medium of the path tracer.
 
-The fog's extinction at a point is its density in closed form (:func:`~warpsky.media.analytic_fog.fog_density`, the
+The fog's extinction at a point is its density in closed form (:func:`~warpsky.media.fog.fog_density`, the
 same function the fog pass's quadrature uses) times its extinction scale; it joins the voxel media and the air in
 the free flights' delta tracking:
 
@@ -14,11 +14,11 @@ the free flights' delta tracking:
   :func:`~warpsky.techniques.path_tracer.events.media_first_function`); then the sun comes through its
   Henyey-Greenstein phase and the new direction is drawn from it (weight 1);
 * transmittance toward the sun and along the camera ray is the closed-form optical depth
-  (:func:`~warpsky.media.analytic_fog.fog_optical_depth`): exact, no tracking, no noise.
+  (:func:`~warpsky.media.fog.fog_optical_depth`): exact, no tracking, no noise.
 
 After high-order similarity (``reduced``) the fog is reduced like the voxel media: extinction sigma_t - g sigma_s,
 isotropic scattering sigma_s (1 - g). Positions are camera-relative, as everywhere in the path tracer; the fog's
-terms are evaluated in float64 (:func:`~warpsky.media.analytic_fog.fog_struct` folds the wind in on the host).
+terms are evaluated in float64 (:func:`~warpsky.media.fog.fog_struct` folds the wind in on the host).
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
-from warpsky.media.analytic_fog import (
+from warpsky.core.numerics import mean3
+from warpsky.media.fog import (
     FogBody,
     FogSet,
     fog_density,
@@ -36,8 +37,7 @@ from warpsky.media.analytic_fog import (
     fog_struct,
     slabs_exit_length,
 )
-from warpsky.numerics import mean3
-from warpsky.scene.analytic_fog import AnalyticFog, BlobTerm, ConstantTerm, CosineTerm, PolynomialTerm
+from warpsky.model.fog import AnalyticFog, BlobTerm, ConstantTerm, CosineTerm, PolynomialTerm
 
 #: The fog's majorant is its density bound inflated by this factor (float32 rounding of the summed coefficients).
 FOG_MARGIN = 1.0001

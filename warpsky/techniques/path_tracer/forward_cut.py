@@ -32,14 +32,14 @@ import numpy as np
 import warp as wp
 
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air, air_part, no_air
+from warpsky.media.air.medium import Air, air_part, no_air
 from warpsky.media.phase_mixture import mixture_functions
-from warpsky.media.voxel import VoxelMedia, media_functions
+from warpsky.media.voxels.voxel import VoxelMedia, media_functions
+from warpsky.model.scene import VoxelMedium
 from warpsky.optics.kernels import scattering_angle
 from warpsky.optics.multiple import forward_cut
 from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.optics.tables import phase_table
-from warpsky.scene.model import VoxelMedium
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.events import UNBOUNDED
 from warpsky.techniques.path_tracer.majorants import Majorants
@@ -96,7 +96,7 @@ def check_cut_settings(cut_deg: float, similarity_order: int) -> None:
     """A UsageError naming both settings when the cut and high-order similarity are both set: they reduce the
     media two ways."""
     if cut_deg > 0.0 and similarity_order > 0:
-        from warpsky.errors import UsageError
+        from warpsky.core.errors import UsageError
 
         raise UsageError("settings forward_cut and similarity_order reduce the media two ways; set one of them "
                          f"(got forward_cut={cut_deg:g}, similarity_order={similarity_order})")

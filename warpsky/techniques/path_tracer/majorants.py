@@ -13,12 +13,12 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers
-from warpsky.media.air import Air, air_bound, altitude, coefficient_at, top_entry, vertical
-from warpsky.media.air_round import Line, altitude_at, make_line
-from warpsky.media.detail import detail_factor_bound
-from warpsky.media.voxel import VoxelMedia, grid_interval, reduced_coefficients
-from warpsky.scene.model import VoxelMedium
+from warpsky.core import device_buffers
+from warpsky.media.air.medium import Air, air_bound, altitude, coefficient_at, top_entry, vertical
+from warpsky.media.air.round_earth_kernels import Line, altitude_at, make_line
+from warpsky.media.voxels.detail import detail_factor_bound
+from warpsky.media.voxels.voxel import VoxelMedia, grid_interval, reduced_coefficients
+from warpsky.model.scene import VoxelMedium
 from warpsky.techniques.path_tracer.fog_media import FogTracking
 
 #: Majorants are inflated by this factor so float32 interpolation never exceeds them.
@@ -257,7 +257,7 @@ def upload_majorants(media: tuple[VoxelMedium, ...], block: int | None, device, 
     """Majorant grids of ``media`` (cells of ``block`` voxels, None: each medium's :func:`medium_block`; bounds on
     extinction times the detail bound, with :data:`MAJORANT_MARGIN`) uploaded to ``device``, and the number of
     cells; with ``reduced`` also the bounds on the extinction after high-order similarity (sigma_t - g sigma_s).
-    With ``cache_name`` the bounds go through :func:`warpsky.device_buffers.upload` (no copy when the previous
+    With ``cache_name`` the bounds go through :func:`warpsky.core.device_buffers.upload` (no copy when the previous
     frame's bounds were the same)."""
     mgrids, chunks, reduced_chunks, offset = [], [], [], 0
     for medium in media:

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpsky.core.numerics import exp3
 from warpsky.light.sun import Sun
-from warpsky.media.air import Air, air_coefficient, altitude, as_analytic, vertical
-from warpsky.media.air_mixture_kernels import air_column
-from warpsky.media.air_round import floor_distance, sun_transmittance
-from warpsky.numerics import exp3
+from warpsky.media.air.medium import Air, air_coefficient, altitude, as_analytic, vertical
+from warpsky.media.air.mixture_kernels import air_column
+from warpsky.media.air.round_earth_kernels import floor_distance, sun_transmittance
 from warpsky.surfaces.plane import Ground
 
 

@@ -19,7 +19,7 @@ Rayleigh, keeps its own coefficients): ``reduced`` 1 selects those coefficients 
 that often has lost most of its angular structure, so the transform changes it little while cutting the collisions
 of a forward-scattering medium by 1 / (1 - g) (6.7 for g = 0.85).
 
-Positions are camera-relative metres (float32-safe far from the origin, as in :mod:`warpsky.media.voxel`).
+Positions are camera-relative metres (float32-safe far from the origin, as in :mod:`warpsky.media.voxels.voxel`).
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ import functools
 
 import warp as wp
 
-from warpsky.media.air import Air, air_coefficient, air_scattering
-from warpsky.media.voxel import MediaPoint, VoxelMedia, media_functions
+from warpsky.media.air.medium import Air, air_coefficient, air_scattering
+from warpsky.media.voxels.voxel import MediaPoint, VoxelMedia, media_functions
 from warpsky.techniques.path_tracer.fog_media import fog_coefficients, fog_segment
 from warpsky.techniques.path_tracer.majorants import Majorants, majorant_segment
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import warp as wp
 
+from warpsky.core.numerics import linear_cell
 from warpsky.media.phase_mixture import oriented_slice
-from warpsky.media.voxel import MediaPoint, VoxelMedia
-from warpsky.numerics import linear_cell
+from warpsky.media.voxels.voxel import MediaPoint, VoxelMedia
 from warpsky.optics.kernels import GRID_SIZE, grid_node
 from warpsky.optics.oriented_phase import OrientedPhases, oriented_value
 

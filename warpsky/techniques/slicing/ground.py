@@ -8,13 +8,13 @@ import functools
 
 import warp as wp
 
-from warpsky.camera_rays import PinholeCamera, primary_ray
-from warpsky.kernel_variants import kernel_variants
+from warpsky.core.kernel_variants import kernel_variants
+from warpsky.core.numerics import exp3
 from warpsky.light.dome import ambient_ground
 from warpsky.light.sun import Sun
-from warpsky.media.shadow import sun_depth_function
-from warpsky.media.voxel import VoxelMedia
-from warpsky.numerics import exp3
+from warpsky.media.voxels.shadow import sun_depth_function
+from warpsky.media.voxels.voxel import VoxelMedia
+from warpsky.model.camera_rays import PinholeCamera, primary_ray
 from warpsky.surfaces.plane import Ground
 
 

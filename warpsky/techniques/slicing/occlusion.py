@@ -16,11 +16,11 @@ import functools
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers
-from warpsky.device import launch_rows
-from warpsky.kernel_variants import kernel_variants
-from warpsky.media.voxel import VoxelMedia, media_functions
-from warpsky.numerics import exp3, trilinear_cell
+from warpsky.core import device_buffers
+from warpsky.core.device import launch_rows
+from warpsky.core.kernel_variants import kernel_variants
+from warpsky.core.numerics import exp3, trilinear_cell
+from warpsky.media.voxels.voxel import VoxelMedia, media_functions
 
 #: Most grid nodes along one axis of the occlusion grid.
 MAX_NODES = 64

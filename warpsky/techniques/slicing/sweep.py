@@ -11,7 +11,7 @@ under a key made of exactly those: the structs' bytes (which include the address
 work buffers' addresses and shapes, the kernels, the planes. A frame whose key differs (another camera or sun, a
 grid whose contents changed and so were uploaded anew, another slice count or resolution) captures again; one
 graph per device is kept, and it holds references to everything it reads so no address in it is reused while it
-lives. The buffers come from :mod:`warpsky.device_buffers` (names ``slicing:*``), so a batch's frames keep the same
+lives. The buffers come from :mod:`warpsky.core.device_buffers` (names ``slicing:*``), so a batch's frames keep the same
 addresses and, with the same camera, sun and grids, replay the same graph.
 
 Capture rules followed: nothing is allocated, copied to or from the host, or synchronised inside the capture
@@ -19,7 +19,7 @@ Capture rules followed: nothing is allocated, copied to or from the host, or syn
 (``force_module_load=False``: loading every module Warp knows would compile unrelated techniques).
 
 On the CPU the sweep runs as plain launches, the eye gather in row bands over every core
-(:func:`~warpsky.device.launch_rows`), exactly as before graphs existed. If a capture raises, the frame runs as
+(:func:`~warpsky.core.device.launch_rows`), exactly as before graphs existed. If a capture raises, the frame runs as
 plain launches, one warning line is printed per process, and that device is not captured again in the process.
 """
 
@@ -32,15 +32,16 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from warpsky import device_buffers
-from warpsky.camera_rays import PinholeCamera
-from warpsky.device import is_cpu, launch_rows
-from warpsky.interrupt import check_stop
+from warpsky.core import device_buffers
+from warpsky.core.device import is_cpu, launch_rows
+from warpsky.core.interrupt import check_stop
 from warpsky.light.skylight import SkyEnvironment
 from warpsky.light.sun import Sun
-from warpsky.media.voxel import VoxelMedia
+from warpsky.media.voxels.voxel import VoxelMedia
+from warpsky.model.camera_rays import PinholeCamera
 from warpsky.optics.oriented_phase import OrientedPhases
-from warpsky.techniques.slicing.kernels import (
+from warpsky.techniques.slicing.occlusion import SkyShadow
+from warpsky.techniques.slicing.slicing_kernels import (
     AmsTables,
     EyeBuffers,
     LightBuffers,
@@ -48,7 +49,6 @@ from warpsky.techniques.slicing.kernels import (
     SliceFrame,
     eye_span_kernel,
 )
-from warpsky.techniques.slicing.occlusion import SkyShadow
 
 #: Capture and replay graphs on CUDA; False: plain launches everywhere (benchmarks compare the two).
 USE_GRAPHS = True
@@ -139,7 +139,7 @@ class SweepBuffers:
 @dataclass
 class SliceSweep:
     """Every launch of one frame's sweep: clears, the eye spans, the light's entry, then per slice plane an eye
-    gather and a light step (see :mod:`warpsky.techniques.slicing.kernels`)."""
+    gather and a light step (see :mod:`warpsky.techniques.slicing.slicing_kernels`)."""
 
     device: str
     eye_kernel: Any

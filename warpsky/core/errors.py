@@ -1,0 +1,34 @@
+"""Error types that carry a message meant for users.
+
+Every error raised at the boundary (USD reading, file loading, command line) is one of these. The message names
+the prim, attribute or file at fault and what was expected, so the CLI can print it as-is and exit with code 2.
+"""
+
+from __future__ import annotations
+
+
+class WarpskyError(Exception):
+    """Base class for errors caused by the user's input (exit code 2)."""
+
+    exit_code = 2
+
+
+class SceneError(WarpskyError):
+    """A stage, prim, attribute or data file is missing or invalid."""
+
+
+class UsageError(WarpskyError):
+    """A command-line argument or option value is invalid."""
+
+
+class ResourceError(WarpskyError):
+    """The frame needs more memory or work than allowed: the message names the estimate, the limit and the option
+    that changes it."""
+
+
+class OutputError(WarpskyError):
+    """An output or cache file cannot be written or read back."""
+
+
+class UnsupportedVar(SceneError):
+    """A RenderVar whose source warpsky does not write: its product is written without it."""

@@ -1,0 +1,51 @@
+"""File helpers shared by outputs and caches: the cache root, writes that are never seen half-done, and the frame
+placeholder of output paths."""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from pathlib import Path
+
+from warpsky.core.errors import OutputError
+
+#: The frame in an output path (usdrecord's rule): a run of ``#``, optionally ``.`` and more ``#`` for subframes.
+PLACEHOLDER = re.compile(r"#+(\.#+)?")
+
+
+def cache_dir() -> Path:
+    """Root of warpsky's on-disk cache (``$WARPSKY_CACHE``, default ``~/.cache/warpsky``)."""
+    return Path(os.environ.get("WARPSKY_CACHE") or Path.home() / ".cache" / "warpsky")
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def atomic_write(path: str | os.PathLike, write) -> Path:
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it onto ``path``.
+
+    The temporary file is removed on any failure; ``path`` either keeps its old content or gets the new one whole.
+    """
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp" + path.suffix, dir=directory)
+    except OSError as exc:
+        raise OutputError(f"cannot write into directory {directory}: {exc.strerror or exc}") from None
+    os.close(fd)
+    try:
+        write(tmp)
+        # mkstemp makes the file private (0600); give it the permissions a plain open() would.
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
