@@ -153,7 +153,7 @@ sunbeams: $(STAMP) data/terrain.usda
 		--time-budget 20
 	$(VENV)/bin/warpsky contact-sheet out/sunbeams/drift.####.exr -o out/sunbeams/drift_sheet.png
 	$(VENV)/bin/warpsky render usd_scenes/sunbeams.usda out/sunbeams/max-rule.####.exr --frames 1 --png \
-		--set heightfield.mode=max --time-budget 20
+		--set deck.mode=max --time-budget 20
 
 # The gallery: one hero frame per shipped stage (tools/make_gallery.py runs each warpsky render command).
 gallery: $(STAMP) data/cumulus.nvdb data/storm/.complete data/terrain.usda

@@ -10,7 +10,7 @@ The camera stands 300 m up, looking 20 deg above the horizon (focal length 24 mm
 
 Measured (evaluation/scripts/bench_deck_error_vs_time.py, 96 x 64, CPU): the reference (2048 spp, 89 s; its grid 1474 x
 32 x 1474 voxels of 12.5 x 4.6 m over a square of half-size 9.2 km) has a relative noise of 0.034 % of the mean and 4.7
-% per pixel. The height-field pass's rows: exact rel RMSE 0.654, bias -0.605 (0.9 s); max 0.649, -0.602 (0.08 s);
+% per pixel. The deck pass's rows: exact rel RMSE 0.654, bias -0.605 (0.9 s); max 0.649, -0.602 (0.08 s);
 sexp 0.692, -0.624 (0.08 s), the same for step lengths 12.5, 6.25 and 3.125 m: the pass shows 40 % of the light.
 That is multiple scattering (the haze's over long paths, the ground's bounce), not error: the exact mode against the
 path tracer limited to single scattering (max_bounces = 1, 512 spp) is -0.46 % +- 0.11 %.

@@ -30,8 +30,8 @@ uniform albedo: the ground's albedo map, which the path tracer does not trace, i
 
 Height-field cloud decks (Max 1986) likewise: the reference path-traces the deck and its haze voxelised
 (:mod:`warpsky.techniques.path_tracer.deck_media`); on a deck stage without voxel media every voxel technique's
-frame is the height-field pass's, measured once per mode (``height-field pass (Max 1986, exact)``, ``max``,
-``sexp``) along ``heightfield.step_length``. That pass is single scattering only, so its bias against the
+frame is the deck pass's, measured once per mode (``deck pass (Max 1986, exact)``, ``max``,
+``sexp``) along ``deck.step_length``. That pass is single scattering only, so its bias against the
 path-traced multiple scattering is expected to be negative.
 
 Terrain meshes and analytic fog (Biri et al. 2002) likewise: the reference traces them
@@ -78,9 +78,9 @@ VOXEL_SETTINGS = ("step_length", "shadow_step_length")
 #: Row name of the stratiform pass measured on a stage of layers without voxel media, and its ladder.
 STRATIFORM_ROW = "stratiform pass (Bouthors 2006)"
 STRATIFORM_LADDER = [{"stratiform.radiosity_detail": d} for d in (0, 1, 2)]
-#: Row names of the height-field pass (Max 1986) measured on a deck stage without voxel media, one per mode, and
-#: its ladder: ``heightfield.step_length`` as these multiples of the pass's automatic cloud step.
-HEIGHTFIELD_ROW = "height-field pass (Max 1986, {mode})"
+#: Row names of the deck pass (Max 1986) measured on a deck stage without voxel media, one per mode, and
+#: its ladder: ``deck.step_length`` as these multiples of the pass's automatic cloud step.
+HEIGHTFIELD_ROW = "deck pass (Max 1986, {mode})"
 HEIGHTFIELD_MODES = ("exact", "max", "sexp")
 HEIGHTFIELD_STEPS = (2.0, 1.0, 0.5)
 
@@ -148,7 +148,7 @@ def reference_image(scene, width, height, device, *, spp: int, seed: int, use_ca
 
 def has_scenery(scene) -> bool:
     """Whether ``scene`` holds terrain meshes, analytic fog or a height-field deck."""
-    return bool(scene.meshes or scene.fogs or scene.heightfield_clouds)
+    return bool(scene.meshes or scene.fogs or scene.decks)
 
 
 def scenery_covered(scene, width: int, height: int, device: str, level: float = 0.99) -> np.ndarray:
@@ -212,7 +212,7 @@ def error_metrics(image: np.ndarray, reference: np.ndarray, covered: np.ndarray,
 
 def setting_label(values: dict) -> str:
     return ", ".join(f"{k.split('.')[-1]}={v if isinstance(v, str) else format(v, '.4g')}"
-                     for k, v in values.items() if k not in ("shadow_step_length", "heightfield.mode"))
+                     for k, v in values.items() if k not in ("shadow_step_length", "deck.mode"))
 
 
 def comparable_scene(scene, log=print):
@@ -233,10 +233,10 @@ def measured_rows(scene, techniques: list[str]) -> list[tuple[str, str, list[dic
     out = []
     for name in techniques:
         cls = technique_class(name)
-        if scene.heightfield_clouds and cls.scatters_scenery and scenery_traceable(scene):
+        if scene.decks and cls.scatters_scenery and scenery_traceable(scene):
             out.append((name, name, LADDERS[name]))  # its paths carry the deck's multiple scattering
-        elif scene.heightfield_clouds and not traces_decks(cls):
-            out += heightfield_rows(scene, name, out)
+        elif scene.decks and not traces_decks(cls):
+            out += deck_rows(scene, name, out)
         elif not scene.layers or not cls.renders_layers:
             out.append((name, name, LADDERS[name]))
         elif scene.media:
@@ -246,12 +246,12 @@ def measured_rows(scene, techniques: list[str]) -> list[tuple[str, str, list[dic
     return out
 
 
-def heightfield_rows(scene, name: str, so_far: list) -> list[tuple[str, str, list[dict]]]:
+def deck_rows(scene, name: str, so_far: list) -> list[tuple[str, str, list[dict]]]:
     """The rows of a voxel technique ``name`` on a stage with a height-field deck: with voxel media, its own
-    ladder next to the height-field pass; without, the height-field pass's frame alone, once per mode along
+    ladder next to the deck pass; without, the deck pass's frame alone, once per mode along
     :data:`HEIGHTFIELD_STEPS` (none when ``so_far`` already holds them)."""
     if scene.media:
-        return [(f"{name} + height-field pass", name, LADDERS[name])]
+        return [(f"{name} + deck pass", name, LADDERS[name])]
     first = HEIGHTFIELD_ROW.format(mode=HEIGHTFIELD_MODES[0])
     if first in (row for row, _, _ in so_far):
         return []
@@ -260,7 +260,7 @@ def heightfield_rows(scene, name: str, so_far: list) -> list[tuple[str, str, lis
 
     step = automatic_steps(the_deck(scene))[0]
     return [(HEIGHTFIELD_ROW.format(mode=mode), name,
-             [{"heightfield.mode": mode, "heightfield.step_length": factor * step} for factor in HEIGHTFIELD_STEPS])
+             [{"deck.mode": mode, "deck.step_length": factor * step} for factor in HEIGHTFIELD_STEPS])
             for mode in HEIGHTFIELD_MODES]
 
 
@@ -283,7 +283,7 @@ def run_report(
     if unknown:
         raise UsageError(f"error-vs-time cannot measure {', '.join(unknown)} (yet); available: "
                          f"{', '.join(LADDERS)}")
-    if not (scene.media or scene.layers or scene.heightfield_clouds or scene.fogs or scene.meshes):
+    if not (scene.media or scene.layers or scene.decks or scene.fogs or scene.meshes):
         raise UsageError("the stage holds no media, no stratiform layers, no height-field clouds, no analytic fog "
                          "and no meshes: nothing to measure")
     scene = comparable_scene(scene, log)

@@ -1,4 +1,4 @@
-"""Choosing the fog pass's quadrature and the height-field pass's steps on the tune half of the scenery family.
+"""Choosing the fog pass's quadrature and the deck pass's steps on the tune half of the scenery family.
 
 Both passes integrate their single scattering by quadrature (the fog: Gauss-Legendre nodes on pieces as long as
 the shortest feature along the ray, :mod:`~warpsky.passes.fog.fog`; the deck and its haze: a march with steps set
@@ -39,7 +39,7 @@ FOG_CANDIDATES = ((1, 4, 16), (2, 4, 64), (2, 16, 64), (2, 32, 64), (4, 4, 16), 
                   (4, 16, 64), (4, 32, 128), (8, 4, 64), (8, 8, 64), (8, 16, 64), (8, 32, 128))
 #: The fog pass's finer quadrature every candidate is measured against: 16 nodes on 16..512 pieces.
 FOG_REFERENCE = (16, 16, 512)
-#: Candidates for the height-field pass: (cloud step factor on its automatic value, None: automatic; the haze's
+#: Candidates for the deck pass: (cloud step factor on its automatic value, None: automatic; the haze's
 #: automatic steps per shortest feature of the deck's shadow, ``haze_steps_per_feature``).
 DECK_CANDIDATES = ((None, 8), (None, 12), (None, 16), (None, 24), (None, 32), (0.5, 16))
 #: The finer march: the cloud step an eighth of its automatic value, the haze step a 64th of the shadow's shortest
@@ -75,11 +75,11 @@ def deck_settings(scene, candidate: tuple[float | None, int], authored: bool = F
 
     factor, per_feature = candidate
     clouds = the_deck(scene)
-    out = {"heightfield.haze_steps_per_feature": per_feature}
+    out = {"deck.haze_steps_per_feature": per_feature}
     if factor is not None:
-        out["heightfield.step_length"] = factor * automatic_steps(clouds, per_feature)[0]
+        out["deck.step_length"] = factor * automatic_steps(clouds, per_feature)[0]
     if authored:
-        out["heightfield.haze_step_length"] = min(haze_step_bound(clouds) / 8.0, shadow_feature(clouds) / per_feature)
+        out["deck.haze_step_length"] = min(haze_step_bound(clouds) / 8.0, shadow_feature(clouds) / per_feature)
     return out
 
 
@@ -125,7 +125,7 @@ def measure_member(scene, member: dict, width: int, height: int, device: str) ->
             nodes, low, high = candidate
             out.append(Measured(member["name"], member["half"], f"fog {nodes} nodes, {low}..{high} pieces", error,
                                 bias, dt, seconds))
-    if scene.heightfield_clouds:
+    if scene.decks:
         finer = deck_settings(scene, DECK_REFERENCE, authored=True)
         reference, _ = pass_layer(scene, finer, width, height, device, "mode", 1)
         for candidate in DECK_CANDIDATES:

@@ -213,3 +213,28 @@ def test_a_new_technique_and_a_new_pass_plug_in_through_the_registry(tmp_path, h
     np.testing.assert_allclose(rgb, 0.5 + 0.5 * 2.0, rtol=1e-6)  # the veil in front, the glow behind it
     assert "glow.R" in image.channels and '"veil": {"opacity": 0.5}' in image.metadata["settings"]
     assert "glow: made up" in image.metadata["warnings"]
+
+
+#: What the commands that render and inspect a stage must not load: the evaluation code beside the package, the
+#: peers and tools only benchmarks, previews and farms use.
+NOT_LOADED = ("evaluation", "mitsuba", "drjit", "dask", "distributed", "pyvista", "vtk", "matplotlib")
+
+
+def _imported(args: list[str]) -> set[str]:
+    """Every module ``python -X importtime -m warpsky ARGS`` imports (read from its import-time log)."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", "warpsky", *args], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return {line.rsplit("|", 1)[1].strip() for line in done.stderr.splitlines() if line.startswith("import time:")
+            and "|" in line}
+
+
+def test_render_help_and_info_load_no_evaluation_code_or_peer(tmp_path, homogeneous_npy):
+    stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy))
+    for args in (["render", "--help"], ["info", str(stage)]):
+        names = _imported(args)
+        assert "warpsky.cli.main" in names
+        loaded = sorted(n for n in names if n.split(".")[0] in NOT_LOADED)
+        assert not loaded, f"warpsky {' '.join(args)} imports {loaded}"

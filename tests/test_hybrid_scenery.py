@@ -80,18 +80,18 @@ def thin_deck_scene(dome: bool) -> Scene:
     """The height-field reference's thin deck with haze (its single scattering there matches the voxelised deck's:
     -0.09 % +- 0.27 %) 1.5 km over a ground plane of albedo 0.4, the sun 55 deg up, optionally a uniform dome;
     the camera 300 m up looks at the deck from below."""
-    from test_heightfield_reference import thin_deck
+    from test_deck_reference import thin_deck
 
     clouds, camera = thin_deck()
     d = np.array([0.4, 0.82, 0.3])
     extra = {"dome": Dome(np.full(3, 0.05))} if dome else {}
     return Scene(camera, Sun(d / np.linalg.norm(d), np.ones(3)), ground=Ground(0.0, np.full(3, 0.4)),
-                 heightfield_clouds=(clouds,), **extra)
+                 decks=(clouds,), **extra)
 
 
 @pytest.mark.parametrize("dome", [False, True])
 def test_deck_over_a_ground_matches_the_path_tracer(dome):
-    """A height-field deck: the height-field pass's single scattering (its ambient term left to the paths) plus the
+    """A height-field deck: the deck pass's single scattering (its ambient term left to the paths) plus the
     paths through the deck and haze voxelised as the path tracer traces them, undenoised, equal the path tracer's
     frame: image means within 4 sigma and 3 % (sigma about 0.5 %; measured z = -0.4 with and without the dome).
     Without the paths (``multiple_scattering = 0``) the passes give 0.79 of it (0.83 with the dome, their ambient
@@ -100,8 +100,8 @@ def test_deck_over_a_ground_matches_the_path_tracer(dome):
     settings = {"deck_extent": "2500"}
     plan = make_plan(scene, technique="hybrid", resolution=(24, 16),
                      settings={"spp": "512", "target_error": "0", "denoise": "0", "seed": "3", **settings})
-    assert plan.passes == ("surfaces", "media", "heightfield")
-    assert "multiple scattering path traced by hybrid through the deck and haze" in plan.features["heightfield"]
+    assert plan.passes == ("surfaces", "media", "deck")
+    assert "multiple scattering path traced by hybrid through the deck and haze" in plan.features["deck"]
     mine = composite(render_layers(plan, scene)[1], scene.camera.far)
     plan = make_plan(scene, technique="path_tracer", resolution=(24, 16), settings={"spp": "1024", "seed": "5",
                                                                                      **settings})
@@ -203,13 +203,13 @@ def test_layers_over_a_textured_ground_leave_the_scenery_to_the_passes():
 
 
 def test_fog_and_deck_layers_are_drawn_once_per_frame(monkeypatch):
-    """The error estimate reads the fog pass's and the height-field pass's own layers of the frame (drawn early
+    """The error estimate reads the fog pass's and the deck pass's own layers of the frame (drawn early
     and kept for their turn), so a hybrid scenery frame draws the fog once and the deck once."""
-    from warpsky.passes.deck.deck import HeightField
+    from warpsky.passes.deck.deck import Deck
     from warpsky.passes.fog.fog import Fog
 
     calls = {"fog": 0, "deck": 0}
-    fog_render, deck_render = Fog.render, HeightField.render
+    fog_render, deck_render = Fog.render, Deck.render
 
     def counted_fog(self, *args, **kwargs):
         calls["fog"] += 1
@@ -220,7 +220,7 @@ def test_fog_and_deck_layers_are_drawn_once_per_frame(monkeypatch):
         return deck_render(self, *args, **kwargs)
 
     monkeypatch.setattr(Fog, "render", counted_fog)
-    monkeypatch.setattr(HeightField, "render", counted_deck)
+    monkeypatch.setattr(Deck, "render", counted_deck)
     plan, _ = frame(slab_scene("ground", False), "hybrid", spp=2, target_error=0, denoise=0)
     assert "media" in plan.passes and calls["fog"] == 1
     scene = thin_deck_scene(False)

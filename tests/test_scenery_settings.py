@@ -1,4 +1,4 @@
-"""The quadrature of the height-field pass's haze shafts against a finer march, and the rule that chooses the
+"""The quadrature of the deck pass's haze shafts against a finer march, and the rule that chooses the
 scenery passes' quadrature settings on a family's tune half (:mod:`evaluation.scenery_settings`)."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import numpy as np
 from conftest import look_rotation
 
 from evaluation.scenery_settings import Measured, choose
-from warpsky.model.deck import HazeSpec, HeightFieldClouds
+from warpsky.model.deck import CloudDeck, HazeSpec
 from warpsky.model.scene import Camera, Scene, Sun
-from warpsky.passes.deck.deck import HeightField, automatic_steps, shadow_feature
+from warpsky.passes.deck.deck import Deck, automatic_steps, shadow_feature
 
 
 def shafts_scene() -> Scene:
@@ -19,14 +19,14 @@ def shafts_scene() -> Scene:
     50 deg up; the camera 100 m up looks 15 deg above the horizon across the shafts."""
     rng = np.random.default_rng(7)
     k = rng.normal(size=(4, 2)) * 2.0 * math.pi / 700.0
-    clouds = HeightFieldClouds("/World/Deck", 1000.0, [5.0], k, rng.uniform(10, 30, 4), rng.uniform(0, 6, 4),
+    clouds = CloudDeck("/World/Deck", 1000.0, [5.0], k, rng.uniform(10, 30, 4), rng.uniform(0, 6, 4),
                                rounding=40.0, bottom_depth=60.0, density=0.03,
                                haze=HazeSpec(np.full(3, 4e-4), g=0.7, floor=-50.0))
     elevation = math.radians(15.0)
     look = np.array([math.cos(elevation), math.sin(elevation), 0.0])
     camera = Camera("cam", np.array([0.0, 100.0, 0.0]), look_rotation(look), 24.0, 36.0, 24.0, near=1.0, far=2e4)
     sun = math.radians(50.0)
-    return Scene(camera, Sun(np.array([0.0, math.sin(sun), math.cos(sun)]), np.ones(3)), heightfield_clouds=(clouds,))
+    return Scene(camera, Sun(np.array([0.0, math.sin(sun), math.cos(sun)]), np.ones(3)), decks=(clouds,))
 
 
 def test_haze_shafts_are_not_darkened_by_the_march():
@@ -35,11 +35,11 @@ def test_haze_shafts_are_not_darkened_by_the_march():
     this replaced, was 3 % dark on a deck of the scenery family), and twice as many steps per feature halve the
     relative RMS error at least roughly (first order in the step: the edges)."""
     scene = shafts_scene()
-    clouds = scene.heightfield_clouds[0]
-    fine = HeightField(haze_step_length=shadow_feature(clouds) / 64.0).render(scene, 32, 24).radiance
+    clouds = scene.decks[0]
+    fine = Deck(haze_step_length=shadow_feature(clouds) / 64.0).render(scene, 32, 24).radiance
     errors = []
     for per_feature in (8, 16):
-        out = HeightField(haze_steps_per_feature=per_feature).render(scene, 32, 24).radiance
+        out = Deck(haze_steps_per_feature=per_feature).render(scene, 32, 24).radiance
         bias = out[..., 1].mean() / fine[..., 1].mean() - 1.0
         errors.append(float(np.sqrt(np.mean((out - fine) ** 2)) / fine.mean()))
         print(f"{per_feature} steps per feature: bias {bias:+.4f}, relative RMSE {errors[-1]:.4f}")

@@ -178,8 +178,10 @@ def test_scenery_pass_settings_come_from_set_and_bad_ones_are_named(tmp_path, ca
     assert code == 2 and "setting fog.nodes: expected a whole number, got 'two'" in err
     code, _, err = run_cli(["info", path, "--set", "fog.max_pieces=2"], capsys)
     assert code == 2 and "setting fog.max_pieces must be a whole number >= fog.min_pieces (4), got 2" in err
-    code, _, err = run_cli(["info", path, "--set", "heightfield.mode=fast"], capsys)
+    code, _, err = run_cli(["info", path, "--set", "deck.mode=fast"], capsys)
     assert code == 2 and "mode" in err and "fast" in err
+    code, _, err = run_cli(["info", path, "--set", "heightfield.mode=max"], capsys)  # the deck pass's old name
+    assert code == 2 and "setting heightfield.mode: the heightfield pass is now called deck; use deck.mode" in err
     reader = StageReader(path)
     scene = reader.scene_at(None)
     coarse = make_plan(scene, resolution=(16, None), settings={"fog.nodes": "1", "fog.max_pieces": "4"})
@@ -210,7 +212,7 @@ def test_shipped_stages_plan_and_render(tmp_path, capsys, stage):
     code, out, err = run_cli(["info", path], capsys)
     assert code == 0, err
     passes = {"valley_fog": "surfaces -> media -> fog -> sky",
-              "sunbeams": "surfaces -> media -> heightfield -> sky"}[stage]
+              "sunbeams": "surfaces -> media -> deck -> sky"}[stage]
     assert f"passes      {passes} -> composite" in out
     code, _, err = run_cli(["render", path, tmp_path / "f.####.exr", "--frames", "1", "--res", "16", "--float"],
                            capsys)

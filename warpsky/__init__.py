@@ -4,7 +4,7 @@ Importing this package loads warp (about 0.35 s, no device initialised) and noth
 only in the modules that need them, and :func:`render_stage` / :func:`render_to_exr` (:mod:`warpsky.api`) load on
 first use. It switches off Warp's generation of adjoint (gradient) code before any of warpsky's kernel modules is
 defined (Warp reads ``warp.config.enable_backward`` when a module is created): warpsky never differentiates a
-kernel, and without adjoints its modules compile several times faster (the height-field pass's sm_90 module:
+kernel, and without adjoints its modules compile several times faster (the deck pass's sm_90 module:
 64 s with them, 7 s without, on a 2-core CPU).
 """
 

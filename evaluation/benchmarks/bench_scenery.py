@@ -2,7 +2,7 @@
 stages that use them, on cpu and cuda when present.
 
 - ``valley_fog``: terrain mesh (131 k triangles) + Biri fog + sky: the surfaces pass, the fog pass, the frame.
-- ``sunbeams``: terrain + Max height-field clouds with haze + sky: the surfaces pass, the height-field pass in its
+- ``sunbeams``: terrain + Max height-field clouds with haze + sky: the surfaces pass, the deck pass in its
   ``exact``, ``max`` and ``sexp`` modes, the frame.
 
     python evaluation/benchmarks/bench_scenery.py [--device cpu|cuda|all] [--width 1024 --height 768] [--json]
@@ -61,12 +61,12 @@ def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -
         row("fog pass (terrain shadows)",
             _best(lambda: fog.render(scene, width, height, limit=limit, occluders=occluders), repeats)[0])
         row("fog pass (no shadows)", _best(lambda: fog.render(scene, width, height, limit=limit), repeats)[0])
-    if scene.heightfield_clouds:
-        from warpsky.passes.deck.deck import HeightField
+    if scene.decks:
+        from warpsky.passes.deck.deck import Deck
 
         for mode in ("exact", "max", "sexp"):
-            clouds = HeightField(device=device, mode=mode)
-            row(f"height-field pass ({mode})",
+            clouds = Deck(device=device, mode=mode)
+            row(f"deck pass ({mode})",
                 _best(lambda c=clouds: c.render(scene, width, height, limit=limit), repeats)[0])
     seconds, _ = _best(lambda: depth_layers(plan, scene), repeats)
     row("all scenery passes", seconds)

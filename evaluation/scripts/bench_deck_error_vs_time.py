@@ -1,10 +1,10 @@
-"""Error against time of the height-field pass (Max 1986) on the small deck stage
+"""Error against time of the deck pass (Max 1986) on the small deck stage
 (:mod:`evaluation.deck_stage`), against the path tracer tracing the voxelised deck and haze.
 
     PYTHONPATH=. python evaluation/scripts/bench_deck_error_vs_time.py [OUT_DIR] [--spp N] [--res W H] [--device D]
 
-Writes the stage, runs ``warpsky bench error-vs-time``'s report (rows ``height-field pass (Max 1986, MODE)`` along
-``heightfield.step_length``) and prints the table; CSV, JSON and PNG go to OUT_DIR.
+Writes the stage, runs ``warpsky bench error-vs-time``'s report (rows ``deck pass (Max 1986, MODE)`` along
+``deck.step_length``) and prints the table; CSV, JSON and PNG go to OUT_DIR.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def single_scattering_check(scene, res, device: str, spp: int) -> None:
     from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     width, height = res
-    exact = render_frame_radiance(frame_plan(scene, "single_scatter", {"heightfield.mode": "exact"}, width, height,
+    exact = render_frame_radiance(frame_plan(scene, "single_scatter", {"deck.mode": "exact"}, width, height,
                                              device), scene)[0][..., 1]
     single = PathTracer(PathTracerSettings(spp=spp, seed=7, max_bounces=1), device=device).render(scene, width,
                                                                                                   height)

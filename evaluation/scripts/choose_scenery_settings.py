@@ -1,4 +1,4 @@
-"""Choose the fog pass's quadrature and the height-field pass's steps on the tune half of the scenery family, and
+"""Choose the fog pass's quadrature and the deck pass's steps on the tune half of the scenery family, and
 report the choice on the test half (``evaluation.scenery_settings``'s docstring says how).
 
 Run:  python evaluation/scripts/choose_scenery_settings.py [--family data/scenery_family_settings] [--count 48]

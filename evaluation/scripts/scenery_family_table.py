@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 #: The rung (index along its ladder) each technique is tabled at: a small budget. Rows of another name (the
-#: height-field pass's, on a deck stage without voxel media) are tabled at their second rung.
+#: deck pass's, on a deck stage without voxel media) are tabled at their second rung.
 RUNGS = {"hybrid": (3,), "single_scatter": (2,), "slicing": (3,), "path_tracer": (4, 6)}
 OTHER_RUNG = 1
 

@@ -253,12 +253,21 @@ def parse_settings(cls, values: dict | None):
     return cls(**kwargs)
 
 
+#: Prefixes a pass's settings had before it was renamed: the old name is refused with the new one.
+RENAMED_PREFIXES = {"heightfield.": "deck."}
+
+
 def split_by_prefix(values: dict, prefixes) -> tuple[dict, dict[str, dict]]:
     """``--set`` values split into (the technique's, {prefix: that pass's, names without the prefix}) for the
     passes' ``prefixes`` (``stratiform.``, ``fog.``); names with no known prefix are the technique's."""
     own: dict = {}
     by_prefix: dict[str, dict] = {prefix: {} for prefix in prefixes}
     for key, value in (values or {}).items():
+        old = next((p for p in RENAMED_PREFIXES if key.startswith(p)), None)
+        if old is not None:
+            new = RENAMED_PREFIXES[old] + key[len(old):]
+            raise UsageError(f"setting {key}: the {old[:-1]} pass is now called {RENAMED_PREFIXES[old][:-1]}; "
+                             f"use {new}")
         prefix = next((p for p in prefixes if key.startswith(p)), None)
         if prefix is None:
             own[key] = value

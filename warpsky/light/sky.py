@@ -1,5 +1,5 @@
 """The analytic sky as a light: its radiance over the upper hemisphere, for the passes that light surfaces and media
-with a uniform-equivalent sky (the surfaces, fog and height-field passes).
+with a uniform-equivalent sky (the surfaces, fog and deck passes).
 
 The sky's radiance along a direction above the horizon is the air to infinity as the sky pass draws it
 (:func:`~warpsky.media.air.multiple_kernels.air_radiance`: Riley's single scattering E_sun P_R(theta) inscatter(v) plus

@@ -20,7 +20,7 @@ The haze is a horizontal slab of constant extinction between ``floor`` and ``top
 H + h(f_max)); the clouds above it throw shafts of light into it (Max §5).
 
 USD: an ``Xform`` prim with ``uniform token warpsky:kind = "heightFieldClouds"``, read by
-:func:`read_heightfield_clouds`. Lengths are in scene units (times metersPerUnit); extinctions are in 1/m whatever
+:func:`read_decks`. Lengths are in scene units (times metersPerUnit); extinctions are in 1/m whatever
 metersPerUnit says. The prim's world translation moves the pattern's origin (x0, z0) and adds to the mean
 altitude; its rotation and scale are ignored. Wave vectors are along world x and world z (a Z-up stage: x and -y).
 
@@ -68,9 +68,9 @@ from warpsky.core.errors import SceneError
 from warpsky.model.checks import float_array_attr
 
 #: ``warpsky:kind`` of a height-field cloud prim.
-HEIGHTFIELD_KIND = "heightFieldClouds"
+DECK_KIND = "heightFieldClouds"
 #: Attributes such a prim may carry.
-HEIGHTFIELD_ATTRIBUTES = frozenset(
+DECK_ATTRIBUTES = frozenset(
     [f"warpsky:hf:{n}" for n in ("meanAltitude", "polynomial", "maxHeight", "waveVectors", "amplitudes", "phases",
                                  "waveSpeeds", "equatorRounding", "bottomDepth", "density", "extinctionScale",
                                  "albedo", "g")]
@@ -149,7 +149,7 @@ class HazeSpec:
 
 
 @dataclass(frozen=True)
-class HeightFieldClouds:
+class CloudDeck:
     """Max's clouds between the surfaces H + g and H + h (module docstring: formulas and USD attributes).
 
     Attributes:
@@ -292,7 +292,7 @@ class HeightFieldClouds:
 
     def __repr__(self) -> str:
         haze = "" if self.haze is None else f", haze {self.haze.density.tolist()} 1/m to {self.haze_top:g} m"
-        return (f"HeightFieldClouds({self.name!r}, H={self.mean_altitude:g} m, {len(self.amplitudes)} waves, "
+        return (f"CloudDeck({self.name!r}, H={self.mean_altitude:g} m, {len(self.amplitudes)} waves, "
                 f"band={tuple(round(b, 3) for b in self.band)} m, rho={self.density:g} 1/m{haze})")
 
 
@@ -300,7 +300,7 @@ class HeightFieldClouds:
 def _read_haze(reader, prim, tc, mpu: float) -> HazeSpec | None:
     path = prim.GetPath()
     density = reader._color_attr(prim, "warpsky:haze:density", tc)
-    authored = [n for n in HEIGHTFIELD_ATTRIBUTES
+    authored = [n for n in DECK_ATTRIBUTES
                 if n.startswith("warpsky:haze:") and prim.GetAttribute(n).HasAuthoredValue()]
     if density is None:
         if authored:
@@ -320,18 +320,18 @@ def _read_haze(reader, prim, tc, mpu: float) -> HazeSpec | None:
         raise SceneError(f"{path} (warpsky:haze:*): {exc}") from None
 
 
-def read_heightfield_clouds(reader, prim, time_code) -> HeightFieldClouds:
-    """The :class:`HeightFieldClouds` of ``prim`` (``warpsky:kind = "heightFieldClouds"``) at USD ``time_code``.
+def read_decks(reader, prim, time_code) -> CloudDeck:
+    """The :class:`CloudDeck` of ``prim`` (``warpsky:kind = "heightFieldClouds"``) at USD ``time_code``.
 
     ``reader`` is a :class:`~warpsky.usd.stage.StageReader` (its attribute helpers, world transform and
     metersPerUnit). Errors name the prim and the attribute. The waves' motion is applied at render time."""
     path = str(prim.GetPath())
     names = {a.GetName() for a in prim.GetAttributes()}
     unknown = sorted(n for n in names if n.startswith(("warpsky:hf:", "warpsky:haze:")) and
-                     n not in HEIGHTFIELD_ATTRIBUTES)
+                     n not in DECK_ATTRIBUTES)
     if unknown:
         raise SceneError(f"height-field clouds {path}: unknown attribute(s) {', '.join(unknown)}; "
-                         f"known: {', '.join(sorted(HEIGHTFIELD_ATTRIBUTES))}")
+                         f"known: {', '.join(sorted(DECK_ATTRIBUTES))}")
     mpu = float(reader.meters_per_unit)
     world = reader._world(prim, time_code)
     translation = world[:3, 3]
@@ -361,7 +361,7 @@ def read_heightfield_clouds(reader, prim, time_code) -> HeightFieldClouds:
     scale = reader._color_attr(prim, hf + "extinctionScale", time_code)
     albedo = reader._color_attr(prim, hf + "albedo", time_code)
     try:
-        return HeightFieldClouds(
+        return CloudDeck(
             path, float(translation[1]) + numbers["meanAltitude"], poly, waves,
             np.zeros(0) if arrays["amplitudes"] is None else arrays["amplitudes"], arrays["phases"],
             arrays["waveSpeeds"], numbers["equatorRounding"], numbers["bottomDepth"], numbers["density"],

@@ -431,8 +431,8 @@ class Scene:
         dome: The environment (``UsdLuxDomeLight``), or None (also for a black dome).
         meshes: Opaque Lambertian surfaces (``UsdGeomMesh``, e.g. terrain), ray cast through Warp's BVH
             (:class:`~warpsky.model.terrain.TerrainMesh`).
-        heightfield_clouds: Constant-density clouds between two height fields about a mean plane, with the haze
-            below them (Max 1986; :class:`~warpsky.model.deck.HeightFieldClouds`).
+        decks: Constant-density clouds between two height fields about a mean plane, with the haze
+            below them (Max 1986; :class:`~warpsky.model.deck.CloudDeck`).
         fogs: Fog whose extinction is a sum of functions with closed-form line integrals (Biri et al. 2002;
             :class:`~warpsky.model.fog.AnalyticFog`).
     """
@@ -450,12 +450,12 @@ class Scene:
     extra_suns: tuple[Sun, ...] = ()
     dome: Dome | None = None
     meshes: tuple = ()
-    heightfield_clouds: tuple = ()
+    decks: tuple = ()
     fogs: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "media", tuple(self.media))
-        for name in ("meshes", "heightfield_clouds", "fogs"):
+        for name in ("meshes", "decks", "fogs"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "extra_suns", tuple(self.extra_suns))
         if self.dome is not None and not self.dome.active:

@@ -23,7 +23,7 @@ from warpsky.passes.render_pass import Pass
 
 def has_scenery(scene) -> bool:
     """Whether ``scene`` holds meshes, height-field clouds or analytic fog (each drawn by its own pass)."""
-    return bool(scene.meshes or scene.heightfield_clouds or scene.fogs)
+    return bool(scene.meshes or scene.decks or scene.fogs)
 
 
 def scenery_traceable(scene) -> bool:
@@ -32,13 +32,13 @@ def scenery_traceable(scene) -> bool:
     its wind, below the lowest cloud base), without voxel media, a deck or a ground albedo map (the paths then trace
     the layers too, beyond a camera ray's first event; the stratiform pass draws them, and the surfaces pass, which
     reads no albedo map, the ground)."""
-    scenery = bool(scene.fogs or scene.meshes or scene.heightfield_clouds)
+    scenery = bool(scene.fogs or scene.meshes or scene.decks)
     if not scene.layers:
         return scenery
     textured = scene.ground is not None and scene.ground.albedo_map is not None
     base = min(layer.base_altitude for layer in scene.layers)
     below = all(fog.top + float(fog.wind[1]) * scene.time_s < base for fog in scene.fogs)
-    return scenery and below and not (scene.media or scene.heightfield_clouds or textured)
+    return scenery and below and not (scene.media or scene.decks or textured)
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,7 @@ class SceneryFrame:
     drawn: np.ndarray | None = None  # (H, W, 3) radiance of the passes before (the surfaces), in the frame's level
     occluders: object | None = None  # the frame's meshes on the device, whose shadows lie on the fog's sunlight
     fog: object | None = None  # the fog pass's layer of this frame (ImageLayer), drawn early and kept for its turn
-    deck: object | None = None  # the height-field pass's, likewise
+    deck: object | None = None  # the deck pass's, likewise
 
 
 def scenery_paths(scene, technique) -> bool:
@@ -79,7 +79,7 @@ class MediaPass(Pass):
     def renders_own(cls, scene, technique) -> bool:
         """Whether it runs for what the technique draws itself (not only for the scenery's multiple scattering,
         :meth:`~warpsky.techniques.technique.Technique.scenery_paths`)."""
-        traced = ((scene.layers and technique.traces_layers) or (scene.heightfield_clouds and technique.traces_decks)
+        traced = ((scene.layers and technique.traces_layers) or (scene.decks and technique.traces_decks)
                   or (scene.fogs and technique.traces_fog) or (scene.meshes and technique.traces_meshes))
         return bool(scene.media) or bool(traced) or not (scene.layers or has_scenery(scene))
 
@@ -95,7 +95,7 @@ class MediaPass(Pass):
             return {"media": f"{len(scene.media)} voxel grid(s), {voxels:,} voxels, {voxels * 4 / 2**20:.1f} MiB"}
         if cls.runs(scene, technique) and not cls.renders_own(scene, technique):
             kinds = [kind for kind, present in (("the fog", scene.fogs), ("the height-field deck",
-                     scene.heightfield_clouds), ("the meshes", scene.meshes)) if present]
+                     scene.decks), ("the meshes", scene.meshes)) if present]
             named = ", ".join(kinds[:-1]) + " and " + kinds[-1] if len(kinds) > 1 else kinds[0]
             layers = (", and the stratiform layers' light on them (the layers voxelised beyond the camera rays' "
                       "first event, which the stratiform pass draws)") if scene.layers else ""
@@ -121,11 +121,11 @@ class MediaPass(Pass):
         if frame.technique.scenery_paths(scene):
             # other passes draw the ground plane and the layers; the paths bounce on the one and trace the other
             kept = {runner.name: runner.own_layer(frame) for runner in frame.runners
-                    if runner.name in ("fog", "heightfield")}
+                    if runner.name in ("fog", "deck")}
             around = SceneryFrame(ground=frame.scene.ground if scene.ground is None else None,
                                   layers=tuple(frame.scene.layers) if not scene.layers else (),
                                   drawn=sum(layer.radiance for layer in frame.layers) if frame.layers else None,
-                                  occluders=frame.occluders, fog=kept.get("fog"), deck=kept.get("heightfield"))
+                                  occluders=frame.occluders, fog=kept.get("fog"), deck=kept.get("deck"))
             layer = frame.technique.render(scene, frame.width, frame.height, around=around)
         else:
             layer = frame.technique.render(scene, frame.width, frame.height)

@@ -31,7 +31,7 @@ PASSES: tuple[str, ...] = (
     "warpsky.passes.surfaces.surfaces:SurfacesPass",
     "warpsky.passes.media:MediaPass",
     "warpsky.passes.stratiform.stratiform:StratiformPass",
-    "warpsky.passes.deck.deck:HeightFieldPass",
+    "warpsky.passes.deck.deck:DeckPass",
     "warpsky.passes.fog.fog:FogPass",
     "warpsky.passes.sky.sky:SkyPass",
 )

@@ -29,7 +29,7 @@ class Technique:
     - ``renders_layers``: the technique can run next to the stratiform pass (it renders the voxel media without
       the ground, which the lowest stratiform layer draws).
     - ``traces_layers``: it traces the stratiform layers itself, voxelised, so no stratiform pass runs.
-    - ``traces_decks``: it traces height-field cloud decks and their haze itself, so no height-field pass runs.
+    - ``traces_decks``: it traces height-field cloud decks and their haze itself, so no deck pass runs.
     - ``traces_fog``: it traces analytic fog itself as a participating medium, so no fog pass runs.
     - ``traces_dome``: a dome's light is path traced exactly (else it is an ambient light of the marching models).
     - ``traces_meshes``: it traces the scene's triangle meshes itself (light bounces between them, the media and
@@ -97,7 +97,7 @@ class Technique:
 
     def scenery_paths(self, scene: Scene) -> bool:
         """Whether its render of ``scene`` path traces the fog's, the deck's and the meshes' light beyond the sun's
-        single scattering, the sky's and the dome's included (then the fog and height-field passes leave out their
+        single scattering, the sky's and the dome's included (then the fog and deck passes leave out their
         ambient terms and the surfaces pass its sky light); False unless ``scatters_scenery``."""
         return False
 

@@ -3,7 +3,7 @@ prims with ``warpsky:kind = "heightFieldClouds"`` (Max 1986) and prims with ``wa
 (Biri et al. 2002).
 
 The attributes each kind carries are documented on its reader: :func:`warpsky.model.terrain.read_mesh`,
-:func:`warpsky.model.deck.read_heightfield_clouds`, :func:`warpsky.model.fog.read_analytic_fog`.
+:func:`warpsky.model.deck.read_decks`, :func:`warpsky.model.fog.read_analytic_fog`.
 pxr is imported inside the methods (a heavy import).
 """
 
@@ -12,10 +12,10 @@ from __future__ import annotations
 from warpsky.core.errors import SceneError
 from warpsky.usd.prims import StagePrims
 
-HEIGHTFIELD_KIND = "heightFieldClouds"
+DECK_KIND = "heightFieldClouds"
 FOG_KIND = "analyticFog"
 #: Attribute namespaces that only make sense on a prim of the given kind.
-_NAMESPACES = {HEIGHTFIELD_KIND: ("warpsky:hf:", "warpsky:haze:"), FOG_KIND: ("warpsky:fog:",)}
+_NAMESPACES = {DECK_KIND: ("warpsky:hf:", "warpsky:haze:"), FOG_KIND: ("warpsky:fog:",)}
 
 
 class SceneryReading(StagePrims):
@@ -48,19 +48,19 @@ class SceneryReading(StagePrims):
                                  f"token warpsky:kind = \"{kind}\" on that prim")
         return prims
 
-    def read_heightfield_clouds(self, time=None) -> tuple:
+    def read_decks(self, time=None) -> tuple:
         """Prims with ``warpsky:kind = "heightFieldClouds"`` as
-        :class:`~warpsky.model.deck.HeightFieldClouds` at ``time``."""
+        :class:`~warpsky.model.deck.CloudDeck` at ``time``."""
         tc = self._time(time)
-        prims = self._kind_prims(HEIGHTFIELD_KIND, tc)
+        prims = self._kind_prims(DECK_KIND, tc)
         if not prims:
             return ()
         if len(prims) > 1:
-            raise SceneError(f"stage {self.path}: {len(prims)} prims with warpsky:kind = \"{HEIGHTFIELD_KIND}\" "
+            raise SceneError(f"stage {self.path}: {len(prims)} prims with warpsky:kind = \"{DECK_KIND}\" "
                              f"({', '.join(str(p.GetPath()) for p in prims)}); one cloud deck per stage is rendered")
-        from warpsky.model.deck import read_heightfield_clouds
+        from warpsky.model.deck import read_decks
 
-        return tuple(read_heightfield_clouds(self, prim, tc) for prim in prims)
+        return tuple(read_decks(self, prim, tc) for prim in prims)
 
     def read_fogs(self, time=None) -> tuple:
         """Prims with ``warpsky:kind = "analyticFog"`` as :class:`~warpsky.model.fog.AnalyticFog` at

@@ -322,7 +322,7 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
             time_codes_per_second=float(self.stage.GetTimeCodesPerSecond()),
             layers=self.read_layers(time),
             meshes=self.read_meshes(time),
-            heightfield_clouds=self.read_heightfield_clouds(time),
+            decks=self.read_decks(time),
             fogs=self.read_fogs(time),
         )
         self.warn_ignored(time)

@@ -28,7 +28,7 @@ import warp as wp
 
 from warpsky.core.errors import UsageError
 from warpsky.media.voxels.voxel import slab_interval
-from warpsky.model.deck import HeightFieldClouds, surface_heights
+from warpsky.model.deck import CloudDeck, surface_heights
 from warpsky.model.scene import PhaseKind, PhaseModel, Scene, VoxelMedium
 
 #: A stand-in for +infinity in float32 kernels (level() below -D, lengths of unbounded rays).
@@ -41,7 +41,7 @@ OPAQUE_DEPTH = 104.0
 
 @wp.struct
 class HeightField:
-    """One height-field cloud deck relative to the camera (built by :func:`heightfield_struct`)."""
+    """One height-field cloud deck relative to the camera (built by :func:`deck_struct`)."""
 
     poly_linear: wp.vec3  # c0 [m], cx, cz [--] of the quadratic about the eye
     poly_quadratic: wp.vec3  # cxx, cxz, czz [1/m]
@@ -273,7 +273,7 @@ def haze_above(haze: HazeSlab, p: wp.vec3) -> float:
 
 
 # ------------------------------------------------------------------------------------------------------ host
-def feature_length(clouds: HeightFieldClouds) -> float:
+def feature_length(clouds: CloudDeck) -> float:
     """The pattern's smallest horizontal feature [m]: the shortest wavelength, the equator's rounding c, and the
     polynomial's curvature length sqrt(f_max / |curvature|), whichever is least."""
     lengths = [clouds.rounding]
@@ -286,7 +286,7 @@ def feature_length(clouds: HeightFieldClouds) -> float:
     return float(min(lengths))
 
 
-def eye_polynomial(clouds: HeightFieldClouds, eye_xz: np.ndarray) -> np.ndarray:
+def eye_polynomial(clouds: CloudDeck, eye_xz: np.ndarray) -> np.ndarray:
     """The quadratic's 6 coefficients re-expanded about ``eye_xz`` (world x, z [m]), in float64."""
     c0, cx, cz, cxx, cxz, czz = clouds.polynomial
     ex, ez = float(eye_xz[0]) - clouds.origin[0], float(eye_xz[1]) - clouds.origin[1]
@@ -294,7 +294,7 @@ def eye_polynomial(clouds: HeightFieldClouds, eye_xz: np.ndarray) -> np.ndarray:
     return np.array([value, cx + 2 * cxx * ex + cxz * ez, cz + cxz * ex + 2 * czz * ez, cxx, cxz, czz])
 
 
-def heightfield_struct(clouds: HeightFieldClouds, camera_position, time_s: float, device, *,
+def deck_struct(clouds: CloudDeck, camera_position, time_s: float, device, *,
                        max_length: float = 1.0e6) -> HeightField:
     """Kernel view of ``clouds`` at ``time_s`` [s] seen from ``camera_position`` (world [m], float64); sun rays
     and other searches stop after ``max_length`` [m]. Marching resolution: ``min_step`` = 1/64 of
@@ -329,7 +329,7 @@ def heightfield_struct(clouds: HeightFieldClouds, camera_position, time_s: float
     return out
 
 
-def haze_struct(clouds: HeightFieldClouds, camera_position) -> HazeSlab:
+def haze_struct(clouds: CloudDeck, camera_position) -> HazeSlab:
     """Kernel view of the haze below ``clouds`` seen from ``camera_position`` (a zero slab without haze)."""
     out = HazeSlab()
     eye_y = float(np.asarray(camera_position, dtype=np.float64)[1])
@@ -344,7 +344,7 @@ def haze_struct(clouds: HeightFieldClouds, camera_position) -> HazeSlab:
     return out
 
 
-def voxelize(clouds: HeightFieldClouds, bounds, shape, *, time_s: float = 0.0, supersample: int = 4) -> VoxelMedium:
+def voxelize(clouds: CloudDeck, bounds, shape, *, time_s: float = 0.0, supersample: int = 4) -> VoxelMedium:
     """The cloud as a :class:`~warpsky.model.scene.VoxelMedium` over the world box ``bounds`` ((x0, y0, z0),
     (x1, y1, z1)) [m] with ``shape`` (nx, ny, nz) voxels: each voxel holds the fraction of its volume inside the
     cloud (``supersample``^3 points per voxel), extinction_scale rho * extinction_scale, the cloud's albedo and HG
@@ -401,18 +401,18 @@ def hf_intervals_kernel(hf: HeightField, origins: wp.array(dtype=wp.vec3), direc
     lengths[i] = hf_cloud_length(hf, o, d, 0.0, t_max)
 
 
-def probe(clouds: HeightFieldClouds, points, camera_position, time_s: float, device) -> np.ndarray:
+def probe(clouds: CloudDeck, points, camera_position, time_s: float, device) -> np.ndarray:
     """(N, 4) f, g, h [m] and inside (0/1) at world ``points`` as the kernels evaluate them."""
     eye = np.asarray(camera_position, dtype=np.float64)
     rel = wp.array((np.asarray(points, np.float64).reshape(-1, 3) - eye).astype(np.float32), dtype=wp.vec3,
                    device=device)
     out = wp.zeros(rel.shape[0], dtype=wp.vec4, device=device)
-    wp.launch(hf_probe_kernel, dim=rel.shape[0], inputs=[heightfield_struct(clouds, eye, time_s, device), rel, out],
+    wp.launch(hf_probe_kernel, dim=rel.shape[0], inputs=[deck_struct(clouds, eye, time_s, device), rel, out],
               device=device)
     return out.numpy()
 
 
-def ray_intervals(clouds: HeightFieldClouds, origins, directions, t_max: float, time_s: float, device, *,
+def ray_intervals(clouds: CloudDeck, origins, directions, t_max: float, time_s: float, device, *,
                   max_pieces: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(pieces (N, max_pieces, 2), counts (N,), cloud lengths (N,)) of rays from world ``origins`` along unit
     ``directions`` up to ``t_max`` [m], found by the kernels' interval search (relative to the first origin)."""
@@ -423,15 +423,15 @@ def ray_intervals(clouds: HeightFieldClouds, origins, directions, t_max: float, 
     pieces = wp.zeros((len(origins), max_pieces), dtype=wp.vec2, device=device)
     counts = wp.zeros(len(origins), dtype=int, device=device)
     lengths = wp.zeros(len(origins), dtype=float, device=device)
-    wp.launch(hf_intervals_kernel, dim=len(origins), inputs=[heightfield_struct(clouds, eye, time_s, device), rel,
+    wp.launch(hf_intervals_kernel, dim=len(origins), inputs=[deck_struct(clouds, eye, time_s, device), rel,
                                                              dirs, float(t_max), pieces, counts, lengths],
               device=device)
     return pieces.numpy(), counts.numpy(), lengths.numpy()
 
 
-def the_deck(scene: Scene) -> HeightFieldClouds | None:
+def the_deck(scene: Scene) -> CloudDeck | None:
     """The scene's one height-field deck (None without); more than one is refused."""
-    decks = scene.heightfield_clouds
+    decks = scene.decks
     if len(decks) > 1:
         raise UsageError(f"one height-field deck per scene is rendered, got {len(decks)}: "
                          f"{', '.join(d.name for d in decks)}")

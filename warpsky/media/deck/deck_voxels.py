@@ -1,5 +1,5 @@
 """A height-field cloud deck (Max 1986) and its haze as voxel media, so that the path tracer can trace them as a
-reference for the height-field pass.
+reference for the deck pass.
 
 The deck fills H + h(f) < y < H + g(f) where the pattern f(x, z, t) > 0
 (:mod:`warpsky.model.deck`). The grid covers a horizontal square around a centre (the camera) and,
@@ -29,14 +29,14 @@ import numpy as np
 
 from warpsky.core.errors import UsageError
 from warpsky.media.stratiform.stratiform_voxels import VOXEL_BUDGET, ColumnGrid
-from warpsky.model.deck import HeightFieldClouds, surface_heights
+from warpsky.model.deck import CloudDeck, surface_heights
 from warpsky.model.scene import PhaseKind, PhaseModel, VoxelMedium
 
 #: Sub-column samples per chunk of the host computation (bounds its float64 temporaries to a few hundred MiB).
 CHUNK_SAMPLES = 2**22
 
 
-def deck_grid(clouds: HeightFieldClouds, centre_xz, half_size: float, width: float, height: float, *,
+def deck_grid(clouds: CloudDeck, centre_xz, half_size: float, width: float, height: float, *,
               max_voxels: int = VOXEL_BUDGET, setting: str = "voxel") -> ColumnGrid:
     """The grid :func:`voxelize_deck` fills, checked against ``max_voxels`` (nothing is allocated).
 
@@ -66,7 +66,7 @@ def sub_column_offsets(width: float, supersample: int) -> np.ndarray:
     return ((np.arange(supersample) + 0.5) / supersample - 0.5) * width
 
 
-def cloud_fractions(clouds: HeightFieldClouds, grid: ColumnGrid, time_s: float, supersample: int) -> np.ndarray:
+def cloud_fractions(clouds: CloudDeck, grid: ColumnGrid, time_s: float, supersample: int) -> np.ndarray:
     """(n_x, n_y, n_z) float32 partial-volume densities of the deck at ``time_s`` [s] (module docstring)."""
     s = int(supersample)
     nx, ny, nz = grid.shape
@@ -90,7 +90,7 @@ def cloud_fractions(clouds: HeightFieldClouds, grid: ColumnGrid, time_s: float, 
     return out
 
 
-def voxelize_deck(clouds: HeightFieldClouds, time_s: float, centre_xz, half_size: float, width: float,
+def voxelize_deck(clouds: CloudDeck, time_s: float, centre_xz, half_size: float, width: float,
                   height: float, *, supersample: int = 4, max_voxels: int = VOXEL_BUDGET,
                   setting: str = "voxel") -> tuple[VoxelMedium, ...]:
     """The deck at ``time_s`` [s] (waves moved to that time) over the square of half-size ``half_size`` [m] around
@@ -129,7 +129,7 @@ def voxelize_deck(clouds: HeightFieldClouds, time_s: float, centre_xz, half_size
     return cloud, haze_box(clouds, grid)
 
 
-def haze_box(clouds: HeightFieldClouds, grid: ColumnGrid) -> VoxelMedium:
+def haze_box(clouds: CloudDeck, grid: ColumnGrid) -> VoxelMedium:
     """The deck's haze as one voxel of density 1 filling [floor, top] over the grid's square."""
     haze = clouds.haze
     span = grid.width[0] * grid.shape[0]

@@ -49,15 +49,15 @@ from warpsky.core.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.core.settings import Settings, documented, setting
 from warpsky.light.dome import ambient_vec, isotropic_ambient
 from warpsky.light.sun import sun_struct, sunlight
-from warpsky.media.deck.deck_geometry import feature_length, haze_struct, heightfield_struct, the_deck
+from warpsky.media.deck.deck_geometry import deck_struct, feature_length, haze_struct, the_deck
 from warpsky.model.camera_rays import pinhole_camera
-from warpsky.model.deck import HeightFieldClouds
+from warpsky.model.deck import CloudDeck
 from warpsky.model.scene import Scene
-from warpsky.passes.deck.deck_kernels import HeightFieldMarch, heightfield_kernel, sun_transmittance_kernel
+from warpsky.passes.deck.deck_kernels import DeckMarch, deck_kernel, sun_transmittance_kernel
 from warpsky.passes.render_pass import Pass
 
 
-def shadow_feature(clouds: HeightFieldClouds) -> float:
+def shadow_feature(clouds: CloudDeck) -> float:
     """The shortest horizontal feature [m] of the deck's shadow pattern: the shortest wavelength, or the
     polynomial's curvature length (the equator's rounding shapes the thickness near the edges, not the holes)."""
     k = np.linalg.norm(clouds.wave_vectors, axis=1) if len(clouds.wave_vectors) else np.zeros(0)
@@ -65,7 +65,7 @@ def shadow_feature(clouds: HeightFieldClouds) -> float:
     return float(min(lengths)) if lengths else feature_length(clouds)
 
 
-def haze_step_bound(clouds: HeightFieldClouds) -> float:
+def haze_step_bound(clouds: CloudDeck) -> float:
     """The longest step in clear haze [m]: a quarter of its mean free path in its densest channel (1e30 without
     haze)."""
     sigma = float(np.max(clouds.haze.density)) if clouds.haze is not None else 0.0
@@ -81,7 +81,7 @@ def haze_step_bound(clouds: HeightFieldClouds) -> float:
 HAZE_STEPS_PER_FEATURE = 16
 
 
-def automatic_steps(clouds: HeightFieldClouds, haze_steps_per_feature: int = HAZE_STEPS_PER_FEATURE
+def automatic_steps(clouds: CloudDeck, haze_steps_per_feature: int = HAZE_STEPS_PER_FEATURE
                     ) -> tuple[float, float]:
     """(cloud step, shortest haze step) [m] from the deck's extinction and smallest features (module docstring)."""
     feature = feature_length(clouds)
@@ -92,12 +92,12 @@ def automatic_steps(clouds: HeightFieldClouds, haze_steps_per_feature: int = HAZ
 
 @documented
 @dataclass(frozen=True)
-class HeightFieldSettings(Settings):
-    """Settings of the height-field pass (``--set heightfield.NAME=VALUE``); see the module docstring for what
+class DeckSettings(Settings):
+    """Settings of the deck pass (``--set deck.NAME=VALUE``); see the module docstring for what
     ``max`` and ``sexp`` trade and where they are not trustworthy."""
 
-    owner = "heightfield"
-    prefix = "heightfield."
+    owner = "deck"
+    prefix = "deck."
     mode: Literal["exact", "max", "sexp"] = setting(
         "exact", help="the sunlight reaching a point of the deck or the haze: exact = dimmed by the exact optical "
         "depth along the sun ray; max = by Max's thickness rule (one pattern lookup per sample); sexp = Max's "
@@ -115,24 +115,24 @@ class HeightFieldSettings(Settings):
     min_transmittance: float = setting(1.0e-4, range="[0, 1)", help="stop once the view is this opaque")
 
 
-class HeightField:
+class Deck:
     """Renders a scene's height-field clouds and their haze as an :class:`~warpsky.core.image.ImageLayer` (single
     scattering
     of the sun and of the sky's ambient light; :mod:`~warpsky.passes.deck.deck_kernels`). Settings are a
-    :class:`HeightFieldSettings`, or its fields as keywords."""
+    :class:`DeckSettings`, or its fields as keywords."""
 
-    def __init__(self, settings: HeightFieldSettings | None = None, *, device: str = "cpu", **values):
-        self.settings = settings if settings is not None else HeightFieldSettings(**values)
+    def __init__(self, settings: DeckSettings | None = None, *, device: str = "cpu", **values):
+        self.settings = settings if settings is not None else DeckSettings(**values)
         self.device = device
 
     def __repr__(self) -> str:
-        return f"HeightField({self.settings!r}, device={self.device!r})"
+        return f"Deck({self.settings!r}, device={self.device!r})"
 
-    def march_settings(self, scene: Scene, clouds: HeightFieldClouds, has_limit: bool,
-                       ambient=None) -> HeightFieldMarch:
+    def march_settings(self, scene: Scene, clouds: CloudDeck, has_limit: bool,
+                       ambient=None) -> DeckMarch:
         s = self.settings
         cloud_auto, haze_auto = automatic_steps(clouds, s.haze_steps_per_feature)
-        march = HeightFieldMarch()
+        march = DeckMarch()
         march.cloud_step = float(s.step_length or cloud_auto)
         march.haze_step = float(s.haze_step_length or haze_auto)
         march.haze_feature = 0.0 if s.haze_step_length else shadow_feature(clouds) / s.haze_steps_per_feature
@@ -161,7 +161,7 @@ class HeightField:
         if limit is not None:
             limit = np.ascontiguousarray(limit, dtype=np.float32)
             if limit.shape != (height, width):
-                raise UsageError(f"height-field pass: limit must be ({height}, {width}) depths, got {limit.shape}")
+                raise UsageError(f"deck pass: limit must be ({height}, {width}) depths, got {limit.shape}")
         device = self.device
         with wp.ScopedDevice(device):
             march = self.march_settings(scene, clouds, limit is not None, ambient)
@@ -169,17 +169,17 @@ class HeightField:
             radiance = wp.zeros((height, width), dtype=wp.vec3)
             transmittance = wp.zeros((height, width), dtype=wp.vec3)
             depth = wp.zeros((height, width), dtype=float)
-            inputs = [heightfield_struct(clouds, camera.position, scene.time_s, device),
+            inputs = [deck_struct(clouds, camera.position, scene.time_s, device),
                       haze_struct(clouds, camera.position), pinhole_camera(camera, width, height),
                       sun_struct(sunlight(scene)), march, depth_limit, radiance, transmittance, depth]
-            launch_rows(heightfield_kernel, height, width, inputs, device)
+            launch_rows(deck_kernel, height, width, inputs, device)
             wp.synchronize_device(device)
             return ImageLayer(radiance.numpy(), transmittance.numpy(), depth.numpy(), stats={
                 "seconds": time.perf_counter() - started, "mode": self.settings.mode,
                 "step_length": march.cloud_step, "haze_step_length": march.haze_step})
 
 
-def heightfield_sun_transmittance(scene: Scene, points: np.ndarray, device: str = "cpu", *,
+def deck_sun_transmittance(scene: Scene, points: np.ndarray, device: str = "cpu", *,
                                   exact: bool = False) -> np.ndarray:
     """(N, 3) transmittance of the sunlight reaching world ``points`` (N, 3) [m] through the scene's deck and haze.
 
@@ -198,47 +198,47 @@ def heightfield_sun_transmittance(scene: Scene, points: np.ndarray, device: str 
         relative = wp.array((pts - reference).astype(np.float32), dtype=wp.vec3)
         out = wp.zeros(len(pts), dtype=wp.vec3)
         wp.launch(sun_transmittance_kernel, dim=len(pts), inputs=[
-            heightfield_struct(clouds, reference, scene.time_s, device), haze_struct(clouds, reference),
+            deck_struct(clouds, reference, scene.time_s, device), haze_struct(clouds, reference),
             wp.vec3(*np.asarray(light.direction, dtype=np.float64).tolist()), relative, int(exact), out])
         return out.numpy().astype(np.float64)
 
 
-class HeightFieldPass(Pass):
+class DeckPass(Pass):
     """Max's clouds and haze shafts, stopped by the nearest opaque surface, lit through the frame's air."""
 
-    name = "heightfield"
+    name = "deck"
     shades_air = True
-    Settings = HeightFieldSettings
+    Settings = DeckSettings
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
-        return bool(scene.heightfield_clouds) and not technique.traces_decks
+        return bool(scene.decks) and not technique.traces_decks
 
     @classmethod
     def refusal(cls, scene, technique):
         if cls.runs(scene, technique) and technique.traces_air:
-            return "height-field clouds", [clouds.name for clouds in scene.heightfield_clouds]
+            return "height-field clouds", [clouds.name for clouds in scene.decks]
         return None
 
     @classmethod
     def describe(cls, scene, technique, settings) -> dict[str, str]:
-        if not scene.heightfield_clouds:
-            return {"heightfield": 'none (no prim with warpsky:kind = "heightFieldClouds")'}
+        if not scene.decks:
+            return {"deck": 'none (no prim with warpsky:kind = "heightFieldClouds")'}
         lines = []
-        for clouds in scene.heightfield_clouds:
+        for clouds in scene.decks:
             haze = "with haze" if clouds.haze is not None else "no haze"
             lines.append(f"{clouds.name}: mean plane {clouds.mean_altitude:g} m, {len(clouds.amplitudes)} waves, "
                          f"density {clouds.density:g} 1/m, {haze}")
-        return {"heightfield": "; ".join(lines) + f" (Max 1986; single scattering, mode {settings.mode})"}
+        return {"deck": "; ".join(lines) + f" (Max 1986; single scattering, mode {settings.mode})"}
 
     def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
         pixels = width * height
-        return MemoryEstimate().add("heightfield", host=pixels * (0 if is_cpu(self.device) else LAYER_BYTES),
+        return MemoryEstimate().add("deck", host=pixels * (0 if is_cpu(self.device) else LAYER_BYTES),
                                     device=pixels * LAYER_BYTES)
 
     def shadow(self, scene):
         """By the exact sun-ray optical depth: Max's thickness rule fails for decks thicker than their features."""
-        return lambda points: heightfield_sun_transmittance(scene, points, self.device, exact=True)
+        return lambda points: deck_sun_transmittance(scene, points, self.device, exact=True)
 
     def own_layer(self, frame) -> ImageLayer:
         """The deck's and the haze's single scattering of the sun, and their ambient term unless the technique
@@ -250,7 +250,7 @@ class HeightFieldPass(Pass):
             ambient = isotropic_ambient(seen, frame.light.sky)
             if frame.technique.scenery_paths(frame.scene):
                 ambient = np.zeros(3)
-            return HeightField(self.settings, device=self.device).render(seen, frame.width, frame.height,
+            return Deck(self.settings, device=self.device).render(seen, frame.width, frame.height,
                                                                          limit=frame.limit, ambient=ambient)
 
         return self.keep(frame, draw)

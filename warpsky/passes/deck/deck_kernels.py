@@ -53,7 +53,7 @@ from warpsky.optics.phase import phase_hg
 
 
 @wp.struct
-class HeightFieldMarch:
+class DeckMarch:
     """Step lengths, mode and ambient light of the march."""
 
     cloud_step: float  # step inside cloud pieces [m]
@@ -116,7 +116,7 @@ def sun_depth(hf: HeightField, haze: HazeSlab, p: wp.vec3, sun_dir: wp.vec3, sha
 
 
 @wp.func
-def haze_step_along(march: HeightFieldMarch, view: wp.vec3, sun_dir: wp.vec3) -> float:
+def haze_step_along(march: DeckMarch, view: wp.vec3, sun_dir: wp.vec3) -> float:
     """Step [m] of clear haze along ``view``: the shadow pattern seen along the ray changes as fast as the point
     where the ray towards the sun meets a horizontal plane moves, |view_xz - (view_y / sun_y) sun_xz| per metre, so
     a feature of the shadow gets ``haze_steps_per_feature`` steps (``haze_feature`` is the feature over that
@@ -152,7 +152,7 @@ def record_opacity(state: MarchState, tau_b: wp.vec3, depth: float, min_transmit
 
 
 @wp.func
-def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldMarch, state: MarchState,
+def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, state: MarchState,
                 o: wp.vec3, view: wp.vec3, a: float, b: float, cloud_on: float, haze_on: float,
                 cos_axis: float) -> MarchState:
     """Integrate the piece [a, b] of the view ray, of constant extinction (cloud if ``cloud_on``, haze if
@@ -217,7 +217,7 @@ def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldMar
 
 
 @wp.func
-def march_segment(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldMarch, state: MarchState,
+def march_segment(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, state: MarchState,
                   o: wp.vec3, view: wp.vec3, a: float, b: float, in_haze: float, cos_axis: float) -> MarchState:
     """March [a, b], which lies wholly inside (``in_haze`` 1) or outside the haze slab: its clear gaps (haze
     only) and its pieces of cloud in order."""
@@ -244,12 +244,12 @@ def march_segment(hf: HeightField, haze: HazeSlab, sun: Sun, march: HeightFieldM
 
 
 @wp.kernel
-def heightfield_kernel(
+def deck_kernel(
     hf: HeightField,
     haze: HazeSlab,
     cam: PinholeCamera,
     sun: Sun,
-    march: HeightFieldMarch,
+    march: DeckMarch,
     limit: wp.array2d(dtype=float),
     radiance: wp.array2d(dtype=wp.vec3),
     transmittance: wp.array2d(dtype=wp.vec3),

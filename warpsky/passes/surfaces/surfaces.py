@@ -212,10 +212,10 @@ class SurfacesPass(Pass):
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
-        if technique.traces_meshes or (scene.heightfield_clouds and technique.traces_decks):
+        if technique.traces_meshes or (scene.decks and technique.traces_decks):
             return False
         fog = bool(scene.fogs) and not technique.traces_fog  # else the technique draws the ground with its fog
-        scenery = bool(scene.meshes or scene.heightfield_clouds or fog)
+        scenery = bool(scene.meshes or scene.decks or fog)
         # under stratiform layers only where the technique's paths carry the layers' light on the ground
         layered = bool(scene.layers) and not scenery_paths(scene, technique)
         return bool(scene.meshes) or (scene.ground is not None and scenery and not scene.media and not layered)

@@ -118,7 +118,7 @@ class HybridSettings(Settings):
                                                auto="1 x the smallest voxel edge")
     deck_extent: float | None = setting(None, unit="m", range="> 0", help="half-size of the square around the "
                                         "camera over which the paths trace a height-field deck and its haze "
-                                        "voxelised (the height-field pass draws their single scattering everywhere)",
+                                        "voxelised (the deck pass draws their single scattering everywhere)",
                                         auto="as the path tracer's")
     deck_voxel_width: float | None = setting(None, unit="m", range="> 0", help="horizontal edge of those voxels",
                                              auto="as the path tracer's")
@@ -196,7 +196,7 @@ class Hybrid(Technique):
                                            int(s.samples_per_pass), film_pixels=coarse,
                                            bake_detail=bool(s.bake_detail)))
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
-        if scene.heightfield_clouds and self.scenery_paths(scene):
+        if scene.decks and self.scenery_paths(scene):
             estimate.merge(deck_voxel_memory(scene, s.path_tracer(), width, height))
         if scene.layers and self.scenery_paths(scene):  # the layers its paths trace, voxelised
             estimate.merge(layer_voxel_memory(scene, s.path_tracer()))
@@ -219,7 +219,7 @@ class Hybrid(Technique):
         s = self.settings_for(scene)
         if not s.multiple_scattering:
             return features
-        if scene.heightfield_clouds and self.scenery_paths(scene):
+        if scene.decks and self.scenery_paths(scene):
             features = deck_paths_features(scene, s.path_tracer(), width, height, features)
         return cut_feature(scene, float(s.forward_cut), features)
 
@@ -275,14 +275,14 @@ class Hybrid(Technique):
 def deck_paths_features(scene: Scene, settings: PathTracerSettings, width: int, height: int,
                         features: dict[str, str]) -> dict[str, str]:
     """``features`` with the height-field line saying that the paths trace the deck voxelised (square, voxels)
-    beside the height-field pass's single scattering."""
+    beside the deck pass's single scattering."""
     clouds, grid, sub = deck_plan(scene, settings, width, height)
     line = (f"; multiple scattering path traced by hybrid through the deck{' and haze' if clouds.haze else ''} "
             f"voxelised over a square of half-size {0.5 * grid.width[0] * grid.shape[0]:.4g} m around the camera "
             f"({grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} = {grid.voxels:,} voxels, {sub}x{sub} sub-columns); "
             "the pass's ambient term left to the paths")
     out = dict(features)
-    out["heightfield"] = features.get("heightfield", clouds.name) + line
+    out["deck"] = features.get("deck", clouds.name) + line
     return out
 
 

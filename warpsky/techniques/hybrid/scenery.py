@@ -4,7 +4,7 @@ triangle meshes (terrain), whose single scattering other passes draw.
 Who counts what, so that no light counts twice:
 
 * the fog pass: the fog's single scattering of the sun (Biri 2002's closed form), without its ambient term;
-* the height-field pass: the deck's and the haze's single scattering of the sun (Max 1986), without its ambient
+* the deck pass: the deck's and the haze's single scattering of the sun (Max 1986), without its ambient
   term;
 * the surfaces pass: the meshes' (and a ground plane's, where it draws it) direct sunlight, without its sky term;
 * the paths (:class:`~warpsky.techniques.path_tracer.path_tracer.PathTracing` with ``meshes`` and ``fog``, the
@@ -36,7 +36,7 @@ import numpy as np
 
 from warpsky.core.image import ImageLayer
 from warpsky.model.scene import Scene
-from warpsky.passes.deck.deck import HeightField
+from warpsky.passes.deck.deck import Deck
 from warpsky.passes.fog.fog import Fog
 from warpsky.passes.media import SceneryFrame
 from warpsky.techniques.path_tracer.deck_media import with_deck_as_media
@@ -68,12 +68,12 @@ def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height
 def scenery_guide(scene: Scene, single: ImageLayer, device: str, around: SceneryFrame) -> ImageLayer:
     """The single-scattering layer as the paths' error estimate and denoiser read it: its transmittance times the
     fogs' (closed form, to the opaque depth; :class:`~warpsky.passes.fog.fog.Fog`) and the deck's and haze's
-    (:class:`~warpsky.passes.deck.deck.HeightField` without light), zero where the camera ray ends
+    (:class:`~warpsky.passes.deck.deck.Deck` without light), zero where the camera ray ends
     on an opaque surface another pass drew (the camera's opaque depth). Its radiance, the level the error estimate
     divides by, adds the light the passes draw beside the paths: the fog's single scattering of the sun as the fog
     pass draws it (in the meshes' and the layers' shadows; its ambient term is the paths') and ``around.drawn``,
     the radiance of the surfaces behind the fog (the passes before the media pass), seen through it; not the
-    deck's (left out, as before the height-field pass's layer was at hand here: the estimate stays conservative
+    deck's (left out, as before the deck pass's layer was at hand here: the estimate stays conservative
     there) nor the stratiform layers'. In a frame of passes the fog's and the deck's layers are the passes' own
     (``around.fog``, ``around.deck``, drawn once and kept for their turn); outside one they are drawn here."""
     height, width = single.depth.shape
@@ -94,10 +94,10 @@ def scenery_guide(scene: Scene, single: ImageLayer, device: str, around: Scenery
         transmittance = transmittance * fog.transmittance
         radiance = radiance + fog.radiance
         through = fog.transmittance
-    if scene.heightfield_clouds:
+    if scene.decks:
         deck = around.deck
         if deck is None:  # outside a frame of passes: its transmittance alone, without light
-            deck = HeightField(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
+            deck = Deck(device=device).render(dark, width, height, limit=depth, ambient=np.zeros(3))
         transmittance = transmittance * deck.transmittance
     if around.drawn is not None:
         radiance = radiance + through * np.asarray(around.drawn, dtype=np.float32)

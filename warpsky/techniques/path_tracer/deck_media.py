@@ -1,6 +1,6 @@
 """Height-field cloud decks (Max 1986) for the path tracer: the scene's deck and its haze are voxelised
 (:func:`~warpsky.media.deck.deck_voxels.voxelize_deck`) at the scene's time over a square around the camera and traced
-with the other media, the ground and the air, so the height-field pass (single scattering) can be measured against
+with the other media, the ground and the air, so the deck pass (single scattering) can be measured against
 an unbiased reference of the same cloud.
 
 Three path tracer settings, with these automatic values:
@@ -9,7 +9,7 @@ Three path tracer settings, with these automatic values:
   (its border and centre pixels) enters the slab of the deck's band and haze, plus ln(100) / sigma, where sigma is
   the haze's smallest extinction (or, without haze, half the deck's smallest extinction: a grazing ray through a
   deck with gaps is about half in cloud); light from beyond the square is then dimmed below 1 % along such a ray.
-  Capped at :data:`DECK_EXTENT_CAP`. What lies beyond is clear (the height-field pass's deck and haze go on).
+  Capped at :data:`DECK_EXTENT_CAP`. What lies beyond is clear (the deck pass's deck and haze go on).
 - ``deck_voxel_width``: horizontal voxel edge [m]. Auto: :func:`~warpsky.media.deck.deck_geometry.feature_length` / 8
   (the shortest wavelength, the equator's rounding c, the polynomial's curvature length).
 - ``deck_voxel``: vertical voxel edge [m]. Auto: the band's height / :data:`DECK_VOXEL_ROWS`. Every column's optical
@@ -31,7 +31,7 @@ from warpsky.core.resources import MemoryEstimate
 from warpsky.media.deck.deck_geometry import feature_length, the_deck
 from warpsky.media.deck.deck_voxels import deck_grid, voxelize_deck
 from warpsky.media.stratiform.stratiform_voxels import VOXEL_BUDGET, ColumnGrid
-from warpsky.model.deck import HeightFieldClouds
+from warpsky.model.deck import CloudDeck
 from warpsky.model.scene import Scene
 from warpsky.techniques.path_tracer.majorants import AUTO_BLOCKS
 
@@ -49,7 +49,7 @@ SETTINGS = "deck_extent / deck_voxel_width / deck_voxel"
 
 def traces_decks(technique_cls) -> bool:
     """Whether ``technique_cls`` traces height-field cloud decks itself, as voxel media (instead of next to the
-    height-field pass)."""
+    deck pass)."""
     return bool(getattr(technique_cls, "traces_decks", False))
 
 
@@ -63,7 +63,7 @@ def frame_directions(scene: Scene, width: int, height: int, samples: int = 16) -
     return np.array([camera.pixel_direction(x, y, width, height) for x, y in points])
 
 
-def automatic_extent(scene: Scene, clouds: HeightFieldClouds, width: int, height: int) -> float:
+def automatic_extent(scene: Scene, clouds: CloudDeck, width: int, height: int) -> float:
     """Half-size [m] of the voxelised square when ``deck_extent`` is auto (module docstring)."""
     low, high = clouds.band
     if clouds.haze is not None:
@@ -86,7 +86,7 @@ def automatic_extent(scene: Scene, clouds: HeightFieldClouds, width: int, height
     return float(min(enter + reach, DECK_EXTENT_CAP))
 
 
-def deck_voxel_sizes(scene: Scene, clouds: HeightFieldClouds, settings, width: int, height: int, *,
+def deck_voxel_sizes(scene: Scene, clouds: CloudDeck, settings, width: int, height: int, *,
                      budget: int = VOXEL_BUDGET) -> tuple[float, float, float]:
     """(half-size of the square, horizontal edge, vertical edge) [m] under the path tracer ``settings``: given
     values as they are, automatic ones from the deck and the frame, the automatic edges grown together until the
@@ -123,7 +123,7 @@ def supersample(grid: ColumnGrid) -> int:
     return 1
 
 
-def deck_plan(scene: Scene, settings, width: int, height: int) -> tuple[HeightFieldClouds, ColumnGrid, int] | None:
+def deck_plan(scene: Scene, settings, width: int, height: int) -> tuple[CloudDeck, ColumnGrid, int] | None:
     """(deck, grid, sub-columns per axis) of the scene's deck as the path tracer voxelises it (None without a
     deck); a grid over the budget is refused (UsageError naming the settings)."""
     clouds = the_deck(scene)
@@ -143,7 +143,7 @@ def with_deck_as_media(scene: Scene, settings, width: int, height: int) -> Scene
     clouds, grid, s = planned
     media = voxelize_deck(clouds, scene.time_s, scene.camera.position[[0, 2]], 0.5 * grid.width[0] * grid.shape[0],
                           grid.width[0], grid.height, supersample=s, setting=SETTINGS)
-    return dataclasses.replace(scene, media=scene.media + media, heightfield_clouds=())
+    return dataclasses.replace(scene, media=scene.media + media, decks=())
 
 
 def deck_voxel_memory(scene: Scene, settings, width: int, height: int) -> MemoryEstimate:
@@ -161,7 +161,7 @@ def deck_voxel_memory(scene: Scene, settings, width: int, height: int) -> Memory
 
 def deck_voxel_features(scene: Scene, settings, width: int, height: int, features: dict[str, str]) -> dict[str, str]:
     """``warpsky info``'s lines for a technique that traces the deck: ``features`` with the height-field and media
-    lines saying how the deck is voxelised (square, sizes, grid, voxels) instead of what the height-field pass
+    lines saying how the deck is voxelised (square, sizes, grid, voxels) instead of what the deck pass
     would do."""
     planned = deck_plan(scene, settings, width, height)
     if planned is None:
@@ -174,9 +174,9 @@ def deck_voxel_features(scene: Scene, settings, width: int, height: int, feature
             f"half-size {0.5 * grid.width[0] * grid.shape[0]:.4g} m around the camera: {grid.width[0]:.4g} x "
             f"{grid.width[1]:.4g} x {grid.height:.4g} m voxels{how}, {grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} = "
             f"{grid.voxels:,} ({grid.voxels * 4 / 2**20:.1f} MiB), partial volume ({s}x{s} sub-columns), density "
-            f"{clouds.density:g} 1/m{haze}; no height-field pass (multiple scattering traced)")
+            f"{clouds.density:g} 1/m{haze}; no deck pass (multiple scattering traced)")
     out = dict(features)
-    out["heightfield"] = line
+    out["deck"] = line
     media = features.get("media", "none")
     out["media"] = (media if scene.media else "none") + f"; plus the voxelised deck{' and haze' if haze else ''}"
     if scene.ground is not None and "ground" in features:

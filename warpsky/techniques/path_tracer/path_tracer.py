@@ -187,7 +187,7 @@ class PathTracer(Technique):
         settings = self.settings_for(scene)
         if scene.layers:
             features = layer_voxel_features(scene, settings, features)
-        if scene.heightfield_clouds:
+        if scene.decks:
             features = deck_voxel_features(scene, settings, width, height, features)
         return cut_feature(scene, float(settings.forward_cut), features)
 

@@ -12,19 +12,19 @@ import pytest
 from tests.conftest import look_rotation
 from warpsky.core.errors import SceneError
 from warpsky.media.deck.deck_geometry import probe, ray_intervals, voxelize
-from warpsky.model.deck import HazeSpec, HeightFieldClouds, read_heightfield_clouds, surface_heights
+from warpsky.model.deck import CloudDeck, HazeSpec, read_decks, surface_heights
 from warpsky.model.scene import Camera, Dome, Ground, PhaseKind, Projection, Scene, Sun
 from warpsky.optics.phase import phase_numpy
-from warpsky.passes.deck.deck import HeightField, heightfield_sun_transmittance
+from warpsky.passes.deck.deck import Deck, deck_sun_transmittance
 from warpsky.techniques.single_scatter.single_scatter import SingleScatter, SingleScatterSettings
 
 
-def wavy_deck(**kwargs) -> HeightFieldClouds:
+def wavy_deck(**kwargs) -> CloudDeck:
     rng = np.random.default_rng(7)
     k = rng.normal(size=(6, 2)) * 2.0 * math.pi / 700.0
     args = dict(rounding=40.0, bottom_depth=120.0, density=0.02, g=0.6)
     args.update(kwargs)
-    return HeightFieldClouds("/World/Deck", 1000.0, [15.0], k, rng.uniform(15.0, 50.0, 6), rng.uniform(0, 6, 6),
+    return CloudDeck("/World/Deck", 1000.0, [15.0], k, rng.uniform(15.0, 50.0, 6), rng.uniform(0, 6, 6),
                              rng.uniform(-0.01, 0.01, 6), **args)
 
 
@@ -74,7 +74,7 @@ def test_equator_and_flat_bottom_limits(device):
     _, h = surface_heights(1e9, c, depth)
     assert abs(h + depth) < 1e-6 * depth
     # the kernels near f = 0: a constant pattern f = 1e-4 m (no waves)
-    tiny = HeightFieldClouds("tiny", 0.0, [1e-4], rounding=c, bottom_depth=depth)
+    tiny = CloudDeck("tiny", 0.0, [1e-4], rounding=c, bottom_depth=depth)
     got = probe(tiny, np.array([[0.0, 0.0, 0.0]]), np.zeros(3), 0.0, device)[0]
     np.testing.assert_allclose(got[1], math.sqrt(1e-4 * (1e-4 + 2 * c)), rtol=1e-5)
     np.testing.assert_allclose(got[2], -depth * math.sqrt(1e-4 * (1e-4 + 2 * c)) / math.hypot(1e-4 + c, c), rtol=1e-5)
@@ -110,10 +110,10 @@ def test_interval_search_matches_dense_sampling(device):
 
 
 # ------------------------------------------------------------------------------------- against single_scatter
-def cloud_patch() -> HeightFieldClouds:
+def cloud_patch() -> CloudDeck:
     """A dome of radius ~80 m with two small waves, optical depth ~2 through its middle."""
     r = 80.0
-    return HeightFieldClouds("patch", 0.0, [40.0, 0, 0, -40 / r**2, 0, -40 / r**2],
+    return CloudDeck("patch", 0.0, [40.0, 0, 0, -40 / r**2, 0, -40 / r**2],
                              [[2 * math.pi / 60, 0.0], [0.0, 2 * math.pi / 45]], [3.0, 2.0], [0.3, 1.1],
                              rounding=25.0, bottom_depth=50.0, density=0.02, albedo=[0.9, 0.95, 1.0], g=0.5)
 
@@ -132,8 +132,8 @@ def test_exact_mode_matches_voxelized_single_scatter(device, sun_direction):
     dome = Dome(np.array([0.05, 0.07, 0.1]))
     for position, forward, aperture in PATCH_VIEWS:
         camera = Camera("cam", np.array(position), look_rotation(forward), 50.0, aperture, aperture, far=2e4)
-        ours = HeightField(device=device, mode="exact").render(
-            Scene(camera=camera, sun=sun, dome=dome, heightfield_clouds=(clouds,)), 48, 48)
+        ours = Deck(device=device, mode="exact").render(
+            Scene(camera=camera, sun=sun, dome=dome, decks=(clouds,)), 48, 48)
         # the deck's ambient is the isotropic dome light occluded towards the zenith: the march's skylight off
         reference = SingleScatter(SingleScatterSettings(skylight=False), device=device).render(
             Scene(camera=camera, sun=sun, dome=dome, media=(voxels,)), 48, 48)
@@ -150,12 +150,12 @@ def test_sexp_error_against_exact(device):
     errors = []
     cases = ((0.02, sun_towards(0, 1, 0)), (0.02, sun_towards(0.5, 0.8, 0.2)), (0.001, sun_towards(0, 1, 0)))
     for density, sun in cases:
-        clouds = HeightFieldClouds(**{**cloud_patch().__dict__, "density": density})
+        clouds = CloudDeck(**{**cloud_patch().__dict__, "density": density})
         for position, forward, aperture in PATCH_VIEWS:
             camera = Camera("cam", np.array(position), look_rotation(forward), 50.0, aperture, aperture, far=2e4)
-            scene = Scene(camera=camera, sun=sun, heightfield_clouds=(clouds,))
-            exact = HeightField(device=device, mode="exact").render(scene, 32, 32).radiance
-            sexp = HeightField(device=device, mode="sexp").render(scene, 32, 32).radiance
+            scene = Scene(camera=camera, sun=sun, decks=(clouds,))
+            exact = Deck(device=device, mode="exact").render(scene, 32, 32).radiance
+            sexp = Deck(device=device, mode="sexp").render(scene, 32, 32).radiance
             assert np.all(np.isfinite(sexp)) and sexp.min() >= 0.0
             errors.append(np.sqrt(np.mean((sexp - exact) ** 2)) / np.sqrt(np.mean(exact**2)))
             if sun.direction[1] == 1.0:
@@ -175,9 +175,9 @@ def test_max_thickness_rule_against_exact(device):
     for name, sun in (("overhead", sun_towards(0, 1, 0)), ("tilted", sun_towards(0.5, 0.8, 0.2))):
         for position, forward, aperture in PATCH_VIEWS:
             camera = Camera("cam", np.array(position), look_rotation(forward), 50.0, aperture, aperture, far=2e4)
-            scene = Scene(camera=camera, sun=sun, heightfield_clouds=(clouds,))
-            exact = HeightField(device=device, mode="exact").render(scene, 32, 32)
-            fast = HeightField(device=device, mode="max").render(scene, 32, 32)
+            scene = Scene(camera=camera, sun=sun, decks=(clouds,))
+            exact = Deck(device=device, mode="exact").render(scene, 32, 32)
+            fast = Deck(device=device, mode="max").render(scene, 32, 32)
             np.testing.assert_array_equal(fast.transmittance, exact.transmittance)
             error = np.sqrt(np.mean((fast.radiance - exact.radiance) ** 2)) / np.sqrt(np.mean(exact.radiance**2))
             errors.setdefault(name, []).append(float(error))
@@ -191,13 +191,13 @@ HOLE_RADIUS = 100.0
 DECK = 1000.0
 
 
-def holed_deck(density: float = 10.0) -> HeightFieldClouds:
+def holed_deck(density: float = 10.0) -> CloudDeck:
     """An opaque deck above y = 1000 m with one round hole of radius 100 m at the origin: f = B r^2 - A < 0 only
     inside the disc, capped at 50 m tops; no bottoms (Max §5's h = 0)."""
     a = 50.0
     b = a / HOLE_RADIUS**2
     haze = HazeSpec(SIGMA_HAZE, albedo=[0.9, 0.9, 0.9], g=0.5, floor=-100.0)
-    return HeightFieldClouds("holed", DECK, [-a, 0, 0, b, 0, b], rounding=0.5, bottom_depth=0.0, density=density,
+    return CloudDeck("holed", DECK, [-a, 0, 0, b, 0, b], rounding=0.5, bottom_depth=0.0, density=density,
                              haze=haze, max_height=50.0)
 
 
@@ -208,8 +208,8 @@ def test_haze_shaft_closed_form_sun_overhead(device):
     forward = phase_numpy(PhaseKind.HG, 0.5, 1.0)
     near = 1.0e-3
     for x, lit in ((0.0, True), (250.0, False)):
-        scene = Scene(camera=vertical_camera(x, 0.0, 0.0, near=near), sun=sun, dome=dome, heightfield_clouds=(clouds,))
-        layer = HeightField(device=device, mode="exact").render(scene, 3, 3)
+        scene = Scene(camera=vertical_camera(x, 0.0, 0.0, near=near), sun=sun, dome=dome, decks=(clouds,))
+        layer = Deck(device=device, mode="exact").render(scene, 3, 3)
         path = DECK - near
         # single scattering in the slab; sun and sky attenuated by the haze above the point only
         expected = sigma_s * path * np.exp(-SIGMA_HAZE * DECK) * (forward * 2.0 + 0.1) if lit else np.zeros(3)
@@ -226,8 +226,8 @@ def test_haze_shaft_tilted_sun_lights_upper_column(device):
     sun = Sun(np.array([math.sin(zenith), math.cos(zenith), 0.0]), np.full(3, 2.0))
     dome = Dome(np.array([0.1, 0.1, 0.1]))
     near = 1.0e-3
-    scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0, near=near), sun=sun, dome=dome, heightfield_clouds=(clouds,))
-    layer = HeightField(device=device, mode="exact").render(scene, 3, 3)
+    scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0, near=near), sun=sun, dome=dome, decks=(clouds,))
+    layer = Deck(device=device, mode="exact").render(scene, 3, 3)
     sigma_s = 0.9 * SIGMA_HAZE
     mu = math.cos(zenith)
     lit_length = HOLE_RADIUS / math.tan(zenith)  # u = DECK - z in [0, lit_length] is sunlit
@@ -242,8 +242,8 @@ def shaft_centroid(clouds, sun, device, height) -> float:
     """Radiance-weighted mean x [m] of a row of horizontal rays along -z at ``height``, 600 m wide."""
     camera = Camera("row", np.array([0.0, height, 400.0]), np.eye(3), 50.0, 600.0, 600.0 / 32, far=2000.0,
                     projection=Projection.ORTHOGRAPHIC)
-    layer = HeightField(device=device, mode="exact", haze_step_length=2.0).render(
-        Scene(camera=camera, sun=sun, heightfield_clouds=(clouds,)), 64, 2)
+    layer = Deck(device=device, mode="exact", haze_step_length=2.0).render(
+        Scene(camera=camera, sun=sun, decks=(clouds,)), 64, 2)
     profile = layer.radiance[:, :, 1].mean(axis=0)
     x = (np.arange(64) + 0.5) / 64 * 600.0 - 300.0
     assert profile.max() > 0 and np.all(np.isfinite(profile))
@@ -265,15 +265,15 @@ def test_haze_shaft_moves_along_the_sun(device):
 # --------------------------------------------------------------------------------------------------- extremes
 def test_no_clouds_leaves_only_haze(device):
     haze = HazeSpec(SIGMA_HAZE, albedo=[1.0, 1.0, 1.0], g=0.3, floor=-50.0, top=800.0)
-    clouds = HeightFieldClouds("clear", DECK, [-10.0], haze=haze)  # f < 0 everywhere
-    scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0), sun=sun_towards(0, 1, 0), heightfield_clouds=(clouds,))
-    layer = HeightField(device=device, mode="exact").render(scene, 3, 3)
+    clouds = CloudDeck("clear", DECK, [-10.0], haze=haze)  # f < 0 everywhere
+    scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0), sun=sun_towards(0, 1, 0), decks=(clouds,))
+    layer = Deck(device=device, mode="exact").render(scene, 3, 3)
     path = 800.0 - 1.0e-3
     expected = SIGMA_HAZE * phase_numpy(PhaseKind.HG, 0.3, 1.0) * path * np.exp(-SIGMA_HAZE * 800.0)
     np.testing.assert_allclose(layer.radiance[1, 1], expected, rtol=2e-3)
     np.testing.assert_allclose(layer.transmittance[1, 1], np.exp(-SIGMA_HAZE * path), rtol=1e-4)
-    above = Scene(camera=vertical_camera(0.0, 900.0, 0.0), sun=sun_towards(0, 1, 0), heightfield_clouds=(clouds,))
-    layer = HeightField(device=device, mode="exact").render(above, 3, 3)
+    above = Scene(camera=vertical_camera(0.0, 900.0, 0.0), sun=sun_towards(0, 1, 0), decks=(clouds,))
+    layer = Deck(device=device, mode="exact").render(above, 3, 3)
     np.testing.assert_array_equal(layer.transmittance, 1.0)
     np.testing.assert_array_equal(layer.radiance, 0.0)
 
@@ -281,13 +281,13 @@ def test_no_clouds_leaves_only_haze(device):
 @pytest.mark.parametrize("camera_y", [0.0, 1000.0], ids=["below", "inside"])
 def test_overcast_slab_closed_form(device, camera_y):
     """f huge everywhere, capped: a homogeneous slab from H + h(f_cap) to H + 300 m."""
-    clouds = HeightFieldClouds("overcast", DECK, [1.0e6], rounding=50.0, bottom_depth=100.0, density=0.01, g=0.7,
+    clouds = CloudDeck("overcast", DECK, [1.0e6], rounding=50.0, bottom_depth=100.0, density=0.01, g=0.7,
                                max_height=300.0)
     low, high = clouds.band
     near = 1.0e-3
     scene = Scene(camera=vertical_camera(0.0, camera_y, 0.0, near=near), sun=sun_towards(0, 1, 0),
-                  heightfield_clouds=(clouds,))
-    layer = HeightField(device=device, mode="exact").render(scene, 3, 3)
+                  decks=(clouds,))
+    layer = Deck(device=device, mode="exact").render(scene, 3, 3)
     start = max(low, camera_y + near)
     length = high - start
     expected = 0.01 * phase_numpy(PhaseKind.HG, 0.7, 1.0) * length * math.exp(-0.01 * length)
@@ -302,27 +302,27 @@ def test_sun_at_and_below_the_horizon_and_grazing_rays(device):
     camera = Camera("cam", np.array([0.0, DECK, 0.0]), look_rotation([0.0, 0.0, -1.0]), 50.0, 36.0, 36.0, far=3e4)
     ground = Ground(0.0)
     for sun, lit in ((sun_towards(1, 0, 0), True), (sun_towards(1, -0.2, 0), False)):
-        layer = HeightField(device=device, mode="exact").render(
-            Scene(camera=camera, sun=sun, ground=ground, heightfield_clouds=(clouds,)), 16, 16)
+        layer = Deck(device=device, mode="exact").render(
+            Scene(camera=camera, sun=sun, ground=ground, decks=(clouds,)), 16, 16)
         assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0
         assert np.all((layer.transmittance >= 0.0) & (layer.transmittance <= 1.0))
         assert (layer.radiance.max() > 0.0) == lit
     # without a horizon a sun below it lights the deck from beneath
-    layer = HeightField(device=device, mode="exact").render(
-        Scene(camera=camera, sun=sun_towards(1, -0.2, 0), heightfield_clouds=(clouds,)), 16, 16)
+    layer = Deck(device=device, mode="exact").render(
+        Scene(camera=camera, sun=sun_towards(1, -0.2, 0), decks=(clouds,)), 16, 16)
     assert np.all(np.isfinite(layer.radiance)) and layer.radiance.min() >= 0.0 and layer.radiance.max() > 0.0
 
 
 def test_far_from_the_origin_equals_at_the_origin(device):
     offset = np.array([1.0e5, 0.0, -1.0e5])
     clouds = wavy_deck(haze=HazeSpec(SIGMA_HAZE, floor=0.0))
-    moved = HeightFieldClouds(**{**clouds.__dict__, "origin": (offset[0], offset[2])})
+    moved = CloudDeck(**{**clouds.__dict__, "origin": (offset[0], offset[2])})
     views = []
     for deck, shift in ((clouds, np.zeros(3)), (moved, offset)):
         camera = Camera("cam", np.array([30.0, 400.0, 500.0]) + shift, look_rotation([0.2, 0.4, -1.0]), 50.0, 36.0,
                         36.0, far=2e4)
-        views.append(HeightField(device=device, mode="exact").render(
-            Scene(camera=camera, sun=sun_towards(0.3, 1, 0.2), heightfield_clouds=(deck,)), 24, 24))
+        views.append(Deck(device=device, mode="exact").render(
+            Scene(camera=camera, sun=sun_towards(0.3, 1, 0.2), decks=(deck,)), 24, 24))
     assert views[0].radiance.max() > 0
     np.testing.assert_allclose(views[1].radiance, views[0].radiance, rtol=1e-3, atol=1e-3 * views[0].radiance.max())
     np.testing.assert_allclose(views[1].transmittance, views[0].transmittance, atol=1e-3)
@@ -330,12 +330,12 @@ def test_far_from_the_origin_equals_at_the_origin(device):
 
 def test_limit_stops_rays_and_sun_transmittance(device):
     clouds = holed_deck(density=0.01)
-    scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0), sun=sun_towards(0, 1, 0), heightfield_clouds=(clouds,))
+    scene = Scene(camera=vertical_camera(0.0, 0.0, 0.0), sun=sun_towards(0, 1, 0), decks=(clouds,))
     limit = np.full((3, 3), 400.0, np.float32)
-    layer = HeightField(device=device, mode="exact").render(scene, 3, 3, limit=limit)
+    layer = Deck(device=device, mode="exact").render(scene, 3, 3, limit=limit)
     np.testing.assert_allclose(layer.transmittance[1, 1], np.exp(-SIGMA_HAZE * (400.0 - 1e-3)), rtol=1e-4)
     points = np.array([[0.0, 500.0, 0.0], [300.0, 500.0, 0.0], [300.0, 1100.0, 0.0]])
-    got = heightfield_sun_transmittance(scene, points, device)
+    got = deck_sun_transmittance(scene, points, device)
     f = clouds.pattern(300.0, 0.0)
     g, h = surface_heights(f, clouds.rounding, clouds.bottom_depth)
     np.testing.assert_allclose(got[0], np.exp(-SIGMA_HAZE * 500.0), rtol=1e-4)
@@ -387,7 +387,7 @@ def read_deck(path):
     from warpsky.usd.stage import StageReader
 
     reader = StageReader(path)
-    return read_heightfield_clouds(reader, reader.stage.GetPrimAtPath("/World/Deck"), Usd.TimeCode.Default())
+    return read_decks(reader, reader.stage.GetPrimAtPath("/World/Deck"), Usd.TimeCode.Default())
 
 
 def test_usd_round_trip(tmp_path):

@@ -1,5 +1,5 @@
 """The path-traced reference for Max 1986 height-field cloud decks: the deck voxelised with exact column optical
-depths (warpsky.media.deck.deck_voxels), traced by the path tracer against the height-field pass's single scattering,
+depths (warpsky.media.deck.deck_voxels), traced by the path tracer against the deck pass's single scattering,
 and
 through ``warpsky render`` / ``info`` / ``bench error-vs-time``."""
 
@@ -13,17 +13,17 @@ from conftest import look_rotation, run_cli
 
 from warpsky.core.errors import UsageError
 from warpsky.media.deck.deck_voxels import deck_grid, sub_column_offsets, voxelize_deck
-from warpsky.model.deck import HazeSpec, HeightFieldClouds, surface_heights
+from warpsky.model.deck import CloudDeck, HazeSpec, surface_heights
 from warpsky.model.scene import Camera, PhaseKind, Scene, Sun
 
 
-def wavy_deck(**kwargs) -> HeightFieldClouds:
+def wavy_deck(**kwargs) -> CloudDeck:
     """Four random waves of 700 m about a nearly flat pattern: about 40 % of the columns clear."""
     rng = np.random.default_rng(7)
     k = rng.normal(size=(4, 2)) * 2.0 * math.pi / 700.0
     args = dict(rounding=40.0, bottom_depth=60.0, density=0.02, haze=HazeSpec(np.full(3, 1e-4), floor=-50.0))
     args.update(kwargs)
-    return HeightFieldClouds("/World/Deck", 1000.0, [5.0], k, rng.uniform(10, 30, 4), rng.uniform(0, 6, 4),
+    return CloudDeck("/World/Deck", 1000.0, [5.0], k, rng.uniform(10, 30, 4), rng.uniform(0, 6, 4),
                              rng.uniform(-0.01, 0.01, 4), **args)
 
 
@@ -74,12 +74,12 @@ def test_deck_grid_over_the_budget_is_refused_naming_the_setting():
     assert deck_grid(clouds, (0.0, 0.0), 2.0e4, 1.0, 1.0, max_voxels=2**62).voxels > 2**27  # nothing allocated
 
 
-# ---------------------------------------------------------------------------------- against the height-field pass
-def thin_deck() -> tuple[HeightFieldClouds, Camera]:
+# ---------------------------------------------------------------------------------- against the deck pass
+def thin_deck() -> tuple[CloudDeck, Camera]:
     """An optically thin deck (density 0.002 1/m, tau <= 0.3, albedo 1) 1.5 km up with haze of 2e-4 /m, and a
     camera 300 m up looking at it from below."""
     k = np.array([[2.0 * math.pi / 700.0, 0.0], [0.0035, 0.0060]])
-    clouds = HeightFieldClouds("/World/Deck", 1500.0, [2.0], k, [20.0, 14.0], [0.3, 1.7], rounding=100.0,
+    clouds = CloudDeck("/World/Deck", 1500.0, [2.0], k, [20.0, 14.0], [0.3, 1.7], rounding=100.0,
                                bottom_depth=80.0, density=0.002, g=0.85, haze=HazeSpec(np.full(3, 2e-4), g=0.7))
     look = np.array([0.2, 1.0, -0.4]) / math.sqrt(1.2)
     camera = Camera("cam", np.array([40.0, 300.0, -20.0]), look_rotation(look), 24.0, 36.0, 24.0, near=1.0,
@@ -87,9 +87,9 @@ def thin_deck() -> tuple[HeightFieldClouds, Camera]:
     return clouds, camera
 
 
-def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
+def test_thin_deck_single_scattering_matches_the_deck_pass(device):
     """An optically thin deck (density 0.002 1/m, tau <= 0.3, albedo 1) with haze, sun overhead, seen from below:
-    the path tracer limited to single scattering (max_bounces = 1) and the height-field pass (exact mode) agree on
+    the path tracer limited to single scattering (max_bounces = 1) and the deck pass (exact mode) agree on
     the mean radiance within noise (z < 4, 0.3 % for the voxels in quadrature; measured on the CPU with 4096 spp:
     -0.09 % +- 0.27 %), and the noise is small enough (< 1 %) for a 5 % error to fail. All orders of scattering
     add about 15 % here."""
@@ -97,13 +97,13 @@ def test_thin_deck_single_scattering_matches_the_heightfield_pass(device):
     from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     clouds, camera = thin_deck()
-    scene = Scene(camera, Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), heightfield_clouds=(clouds,))
+    scene = Scene(camera, Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), decks=(clouds,))
     expected = float(HeightField(device=device).render(scene, 24, 16).radiance[..., 1].mean())
     settings = PathTracerSettings(spp=2048, seed=5, max_bounces=1, deck_extent=2500.0)
     out = PathTracer(settings, device=device).render(scene, 24, 16)
     measured = float(out.radiance[..., 1].mean())
     noise = math.sqrt(float(out.aovs["variance"][..., 1].sum())) / out.radiance[..., 1].size
-    print(f"thin deck: path tracer (single scattering) {measured:.5f} +- {noise:.5f}, height-field pass "
+    print(f"thin deck: path tracer (single scattering) {measured:.5f} +- {noise:.5f}, deck pass "
           f"{expected:.5f}")
     assert noise < 0.01 * expected
     assert abs(measured - expected) / math.hypot(noise, 0.003 * expected) < 4.0
@@ -149,8 +149,8 @@ def test_render_and_info_trace_the_deck(tmp_path, capsys):
     assert np.all(np.isfinite(with_hill)) and with_hill[..., :3].min() >= 0.0
 
 
-def test_error_vs_time_judges_the_heightfield_pass(tmp_path, monkeypatch):
-    """On a deck stage the report's rows name the height-field pass, one family per mode along its step length,
+def test_error_vs_time_judges_the_deck_pass(tmp_path, monkeypatch):
+    """On a deck stage the report's rows name the deck pass, one family per mode along its step length,
     against the path-traced deck; single scattering shows as a negative bias."""
     from evaluation import error_vs_time
     from evaluation.deck_stage import deck_scene
