@@ -219,7 +219,7 @@ def comparable_scene(scene, log=print):
     """``scene`` as both sides of the report can render it: with stratiform layers, the ground's albedo map (which
     only the stratiform pass reads) is left out, so both see the ground's uniform albedo."""
     ground = scene.ground
-    if not scene.layers or ground is None or ground.albedo_map is None:
+    if not scene.stratiform_layers or ground is None or ground.albedo_map is None:
         return scene
     log(f"ground {ground.name}: albedo map left out of the comparison (the path tracer traces a uniform ground); "
         f"both sides use albedo {np.round(ground.albedo, 3).tolist()}")
@@ -237,7 +237,7 @@ def measured_rows(scene, techniques: list[str]) -> list[tuple[str, str, list[dic
             out.append((name, name, LADDERS[name]))  # its paths carry the deck's multiple scattering
         elif scene.decks and not traces_decks(cls):
             out += deck_rows(scene, name, out)
-        elif not scene.layers or not cls.renders_layers:
+        elif not scene.stratiform_layers or not cls.renders_layers:
             out.append((name, name, LADDERS[name]))
         elif scene.media:
             out.append((f"{name} + stratiform pass", name, LADDERS[name]))
@@ -283,7 +283,7 @@ def run_report(
     if unknown:
         raise UsageError(f"error-vs-time cannot measure {', '.join(unknown)} (yet); available: "
                          f"{', '.join(LADDERS)}")
-    if not (scene.media or scene.layers or scene.decks or scene.fogs or scene.meshes):
+    if not (scene.media or scene.stratiform_layers or scene.decks or scene.fogs or scene.meshes):
         raise UsageError("the stage holds no media, no stratiform layers, no height-field clouds, no analytic fog "
                          "and no meshes: nothing to measure")
     scene = comparable_scene(scene, log)

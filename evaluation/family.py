@@ -160,7 +160,7 @@ def covered_pixels(scene, width: int, height: int, device: str) -> np.ndarray:
     terrain, ground, fog, the deck or its haze, or the media (open sky is left out)."""
     if has_scenery(scene):
         return scenery_covered(scene, width, height, device, COVERED_TRANSMITTANCE)
-    media_only = dataclasses.replace(scene, ground=None, atmosphere=None, layers=())
+    media_only = dataclasses.replace(scene, ground=None, atmosphere=None, stratiform_layers=())
     plan = frame_plan(media_only, "single_scatter", {}, width, height, device)
     layer, _ = render_layers(plan, media_only)
     return (layer.transmittance @ LUMINANCE_WEIGHTS.astype(np.float32)) < COVERED_TRANSMITTANCE

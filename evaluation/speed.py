@@ -108,10 +108,10 @@ def plan_rows(stages: list[Path], techniques: list[str], devices: list[str], *, 
         scene = StageReader(stage).scene_at(None)
         for technique in techniques:
             if technique == STRATIFORM:
-                why = None if scene.layers else "no stratiform layers"
+                why = None if scene.stratiform_layers else "no stratiform layers"
             elif not scene.media:
                 why = "no voxel media"
-            elif scene.layers and not technique_class(technique).renders_layers:
+            elif scene.stratiform_layers and not technique_class(technique).renders_layers:
                 why = "it does not render next to stratiform layers"
             else:
                 why = None

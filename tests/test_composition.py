@@ -215,7 +215,7 @@ def add_surfaces(stage, tmp_path) -> dict[str, str]:
 def surfaces(scene) -> dict[str, str | None]:
     """Names of the scene's ground, atmosphere and (first) stratiform layer; None where absent."""
     return {"ground": scene.ground and scene.ground.name, "atmosphere": scene.atmosphere and scene.atmosphere.name,
-            "layer": scene.layers[0].name if scene.layers else None}
+            "layer": scene.stratiform_layers[0].name if scene.stratiform_layers else None}
 
 
 def test_purpose_skips_ground_atmosphere_and_layers_but_not_the_sun(tmp_path):

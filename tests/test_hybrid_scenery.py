@@ -127,7 +127,7 @@ def layered_slab_scene(floor: str) -> Scene:
     thickness = np.array([[60.0 * max(0.0, np.sin(0.9 * i) * np.cos(0.7 * j)) for j in range(8)] for i in range(8)])
     layer = StratiformLayer(thickness.astype(np.float32), 300.0, (-1000.0, -1000.0), (2000.0, 2000.0),
                             name="deck")
-    return dataclasses.replace(slab_scene(floor, False), layers=(layer,))
+    return dataclasses.replace(slab_scene(floor, False), stratiform_layers=(layer,))
 
 
 @pytest.mark.slow

@@ -150,7 +150,7 @@ def test_flat_layer_against_the_slab_solution(device):
         look = np.array([sideways, -mu, 0.0])  # mu > 0: from above looking down; < 0: from below looking up
         camera = Camera("camera", -look * 40.0 + np.array([0.0, 5.0, 0.0]), look_rotation(look), 2000.0, 36.0, 36.0,
                         near=0.1, far=1.0e5)
-        scene = Scene(camera, Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), layers=(layer,))
+        scene = Scene(camera, Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), stratiform_layers=(layer,))
         out = PathTracer(PathTracerSettings(spp=8192, seed=11), device=device).render(scene, 16, 16)
         measured = float(out.radiance[..., 1].mean())
         noise = math.sqrt(float(out.aovs["variance"][..., 1].sum())) / out.radiance[..., 1].size
@@ -175,7 +175,7 @@ def test_halving_the_voxels_changes_a_cloudy_region_by_under_5_percent(device):
     camera = Camera("camera", np.array([0.0, 0.0, 300.0]), look_rotation(look), 36.0, 36.0, 36.0, near=1.0,
                     far=1.0e5)
     sun = np.array([-0.3, 0.77, -0.56])
-    scene = Scene(camera, Sun(sun / np.linalg.norm(sun), np.ones(3)), layers=(layer,))
+    scene = Scene(camera, Sun(sun / np.linalg.norm(sun), np.ones(3)), stratiform_layers=(layer,))
     width, height = layer_voxel_sizes(layer, PathTracerSettings())
     assert (width, height) == (62.5, 3.125)  # half a texel, max thickness / 32
     means, errors = [], []

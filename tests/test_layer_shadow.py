@@ -64,7 +64,7 @@ def test_fog_sunlight_lies_in_a_uniform_layer_shadow(device):
     scene = Scene(camera, Sun(np.array([0.0, math.sin(e), math.cos(e)]), np.ones(3)), fogs=(fog,))
     layer = StratiformLayer(np.full((4, 4), 50.0, np.float32), 400.0, (-50000.0, -50000.0), (1.0e5, 1.0e5))
     clear = Fog(device=device).render(scene, 16, 12, ambient=np.zeros(3)).radiance
-    shaded = Fog(device=device).render(dataclasses.replace(scene, layers=(layer,)), 16, 12,
+    shaded = Fog(device=device).render(dataclasses.replace(scene, stratiform_layers=(layer,)), 16, 12,
                                        ambient=np.zeros(3)).radiance
     expected = math.exp(-layer.extinction * 50.0 / math.sin(e))
     assert clear.min() > 0.0

@@ -75,7 +75,7 @@ def test_stages_read_back_with_their_scenery(family):
         assert len(scene.meshes) == 1 and scene.ground is not None
         assert (scene.atmosphere is not None) == m["air"]
         assert bool(scene.fogs) == (m["kind"] in FOGGY)
-        assert bool(scene.layers) == (m["kind"] == "layer_fog")
+        assert bool(scene.stratiform_layers) == (m["kind"] == "layer_fog")
         assert bool(scene.decks) == (m["kind"] == "deck_haze")
         assert bool(scene.media) == (m["kind"] == "ridge_cloud")
         assert scene.resolution == (96, 64)

@@ -1,4 +1,4 @@
-"""Stratiform layers through the normal pipeline: USD prims -> Scene.layers -> plan (``warpsky info``) -> the
+"""Stratiform layers through the normal pipeline: USD prims -> Scene.stratiform_layers -> plan (``warpsky info``) -> the
 stratiform pass composited with the sky and voxel media -> EXR; advected thickness maps (Neyret 2003)."""
 
 from __future__ import annotations
@@ -103,7 +103,7 @@ def test_reader_fills_scene_layers_and_ground_texture(tmp_path):
     for up in ("Y", "Z"):
         stage = write_layer_stage(tmp_path / f"s{up}.usda", up=up)
         scene = StageReader(stage).scene_at(None)
-        (layer,) = scene.layers
+        (layer,) = scene.stratiform_layers
         assert layer.name == "/World/Stratocumulus" and layer.base_altitude == pytest.approx(1000.0)
         assert layer.origin == pytest.approx((-SIZE / 2, -SIZE / 2)) and layer.size == pytest.approx((SIZE, SIZE))
         np.testing.assert_array_equal(layer.thickness, np.load(tmp_path / "thickness.npy"))
@@ -273,7 +273,7 @@ def test_still_advection_shows_the_static_map_and_wind_translates_it(tmp_path):
     reader = StageReader(still)
     static = np.load(tmp_path / "thickness.npy")
     for time in (1.0, 37.0, 100.0):
-        (layer,) = reader.scene_at(time).layers
+        (layer,) = reader.scene_at(time).stratiform_layers
         assert layer.advection is not None and layer.advection.still
         np.testing.assert_array_equal(thickness_at_time(layer), static)
     # wind along +x carrying the map 3 texels per frame (10 s): the map at frame 2 is the static map shifted by 6
@@ -282,5 +282,5 @@ def test_still_advection_shows_the_static_map_and_wind_translates_it(tmp_path):
     for wind, axis in (((speed, 0.0), 0), ((0.0, speed), 1)):
         windy = write_layer_stage(tmp_path / f"wind{axis}.usda", layer_attrs=_advected_attrs(wind=wind, curl=0.0),
                                   frames=(1, 100))
-        (layer,) = StageReader(windy).scene_at(2.0).layers
+        (layer,) = StageReader(windy).scene_at(2.0).stratiform_layers
         np.testing.assert_allclose(thickness_at_time(layer), np.roll(static, 6, axis=axis), atol=1e-3)

@@ -69,7 +69,7 @@ def sunset_scene(elevation_deg: float, *, air: bool, layer: bool = False) -> Sce
         thickness = np.full((8, 8), 200.0, np.float32)
         thickness[2:5, 3:6] = 0.0  # a hole: shadow and light on the ground
         return Scene(camera, sun, ground=Ground(0.0, np.full(3, 0.3)), atmosphere=atmosphere,
-                     layers=(StratiformLayer(thickness, 400.0, (-2000.0, -4000.0), (4000.0, 4000.0)),))
+                     stratiform_layers=(StratiformLayer(thickness, 400.0, (-2000.0, -4000.0), (4000.0, 4000.0)),))
     world_from_index = np.diag([100.0, 100.0, 100.0, 1.0])
     world_from_index[:3, 3] = (-150.0, 200.0, -1350.0)  # 4 voxels of 100 m: a box from y = 150 m to 550 m
     cloud = VoxelMedium("cloud", np.ones((4, 4, 4), np.float32), world_from_index, extinction_scale=np.full(3, 0.01),

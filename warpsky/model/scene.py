@@ -418,8 +418,8 @@ class Scene:
         camera: The camera to render from.
         sun: The sun, or None for a scene lit by nothing (renders black).
         media: Participating media; their extinctions add where they overlap.
-        layers: Stratiform cloud layers (Bouthors 2006), rendered by the stratiform pass and composited with the
-            media by depth.
+        stratiform_layers: Stratiform cloud layers (Bouthors 2006), rendered by the stratiform pass and composited
+            with the media by depth.
         ground: Optional ground plane.
         atmosphere: Optional air (sky, aerial perspective, reddened sunlight); None: black background.
         time_code: USD time code this scene was read at (``nan`` for the default time).
@@ -446,7 +446,7 @@ class Scene:
     source: str = ""
     resolution: tuple[int, int] | None = None
     time_codes_per_second: float = 24.0
-    layers: tuple[StratiformLayer, ...] = ()
+    stratiform_layers: tuple[StratiformLayer, ...] = ()
     extra_suns: tuple[Sun, ...] = ()
     dome: Dome | None = None
     meshes: tuple = ()
@@ -460,7 +460,7 @@ class Scene:
         object.__setattr__(self, "extra_suns", tuple(self.extra_suns))
         if self.dome is not None and not self.dome.active:
             object.__setattr__(self, "dome", None)  # a black dome renders exactly as none
-        object.__setattr__(self, "layers", tuple(self.layers))
+        object.__setattr__(self, "stratiform_layers", tuple(self.stratiform_layers))
         if not (math.isfinite(self.time_codes_per_second) and self.time_codes_per_second > 0.0):
             raise SceneError(f"timeCodesPerSecond must be positive, got {self.time_codes_per_second}")
 

@@ -40,7 +40,7 @@ def scene_bounds(scene) -> tuple[np.ndarray, np.ndarray]:
     points = [scene.camera.position]
     for medium in scene.media:
         points.extend(medium.world_corners())
-    for layer in getattr(scene, "layers", ()):
+    for layer in getattr(scene, "stratiform_layers", ()):
         (x0, z0), (sx, sz) = layer.origin, layer.size
         top = layer.base_altitude + float(np.max(layer.thickness, initial=0.0))
         points += [(x0, layer.base_altitude, z0), (x0 + sx, top, z0 + sz)]
@@ -90,7 +90,7 @@ def stage_preview(scene, path: str | os.PathLike, *, size: tuple[int, int] = (10
         plotter.add_mesh(mesh, color=colour, opacity=0.55 if medium.species in ("rain", "ice", "snow") else 0.9,
                          smooth_shading=True)
         legend.append([f"{medium.name} ({medium.species or 'density'})", colour])
-    for layer in getattr(scene, "layers", ()):
+    for layer in getattr(scene, "stratiform_layers", ()):
         (x0, z0), (sx, sz) = layer.origin, layer.size
         top = layer.base_altitude + float(np.max(layer.thickness, initial=0.0))
         box = pv.Box(bounds=(x0, x0 + sx, layer.base_altitude, max(top, layer.base_altitude + 1.0), z0, z0 + sz))

@@ -33,10 +33,10 @@ def scenery_traceable(scene) -> bool:
     the layers too, beyond a camera ray's first event; the stratiform pass draws them, and the surfaces pass, which
     reads no albedo map, the ground)."""
     scenery = bool(scene.fogs or scene.meshes or scene.decks)
-    if not scene.layers:
+    if not scene.stratiform_layers:
         return scenery
     textured = scene.ground is not None and scene.ground.albedo_map is not None
-    base = min(layer.base_altitude for layer in scene.layers)
+    base = min(layer.base_altitude for layer in scene.stratiform_layers)
     below = all(fog.top + float(fog.wind[1]) * scene.time_s < base for fog in scene.fogs)
     return scenery and below and not (scene.media or scene.decks or textured)
 
@@ -47,7 +47,7 @@ class SceneryFrame:
     (:meth:`~warpsky.techniques.technique.Technique.scenery_paths`)."""
 
     ground: object | None = None  # the ground plane another pass draws: the paths bounce on it
-    layers: tuple = ()  # the stratiform layers the stratiform pass draws: traced beyond a camera ray's first event
+    stratiform_layers: tuple = ()  # what the stratiform pass draws: traced beyond a camera ray's first event
     drawn: np.ndarray | None = None  # (H, W, 3) radiance of the passes before (the surfaces), in the frame's level
     occluders: object | None = None  # the frame's meshes on the device, whose shadows lie on the fog's sunlight
     fog: object | None = None  # the fog pass's layer of this frame (ImageLayer), drawn early and kept for its turn
@@ -79,9 +79,9 @@ class MediaPass(Pass):
     def renders_own(cls, scene, technique) -> bool:
         """Whether it runs for what the technique draws itself (not only for the scenery's multiple scattering,
         :meth:`~warpsky.techniques.technique.Technique.scenery_paths`)."""
-        traced = ((scene.layers and technique.traces_layers) or (scene.decks and technique.traces_decks)
+        traced = ((scene.stratiform_layers and technique.traces_layers) or (scene.decks and technique.traces_decks)
                   or (scene.fogs and technique.traces_fog) or (scene.meshes and technique.traces_meshes))
-        return bool(scene.media) or bool(traced) or not (scene.layers or has_scenery(scene))
+        return bool(scene.media) or bool(traced) or not (scene.stratiform_layers or has_scenery(scene))
 
     def draws_ground(self, scene) -> bool:
         """Not where it runs only for the scenery's multiple scattering: the surfaces pass draws the ground there,
@@ -98,10 +98,10 @@ class MediaPass(Pass):
                      scene.decks), ("the meshes", scene.meshes)) if present]
             named = ", ".join(kinds[:-1]) + " and " + kinds[-1] if len(kinds) > 1 else kinds[0]
             layers = (", and the stratiform layers' light on them (the layers voxelised beyond the camera rays' "
-                      "first event, which the stratiform pass draws)") if scene.layers else ""
+                      "first event, which the stratiform pass draws)") if scene.stratiform_layers else ""
             return {"media": f"none: {technique.name} path traces the multiple scattering of {named} (their "
                              f"passes draw the single scattering){layers}"}
-        if scene.layers:
+        if scene.stratiform_layers:
             return {"media": f"none: {technique.name} does not run, the layers are rendered by the stratiform pass"}
         return {"media": "none"}
 
@@ -123,7 +123,8 @@ class MediaPass(Pass):
             kept = {runner.name: runner.own_layer(frame) for runner in frame.runners
                     if runner.name in ("fog", "deck")}
             around = SceneryFrame(ground=frame.scene.ground if scene.ground is None else None,
-                                  layers=tuple(frame.scene.layers) if not scene.layers else (),
+                                  stratiform_layers=() if scene.stratiform_layers
+                                  else tuple(frame.scene.stratiform_layers),
                                   drawn=sum(layer.radiance for layer in frame.layers) if frame.layers else None,
                                   occluders=frame.occluders, fog=kept.get("fog"), deck=kept.get("deck"))
             layer = frame.technique.render(scene, frame.width, frame.height, around=around)

@@ -320,7 +320,7 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
             source=str(self.path),
             resolution=resolution,
             time_codes_per_second=float(self.stage.GetTimeCodesPerSecond()),
-            layers=self.read_layers(time),
+            stratiform_layers=self.read_stratiform_layers(time),
             meshes=self.read_meshes(time),
             decks=self.read_decks(time),
             fogs=self.read_fogs(time),

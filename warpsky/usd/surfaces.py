@@ -54,7 +54,7 @@ class SurfaceReading(StagePrims):
         return None
 
     # ------------------------------------------------------------------------------------ stratiform layers
-    def read_layers(self, time=None) -> tuple:
+    def read_stratiform_layers(self, time=None) -> tuple:
         """Visible prims of a rendered purpose with ``uniform token warpsky:kind = "stratiformLayer"`` as
         :class:`~warpsky.model.stratiform.StratiformLayer` at ``time`` (the attribute table is on that class)."""
         from pxr import UsdGeom

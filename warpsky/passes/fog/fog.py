@@ -104,7 +104,7 @@ class Fog:
         march.sun_irradiance = wp.vec3d(*(np.zeros(3) if light is None else light.irradiance).tolist())
         march.sun_on = int(light is not None and light.lit and direction[1] > 0.0)
         march.occluders = no_surfaces(self.device) if occluders is None else occluders.surfaces
-        march.layers = layer_shadows(scene.layers, scene.camera.position, self.device)
+        march.layers = layer_shadows(scene.stratiform_layers, scene.camera.position, self.device)
         ambient = ambient_radiance(scene) if ambient is None else ambient
         march.ambient = wp.vec3d(*np.asarray(ambient, dtype=np.float64).tolist())
         return march

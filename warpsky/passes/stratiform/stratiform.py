@@ -245,11 +245,11 @@ class StratiformPass(Pass):
     Settings = StratiformSettings
     ground_rank = 0
     ground_note = "drawn by the stratiform pass (layer shadows, radiosity), voxel media cast no shadow"
-    draws = ("layers",)
+    draws = ("stratiform_layers",)
 
     @classmethod
     def runs(cls, scene, technique) -> bool:
-        return bool(scene.layers) and not technique.traces_layers
+        return bool(scene.stratiform_layers) and not technique.traces_layers
 
     def draws_ground(self, scene) -> bool:
         """Not where the technique's paths trace the scenery under the layers
@@ -260,12 +260,12 @@ class StratiformPass(Pass):
     @classmethod
     def refusal(cls, scene, technique):
         if cls.runs(scene, technique) and not technique.renders_layers:
-            return "stratiform layers", [layer.name for layer in scene.layers]
+            return "stratiform layers", [layer.name for layer in scene.stratiform_layers]
         return None
 
     @classmethod
     def describe(cls, scene, technique, settings) -> dict[str, str]:
-        if not scene.layers:
+        if not scene.stratiform_layers:
             return {"layers": 'no layers (no prim with warpsky:kind = "stratiformLayer"): stratiform pass and '
                               "radiosity not built"}
         if technique.traces_layers:
@@ -275,16 +275,16 @@ class StratiformPass(Pass):
     def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
         """The thickness maps, one layer image per layer (and its host copy on a GPU), the merge's copies and the
         radiosity buffers of every layer above the ground."""
-        pixels, layers = width * height, len(scene.layers)
+        pixels, layers = width * height, len(scene.stratiform_layers)
         copies = 0 if is_cpu(self.device) else layers
         estimate = MemoryEstimate()
-        for layer in scene.layers:
+        for layer in scene.stratiform_layers:
             estimate.add("stratiform maps", device=4 * layer.thickness.size)
         estimate.add("stratiform layers", host=pixels * (LAYER_BYTES * copies + 40 * (layers + 1)),
                      device=pixels * LAYER_BYTES * layers)
         ground, settings = scene.ground, self.settings
         return estimate.add("radiosity", device=sum(
-            radiosity_bytes(layer, ground.height, int(settings.radiosity_detail)) for layer in scene.layers
+            radiosity_bytes(layer, ground.height, int(settings.radiosity_detail)) for layer in scene.stratiform_layers
             if ground is not None and ground.height < layer.base_altitude and settings.radiosity_for(layer)))
 
     def tables(self, scene) -> list[TableNeed]:
@@ -299,7 +299,7 @@ class StratiformPass(Pass):
 
         def through_layers(points):
             out = 1.0
-            for layer in scene.layers:
+            for layer in scene.stratiform_layers:
                 out = out * layer_sun_transmittance(layer, points, scene.sun.direction, self.device)
             return out
 
@@ -315,9 +315,9 @@ class StratiformPass(Pass):
     def render(self, frame) -> list[ImageLayer]:
         """One ImageLayer per stratiform layer, in the scene's order; ``stats["layer"]`` names it."""
         scene, parts = frame.scene, []
-        lowest = min(range(len(scene.layers)), key=lambda i: scene.layers[i].base_altitude)
+        lowest = min(range(len(scene.stratiform_layers)), key=lambda i: scene.stratiform_layers[i].base_altitude)
         renderer = Stratiform(self.settings, device=self.device)
-        for index, layer in enumerate(scene.layers):
+        for index, layer in enumerate(scene.stratiform_layers):
             lit = frame.light.lit_at(scene, layer.base_altitude + 0.5 * float(layer.thickness.max()))
             part = renderer.render(lit, frame.width, frame.height, layer=layer,
                                    draw_ground=index == lowest and frame.ground == self.name)
@@ -330,8 +330,8 @@ def layer_features(scene, settings) -> dict[str, str]:
     """One ``layer`` line per stratiform layer and one ``radiosity`` line per layer: what the stratiform pass
     builds (map, optics, advection; the radiosity buffers and their size, or why there are none)."""
     features = {}
-    count = len(scene.layers)
-    for number, layer in enumerate(scene.layers, start=1):
+    count = len(scene.stratiform_layers)
+    for number, layer in enumerate(scene.stratiform_layers, start=1):
         suffix = "" if count == 1 else f" {number}"
         nx, nz = layer.thickness.shape
         line = (f"{layer.name}: stratiform (Bouthors 2006), base {layer.base_altitude:g} m, "

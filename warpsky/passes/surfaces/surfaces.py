@@ -217,7 +217,7 @@ class SurfacesPass(Pass):
         fog = bool(scene.fogs) and not technique.traces_fog  # else the technique draws the ground with its fog
         scenery = bool(scene.meshes or scene.decks or fog)
         # under stratiform layers only where the technique's paths carry the layers' light on the ground
-        layered = bool(scene.layers) and not scenery_paths(scene, technique)
+        layered = bool(scene.stratiform_layers) and not scenery_paths(scene, technique)
         return bool(scene.meshes) or (scene.ground is not None and scenery and not scene.media and not layered)
 
     @classmethod

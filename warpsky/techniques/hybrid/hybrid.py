@@ -198,7 +198,7 @@ class Hybrid(Technique):
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.decks and self.scenery_paths(scene):
             estimate.merge(deck_voxel_memory(scene, s.path_tracer(), width, height))
-        if scene.layers and self.scenery_paths(scene):  # the layers its paths trace, voxelised
+        if scene.stratiform_layers and self.scenery_paths(scene):  # the layers its paths trace, voxelised
             estimate.merge(layer_voxel_memory(scene, s.path_tracer()))
         if scene.atmosphere is not None:
             estimate.add("sky", host=pixels * 64, device=pixels * 40)

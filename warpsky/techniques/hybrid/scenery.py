@@ -40,7 +40,7 @@ from warpsky.passes.deck.deck import Deck
 from warpsky.passes.fog.fog import Fog
 from warpsky.passes.media import SceneryFrame
 from warpsky.techniques.path_tracer.deck_media import with_deck_as_media
-from warpsky.techniques.path_tracer.stratiform_media import with_layers_as_media
+from warpsky.techniques.path_tracer.stratiform_media import with_stratiform_as_media
 
 
 def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height: int,
@@ -49,14 +49,16 @@ def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height
     ``scene`` with ``around.ground`` as its ground plane where another pass draws it, no opaque depth on the camera
     (the surfaces pass's meshes and ground, which the paths trace themselves), its height-field deck voxelised into
     its media (``settings``: the path tracer's, for the deck's square and voxels;
-    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`) and ``around.layers``, the stratiform
+    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`) and ``around.stratiform_layers``, the
+    stratiform
     layers another pass draws, voxelised into them too; their band is the one returned."""
     ground = scene.ground if scene.ground is not None else around.ground
     camera = dataclasses.replace(scene.camera, opaque_depth=None)
     traced = dataclasses.replace(scene, ground=ground, camera=camera)
     band = None
-    if around.layers:
-        layered = with_layers_as_media(dataclasses.replace(traced, layers=tuple(around.layers)), settings, device)
+    if around.stratiform_layers:
+        layered = with_stratiform_as_media(
+            dataclasses.replace(traced, stratiform_layers=tuple(around.stratiform_layers)), settings, device)
         added = layered.media[len(traced.media):]
         if added:
             heights = np.concatenate([m.world_corners()[:, 1] for m in added])
@@ -88,7 +90,8 @@ def scenery_guide(scene: Scene, single: ImageLayer, device: str, around: Scenery
     if scene.fogs:
         fog = around.fog
         if fog is None:  # outside a frame of passes: drawn here as the fog pass would
-            lit = dataclasses.replace(scene, extra_suns=(), dome=None, layers=tuple(scene.layers or around.layers))
+            lit = dataclasses.replace(scene, extra_suns=(), dome=None,
+                                      stratiform_layers=tuple(scene.stratiform_layers or around.stratiform_layers))
             fog = Fog(device=device).render(lit, width, height, limit=depth, ambient=np.zeros(3),
                                             occluders=around.occluders)
         transmittance = transmittance * fog.transmittance

@@ -51,9 +51,9 @@ from warpsky.techniques.path_tracer.path_tracer_kernels import (
     sum_samples_kernel,
 )
 from warpsky.techniques.path_tracer.stratiform_media import (
-    layer_voxel_features,
     layer_voxel_memory,
-    with_layers_as_media,
+    stratiform_voxel_features,
+    with_stratiform_as_media,
 )
 from warpsky.techniques.path_tracer.surface_hits import traced_meshes
 from warpsky.techniques.single_scatter.single_scatter import MEDIA_CACHE
@@ -178,15 +178,15 @@ class PathTracer(Technique):
     def tables(self, scene: Scene) -> list[TableNeed]:
         """A phase table per species, and the stratus table of the layers it voxelises."""
         needs = super().tables(scene)
-        if scene.layers and LAYER_SPECIES not in scene.species:
+        if scene.stratiform_layers and LAYER_SPECIES not in scene.species:
             needs.append(TableNeed(LAYER_SPECIES, "phase", functools.partial(phase_table, LAYER_SPECIES)))
         return needs
 
     def features(self, scene: Scene, width: int, height: int, features: dict[str, str]) -> dict[str, str]:
         """The lines of the layers and the deck it voxelises, and of the forward cut."""
         settings = self.settings_for(scene)
-        if scene.layers:
-            features = layer_voxel_features(scene, settings, features)
+        if scene.stratiform_layers:
+            features = stratiform_voxel_features(scene, settings, features)
         if scene.decks:
             features = deck_voxel_features(scene, settings, width, height, features)
         return cut_feature(scene, float(settings.forward_cut), features)
@@ -200,7 +200,7 @@ class PathTracer(Technique):
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> ImageLayer:
         settings = self.settings_for(scene)
         started = time.perf_counter()
-        scene = with_deck_as_media(with_layers_as_media(scene, settings, self.device), settings, width, height)
+        scene = with_deck_as_media(with_stratiform_as_media(scene, settings, self.device), settings, width, height)
         with device_buffers.exclusive("path_tracer", self.device):  # the sums and kept paths below
             tracing = PathTracing(scene, width, height, settings, self.device, meshes=True, fog=True)
             sums = pixel_sums((height, width), self.device, name="path_tracer")
@@ -286,8 +286,7 @@ class PathTracing:
         fogs = scene.fogs if fog else ()
         majorants.fog = fog_tracking(fogs, camera.position, scene.time_s, device)
         cut_struct.majorants.fog = majorants.fog
-        flags = (scene.ground is not None, bool(species), media.has_detail, scene.dome is not None,
-                 mesh_buffers is not None, bool(fogs))
+        flags = (bool(species), media.has_detail, mesh_buffers is not None, bool(fogs))  # ground, dome: runtime
         capacity = per_sample_launches(device, width * height, int(settings.samples_per_pass or 1))
         if per_sample is not None:
             capacity = max(1, int(settings.samples_per_pass or 1)) if per_sample else 0

@@ -77,7 +77,7 @@ def layer_voxel_sizes(layer: StratiformLayer, settings, *, budget: int = VOXEL_B
 def voxelised_layers(scene: Scene, settings, device: str) -> tuple:
     """The scene's stratiform layers with any cloud, each as a voxel medium at its time (:attr:`time_s`)."""
     media = []
-    for layer in scene.layers:
+    for layer in scene.stratiform_layers:
         if float(layer.thickness.max()) <= 0.0:
             continue
         width, height = layer_voxel_sizes(layer, settings)
@@ -85,19 +85,20 @@ def voxelised_layers(scene: Scene, settings, device: str) -> tuple:
     return tuple(media)
 
 
-def with_layers_as_media(scene: Scene, settings, device: str) -> Scene:
+def with_stratiform_as_media(scene: Scene, settings, device: str) -> Scene:
     """``scene`` with its stratiform layers voxelised and appended to its media (no layers left); ``scene`` itself
     when it has none."""
-    if not scene.layers:
+    if not scene.stratiform_layers:
         return scene
-    return dataclasses.replace(scene, media=scene.media + voxelised_layers(scene, settings, device), layers=())
+    return dataclasses.replace(scene, media=scene.media + voxelised_layers(scene, settings, device),
+                               stratiform_layers=())
 
 
 def layer_voxel_memory(scene: Scene, settings) -> MemoryEstimate:
     """Bytes of the scene's voxelised layers: on the host the float64 fractions and the float32 grid while it is
     built and its majorant copy; on the device the grid and its majorants."""
     estimate = MemoryEstimate()
-    for layer in scene.layers:
+    for layer in scene.stratiform_layers:
         width, height = layer_voxel_sizes(layer, settings)
         voxels = layer_grid(layer, width, vertical=height, max_voxels=2**62).voxels
         block = max(1, int(settings.majorant_block or AUTO_BLOCKS[0]))
@@ -105,13 +106,13 @@ def layer_voxel_memory(scene: Scene, settings) -> MemoryEstimate:
     return estimate
 
 
-def layer_voxel_features(scene: Scene, settings, features: dict[str, str]) -> dict[str, str]:
+def stratiform_voxel_features(scene: Scene, settings, features: dict[str, str]) -> dict[str, str]:
     """``warpsky info``'s lines for a technique that traces the layers: ``features`` with the media, layers and
     ground lines saying how each layer is voxelised (sizes, grid, voxels) instead of what the stratiform pass
     would build."""
     lines = {}
-    count = len(scene.layers)
-    for number, layer in enumerate(scene.layers, start=1):
+    count = len(scene.stratiform_layers)
+    for number, layer in enumerate(scene.stratiform_layers, start=1):
         key = "layer" if count == 1 else f"layer {number}"
         if float(layer.thickness.max()) <= 0.0:
             lines[key] = f"{layer.name}: no cloud (thickness 0 everywhere): nothing to trace"
