@@ -1,7 +1,6 @@
 """The path-traced reference for Max 1986 height-field cloud decks: the deck voxelised with exact column optical
 depths (warpsky.media.deck.deck_voxels), traced by the path tracer against the deck pass's single scattering,
-and
-through ``warpsky render`` / ``info`` / ``bench error-vs-time``."""
+and through ``warpsky render`` / ``info`` / ``bench error-vs-time``."""
 
 from __future__ import annotations
 

@@ -1,7 +1,6 @@
 """The path-traced reference for stratiform layers: a layer voxelised with exact column optical depths
 (warpsky.media.stratiform.stratiform_voxels), traced by the path tracer against a plane-parallel slab solution,
-converged in the
-voxel size, and through ``warpsky render`` / ``info`` / ``bench error-vs-time``."""
+converged in the voxel size, and through ``warpsky render`` / ``info`` / ``bench error-vs-time``."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
 """The sun's transmittance through stratiform layers on the device (:mod:`warpsky.media.stratiform.stratiform_shadow`)
-against the
-host's closed form, and the fog pass's sunlight in a layer's shadow."""
+against the host's closed form, and the fog pass's sunlight in a layer's shadow."""
 
 from __future__ import annotations
 

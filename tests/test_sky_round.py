@@ -1,7 +1,6 @@
 """A round earth's air (warpsky.media.air.round_earth_kernels*, the sky pass on it): the panel quadrature and the
 optical depth table against brute-force float64 quadrature, the sun's transmittance with each point's horizon, a planet
-of huge
-radius against Riley's flat earth, twilight, the front transmittance shared with hybrid, the USD attribute."""
+of huge radius against Riley's flat earth, twilight, the front transmittance shared with hybrid, the USD attribute."""
 
 from __future__ import annotations
 

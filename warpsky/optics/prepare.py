@@ -34,8 +34,7 @@ class TableNeed:
 
 def tables_needed(scene, plan) -> list[TableNeed]:
     """The tables rendering ``scene`` with ``plan`` (:class:`~warpsky.render.plan.RenderPlan`) loads, in build order,
-    each
-    once: those of every pass that runs (the technique's through the media pass)."""
+    each once: those of every pass that runs (the technique's through the media pass)."""
     needs: dict[tuple, TableNeed] = {}
     for runner in plan.pass_runners:
         for need in runner.tables(scene):

@@ -244,8 +244,7 @@ class AirRay:
 def air_ray(air: AnalyticAir, cam: PinholeCamera, ray: PrimaryRay, has_ground: int, ground: Ground,
             media_depth: float) -> AirRay:
     """The air along ``ray`` (from its start, :func:`~warpsky.model.camera_rays.primary_ray`), split at the media's
-    depth
-    ``media_depth`` along the view axis [m] (the far plane or beyond: no media, the split is the air's end)."""
+    depth ``media_depth`` along the view axis [m] (the far plane or beyond: no media, the split is the air's end)."""
     out = AirRay()
     height = ray.origin[1]  # of the ray's start above the eye (orthographic)
     out.altitude = air.camera_altitude + height

@@ -69,8 +69,7 @@ def multiple_terms(ms: RoundMultiple, h: float, mu_s: float, mu: float, nu: floa
     """The table at altitude ``h`` for a sun of elevation sine ``mu_s`` there, towards a view of elevation sine
     ``mu`` there and cos(view, sun) ``nu``: bilinear in u = sqrt((h - floor) / height) and in the sun's
     :func:`~warpsky.media.air.round_earth_kernels.sun_coordinate` (rows dense near the floor, columns near the point's
-    horizon),
-    Psi and J_2 through their logarithms, the moments as fractions of J_2."""
+    horizon), Psi and J_2 through their logarithms, the moments as fractions of J_2."""
     u = wp.sqrt(wp.clamp((h - ms.floor) / ms.height, 0.0, 1.0)) * float(ms.psi.shape[0] - 1)
     v = sun_coordinate(ms.radius, ms.floor, h, mu_s)
     s = wp.clamp(0.5 * (v + 1.0), 0.0, 1.0) * float(ms.psi.shape[1] - 1)

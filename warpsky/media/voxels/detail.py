@@ -93,8 +93,7 @@ def tile_size(spec: DetailSpec) -> float:
 
 def advected_detail(spec: DetailSpec, device):
     """The (cached) :class:`~warpsky.media.advection.advection.AdvectedDetail` of ``spec`` on ``device``, anchored at
-    the
-    world origin (its texture tiles all space)."""
+    the world origin (its texture tiles all space)."""
     device = str(wp.get_device(device))
     key = (spec.scale, spec.wind, spec.curl_speed, spec.period, spec.seed, device)
     if key in _cache:

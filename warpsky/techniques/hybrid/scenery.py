@@ -50,8 +50,7 @@ def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height
     (the surfaces pass's meshes and ground, which the paths trace themselves), its height-field deck voxelised into
     its media (``settings``: the path tracer's, for the deck's square and voxels;
     :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`) and ``around.stratiform_layers``, the
-    stratiform
-    layers another pass draws, voxelised into them too; their band is the one returned."""
+    stratiform layers another pass draws, voxelised into them too; their band is the one returned."""
     ground = scene.ground if scene.ground is not None else around.ground
     camera = dataclasses.replace(scene.camera, opaque_depth=None)
     traced = dataclasses.replace(scene, ground=ground, camera=camera)
