@@ -18,7 +18,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.core import device_buffers
-from warpsky.core.errors import UsageError
+from warpsky.core.errors import ResourceError, UsageError
 from warpsky.core.numerics import trilinear_cell
 from warpsky.media.voxels.detail import MediumDetail, detail_z, factor_of_z, medium_details
 from warpsky.model.scene import VoxelMedium
@@ -263,7 +263,8 @@ class VoxelMediaBuffers:
                 chunks.append(medium.density.reshape(-1))
             offset += medium.density.size
         if offset >= 2**31:
-            raise ValueError("voxel media exceed 2^31 values; split them or use coarser grids")
+            raise ResourceError(f"the voxel media hold {offset:,} values, more than the 2^31 one buffer can index: "
+                                "split them or use coarser grids")
         flat = np.concatenate(chunks) if chunks else np.zeros(1, dtype=np.float32)
         sizes = [float(m.voxel_size.min()) for m in media]
         entries = medium_details(tuple(media), time_s, camera_position, device)
