@@ -58,6 +58,18 @@ def test_imports_run_down_the_layers():
     assert not upward, "imports running up the layers:\n" + "\n".join(upward)
 
 
+def test_every_folder_is_a_layer_and_no_two_files_of_a_layer_share_a_name():
+    """A module's layer is its top folder's (no module-by-module exceptions), and within a layer a file's name says
+    which file it is: no two ``kernels.py`` or ``technique.py`` to tell apart by their folder."""
+    names: dict[tuple[int, str], list[str]] = {}
+    for module, path in modules().items():
+        rank = layer_of(module)  # raises for a folder in no layer
+        if path.name != "__init__.py":
+            names.setdefault((rank, path.name), []).append(module)
+    shared = {name: found for (_, name), found in names.items() if len(found) > 1}
+    assert not shared, shared
+
+
 def test_files_and_functions_stay_small():
     long_files, long_functions = [], []
     for module, path in sorted(modules().items()):
