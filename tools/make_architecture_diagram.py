@@ -30,7 +30,7 @@ def flow_boxes() -> list[tuple[str, str]]:
         passes.append(cls.name + note)
     return [
         ("stage", "USD stage\n.usda .nvdb .vdb .npy"),
-        ("scene", "scene/usd*: StageReader\nScene: dataclasses, SI, Y up"),
+        ("scene", "usd/stage.py: StageReader\nmodel/: Scene, SI, Y up"),
         ("plan", "render/plan.py + render/registry.py\nRenderPlan: technique, passes,\nsettings, features, costs"),
         ("light", "light/: sun above the air +\ntransmittance, dome, sky light,\nskylight (FrameLight)"),
         ("passes", "passes/frame.py, in order:\n" + "\n".join(passes)),
@@ -89,7 +89,8 @@ def draw_layers(ax, counts, between) -> None:
     for rank, (name, prefixes) in enumerate(LAYERS):
         y = rank
         ax.add_patch(FancyBboxPatch((0.2, y - 0.36), 6.3, 0.72, boxstyle="round,pad=0.02", fc=BLUE, ec=INK))
-        shown = ", ".join(p.removeprefix("warpsky.").replace(".", "/") or "warpsky" for p in prefixes)
+        shown = ", ".join(f"{p}/" if p and p != "api" and p != "__main__" else (p + ".py" if p else "__init__.py")
+                          for p in prefixes)
         if len(shown) > 92:
             shown = shown[:89] + "..."
         ax.text(0.35, y + 0.12, f"{name}  ({counts[rank]} modules)", fontsize=9, weight="bold", color=INK,
