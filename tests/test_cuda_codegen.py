@@ -1,5 +1,5 @@
-"""Every kernel module compiles for CUDA (sm_90 PTX), even on a machine without a GPU: every plain module, every
-variant of a kernel factory with up to 16, and of larger factories a set that gives each flag each of its values."""
+"""Every kernel module compiles for CUDA (sm_90 PTX), even on a machine without a GPU: every plain module and every
+variant of every kernel factory (none has more than 16, which ``kernel_variants`` enforces)."""
 
 from __future__ import annotations
 
@@ -12,11 +12,10 @@ from pathlib import Path
 import pytest
 
 from warpsky.cli.kernel_registry import compile_ptx, kernel_modules
-from warpsky.core.kernel_variants import registered_factories
+from warpsky.core.kernel_variants import MAX_VARIANTS, kernel_variants, registered_factories, variants
 
-#: Every plain kernel module and every variant of each factory with up to 16, a covering set of the larger ones (each
-#: flag at each of its values: 8 of the path tracer's 64).
-MODULES = kernel_modules(covering=True)
+#: Every plain kernel module and every variant of each kernel factory.
+MODULES = kernel_modules()
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +26,7 @@ def ptx_builds(request, tmp_path_factory):
                 if getattr(item, "originalname", "") == "test_module_compiles_to_sm90_ptx"}
     folder = tmp_path_factory.mktemp("ptx")
     pool = ProcessPoolExecutor(max(1, min(os.cpu_count() or 1, 4)), mp_context=multiprocessing.get_context("spawn"))
-    futures = {m.name: pool.submit(compile_ptx, i, str(folder / str(i)), 90, True) for i, m in enumerate(MODULES)
+    futures = {m.name: pool.submit(compile_ptx, i, str(folder / str(i)), 90) for i, m in enumerate(MODULES)
                if m.name in selected}
     yield futures
     pool.shutdown(wait=True, cancel_futures=True)
@@ -90,16 +89,16 @@ def test_every_kernel_factory_declares_its_variants():
     assert not undeclared, f"kernel factories without @kernel_variants: {undeclared}"
 
 
-def test_covering_variants_give_every_flag_each_value():
-    """A factory of six boolean flags compiles 8 variants in the code-generation test (all off, each alone on, all
-    on), in which every flag takes both values; up to 16 combinations every one is compiled."""
-    from warpsky.core.kernel_variants import covering_variants, variants
+def test_no_factory_has_more_variants_than_the_cap():
+    """Every registered factory is within the cap, and a factory that declares more combinations (five boolean
+    flags: 32) is refused at decoration time, with its name and its count, and not registered."""
+    assert MAX_VARIANTS == 16
+    assert all(len(variants(domains)) <= MAX_VARIANTS for _, domains in registered_factories())
 
-    six = {f"f{i}": (False, True) for i in range(6)}
-    chosen = covering_variants(six)
-    assert len(chosen) == 8 and all(flags in variants(six) for flags in chosen)
-    assert all({flags[name] for flags in chosen} == {False, True} for name in six)
-    four = {f"f{i}": (False, True) for i in range(4)}
-    assert covering_variants(four) == variants(four)
-    mixed = {"a": (0, 1, 2), "b": (False, True), "c": (False, True), "d": (False, True), "e": (False, True)}
-    assert all({flags[n] for flags in covering_variants(mixed)} == set(mixed[n]) for n in mixed)
+    def too_many(**flags):
+        return None
+
+    five = {f"f{i}": (False, True) for i in range(5)}
+    with pytest.raises(ValueError, match=r"test_cuda_codegen\.test_no_factory.*too_many declares 32 variants"):
+        kernel_variants(**five)(too_many)
+    assert all(f is not too_many for f, _ in registered_factories())

@@ -45,17 +45,17 @@ def plain_kernel_modules() -> list[str]:
     return found
 
 
-def kernel_modules(covering: bool = False) -> list:
-    """Warp ``Module`` objects for every kernel warpsky can launch (with ``covering``, of each factory with many
-    variants those :func:`~warpsky.core.kernel_variants.covering_variants` chooses)."""
+def kernel_modules() -> list:
+    """Warp ``Module`` objects for every kernel warpsky can launch: every plain module and every variant of every
+    kernel factory (at most :data:`~warpsky.core.kernel_variants.MAX_VARIANTS` each)."""
     from warpsky.core.kernel_variants import variant_modules
 
     plain = [wp.get_module(name) for name in plain_kernel_modules()]
-    return plain + variant_modules(covering)
+    return plain + variant_modules()
 
 
-def compile_ptx(index: int, folder: str, arch: int = 90, covering: bool = False) -> list[str]:
-    """Compile ``kernel_modules(covering)[index]`` to PTX for ``arch`` into ``folder``; the output paths. A function
-    of plain arguments, so that separate processes can compile modules side by side (NVRTC uses one core)."""
-    module = kernel_modules(covering)[index]
+def compile_ptx(index: int, folder: str, arch: int = 90) -> list[str]:
+    """Compile ``kernel_modules()[index]`` to PTX for ``arch`` into ``folder``; the output paths. A function of plain
+    arguments, so that separate processes can compile modules side by side (NVRTC uses one core)."""
+    module = kernel_modules()[index]
     return [str(p) for p in wp.compile_aot_module(module, arch=arch, use_ptx=True, module_dir=folder)]

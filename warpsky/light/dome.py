@@ -28,6 +28,7 @@ class DomeLight:
     dome_from_world: wp.mat33  # rotation
     texture: wp.array2d(dtype=wp.vec3)  # (H, W) lat-long, row 0 latitude +pi/2, column 0 longitude +pi
     textured: int
+    enabled: int  # 1: the scene has a dome (a runtime test, uniform over a launch); 0: black, untextured
 
 
 def dome_struct(dome, device) -> DomeLight:
@@ -39,6 +40,7 @@ def dome_struct(dome, device) -> DomeLight:
     texture = dome.texture if dome is not None and dome.texture is not None else np.zeros((1, 1, 3), np.float32)
     out.texture = wp.array(np.ascontiguousarray(texture, dtype=np.float32), dtype=wp.vec3, device=device)
     out.textured = int(dome is not None and dome.texture is not None)
+    out.enabled = int(dome is not None)
     return out
 
 

@@ -109,11 +109,11 @@ def level_crossing(a: RayPoint, tau: wp.vec3, dt: float, entry: float, whole: Ra
     return ray_step(a, hi * tau, hi * dt)
 
 
-@kernel_variants(has_ground=(False, True), has_detail=(False, True))
+@kernel_variants(has_detail=(False, True))
 @functools.cache
-def media_profile_kernel(has_ground: bool, has_detail: bool = False) -> wp.Kernel:
-    """The voxel media's profile per pixel, specialised on a ground plane that ends the rays and on animated
-    detail (the density the technique saw)."""
+def media_profile_kernel(has_detail: bool = False) -> wp.Kernel:
+    """The voxel media's profile per pixel, specialised on animated detail (the density the technique saw); a
+    ground plane (``ground.enabled``, a runtime test) ends the rays."""
 
     sample_media = media_functions(has_detail)
 
@@ -143,7 +143,7 @@ def media_profile_kernel(has_ground: bool, has_detail: bool = False) -> wp.Kerne
         ray = primary_ray(cam, row, col, 0.5, 0.5)
         t_end = ray.t_far
         hit = int(0)
-        if wp.static(has_ground):
+        if ground.enabled != 0:
             t_end, hit = ground_end(ground, ray.origin, ray.direction, ray.t_near, t_end)
         end[row, col] = t_end * ray.cos_axis
         span = media_span(media, ray.origin, ray.direction, ray.t_near, t_end)
@@ -239,7 +239,7 @@ def media_profile(scene, width: int, height: int, count: int, device: str) -> De
     with wp.ScopedDevice(device):
         media = VoxelMediaBuffers.upload(scene.media, camera.position, device, scene.species, time_s=scene.time_s)
         edges, depths, end = _outputs(width, height, count)
-        kernel = media_profile_kernel(scene.ground is not None, media.has_detail)
+        kernel = media_profile_kernel(media.has_detail)
         launch_rows(kernel, height, width, [media.media, pinhole_camera(camera, width, height),
                                             ground_struct(scene.ground, camera.position),
                                             profile_march(count, STEP_VOXELS * media.min_voxel_size),

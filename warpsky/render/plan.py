@@ -211,7 +211,7 @@ def light_features(scene: Scene, cls) -> dict[str, str]:
 def _ground_feature(scene: Scene, plan: RenderPlan) -> str:
     ground = scene.ground
     if ground is None:
-        return "off (no Plane prim): kernel built without the ground branch"
+        return "off (no Plane prim): the kernels skip the ground (Ground.enabled = 0)"
     line = f"{ground.name} at y = {ground.height:g} m, albedo {np.round(ground.albedo, 3).tolist()}"
     if ground.albedo_map is not None:
         tex = ground.albedo_map

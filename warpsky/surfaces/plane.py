@@ -8,16 +8,18 @@ import warp as wp
 
 @wp.struct
 class Ground:
-    """The ground plane as kernels see it (kernels specialised on having one read it)."""
+    """The ground plane as kernels see it (``enabled`` = 0: the scene has none, the other fields are zeros)."""
 
     offset: float  # plane height relative to the camera [m]
     albedo: wp.vec3  # Lambertian albedo, RGB
+    enabled: int  # 1: the scene has a ground plane (a runtime test, uniform over a launch)
 
 def ground_struct(ground, camera_position) -> Ground:
     """Kernel view of a :class:`~warpsky.model.scene.Ground` seen from ``camera_position`` (None: a zero struct)."""
     out = Ground()
     out.offset = float(ground.height - camera_position[1]) if ground is not None else 0.0
     out.albedo = wp.vec3(*(ground.albedo if ground is not None else np.zeros(3)).tolist())
+    out.enabled = int(ground is not None)
     return out
 
 

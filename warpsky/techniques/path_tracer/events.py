@@ -193,81 +193,78 @@ def roulette(path: PathState, bounce: int) -> PathState:
     return out
 
 
-@functools.cache
-def surface_functions(has_ground: bool):
-    """``(primary_end, flight_end, sun_reaches)``, specialised on a ground plane."""
+@wp.func
+def round_end(air: Air, ground: Ground, origin: wp.vec3, d: wp.vec3, t_end: float) -> RayEnd:
+    """Where a ray ends on a round earth: at ``t_end``, else at the floor's sphere where it is nearer."""
+    out = RayEnd()
+    out.t = t_end
+    out.surface = SURFACE_NONE
+    t_floor = floor_hit(air, origin, d)
+    if t_floor >= 0.0 and t_floor < t_end:
+        out.t = t_floor
+        out.surface = SURFACE_SEA
+        if ground.enabled != 0:
+            out.surface = floor_surface(air)
+    return out
 
-    @wp.func
-    def round_end(air: Air, origin: wp.vec3, d: wp.vec3, t_end: float) -> RayEnd:
-        """Where a ray ends on a round earth: at ``t_end``, else at the floor's sphere where it is nearer."""
-        out = RayEnd()
-        out.t = t_end
-        out.surface = SURFACE_NONE
-        t_floor = floor_hit(air, origin, d)
-        if t_floor >= 0.0 and t_floor < t_end:
-            out.t = t_floor
+
+@wp.func
+def primary_end(air: Air, ground: Ground, origin: wp.vec3, view: wp.vec3, t_end: float) -> RayEnd:
+    """Where a camera ray from the near plane ends: the far plane at ``t_end``, else sea level, else the
+    ground (the nearer wins; a ground at sea level wins within ``SURFACE_TIE`` of the distance); on a round
+    earth the floor's sphere."""
+    if air.enabled != 0 and air.round != 0:
+        return round_end(air, ground, origin, view, t_end)
+    out = RayEnd()
+    out.t = t_end
+    out.surface = SURFACE_NONE
+    if air.enabled != 0 and view[1] < 0.0:
+        t_sea = sea_level_distance(air, origin, view)
+        if t_sea < out.t:
+            out.t = t_sea
             out.surface = SURFACE_SEA
-            if wp.static(has_ground):
-                out.surface = floor_surface(air)
-        return out
+    if ground.enabled != 0:
+        if reaches_ground(ground, origin, view):
+            tg = ground_distance(ground, origin, view)
+            if tg < out.t or (out.surface == SURFACE_SEA and tg <= out.t * (1.0 + SURFACE_TIE)):
+                out.t = tg
+                out.surface = SURFACE_GROUND
+    return out
 
-    @wp.func
-    def primary_end(air: Air, ground: Ground, origin: wp.vec3, view: wp.vec3, t_end: float) -> RayEnd:
-        """Where a camera ray from the near plane ends: the far plane at ``t_end``, else sea level, else the
-        ground (the nearer wins; a ground at sea level wins within ``SURFACE_TIE`` of the distance); on a round
-        earth the floor's sphere."""
-        if air.enabled != 0 and air.round != 0:
-            return round_end(air, origin, view, t_end)
-        out = RayEnd()
-        out.t = t_end
-        out.surface = SURFACE_NONE
-        if air.enabled != 0 and view[1] < 0.0:
-            t_sea = sea_level_distance(air, origin, view)
-            if t_sea < out.t:
-                out.t = t_sea
-                out.surface = SURFACE_SEA
-        if wp.static(has_ground):
-            if reaches_ground(ground, origin, view):
-                tg = ground_distance(ground, origin, view)
-                if tg < out.t or (out.surface == SURFACE_SEA and tg <= out.t * (1.0 + SURFACE_TIE)):
-                    out.t = tg
-                    out.surface = SURFACE_GROUND
-        return out
 
-    @wp.func
-    def flight_end(air: Air, ground: Ground, origin: wp.vec3, d: wp.vec3, bounce: int, first: RayEnd) -> RayEnd:
-        """Where the flight of bounce ``bounce`` ends: the camera ray's end ``first`` for bounce 0, else the ground
-        (or no end), then sea level where it is nearer (within ``SURFACE_TIE`` the ground); on a round earth the
-        camera ray's end, else the floor's sphere (or no end)."""
-        if air.enabled != 0 and air.round != 0:
-            if bounce == 0:
-                return first
-            return round_end(air, origin, d, UNBOUNDED)
-        out = RayEnd()
-        out.t = first.t
-        out.surface = SURFACE_NONE
-        if bounce > 0:
-            out.t = UNBOUNDED
-            if wp.static(has_ground):
-                if reaches_ground(ground, origin, d):
-                    out.t = ground_distance(ground, origin, d)
-                    out.surface = SURFACE_GROUND
-        elif first.surface == SURFACE_GROUND or first.surface == SURFACE_OPAQUE:
-            out.surface = first.surface
-        if air.enabled != 0 and d[1] < 0.0:
-            t_sea = sea_level_distance(air, origin, d)
-            if t_sea < out.t * (1.0 - SURFACE_TIE):
-                out.t = t_sea  # the air ends at a black sea level (no ground plane above it here)
-                out.surface = SURFACE_SEA
-        return out
+@wp.func
+def flight_end(air: Air, ground: Ground, origin: wp.vec3, d: wp.vec3, bounce: int, first: RayEnd) -> RayEnd:
+    """Where the flight of bounce ``bounce`` ends: the camera ray's end ``first`` for bounce 0, else the ground
+    (or no end), then sea level where it is nearer (within ``SURFACE_TIE`` the ground); on a round earth the
+    camera ray's end, else the floor's sphere (or no end)."""
+    if air.enabled != 0 and air.round != 0:
+        if bounce == 0:
+            return first
+        return round_end(air, ground, origin, d, UNBOUNDED)
+    out = RayEnd()
+    out.t = first.t
+    out.surface = SURFACE_NONE
+    if bounce > 0:
+        out.t = UNBOUNDED
+        if ground.enabled != 0:
+            if reaches_ground(ground, origin, d):
+                out.t = ground_distance(ground, origin, d)
+                out.surface = SURFACE_GROUND
+    elif first.surface == SURFACE_GROUND or first.surface == SURFACE_OPAQUE:
+        out.surface = first.surface
+    if air.enabled != 0 and d[1] < 0.0:
+        t_sea = sea_level_distance(air, origin, d)
+        if t_sea < out.t * (1.0 - SURFACE_TIE):
+            out.t = t_sea  # the air ends at a black sea level (no ground plane above it here)
+            out.surface = SURFACE_SEA
+    return out
 
-    @wp.func
-    def sun_reaches(sun: Sun, air: Air) -> bool:
-        """Whether the sun lights the scene: ``lit``, which the host sets from the part of the disk above the
-        horizon where a ground or the air is there to hide it (:mod:`warpsky.light.sun`)."""
-        return sun.lit != 0
 
-    return primary_end, flight_end, sun_reaches
+@wp.func
+def sun_reaches(sun: Sun, air: Air) -> bool:
+    """Whether the sun lights the scene: ``lit``, which the host sets from the part of the disk above the
+    horizon where a ground or the air is there to hide it (:mod:`warpsky.light.sun`)."""
+    return sun.lit != 0
 
 
 @functools.cache
@@ -409,9 +406,9 @@ def fog_event_function(has_detail: bool, has_fog: bool):
 
 
 @functools.cache
-def event_functions(has_ground: bool, has_tables: bool, has_detail: bool, has_fog: bool = False):
-    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on a ground plane, tabulated species,
-    animated detail and analytic fog."""
+def event_functions(has_tables: bool, has_detail: bool, has_fog: bool = False):
+    """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on tabulated species, animated detail
+    and analytic fog."""
     sample_media = media_functions(has_detail)
     transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
     mixture_phase, sample_mixture = mixture_functions(has_tables)
@@ -458,7 +455,7 @@ def event_functions(has_ground: bool, has_tables: bool, has_detail: bool, has_fo
         """Lambertian ground under ``p`` (on a round earth its floor, the local vertical its normal): the sun
         through the media (with ``reduced``, after high-order similarity), then a cosine-weighted bounce."""
         out = path
-        if wp.static(has_ground):
+        if ground.enabled != 0:
             q = ground_point(air, ground, p)
             if sun_on:
                 tr_sun = transmittance_to_sun(media, majorants, air, sun, q, out.state, reduced)

@@ -135,7 +135,7 @@ def cut_feature(scene, cut_deg: float, features: dict[str, str]) -> dict[str, st
 
 
 @functools.cache
-def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
+def peak_light_function(has_tables: bool, has_detail: bool):
     """``first_event_peak_light(media, majorants, cut, tables, air, sun, ground, throughput, direction, p,
     on_ground, state) -> PeakLight``, specialised like the path tracer's kernels."""
     sample_media = media_functions(has_detail)
@@ -191,7 +191,7 @@ def peak_light_function(has_tables: bool, has_detail: bool, has_ground: bool):
         gained = wp.cw_mul(wp.cw_mul(sun.irradiance, out.radiance), air_to_sun(air, sun, p))
         out.radiance = wp.vec3(0.0)
         if on_ground != 0:
-            if wp.static(has_ground):
+            if ground.enabled != 0:
                 out.radiance = wp.cw_mul(wp.cw_mul(throughput, ground.albedo), gained) * (
                     ground_cosine(air, sun, p) / wp.pi)
         else:

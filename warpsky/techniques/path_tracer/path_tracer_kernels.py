@@ -45,10 +45,12 @@ from warpsky.techniques.path_tracer.events import (
     escaped_dome,
     escaped_radiance,
     event_functions,
+    flight_end,
     media_first_function,
+    primary_end,
     roulette,
     start_path,
-    surface_functions,
+    sun_reaches,
 )
 from warpsky.techniques.path_tracer.fog_media import fog_sun_transmittance, fog_view_transmittance
 from warpsky.techniques.path_tracer.forward_cut import CutMedia, peak_light_function
@@ -122,10 +124,10 @@ def air_transmittance(air: Air, origin: wp.vec3, view: wp.vec3, distance: float)
 
 
 @functools.cache
-def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool, has_fog: bool = False):
+def first_event_function(has_tables: bool, has_detail: bool, has_fog: bool = False):
     """``first_event(...) -> PathState``, what a path does where its first flight ends, specialised like the
     kernels (the peak scatterings' sunlight comes through the analytic fogs too)."""
-    first_event_peak_light = peak_light_function(has_tables, has_detail, has_ground)
+    first_event_peak_light = peak_light_function(has_tables, has_detail)
 
     @wp.func
     def first_event(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
@@ -154,17 +156,16 @@ def first_event_function(has_ground: bool, has_tables: bool, has_detail: bool, h
 
 
 @functools.cache
-def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
-                  has_meshes: bool = False, has_fog: bool = False):
+def path_function(has_tables: bool, has_detail: bool = False, has_meshes: bool = False, has_fog: bool = False):
     """``trace_path(...) -> PathState``, one path from its camera ray (one loop carrying state), specialised like
     the kernels; with ``has_meshes`` its flights end at the meshes and bounce on them, with ``has_fog`` the analytic
-    fogs are tracked with the media."""
+    fogs are tracked with the media. The ground plane and the dome are runtime tests (``ground.enabled``,
+    ``dome.enabled``): uniform over a launch, one per path event."""
     delta_track = tracking_functions(has_detail, has_fog)[1]
     mesh_event = mesh_event_function(has_detail, has_fog)
-    flight_end = surface_functions(has_ground)[1]
-    scatter_event, reduced_scatter_event, ground_event = event_functions(has_ground, has_tables, has_detail, has_fog)
+    scatter_event, reduced_scatter_event, ground_event = event_functions(has_tables, has_detail, has_fog)
     media_first = media_first_function(has_detail, has_fog)
-    first_event = first_event_function(has_ground, has_tables, has_detail, has_fog)
+    first_event = first_event_function(has_tables, has_detail, has_fog)
 
     @wp.func
     def trace_path(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
@@ -214,7 +215,7 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
                 if end.surface != SURFACE_OPAQUE and end.surface != SURFACE_SEA:
                     path.radiance = path.radiance + escaped_radiance(air, sun, settings.environment,
                                                                      path.direction, path.throughput, bounce, lit)
-                    if wp.static(has_dome):
+                    if dome.enabled != 0:
                         path.radiance = path.radiance + escaped_dome(air, dome, path.direction, path.throughput,
                                                                      bounce)
                 break
@@ -257,14 +258,11 @@ def path_function(has_ground: bool, has_tables: bool, has_detail: bool = False, 
 
 
 @functools.cache
-def sample_function(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
-                    has_meshes: bool = False, has_fog: bool = False):
+def sample_function(has_tables: bool, has_detail: bool = False, has_meshes: bool = False, has_fog: bool = False):
     """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
-    without a dome runs exactly the code it ran before domes existed, one without analytic fog the code it ran
-    before the path tracer traced fog)."""
+    without analytic fog runs the code it ran before the path tracer traced fog)."""
     ratio_track = tracking_functions(has_detail)[2]
-    primary_end, _flight_end, sun_reaches = surface_functions(has_ground)
-    trace_path = path_function(has_ground, has_tables, has_detail, has_dome, has_meshes, has_fog)
+    trace_path = path_function(has_tables, has_detail, has_meshes, has_fog)
 
     @wp.func
     def pixel_sample(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
@@ -334,11 +332,10 @@ def add_sample(sums: PixelSums, row: int, col: int, sample: SampleResult):
     sums.radiance_sq[row, col] = sums.radiance_sq[row, col] + wp.cw_mul(sample.radiance, sample.radiance)
 
 
-@kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True),
-                 has_dome=(False, True), has_meshes=(False, True), has_fog=(False, True))
+@kernel_variants(has_tables=(False, True), has_detail=(False, True), has_meshes=(False, True), has_fog=(False, True))
 @functools.cache
-def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False, has_dome: bool = False,
-                      has_meshes: bool = False, has_fog: bool = False) -> wp.Kernel:
+def path_trace_kernel(has_tables: bool, has_detail: bool = False, has_meshes: bool = False,
+                      has_fog: bool = False) -> wp.Kernel:
     """The progressive path tracer in both launch shapes (one kernel per scene kind, hence one CUDA module, for
     frames of any size). With ``samples`` empty (None), one thread per pixel runs the launch's
     ``settings.sample_count`` paths in path order into ``sums``. Otherwise one thread per (path, pixel): a launch
@@ -346,8 +343,9 @@ def path_trace_kernel(has_ground: bool, has_tables: bool, has_detail: bool = Fal
     ``samples[r]`` (``sums`` untouched); :func:`sum_samples_kernel` then adds them. Only ``has_meshes`` kernels
     read ``surfaces`` (the meshes' BVH); the others are given an empty one (:func:`~warpsky.surfaces.mesh.
     no_surfaces`) and run the code they ran before the path tracer traced meshes; likewise only ``has_fog``
-    kernels read the majorants' fogs."""
-    pixel_sample = sample_function(has_ground, has_tables, has_detail, has_dome, has_meshes, has_fog)
+    kernels read the majorants' fogs. Whether the scene has a ground plane or a dome is not a variant: the kernel
+    tests ``ground.enabled`` and ``dome.enabled`` (:mod:`~warpsky.core.kernel_variants`' rule)."""
+    pixel_sample = sample_function(has_tables, has_detail, has_meshes, has_fog)
 
     @wp.kernel(module="unique")
     def path_trace(

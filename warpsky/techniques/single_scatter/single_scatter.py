@@ -125,7 +125,7 @@ class SingleScatter(Technique):
             march.min_transmittance = float(settings.min_transmittance)
             march.environment, march.ground_ambient, march.ambient_on = ambient_settings(
                 scene, skylight=bool(settings.skylight), traces_air=self.traces_air, device=device)
-            kernel = single_scatter_kernel(scene.ground is not None, bool(species), media.has_detail)
+            kernel = single_scatter_kernel(bool(species), media.has_detail)
             inputs = [media.media, tables.values, oriented_phases(scene, device), pinhole_camera(camera, width, height),
                       sun_struct(sunlight(scene)),
                       ground_struct(scene.ground, camera.position), march, radiance, transmittance, depth, lookups]

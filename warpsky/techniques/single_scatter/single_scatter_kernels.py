@@ -202,11 +202,11 @@ def march_functions(has_tables: bool, has_detail: bool):
     return eye_march
 
 
-@kernel_variants(has_ground=(False, True), has_tables=(False, True), has_detail=(False, True))
+@kernel_variants(has_tables=(False, True), has_detail=(False, True))
 @functools.cache
-def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool = False) -> wp.Kernel:
-    """The per-pixel march, specialised on whether the scene has a ground plane, tabulated species and animated
-    detail: a scene without them pays nothing for those branches."""
+def single_scatter_kernel(has_tables: bool, has_detail: bool = False) -> wp.Kernel:
+    """The per-pixel march, specialised on tabulated species and animated detail: a scene without them pays nothing
+    for those branches. The ground plane is a runtime test (``ground.enabled``, once per pixel)."""
 
     eye_march = march_functions(has_tables, has_detail)
     ground_light = light_functions(has_detail)[2]
@@ -233,16 +233,15 @@ def single_scatter_kernel(has_ground: bool, has_tables: bool, has_detail: bool =
         theta = scattering_angle(sun.direction, ray.direction)
         t_end = ray.t_far
         hit_ground = int(0)
-        if wp.static(has_ground):
+        if ground.enabled != 0:
             t_end, hit_ground = ground_end(ground, ray.origin, ray.direction, ray.t_near, t_end)
         lobes = ambient_lobes(march.environment, ray.direction)
         span = media_span(media, ray.origin, ray.direction, ray.t_near, t_end)
         state = eye_march(media, phase_tables, oriented, sun, march, lobes, ray, theta, span[0], span[1])
         trans = exp3(state.tau)
-        if wp.static(has_ground):
-            if hit_ground != 0:
-                state = ground_light(media, sun, ground, march, ray, state, t_end, trans)
-                trans = wp.vec3(0.0)
+        if hit_ground != 0:
+            state = ground_light(media, sun, ground, march, ray, state, t_end, trans)
+            trans = wp.vec3(0.0)
         radiance[row, col] = state.light
         transmittance[row, col] = trans
         if state.weight_sum > 1.0e-6:
