@@ -117,8 +117,7 @@ class DeckSettings(Settings):
 
 class Deck:
     """Renders a scene's height-field clouds and their haze as an :class:`~warpsky.core.image.ImageLayer` (single
-    scattering
-    of the sun and of the sky's ambient light; :mod:`~warpsky.passes.deck.deck_kernels`). Settings are a
+    scattering of the sun and of the sky's ambient light; :mod:`~warpsky.passes.deck.deck_kernels`). Settings are a
     :class:`DeckSettings`, or its fields as keywords."""
 
     def __init__(self, settings: DeckSettings | None = None, *, device: str = "cpu", **values):
