@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from evaluation.benchmarks.common import bench_devices  # noqa: E402
 
 PERIOD_S = 120.0
 STEP_S = 1.0
@@ -40,7 +42,7 @@ def main(argv=None) -> int:
     from warpsky.media.advection.advection import AdvectedDetail, AdvectedTexture, Flow2D, Flow3D, periodic_noise
 
     init_warp()
-    devices = ["cpu"] + [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]
+    devices = bench_devices()
     layer_texture = (1.0 + 0.25 * periodic_noise((512, 512), smoothing_texels=3.0, seed=1)).astype(np.float32)
     layer_extent = (20000.0, 20000.0)
     layer_flow = Flow2D.procedural(layer_extent, speed_m_s=8.0, scale_m=10000.0, resolution=(64, 64), seed=2,

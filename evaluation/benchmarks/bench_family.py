@@ -23,6 +23,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from evaluation.benchmarks.common import bench_devices  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -42,7 +43,6 @@ def main(argv=None) -> int:
     parser.add_argument("--devices", default=None, help="comma-separated Warp devices (default: cpu + all cuda)")
     args = parser.parse_args(argv)
 
-    import warp as wp
 
     from evaluation.family import format_family_table, make_family, run_family, write_family_outputs
     from warpsky.core.device import init_warp
@@ -65,9 +65,7 @@ def main(argv=None) -> int:
     else:
         techniques = ["single_scatter", "slicing", "path_tracer"]
         techniques += ["hybrid"] if "hybrid" in technique_names() else []
-    devices = args.devices.split(",") if args.devices else ["cpu"] + [
-        f"cuda:{i}" for i in range(wp.get_cuda_device_count())
-    ]
+    devices = bench_devices(args.devices)
     for device in devices:
         report = run_family(args.family, techniques, args.res, args.res, device, half=args.half,
                             reference_spp=args.reference_spp, budget_per_stage=args.budget,

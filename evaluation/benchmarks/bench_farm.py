@@ -60,7 +60,8 @@ def breakdown(stage: Path, frame: float, options) -> dict:
     from warpsky.output.exr import write_exr
     from warpsky.passes.composite import composite
     from warpsky.passes.frame import render_layers
-    from warpsky.render.frame import plan_frame, render_frame
+    from warpsky.render.frame import render_frame
+    from warpsky.render.planned import plan_frame
     from warpsky.usd.stage import StageReader
 
     reader = StageReader(stage)
@@ -107,7 +108,7 @@ def main(argv=None) -> int:
 
     from warpsky.batch.run import DaskExecutor, InProcessExecutor
     from warpsky.core.device import init_warp, resolve_device
-    from warpsky.render.frame import RenderOptions
+    from warpsky.render.options import RenderOptions
 
     init_warp()
     stage = ensure_storm(args.frames)

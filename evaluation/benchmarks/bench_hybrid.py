@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from evaluation.benchmarks.common import bench_devices, demo_scene  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -39,16 +41,12 @@ def main(argv=None) -> int:
     from warpsky.core.device import cpu_thread_count, init_warp
     from warpsky.passes.frame import render_layers
     from warpsky.render.plan import make_plan
-    from warpsky.usd.stage import StageReader
 
     init_warp()
-    devices = args.devices.split(",") if args.devices else ["cpu"] + [
-        f"cuda:{i}" for i in range(wp.get_cuda_device_count())
-    ]
-    if not (ROOT / "data" / "cumulus.nvdb").exists() and args.stage.name == "cumulus.usda":
-        print("data/cumulus.nvdb is missing: run `python tools/make_cumulus.py` (or `make data`)", file=sys.stderr)
+    devices = bench_devices(args.devices)
+    scene = demo_scene(args.stage)
+    if scene is None:
         return 2
-    scene = StageReader(args.stage).scene_at(None)
     rows = []
     for device in devices:
         width = args.size if device.startswith("cpu") else args.gpu_size

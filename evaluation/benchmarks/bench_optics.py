@@ -20,6 +20,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from evaluation.benchmarks.common import bench_devices  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -66,7 +68,7 @@ def main(argv=None) -> int:
         print(f"{r['species']:<10} {r['first_build_s']:>14.2f} {r['cached_load_s']:>14.3f}  {built}")
 
     tables = build_tables(["cloud", "rain", "ice", "snow"])
-    devices = ["cpu"] + [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]
+    devices = bench_devices()
     throughput = []
     rng = np.random.default_rng(0)
     angles = rng.uniform(0, np.pi, args.count).astype(np.float32)

@@ -34,7 +34,8 @@ def _best(call, repeats: int) -> tuple[float, object]:
 def stage_rows(stage: str, device: str, width: int, height: int, repeats: int) -> list[dict]:
     from warpsky.passes.frame import depth_layers, ground_pass
     from warpsky.passes.surfaces.surfaces import SurfacesPass, kept_renderer
-    from warpsky.render.frame import RenderOptions, render_image
+    from warpsky.render.frame import render_image
+    from warpsky.render.options import RenderOptions
     from warpsky.render.plan import make_plan
     from warpsky.usd.stage import StageReader
 

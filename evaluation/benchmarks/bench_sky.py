@@ -19,6 +19,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from evaluation.benchmarks.common import bench_devices  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -44,7 +46,7 @@ def main(argv=None) -> int:
     from warpsky.passes.sky.sky import Sky
 
     init_warp()
-    devices = ["cpu"] + [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]
+    devices = bench_devices()
     rotation = np.eye(3)
     camera = Camera("cam", np.array([0.0, 10.0, 0.0]), rotation, 20.0, 36.0, 24.0)
     scene = Scene(camera, Sun(np.array([0.3, 0.1, -1.0]) / np.linalg.norm([0.3, 0.1, -1.0]), np.ones(3)),

@@ -19,6 +19,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from evaluation.benchmarks.common import bench_devices  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -34,7 +36,6 @@ def main(argv=None) -> int:
     if args.convergence:
         return convergence()
 
-    import warp as wp
 
     from warpsky.core.device import init_warp
     from warpsky.techniques.slicing import sweep
@@ -55,7 +56,7 @@ def main(argv=None) -> int:
 
             make_storm.write_frames(ROOT / "data" / "storm", 48, res=64, only=[frame])  # the stage's resolution
         scenes.append((item, StageReader(ROOT / "usd_scenes" / name).scene_at(float(when) if when else None)))
-    devices = ["cpu"] + [f"cuda:{i}" for i in range(wp.get_cuda_device_count())]
+    devices = bench_devices()
     rows = []
     for label, scene in scenes:
         for device in devices:
