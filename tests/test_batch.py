@@ -161,3 +161,37 @@ def test_existing_scheduler_renders_the_same_pixels(tiny_storm, tmp_path, capsys
         b = pixels(tmp_path / "b" / f"storm.{frame:04d}.exr")
         for name in a:
             np.testing.assert_array_equal(a[name], b[name])
+
+
+def test_an_in_process_batch_reads_and_plans_each_frame_once(tiny_storm, tmp_path, capsys, monkeypatch):
+    """The storm's 6 frames rendered in this process: the stage is opened twice (the command's reader, which lists
+    the products and the frames, and the batch's, which reads them) and each frame's scene is read, planned, its
+    files stat'ed and its settings hashed once; the first frame's plan, made for the checks before anything is
+    written, is the one the batch prepares the tables from and the one it renders."""
+    from warpsky.batch import run
+    from warpsky.render import planned
+    from warpsky.usd.stage import StageReader
+
+    monkeypatch.setattr(run, "_READERS", {})  # no reader kept from an earlier test
+    calls = {"open": 0, "scene_at": [], "make_plan": 0, "input_files": 0, "settings_hash": 0}
+    opened, scene_at = StageReader.__init__, StageReader.scene_at
+
+    def counted(name, function):
+        def call(*args, **kwargs):
+            calls[name] += 1
+            return function(*args, **kwargs)
+        return call
+
+    def counted_read(self, time=None, **kwargs):
+        calls["scene_at"].append(time)
+        return scene_at(self, time, **kwargs)
+
+    monkeypatch.setattr(StageReader, "__init__", counted("open", opened))
+    monkeypatch.setattr(StageReader, "scene_at", counted_read)
+    for name in ("make_plan", "input_files", "settings_hash"):
+        monkeypatch.setattr(planned, name, counted(name, getattr(planned, name)))
+    code, _, err = render(["render", tiny_storm, tmp_path / "storm.####.exr", *FAST], capsys)
+    assert code == 0 and "6 rendered" in err, err
+    frames = [float(f) for f in range(1, FRAMES + 1)]
+    assert calls == {"open": 2, "scene_at": frames, "make_plan": FRAMES, "input_files": FRAMES,
+                     "settings_hash": FRAMES}

@@ -12,7 +12,7 @@ from warpsky.batch.run import FrameJob, InProcessExecutor, run_batch
 from warpsky.optics import tables
 from warpsky.optics.grid import angle_grid
 from warpsky.optics.species import Species
-from warpsky.render.frame import RenderOptions
+from warpsky.render.options import RenderOptions
 
 
 class DispatchRecorder(InProcessExecutor):

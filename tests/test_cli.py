@@ -9,7 +9,7 @@ from conftest import run_cli as run
 
 from warpsky.cli.main import main
 from warpsky.output.exr import read_exr
-from warpsky.render.frame import EXR_CHANNELS
+from warpsky.render.header import EXR_CHANNELS
 
 
 @pytest.fixture

@@ -145,7 +145,8 @@ def test_tiny_step_is_refused_naming_the_setting_and_the_way_past(tmp_path, box_
 
 def test_huge_frame_work_is_refused_and_no_work_limit_plans_it(box_stage):
     from warpsky.core.errors import ResourceError
-    from warpsky.render.frame import RenderOptions, plan_frame
+    from warpsky.render.options import RenderOptions
+    from warpsky.render.planned import plan_frame
     from warpsky.usd.stage import StageReader
 
     reader = StageReader(box_stage)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import run_cli as run
@@ -9,8 +11,7 @@ from conftest import run_cli as run
 import warpsky
 from warpsky.core.errors import SceneError
 from warpsky.output.exr import read_exr
-from warpsky.render.frame import RenderOptions
-from warpsky.render.motion import sub_frame_options, sub_frame_times
+from warpsky.render.motion import sub_frame_technique, sub_frame_times
 
 FAST = {"technique": "single_scatter", "resolution": (24, 16), "device": "cpu", "settings": {"step_length": "1"}}
 
@@ -140,7 +141,58 @@ def test_a_blurred_frame_has_deep_samples_that_flatten_to_it(tmp_path, homogeneo
 
 
 def test_monte_carlo_sub_frames_take_their_own_seeds():
-    options = RenderOptions(settings={"seed": "7", "spp": "16"}, shutter=(-0.5, 0.5))
-    subs = [sub_frame_options(options, k, seeded=True) for k in range(3)]
-    assert [s.settings["seed"] for s in subs] == ["7", "8", "9"] and all(s.shutter == (0.0, 0.0) for s in subs)
-    assert sub_frame_options(options, 2, seeded=False).settings == options.settings
+    """A sub-frame's technique has the frame's resolved, typed settings with the seed moved on by its index (no
+    text parsed again); a technique without a seed is the frame's own."""
+    from warpsky.core.settings import parse_settings
+    from warpsky.render.registry import technique_classes
+
+    seeded = [cls for cls in technique_classes() if "seed" in {f.name for f in dataclasses.fields(cls.Settings)}]
+    unseeded = [cls for cls in technique_classes() if cls not in seeded]
+    assert seeded and unseeded
+    technique = seeded[0](parse_settings(seeded[0].Settings, {"seed": "7", "spp": "16"}))
+    subs = [sub_frame_technique(technique, k) for k in range(3)]
+    assert [s.settings.seed for s in subs] == [7, 8, 9]
+    assert all(dataclasses.replace(s.settings, seed=7) == technique.settings for s in subs)
+    assert all(type(s) is type(technique) and s.device == technique.device for s in subs)
+    plain = unseeded[0]()
+    assert sub_frame_technique(plain, 2) is plain
+
+
+def test_a_blurred_frame_is_planned_once(tmp_path, homogeneous_npy, monkeypatch):
+    """An 8-sub-frame blurred frame makes its plan once (technique and passes built, settings resolved) and reads
+    the stage once at its time code and once per sub-frame."""
+    from warpsky.render import planned
+    from warpsky.usd.stage import StageReader
+
+    calls = {"make_plan": 0, "scene_at": []}
+    make_plan, scene_at = planned.make_plan, StageReader.scene_at
+
+    def counted_plan(*args, **kwargs):
+        calls["make_plan"] += 1
+        return make_plan(*args, **kwargs)
+
+    def counted_read(self, time=None, **kwargs):
+        calls["scene_at"].append(time)
+        return scene_at(self, time, **kwargs)
+
+    monkeypatch.setattr(planned, "make_plan", counted_plan)
+    monkeypatch.setattr(StageReader, "scene_at", counted_read)
+    stage = moving_stage(tmp_path / "m.usda", homogeneous_npy)
+    image = warpsky.render_stage(stage, 1.0, motion_samples=8, **FAST)
+    assert image.metadata["motionSamples"] == 8
+    assert calls["make_plan"] == 1
+    assert calls["scene_at"] == [1.0, *sub_frame_times(1.0, (0.0, 1.0), 8)]
+
+
+def test_a_blurred_path_traced_frame_averages_sub_frames_seeded_in_turn(tmp_path, homogeneous_npy):
+    """Path traced with seed 3 over 2 sub-frames: the frame is the mean of the unblurred renders at the sub-frame
+    times with seeds 3 and 4, as when each sub-frame was planned from its own settings text."""
+    stage = moving_stage(tmp_path / "m.usda", homogeneous_npy)
+    traced = {**FAST, "technique": "path_tracer", "settings": {"spp": "2", "seed": "3"}}
+    blurred = warpsky.render_stage(stage, 1.0, motion_samples=2, **traced)
+    subs = [warpsky.render_stage(stage, t, shutter=(0.0, 0.0), **{**traced, "settings": {"spp": "2",
+                                                                                          "seed": str(3 + k)}})
+            for k, t in enumerate(sub_frame_times(1.0, (0.0, 1.0), 2))]
+    np.testing.assert_array_equal(blurred.frame.rgba, np.mean([s.frame.rgba for s in subs], axis=0)
+                                  .astype(np.float32))
+    assert not np.array_equal(subs[0].frame.rgba, subs[1].frame.rgba)

@@ -21,7 +21,10 @@ from pathlib import Path
 from warpsky.core.errors import SceneError, UsageError
 from warpsky.output.color import DEFAULT_COLORSPACE, check_colorspace, resolve_colorspace
 from warpsky.output.products import FULL_WINDOW
-from warpsky.render.frame import RenderedImage, RenderOptions, plan_frame, render_image, write_frame
+from warpsky.render.frame import render_planned, write_frame
+from warpsky.render.image import RenderedImage
+from warpsky.render.options import RenderOptions
+from warpsky.render.planned import planned_frame
 from warpsky.render.registry import DEFAULT_TECHNIQUE, aov_components
 from warpsky.usd.render_settings import ProductSpec, RenderSpec, read_render_spec
 
@@ -29,7 +32,7 @@ from warpsky.usd.render_settings import ProductSpec, RenderSpec, read_render_spe
 def render_options(*, technique: str = DEFAULT_TECHNIQUE, resolution=None, camera: str | None = None,
                    device: str = "auto", settings: dict | None = None, colorspace: str | None = None,
                    load: str = "all", variants=(), purposes=None, **more) -> RenderOptions:
-    """:class:`~warpsky.render.frame.RenderOptions` from keyword arguments; ``resolution`` is (width, height), (width,
+    """:class:`~warpsky.render.options.RenderOptions` from keyword arguments; ``resolution`` is (width, height), (width,
     None) or a width; ``variants`` are (set, selection) pairs or ``"SET=SELECTION"`` strings; the rest
     (``half``, ``png``, ``exposure``, ``max_memory``, ``work_limit``, ``deep``, ``deep_samples``) pass through."""
     from warpsky.core.device import resolve_device
@@ -104,7 +107,7 @@ def open_stage(stage, options: RenderOptions, settings_prim: str | None, *, expl
 
 
 def _planned(stage, time, product: str | None, settings_prim: str | None, kwargs: dict):
-    """(reader, scene, plan, options) of one frame of ``stage``, with ``product``'s outputs when given."""
+    """(reader, planned frame) of one frame of ``stage``, with ``product``'s outputs when given."""
     from warpsky.core.device import init_warp
 
     init_warp()
@@ -116,8 +119,7 @@ def _planned(stage, time, product: str | None, settings_prim: str | None, kwargs
             known = ", ".join(products) or "none"
             raise SceneError(f"product {product} is not among the render settings' products (known: {known})")
         options = with_product(options, products[product], explicit=explicit)
-    scene, plan = plan_frame(reader, time, options)
-    return reader, scene, plan, options
+    return reader, planned_frame(reader, time, options)
 
 
 def render_stage(stage: str | os.PathLike, time: float | None = None, *, product: str | None = None,
@@ -126,11 +128,11 @@ def render_stage(stage: str | os.PathLike, time: float | None = None, *, product
 
     Keyword arguments are :func:`render_options`' (``technique``, ``resolution``, ``camera``, ``device``,
     ``settings``, ``colorspace``, ``load``, ``variants``, ``purposes``, ...). Returns a
-    :class:`~warpsky.render.frame.RenderedImage`: ``frame.rgba`` / ``frame.transmittance`` / ``frame.depth`` /
+    :class:`~warpsky.render.image.RenderedImage`: ``frame.rgba`` / ``frame.transmittance`` / ``frame.depth`` /
     ``frame.aovs``, the output's ``channels``, its ``metadata`` and OpenEXR ``attributes``.
     """
-    reader, scene, plan, options = _planned(stage, time, product, settings_prim, kwargs)
-    return render_image(scene, plan, options, stage=reader.path, time_code=time, reader=reader)
+    reader, frame = _planned(stage, time, product, settings_prim, kwargs)
+    return render_planned(frame, reader=reader)
 
 
 def render_to_exr(stage: str | os.PathLike, out: str | os.PathLike, time: float | None = None, *,
@@ -139,9 +141,9 @@ def render_to_exr(stage: str | os.PathLike, out: str | os.PathLike, time: float 
     the EXR's path. Arguments as :func:`render_stage`."""
     if not str(out).lower().endswith(".exr"):
         raise UsageError(f"output {str(out)!r} must end in .exr")
-    reader, scene, plan, options = _planned(stage, time, product, settings_prim, kwargs)
+    reader, frame = _planned(stage, time, product, settings_prim, kwargs)
     Path(out).parent.mkdir(parents=True, exist_ok=True)
-    return write_frame(scene, plan, Path(out), options, stage=reader.path, time_code=time, reader=reader).exr
+    return write_frame(frame, Path(out), reader=reader).exr
 
 
 __all__ = ["FULL_WINDOW", "open_stage", "render_options", "render_stage", "render_to_exr", "with_product",

@@ -32,7 +32,7 @@ def measure(family: Path, half: str, width: int, height: int, budget: float, dev
         render_frame_radiance,
         scenery_covered,
     )
-    from warpsky.render.frame import quality_stats
+    from warpsky.render.header import quality_stats
     from warpsky.usd.stage import StageReader
 
     members = json.loads((family / "family.json").read_text())["members"]

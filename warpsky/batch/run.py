@@ -1,12 +1,13 @@
 """Frame sequences on one machine or a Dask cluster: resume, retries, a per-shot JSON log and a summary.
 
 A batch is a list of :class:`FrameJob`. Workers (this process, a Dask ``LocalCluster`` or an existing Dask
-scheduler) run :func:`run_frame` on each: open the stage themselves, plan the frame once, skip it when its EXR
-already exists and validates (opens, has every channel, carries the same settings hash, which covers the settings
-and the stage's and field files' size and modification time), else render and write it atomically. They return a
-small record (path, seconds, device, hash, error), never pixels. The client retries failed frames whose error was
-not the input's (``retries`` times; a missing file fails the same way again), appends one run to the shot's log
-after every frame (so a killed batch keeps what it finished), and prints a summary table.
+scheduler) run :func:`run_frame` on each: open the stage themselves, plan the frame once (in this process the
+first frame's plan, made for the up-front checks by :func:`plan_first_frame`, is the one it renders), skip it when
+its EXR already exists and validates (opens, has every channel, carries the same settings hash, which covers the
+settings and the stage's and field files' size and modification time), else render and write it atomically. They
+return a small record (path, seconds, device, hash, error), never pixels. The client retries failed frames whose
+error was not the input's (``retries`` times; a missing file fails the same way again), appends one run to the
+shot's log after every frame (so a killed batch keeps what it finished), and prints a summary table.
 
 Test hook: the environment variable ``WARPSKY_FAIL_FRAMES`` (comma-separated time codes, each optionally ``@N`` for
 "only on attempt N") makes those frames raise before rendering, to exercise failure, retry and resume; it is read
@@ -31,8 +32,8 @@ from warpsky.core.errors import UsageError, WarpskyError
 from warpsky.core.files import atomic_write
 from warpsky.core.interrupt import Interrupted, request_stop, sigint_ignored, stop_requested, stop_scope
 from warpsky.output.exr import validate_exr
-from warpsky.output.products import window_pixels
-from warpsky.render.frame import check_outputs, plan_frame, settings_hash, write_frame
+from warpsky.render.frame import write_frame
+from warpsky.render.planned import PlannedFrame, planned_frame
 from warpsky.usd.stage import StageReader
 
 FAIL_FRAMES_ENV = "WARPSKY_FAIL_FRAMES"
@@ -45,7 +46,7 @@ class FrameJob:
     stage: str
     time_code: float | None
     out: str
-    options: object  # warpsky.render.frame.RenderOptions
+    options: object  # warpsky.render.options.RenderOptions
     overwrite: bool = False
     siblings: tuple = ()  # (out, RenderOptions) of products with the same camera and resolution: one render
 
@@ -84,14 +85,48 @@ def _reader(stage: str, options=None):
     return _READERS[key]
 
 
+@dataclass(frozen=True)
+class PlannedJob:
+    """A job's frame planned in this process: the job, the reader that read it, the frame and its siblings'
+    (:meth:`~warpsky.render.planned.PlannedFrame.for_options`), each planned once."""
+
+    job: FrameJob
+    reader: object
+    frame: PlannedFrame
+    siblings: tuple[PlannedFrame, ...]
+
+
+#: Frames planned before their batch runs (:func:`plan_first_frame`), by (stage, time code, output): the batch's
+#: up-front work and the frame's render take the plan from here instead of making it again.
+_PLANNED: dict[tuple, PlannedJob] = {}
+
+
+def _job_key(job: FrameJob) -> tuple:
+    return job.stage, job.time_code, job.out
+
+
+def plan_job(job: FrameJob, *, keep: bool = False) -> PlannedJob:
+    """``job``'s frame planned once in this process: the plan kept for it (by :func:`plan_first_frame`, for the same
+    job read by the same reader) when there is one, else planned now (stage read, plan, outputs and limits checked,
+    files stat'ed and settings hashed) and, with ``keep``, kept for the frame's render."""
+    reader = _reader(job.stage, job.options.stage)
+    kept = _PLANNED.get(_job_key(job))
+    if kept is not None and kept.job == job and kept.reader is reader:
+        return kept
+    frame = planned_frame(reader, job.time_code, job.options)
+    planned = PlannedJob(job, reader, frame, tuple(frame.for_options(options) for _, options in job.siblings))
+    if keep:
+        _PLANNED[_job_key(job)] = planned
+    return planned
+
+
 def plan_first_frame(job: FrameJob, *, keep_reader: bool = True) -> None:
     """Read the stage and plan ``job``'s frame here, before anything is written: an input error that every frame
     shares (no camera, a bad setting) is raised once, as a :class:`WarpskyError`, and leaves no output directory
-    and no log behind. ``keep_reader``: keep the stage read for frames rendered in this process."""
-    _, plan = plan_frame(_reader(job.stage, job.options.stage), job.time_code, job.options)
-    for _, options in job.siblings:
-        check_outputs(options.outputs or (), plan)
-        window_pixels(options.data_window, plan.width, plan.height)
+    and no log behind. ``keep_reader``: keep the stage read, and the plan, for frames rendered in this process
+    (the batch's preparation and the frame's render reuse it)."""
+    _PLANNED.pop(_job_key(job), None)
+    plan_job(job, keep=keep_reader)
     if not keep_reader:
         _READERS.clear()
 
@@ -117,19 +152,20 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
     record = FrameRecord(job.time_code, job.out, "failed", device=job.options.device,
                          worker=f"{socket.gethostname()}:{os.getpid()}", attempt=attempt)
     try:
-        reader = _reader(job.stage, job.options.stage)
         t0 = time.perf_counter()
-        scene, plan = plan_frame(reader, job.time_code, job.options)
+        planned = plan_job(job)
+        _PLANNED.pop(_job_key(job), None)  # rendered once: a later batch plans the frame again
+        frame = planned.frame
         record.timings["stage_load"] = time.perf_counter() - t0
-        record.settings_hash = plan.settings_hash
+        record.settings_hash = frame.settings_hash
         record.also = [out for out, _ in job.siblings]
-        if not job.overwrite and _up_to_date(job, scene, plan):
+        if not job.overwrite and _up_to_date(job, planned):
             record.status = "skipped"
             return record
         if _hook_fails(job.time_code, attempt):
             raise RuntimeError(f"{FAIL_FRAMES_ENV} asks frame {job.time_code:g} to fail (test hook)")
-        result = write_frame(scene, plan, Path(job.out), job.options, stage=reader.path, time_code=job.time_code,
-                             siblings=[(Path(out), options) for out, options in job.siblings], reader=reader)
+        siblings = [(Path(out), sibling) for (out, _), sibling in zip(job.siblings, planned.siblings, strict=True)]
+        result = write_frame(frame, Path(job.out), siblings=siblings, reader=planned.reader)
         record.timings.update(result.timings)
         record.timings["technique"] = result.render_seconds
         record.quality = result.quality
@@ -148,19 +184,20 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
     return record
 
 
-def _up_to_date(job: FrameJob, scene, plan) -> bool:
+def _up_to_date(job: FrameJob, planned: PlannedJob) -> bool:
     """Whether the job's EXR and its siblings' exist, open, hold their channels and carry their settings hash (and
     the deep EXR beside the job's exists, when it is asked for; a deep product's own file carries the hash)."""
     from warpsky.output.deep import deep_path, deep_up_to_date
 
+    frame = planned.frame
     if job.options.deep_product:
-        return deep_up_to_date(job.out, plan.settings_hash)
+        return deep_up_to_date(job.out, frame.settings_hash)
     if job.options.deep and not Path(deep_path(job.out)).is_file():
         return False
-    outputs = [(job.out, job.options, plan.settings_hash)]
-    outputs += [(out, options, settings_hash(plan, options, scene)) for out, options in job.siblings]
-    return all(validate_exr(out, required_channels=options.required_channels,
-                            metadata_expect={"settingsHash": digest}) for out, options, digest in outputs)
+    outputs = [(job.out, frame)]
+    outputs += [(out, sibling) for (out, _), sibling in zip(job.siblings, planned.siblings, strict=True)]
+    return all(validate_exr(out, required_channels=sibling.options.required_channels,
+                            metadata_expect={"settingsHash": sibling.settings_hash}) for out, sibling in outputs)
 
 
 def run_frame_in_scope(job: FrameJob, attempt: int, stop_token: str) -> FrameRecord:
@@ -338,13 +375,12 @@ def prepare_batch(jobs: list[FrameJob]) -> None:
     from warpsky.optics.prepare import prepare_tables
     from warpsky.render.kernel_cache import compile_notice
 
-    job = jobs[0]
     try:
-        scene, plan = plan_frame(_reader(job.stage, job.options.stage), job.time_code, job.options)
+        frame = plan_job(jobs[0]).frame  # the frame planned for the up-front checks, else planned here
     except (WarpskyError, OSError):
         return
-    prepare_tables(scene, plan)
-    notice = compile_notice(plan.technique)
+    prepare_tables(frame.scene, frame.plan)
+    notice = compile_notice(frame.plan.technique)
     if notice is not None:
         print(f"warpsky: {notice}", file=sys.stderr, flush=True)
 

@@ -9,8 +9,7 @@ from warpsky.cli.options import explicit_options, options_from_args, with_res_sc
 from warpsky.core.resources import resource_lines
 from warpsky.light.dome import mean_radiance, upper_hemisphere
 from warpsky.light.sun import has_horizon, sun_sunlight
-from warpsky.render.frame import plan_frame
-from warpsky.render.motion import blurs, shutter_interval
+from warpsky.render.planned import planned_frame
 
 
 def _fmt3(values) -> str:
@@ -83,7 +82,8 @@ def cmd_info(args) -> int:
         options = with_product(options, products[0], explicit=explicit_options(args))
     options = with_res_scale(options, args.res_scale)
     span = reader.time_range()
-    scene, plan = plan_frame(reader, args.time, options, check=False)
+    frame = planned_frame(reader, args.time, options, check=False)
+    scene, plan = frame.scene, frame.plan
     out = [
         f"stage       {reader.path}",
         f"units       upAxis {reader.up_axis}, metersPerUnit {reader.meters_per_unit:g}",
@@ -96,9 +96,9 @@ def cmd_info(args) -> int:
         f"camera      {cam.name} ({cam.projection.value}) at {np.round(cam.position, 3).tolist()} m looking "
         f"{np.round(cam.forward, 4).tolist()}, clip {cam.near:g}..{cam.far:g} m"
     )
-    open_, close = shutter_interval(scene, options)
-    out.append(f"motion blur shutter {open_:g} .. {close:g} frames, {options.motion_samples} sub-frames (a frame "
-               f"costs {options.motion_samples})" if blurs(scene, options, 0.0) else "motion blur off (shutter closed)")
+    out.append("motion blur off (shutter closed)" if frame.motion is None else
+               f"motion blur shutter {frame.motion[0]:g} .. {frame.motion[1]:g} frames, {options.motion_samples} "
+               f"sub-frames (a frame costs {options.motion_samples})")
     for medium in scene.media:
         lo, hi = medium.world_corners().min(axis=0), medium.world_corners().max(axis=0)
         out.append(f"volume      {medium.name}: {medium.source}")

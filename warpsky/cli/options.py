@@ -1,5 +1,5 @@
 """The render options ``warpsky render`` and ``warpsky info`` share: their arguments, the ``--set`` pairs with the
-technique shorthands, and the :class:`~warpsky.render.frame.RenderOptions` they make."""
+technique shorthands, and the :class:`~warpsky.render.options.RenderOptions` they make."""
 
 from __future__ import annotations
 

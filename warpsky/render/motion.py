@@ -12,6 +12,11 @@ rendered once at its time code, bit for bit as without motion blur. Each sub-fra
 frame costs N frames; Monte Carlo techniques may take N times fewer paths per sub-frame for the same noise, their
 seed differing per sub-frame (``seed + k``) so the sub-frames' noise does not repeat.
 
+A blurred frame is planned once, at its time code (:mod:`warpsky.render.planned`): every sub-frame renders with the
+frame's plan, its technique and passes built and their settings resolved once, and re-reads only what is
+time-sampled, the scene at the sub-frame's time. A sub-frame's seed is the frame's typed settings with ``seed``
+moved on (:func:`sub_frame_technique`), no text parsed again.
+
 A Volume with a velocity field (a simulation's ``vel`` grid) is read at each sub-frame's time with its density
 moved along that velocity from the state its file holds (:mod:`warpsky.media.voxels.velocity`), so a cached simulation
 blurs within the frame. A deep EXR of a blurred frame holds every sub-frame's samples, weighted
@@ -21,6 +26,7 @@ to flatten to the average (:func:`~warpsky.output.deep.average_deep`). A render 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import replace
 
 import numpy as np
@@ -46,12 +52,13 @@ def sub_frame_times(time_code: float, interval: tuple[float, float], samples: in
     return [float(time_code) + open_ + (close - open_) * (k + 0.5) / samples for k in range(samples)]
 
 
-def sub_frame_options(options, k: int, seeded: bool):
-    """``options`` for sub-frame ``k``: no blur of its own, and with ``seeded`` its seed moved on by ``k``."""
-    settings = dict(options.settings)
-    if seeded:
-        settings["seed"] = str(int(float(settings.get("seed", 0))) + k)
-    return replace(options, shutter=(0.0, 0.0), settings=settings)
+def sub_frame_technique(technique, k: int):
+    """The technique of sub-frame ``k``: ``technique`` itself, or one with the same resolved settings but its seed
+    moved on by ``k`` when its settings have a seed (a Monte Carlo technique), so the sub-frames' noise differs."""
+    settings = technique.settings
+    if k == 0 or "seed" not in {f.name for f in dataclasses.fields(settings)}:
+        return technique
+    return technique.with_settings(replace(settings, seed=settings.seed + k))
 
 
 def average_frames(frames):
@@ -76,3 +83,22 @@ def add_stats(layers) -> dict:
         if key in stats:
             stats[key] = type(stats[key])(sum(layer.stats.get(key, 0) for layer in layers))
     return stats
+
+
+def average_renders(renders, timings=None):
+    """One render (:class:`~warpsky.render.image.FrameRender`) of a frame from those of its sub-frames: the frames
+    and previews averaged, the stats' seconds, lookups and paths added up, the deep samples merged
+    (:func:`~warpsky.output.deep.average_deep`), every warning once and the seconds per step summed on top of
+    ``timings`` (the frame's own, e.g. its planning)."""
+    first = renders[0]
+    deep = None
+    if first.deep is not None:
+        from warpsky.output.deep import average_deep
+
+        deep = average_deep([render.deep for render in renders])
+    warnings = [line for render in renders for line in render.warnings]
+    spent = {key: sum(render.timings.get(key, 0.0) for render in renders) for key in first.timings}
+    return replace(first, frame=average_frames([render.frame for render in renders]),
+                   preview=np.mean([render.preview for render in renders], axis=0),
+                   layer=replace(first.layer, stats=add_stats([render.layer for render in renders])), deep=deep,
+                   timings={**dict(timings or {}), **spent}, warnings=list(dict.fromkeys(warnings)))
