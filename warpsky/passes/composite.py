@@ -1,4 +1,7 @@
-"""Combine technique layers front to back into the frame that is written out."""
+"""Combine technique layers front to back into the frame that is written out.
+
+What lies behind everything (the dome, :mod:`warpsky.light.background`) comes here worked out; this module only
+composites it."""
 
 from __future__ import annotations
 
@@ -8,7 +11,7 @@ import numpy as np
 
 from warpsky.core.image import ImageLayer, gathered_warnings
 from warpsky.core.numerics import LUMINANCE_WEIGHTS
-from warpsky.model.scene import Projection
+from warpsky.light.background import pixel_directions as pixel_directions  # the sky pass's and tests'
 
 
 @dataclass
@@ -108,62 +111,14 @@ def merge_by_depth(layers: list[ImageLayer], far: float) -> ImageLayer:
                       parts=list(layers))
 
 
-def pixel_directions(camera, width: int, height: int) -> np.ndarray:
-    """(H, W, 3) world unit directions through the pixel centres of ``camera`` conformed to (width, height), as the
-    kernels' ``primary_ray`` gives them (an orthographic camera's all run along its view axis)."""
-    camera = camera.conformed(width, height)
-    if camera.projection is Projection.ORTHOGRAPHIC:
-        return np.broadcast_to(camera.forward, (height, width, 3)).copy()
-    sx = ((np.arange(width) + 0.5) / width - 0.5) * camera.horizontal_aperture + camera.horizontal_aperture_offset
-    sy = (0.5 - (np.arange(height) + 0.5) / height) * camera.vertical_aperture + camera.vertical_aperture_offset
-    local = np.stack(np.broadcast_arrays(sx[None, :], sy[:, None], -camera.focal_length), axis=-1)
-    d = local @ np.asarray(camera.rotation, dtype=np.float64).T
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
-def dome_background(scene, width: int, height: int, *, through_air: bool) -> np.ndarray:
-    """(H, W, 3) float32 radiance of the scene's dome behind everything (zeros without one).
-
-    The dome lights from beyond the air: it replaces the black space an atmosphere would otherwise show. With
-    ``through_air`` (a sky pass drew the air, whose back layer is opaque) it is seen through the air's
-    transmittance to space along each pixel's ray, the flat-earth column over the finite-air-mass sine
-    (:func:`~warpsky.media.air.analytic.air_sine`), and not at all below the horizon (ground or sea level);
-    otherwise the layers' own transmittance (zero on the ground, with the air where a technique traced it)
-    is all that hides it."""
-    if scene.dome is None:
-        return np.zeros((height, width, 3), np.float32)
-    directions = pixel_directions(scene.camera, width, height)
-    radiance = scene.dome.radiance(directions)
-    atmosphere = scene.atmosphere
-    if through_air and atmosphere is not None and atmosphere.round:
-        from warpsky.media.air import round_earth as air_round_host
-
-        altitude = float(scene.camera.position[1]) + atmosphere.altitude
-        through = air_round_host.space_transmittance(atmosphere, air_round_host.scene_floor(scene), altitude,
-                                                     directions.reshape(-1, 3))
-        radiance = radiance * through.reshape(directions.shape)
-    elif through_air and atmosphere is not None:
-        from warpsky.media.air.analytic import air_sine
-        from warpsky.media.air.mixture import column as air_column
-
-        altitude = float(scene.camera.position[1]) + atmosphere.altitude
-        column = air_column(atmosphere, altitude)
-        sine = air_sine(directions[..., 1], atmosphere.gamma)[..., None]
-        radiance = np.where(directions[..., 1:2] > 0.0, radiance * np.exp(-column / sine), 0.0)
-    return radiance.astype(np.float32)
-
-
 def with_background(layers: list[ImageLayer], background: np.ndarray, far: float, *,
-                    front_air: np.ndarray | None = None) -> list[ImageLayer]:
-    """``layers`` with ``background`` radiance behind them, as an opaque layer at ``far``; or, with ``front_air``,
-    added to the last layer: the sky pass's opaque back layer, ``background`` having been seen through all the air
-    (:func:`dome_background` with ``through_air``) of which ``front_air`` (the sky pass's front transmittance) is
-    the part the composite applies again in front of the media, so it is divided out here."""
-    last = layers[-1]
-    if front_air is not None:
-        beyond = np.divide(background, front_air, out=np.zeros_like(background), where=front_air > 0.0)
-        return [*layers[:-1], ImageLayer(last.radiance + beyond.astype(np.float32), last.transmittance, last.depth,
-                                         last.stats, last.aovs, warnings=last.warnings)]
+                    behind_air: bool = False) -> list[ImageLayer]:
+    """``layers`` with ``background`` radiance behind them, as an opaque layer at ``far``; or, with ``behind_air``
+    (a wrapping pass drew the air: its back layer, the last, is opaque), added to that back layer."""
+    if behind_air:
+        last = layers[-1]
+        return [*layers[:-1], ImageLayer(last.radiance + background, last.transmittance, last.depth, last.stats,
+                                         last.aovs, warnings=last.warnings)]
     height, width = background.shape[:2]
     return [*layers, ImageLayer(background, np.zeros_like(background), np.full((height, width), far, np.float32))]
 

@@ -10,7 +10,7 @@ the nearest opaque surface, the meshes on the device for shadow rays).
 Light transport is linear in the lights: each of the scene's ``extra_suns`` runs every pass again with that light
 as the sun (the technique's :meth:`~warpsky.techniques.technique.Technique.for_extra_light`) and the radiance adds up;
 transmittance and depth are the first run's. The dome lights the first run only, and shows behind everything
-(:func:`~warpsky.passes.composite.dome_background`).
+(:func:`~warpsky.light.background.dome_background`, worked out in the light layer, composited here).
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from warpsky.core.image import ImageLayer
+from warpsky.light.background import dome_background
 from warpsky.light.frame import FrameLight
-from warpsky.passes.composite import add_light, dome_background, merge_by_depth, with_background
+from warpsky.passes.composite import add_light, merge_by_depth, with_background
 
 
 @dataclass
@@ -90,11 +91,11 @@ def render_layers(plan, scene, technique=None, *, deep_samples: int = 0) -> tupl
             extra_main, extra_layers = _lit_by(plan, replace(scene, sun=sun, extra_suns=(), dome=None), again)
             main = add_light([main], [extra_main])[0]
             layers = add_light(layers, extra_layers)
-    if scene.dome is not None:
-        air = any(runner.wraps for runner in plan.pass_runners)
-        background = dome_background(scene, plan.width, plan.height, through_air=air)
-        layers = with_background(layers, background, scene.camera.far,
-                                 front_air=layers[0].transmittance if air else None)
+    air = any(runner.wraps for runner in plan.pass_runners)
+    dome = dome_background(scene, plan.width, plan.height, through_air=air)
+    if dome is not None:  # behind the air a wrapping pass drew, whose front part (the first layer) it lies beyond
+        background = dome.beyond(layers[0].transmittance) if air else dome.seen
+        layers = with_background(layers, background, scene.camera.far, behind_air=air)
     return main, layers
 
 
