@@ -19,6 +19,8 @@ from warpsky.core.version import __version__
 from warpsky.model.scene import Scene, as_imath_rows
 from warpsky.output.color import colour_attributes
 from warpsky.output.png import auto_exposure, shown_view
+from warpsky.render.options import RenderOptions
+from warpsky.render.planned import PlannedFrame
 
 #: Figures of a Monte Carlo render that go into the EXR header (camelCase) and the batch log, where present.
 QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths", "paths")
@@ -55,7 +57,7 @@ def capped_paths_warning(quality: dict, plan) -> str | None:
             "their light is missing from the frame (raise it with --set max_bounces=N)")
 
 
-def png_exposure(scene: Scene, options, preview: np.ndarray) -> float:
+def png_exposure(scene: Scene, options: RenderOptions, preview: np.ndarray) -> float:
     """The preview's exposure: :func:`preview_exposure` at ``options.exposure`` stops, or without it the frame's
     own (:func:`~warpsky.output.png.auto_exposure` of the ``preview`` radiance)."""
     if options.exposure is None:
@@ -78,19 +80,19 @@ def camera_attributes(camera, width: int, height: int) -> dict:
             "worldToNDC": as_imath_rows(camera.world_to_ndc(width, height)).astype(np.float32)}
 
 
-def exr_attributes(frame) -> dict:
-    """OpenEXR's standard attributes of the planned ``frame`` (:class:`~warpsky.render.planned.PlannedFrame`): its
-    colour space's chromaticities and white luminance, the pixel aspect and the camera matrices."""
+def exr_attributes(frame: PlannedFrame) -> dict:
+    """OpenEXR's standard attributes of the planned ``frame``: its colour space's chromaticities and white
+    luminance, the pixel aspect and the camera matrices."""
     options, plan = frame.options, frame.plan
     attributes = {**colour_attributes(options.colorspace), "pixelAspectRatio": float(options.pixel_aspect)}
     attributes.update(camera_attributes(frame.scene.camera, plan.width, plan.height))
     return attributes
 
 
-def frame_metadata(frame, layer: ImageLayer, channels, preview: np.ndarray, warnings) -> dict:
-    """warpsky's header values (written as ``warpsky/<key>``) of the planned ``frame``
-    (:class:`~warpsky.render.planned.PlannedFrame`) rendered into ``layer`` (its stats), written as ``channels``,
-    with the ``preview`` radiance (its exposure, which contact sheets reuse) and the render's ``warnings``."""
+def frame_metadata(frame: PlannedFrame, layer: ImageLayer, channels, preview: np.ndarray, warnings) -> dict:
+    """warpsky's header values (written as ``warpsky/<key>``) of the planned ``frame`` rendered into ``layer`` (its
+    stats), written as ``channels``, with the ``preview`` radiance (its exposure, which contact sheets reuse) and the
+    render's ``warnings``."""
     scene, plan, options = frame.scene, frame.plan, frame.options
     metadata = {
         "stage": str(frame.stage.resolve()),

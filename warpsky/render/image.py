@@ -20,8 +20,10 @@ from warpsky.output.products import default_outputs, frame_channels, render_boun
 from warpsky.passes.composite import Frame, composite
 from warpsky.passes.frame import render_layers
 from warpsky.render.header import capped_paths_warning, exr_attributes, frame_metadata, quality_stats
+from warpsky.render.options import RenderOptions
 from warpsky.render.overscan import overscanned, window_crop
 from warpsky.render.plan import RenderPlan
+from warpsky.render.planned import PlannedFrame
 
 
 @dataclass(frozen=True)
@@ -91,7 +93,7 @@ class RenderedImage:
         return self.plan.height
 
 
-def composited(plan: RenderPlan, scene: Scene, options, *, technique=None, timings=None) -> FrameRender:
+def composited(plan: RenderPlan, scene: Scene, options: RenderOptions, *, technique=None, timings=None) -> FrameRender:
     """The frame of ``plan`` at ``scene``'s time: every pass run (with ``technique``, default the plan's), the layers
     composited and converted to the output colour space, over the pixels the data window needs."""
     timings = dict(timings or {})
@@ -115,7 +117,7 @@ def composited(plan: RenderPlan, scene: Scene, options, *, technique=None, timin
     return FrameRender(frame, preview, layer, warnings, (bounds[0], bounds[1]), timings, samples)
 
 
-def image_deep(layers, scene: Scene, options, region: tuple[int, int, int, int]):
+def image_deep(layers, scene: Scene, options: RenderOptions, region: tuple[int, int, int, int]):
     """The deep samples of the image's pixels (``region`` x, y, width, height of the rendered frame) in the output
     colour space."""
     from warpsky.output.color import matrix_from_rec709
@@ -125,9 +127,9 @@ def image_deep(layers, scene: Scene, options, region: tuple[int, int, int, int])
     return deep_from_layers(layers, scene.camera.far, matrix, region)
 
 
-def rendered_image(render: FrameRender, frame) -> RenderedImage:
-    """The output of the planned ``frame`` (:class:`~warpsky.render.planned.PlannedFrame`) from ``render``: its
-    channels cropped to the data window, its header and attributes."""
+def rendered_image(render: FrameRender, frame: PlannedFrame) -> RenderedImage:
+    """The output of the planned ``frame`` from ``render``, built whole: its channels cropped to the data window,
+    its header and attributes."""
     options = frame.options
     outputs = options.outputs or default_outputs(sorted(render.frame.aovs), half=options.half)
     crop = window_crop(frame.window, render.origin, render.frame.depth.shape, options.data_window)

@@ -45,7 +45,7 @@ class RenderPlan:
         pass_settings: Settings of every registered pass that has settings, by pass name (running or not).
         features: One line per feature of the scene, what ``warpsky info`` prints.
         unused: ``--set`` names given to passes that do not run in this frame.
-        settings_hash: Hash of what changes the frame's pixels, set by :func:`warpsky.render.frame.plan_frame` (the
+        settings_hash: Hash of what changes the frame's pixels, set by :func:`warpsky.render.planned.plan_frame` (the
             batch's resume check and the EXR metadata share it); empty until then.
         memory: Bytes the frame will allocate, by part (:func:`frame_memory`).
         work: Worst-case kernel iterations of the frame (:func:`frame_work`).

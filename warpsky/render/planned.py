@@ -18,6 +18,7 @@ from warpsky.core.resources import check_resources
 from warpsky.model.scene import Scene
 from warpsky.output.products import FULL_WINDOW, window_pixels
 from warpsky.render.motion import blurs, shutter_interval
+from warpsky.render.options import RenderOptions
 from warpsky.render.plan import RenderPlan, make_plan
 from warpsky.render.registry import aov_producers
 from warpsky.render.settings_hash import input_files, settings_hash
@@ -31,7 +32,7 @@ class PlannedFrame:
     Attributes:
         scene: The scene at the frame's time code (its camera with the options' pixel aspect).
         plan: The frame's plan: technique and passes built, settings resolved and typed.
-        options: The :class:`~warpsky.render.options.RenderOptions` of the output.
+        options: How the output is rendered and written.
         time_code: The frame's time code (None: the stage's earliest time, never blurred).
         stage: The stage file it was read from (the EXR header names it).
         motion: (open, close) [frames] when the shutter is open with more than one sub-frame, else None: what the
@@ -44,7 +45,7 @@ class PlannedFrame:
 
     scene: Scene
     plan: RenderPlan
-    options: object
+    options: RenderOptions
     time_code: float | None
     stage: Path
     motion: tuple[float, float] | None
@@ -57,7 +58,7 @@ class PlannedFrame:
         """Whether the frame is the average of sub-frames over its shutter (:mod:`warpsky.render.motion`)."""
         return self.motion is not None and self.time_code is not None
 
-    def for_options(self, options) -> PlannedFrame:
+    def for_options(self, options: RenderOptions) -> PlannedFrame:
         """The same frame written with other ``options`` that share its render (a sibling RenderProduct: other
         channels or data window): its outputs and window checked, its own settings hash, the files not stat'ed
         again."""
@@ -65,7 +66,7 @@ class PlannedFrame:
                        inputs=self.inputs)
 
 
-def frame_scene(reader, time_code, options) -> Scene:
+def frame_scene(reader, time_code, options: RenderOptions) -> Scene:
     """The scene at ``time_code`` as the options see it: through their camera, with their pixel aspect."""
     scene = reader.scene_at(time_code, camera_path=options.camera)
     if options.pixel_aspect != 1.0:
@@ -73,7 +74,7 @@ def frame_scene(reader, time_code, options) -> Scene:
     return scene
 
 
-def planned_frame(reader, time_code, options, *, check: bool = True) -> PlannedFrame:
+def planned_frame(reader, time_code, options: RenderOptions, *, check: bool = True) -> PlannedFrame:
     """Read the stage at ``time_code`` once and plan the frame (technique built, settings resolved, passes chosen);
     with ``check``, a frame over the memory or work limits is refused here
     (:class:`~warpsky.core.errors.ResourceError`), before anything is allocated, and so is an output the technique
@@ -86,13 +87,13 @@ def planned_frame(reader, time_code, options, *, check: bool = True) -> PlannedF
     return frame
 
 
-def plan_frame(reader, time_code, options, *, check: bool = True) -> tuple[Scene, RenderPlan]:
+def plan_frame(reader, time_code, options: RenderOptions, *, check: bool = True) -> tuple[Scene, RenderPlan]:
     """:func:`planned_frame`'s (scene, plan), the plan's ``settings_hash`` set."""
     frame = planned_frame(reader, time_code, options, check=check)
     return frame.scene, frame.plan
 
 
-def planned(scene: Scene, plan: RenderPlan, options, *, time_code, stage, inputs: tuple | None = None,
+def planned(scene: Scene, plan: RenderPlan, options: RenderOptions, *, time_code, stage, inputs: tuple | None = None,
             digest: str | None = None, check: bool = False) -> PlannedFrame:
     """``plan`` of ``scene`` as a :class:`PlannedFrame` of ``options``: the outputs and the data window checked, the
     input files stat'ed (unless ``inputs`` are given, or its ``digest``), the settings hashed and, with ``check``,
