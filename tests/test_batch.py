@@ -164,8 +164,8 @@ def test_existing_scheduler_renders_the_same_pixels(tiny_storm, tmp_path, capsys
 
 
 def test_an_in_process_batch_reads_and_plans_each_frame_once(tiny_storm, tmp_path, capsys, monkeypatch):
-    """The storm's 6 frames rendered in this process: the stage is opened twice (the command's reader, which lists
-    the products and the frames, and the batch's, which reads them) and each frame's scene is read, planned, its
+    """The storm's 6 frames rendered in this process: the stage is opened once (the command's reader, which lists
+    the products and the frames, is the one the batch reads them with) and each frame's scene is read, planned, its
     files stat'ed and its settings hashed once; the first frame's plan, made for the checks before anything is
     written, is the one the batch prepares the tables from and the one it renders."""
     from warpsky.batch import run
@@ -193,5 +193,5 @@ def test_an_in_process_batch_reads_and_plans_each_frame_once(tiny_storm, tmp_pat
     code, _, err = render(["render", tiny_storm, tmp_path / "storm.####.exr", *FAST], capsys)
     assert code == 0 and "6 rendered" in err, err
     frames = [float(f) for f in range(1, FRAMES + 1)]
-    assert calls == {"open": 2, "scene_at": frames, "make_plan": FRAMES, "input_files": FRAMES,
+    assert calls == {"open": 1, "scene_at": frames, "make_plan": FRAMES, "input_files": FRAMES,
                      "settings_hash": FRAMES}

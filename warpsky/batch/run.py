@@ -75,10 +75,21 @@ class FrameRecord:
 _READERS: dict[tuple, object] = {}
 
 
+def _reader_key(stage: str, options) -> tuple:
+    return str(Path(stage).resolve()), Path(stage).stat().st_mtime if Path(stage).exists() else 0.0, options
+
+
+def share_reader(stage: str, options, reader) -> None:
+    """Let this process's batch read ``stage`` with ``reader``, which the caller opened with the composition
+    ``options`` (the jobs' ``options.stage``), instead of opening the stage again."""
+    _READERS.clear()
+    _READERS[_reader_key(stage, options)] = reader
+
+
 def _reader(stage: str, options=None):
     """The stage opened once per worker process with its composition ``options`` (reopened when the file or the
     options change)."""
-    key = (str(Path(stage).resolve()), Path(stage).stat().st_mtime if Path(stage).exists() else 0.0, options)
+    key = _reader_key(stage, options)
     if key not in _READERS:
         _READERS.clear()
         _READERS[key] = StageReader(stage) if options is None else StageReader(stage, options)

@@ -24,6 +24,7 @@ from warpsky.batch.run import (
     plan_first_frame,
     remove_empty,
     run_batch,
+    share_reader,
 )
 from warpsky.cli.info import cmd_info
 from warpsky.cli.options import (
@@ -322,6 +323,8 @@ def cmd_render(args) -> int:
                 for job, *others in zip(jobs, *siblings, strict=True)]
         batches.append((pattern, jobs))
     far = bool(args.scheduler or args.workers)
+    if not far and reader.options == (batches[0][1][0].options.stage or reader.options):
+        share_reader(str(args.stage), batches[0][1][0].options.stage, reader)  # the stage is opened once
     for _, jobs in batches:  # input errors of any product: nothing written
         plan_first_frame(jobs[0], keep_reader=not far)
     created: list[Path] = []
