@@ -345,8 +345,8 @@ def fog_camera(position=(0.0, 20.0, 0.0), far=1.0e6):
 def test_homogeneous_fog_matches_closed_form(sigma, albedo, device):
     """A constant fog around the camera (1 /m: T ~ 0, albedo exactly 1): the image equals the closed form, and
     stays finite, non-negative and below the single-scattering bound a (E p + L_ambient)."""
+    from warpsky.light.background import pixel_directions
     from warpsky.model.lights import Dome
-    from warpsky.passes.composite import pixel_directions
 
     fog = AnalyticFog("c", [ConstantTerm(sigma)], floor=-200.0, top=100.0, extinction_scale=[0.8, 1.0, 1.3],
                       albedo=[albedo, albedo * 0.9, albedo * 0.8], g=0.7)
@@ -372,7 +372,7 @@ def test_homogeneous_fog_matches_closed_form(sigma, albedo, device):
 
 def test_limit_cuts_the_fog_at_the_surface_depth(device):
     """With ``limit`` depths d the fog is integrated to d (ray distance d / cos): the closed form to that point."""
-    from warpsky.passes.composite import pixel_directions
+    from warpsky.light.background import pixel_directions
 
     fog = AnalyticFog("c", [ConstantTerm(0.03)], floor=-200.0, top=100.0, extinction_scale=[0.8, 1.0, 1.3], g=0.5)
     sun = Sun(np.array([0.2, 0.7, -0.6]) / np.linalg.norm([0.2, 0.7, -0.6]), np.ones(3))

@@ -8,10 +8,11 @@ import pytest
 from conftest import look_rotation
 
 from warpsky.core.image import ImageLayer
+from warpsky.light.background import pixel_directions
 from warpsky.model.scene import Atmosphere, Camera, Ground, Scene, Sun, VoxelMedium
 from warpsky.output.deep import deep_from_layers, flatten, visibility_in_front
 from warpsky.output.deep_bins import DepthProfile
-from warpsky.passes.composite import composite, pixel_directions
+from warpsky.passes.composite import composite
 from warpsky.passes.frame import render_layers
 from warpsky.render.plan import make_plan
 

@@ -327,7 +327,7 @@ def test_dome_lies_beyond_the_air(tmp_path, device):
     horizon, hidden below it (sea level)."""
     from conftest import add_atmosphere
 
-    from warpsky.passes.composite import pixel_directions
+    from warpsky.light.background import pixel_directions
 
     spec = StageSpec(sun_direction=(0.3, 0.5, 0.2), camera_rotation=look_rotation((0.0, 0.05, -1.0)),
                      camera_position=(0.0, 10.0, 0.0))

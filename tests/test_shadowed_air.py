@@ -9,12 +9,12 @@ import math
 import numpy as np
 from conftest import look_rotation
 
+from warpsky.light.background import pixel_directions
 from warpsky.light.sun import sunlight
 from warpsky.media.air.analytic import inscatter
 from warpsky.model.scene import Atmosphere, Camera, Scene, Sun
 from warpsky.model.terrain import TerrainMesh
 from warpsky.passes.frame import render_layers
-from warpsky.passes.sky.shadowed_air import pixel_directions
 from warpsky.render.plan import make_plan
 
 WIDTH, HEIGHT = 12, 8

@@ -11,7 +11,6 @@ import numpy as np
 
 from warpsky.core.image import ImageLayer, gathered_warnings
 from warpsky.core.numerics import LUMINANCE_WEIGHTS
-from warpsky.light.background import pixel_directions as pixel_directions  # the sky pass's and tests'
 
 
 @dataclass

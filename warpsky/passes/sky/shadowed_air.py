@@ -27,6 +27,7 @@ import math
 import numpy as np
 import warp as wp
 
+from warpsky.light.background import pixel_directions
 from warpsky.light.sun import sunlight
 from warpsky.model.scene import Projection
 from warpsky.optics.phase import PhaseKind, phase_numpy
@@ -50,15 +51,6 @@ def sun_visible_kernel(surfaces: SurfaceMeshes, points: wp.array(dtype=wp.vec3),
     """1 where the ray from ``points[i]`` (relative to the meshes' camera) towards the sun meets no mesh, else 0."""
     i = wp.tid()
     out[i] = wp.where(mesh_occluded(surfaces, points[i], sun, SHADOW_LENGTH), 0.0, 1.0)
-
-
-def pixel_directions(camera, width: int, height: int) -> np.ndarray:
-    """(H, W, 3) float64 unit world directions of a pinhole ``camera``'s rays through the pixel centres."""
-    sx = ((np.arange(width) + 0.5) / width - 0.5) * camera.horizontal_aperture + camera.horizontal_aperture_offset
-    sy = (0.5 - (np.arange(height) + 0.5) / height) * camera.vertical_aperture + camera.vertical_aperture_offset
-    local = np.stack(np.broadcast_arrays(sx[None, :], sy[:, None], -float(camera.focal_length)), axis=-1)
-    rays = local @ np.asarray(camera.rotation, dtype=np.float64).reshape(3, 3).T
-    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
 
 
 def mesh_visibility(occluders, points: np.ndarray, sun: np.ndarray, device: str) -> np.ndarray:
