@@ -19,15 +19,18 @@ MODULES = kernel_modules()
 
 
 @pytest.fixture(scope="module")
-def ptx_builds(request, tmp_path_factory):
+def ptx_builds(request):
     """The selected modules' sm_90 compiles, started at once on a pool of processes (one per core, at most 4): each
-    NVRTC compile uses one core, so the suite's longest part runs side by side. Each test then waits for its own."""
+    NVRTC compile uses one core, so the suite's longest part runs side by side. Each test then waits for its own.
+
+    The PTX goes to Warp's kernel cache, named by the module's hash (its kernels' and functions' code and the
+    compile options), as Warp's own compiles are: a module compiled before with the same code is found there, and
+    any change to it compiles it again. The 16 variants of the path tracer take 40-150 s of NVRTC each on this
+    2-core CPU, which a fresh folder per run would pay on every ``make test``."""
     selected = {item.callspec.params["module"].name for item in request.session.items
                 if getattr(item, "originalname", "") == "test_module_compiles_to_sm90_ptx"}
-    folder = tmp_path_factory.mktemp("ptx")
     pool = ProcessPoolExecutor(max(1, min(os.cpu_count() or 1, 4)), mp_context=multiprocessing.get_context("spawn"))
-    futures = {m.name: pool.submit(compile_ptx, i, str(folder / str(i)), 90) for i, m in enumerate(MODULES)
-               if m.name in selected}
+    futures = {m.name: pool.submit(compile_ptx, i, None, 90) for i, m in enumerate(MODULES) if m.name in selected}
     yield futures
     pool.shutdown(wait=True, cancel_futures=True)
 

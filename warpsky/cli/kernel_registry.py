@@ -54,8 +54,10 @@ def kernel_modules() -> list:
     return plain + variant_modules()
 
 
-def compile_ptx(index: int, folder: str, arch: int = 90) -> list[str]:
-    """Compile ``kernel_modules()[index]`` to PTX for ``arch`` into ``folder``; the output paths. A function of plain
-    arguments, so that separate processes can compile modules side by side (NVRTC uses one core)."""
+def compile_ptx(index: int, folder: str | None = None, arch: int = 90) -> list[str]:
+    """Compile ``kernel_modules()[index]`` to PTX for ``arch`` into ``folder`` (None: Warp's kernel cache, where a
+    module whose code is unchanged since its last compile is found under its hash and not compiled again); the
+    output paths. A function of plain arguments, so that separate processes can compile modules side by side
+    (NVRTC uses one core)."""
     module = kernel_modules()[index]
     return [str(p) for p in wp.compile_aot_module(module, arch=arch, use_ptx=True, module_dir=folder)]
