@@ -92,12 +92,12 @@ def test_thin_deck_single_scattering_matches_the_deck_pass(device):
     the mean radiance within noise (z < 4, 0.3 % for the voxels in quadrature; measured on the CPU with 4096 spp:
     -0.09 % +- 0.27 %), and the noise is small enough (< 1 %) for a 5 % error to fail. All orders of scattering
     add about 15 % here."""
-    from warpsky.passes.deck.deck import HeightField
+    from warpsky.passes.deck.deck import Deck
     from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
     clouds, camera = thin_deck()
     scene = Scene(camera, Sun(np.array([0.0, 1.0, 0.0]), np.ones(3)), decks=(clouds,))
-    expected = float(HeightField(device=device).render(scene, 24, 16).radiance[..., 1].mean())
+    expected = float(Deck(device=device).render(scene, 24, 16).radiance[..., 1].mean())
     settings = PathTracerSettings(spp=2048, seed=5, max_bounces=1, deck_extent=2500.0)
     out = PathTracer(settings, device=device).render(scene, 24, 16)
     measured = float(out.radiance[..., 1].mean())
