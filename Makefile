@@ -12,7 +12,7 @@ STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
 	@echo "                          (the render: about 50 s on 2 CPU cores once Warp's kernels are cached)"
-	@echo "make test               - install into $(VENV) and run every test on the CPU (894 tests, 8-14 min on 2 cores)"
+	@echo "make test               - install into $(VENV) and run every test on the CPU (899 tests, 8-14 min on 2 cores)"
 	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; under 3 min)"
 	@echo "make lint               - ruff"
 	@echo "make bench              - run evaluation/benchmarks/bench_single_scatter.py (cuda too when present)"
