@@ -73,11 +73,15 @@ class RenderPlan:
         """The settings of every running pass that has settings, in pass order."""
         return [runner.settings for runner in self.pass_runners if runner.settings is not None]
 
-    def settings_json(self) -> str:
+    def settings_record(self) -> dict:
         """The technique's settings and every running pass's, by pass name: what the settings hash covers."""
         passes = {runner.name: settings_dict(runner.settings) for runner in self.pass_runners
                   if runner.settings is not None}
-        return json.dumps({"technique": self.technique, **self.settings_dict(), **passes}, sort_keys=True)
+        return {"technique": self.technique, **self.settings_dict(), **passes}
+
+    def settings_json(self) -> str:
+        """:meth:`settings_record` as the JSON the EXR header holds."""
+        return json.dumps(self.settings_record(), sort_keys=True)
 
     def describe(self) -> str:
         media = any(runner.runs_technique for runner in self.pass_runners)

@@ -1,7 +1,7 @@
 """The settings hash: a short digest of everything that changes a frame's pixels, which a batch compares with the
 one in a finished EXR's header to skip the frame (:mod:`warpsky.batch.run`).
 
-It covers the plan's resolved settings (their JSON form, :meth:`~warpsky.render.plan.RenderPlan.settings_json`), the
+It covers the plan's resolved settings (:meth:`~warpsky.render.plan.RenderPlan.settings_record`), the
 resolution, camera, output format and channels, the shutter of a blurred frame and the identity of every input file
 by size and modification time (:func:`input_files`, stat'ed once per frame by :mod:`warpsky.render.planned`), so a
 batch renders again the frames whose data were rewritten.
@@ -34,7 +34,7 @@ def settings_hash(plan, options, inputs=(), motion: tuple[float, float] | None =
     and format, the ``inputs`` (:func:`input_files`; none for a frame hashed without its scene) and, for a frame
     whose shutter is open, its ``motion`` interval (open, close) and sub-frames."""
     key = json.dumps(
-        {"plan": json.loads(plan.settings_json()), "res": [plan.width, plan.height], "camera": options.camera,
+        {"plan": plan.settings_record(), "res": [plan.width, plan.height], "camera": options.camera,
          "half": options.half, "inputs": [list(item) for item in inputs],
          "outputs": [list(o.channels) for o in options.outputs or ()],
          "pixelAspect": options.pixel_aspect, "window": list(options.data_window), "colorspace": options.colorspace,
