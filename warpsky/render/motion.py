@@ -19,8 +19,8 @@ moved on (:func:`sub_frame_technique`), no text parsed again.
 
 A Volume with a velocity field (a simulation's ``vel`` grid) is read at each sub-frame's time with its density
 moved along that velocity from the state its file holds (:mod:`warpsky.media.voxels.velocity`), so a cached simulation
-blurs within the frame. A deep EXR of a blurred frame holds every sub-frame's samples, weighted
-to flatten to the average (:func:`~warpsky.output.deep.average_deep`). A render without a time code (the API's
+blurs within the frame. A deep EXR of a blurred frame holds every sub-frame's samples, weighted to flatten to the
+average (:func:`~warpsky.output.deep.average_deep`). A render without a time code (the API's
 ``time=None``, the stage's earliest time) is not blurred.
 """
 
