@@ -323,8 +323,9 @@ def cmd_render(args) -> int:
                 for job, *others in zip(jobs, *siblings, strict=True)]
         batches.append((pattern, jobs))
     far = bool(args.scheduler or args.workers)
-    if not far and reader.options == (batches[0][1][0].options.stage or reader.options):
-        share_reader(str(args.stage), batches[0][1][0].options.stage, reader)  # the stage is opened once
+    composed = batches[0][1][0].options.stage  # None: the reader's defaults
+    if not far and composed in (None, reader.options):
+        share_reader(str(args.stage), composed, reader)  # the stage is opened once
     for _, jobs in batches:  # input errors of any product: nothing written
         plan_first_frame(jobs[0], keep_reader=not far)
     created: list[Path] = []
