@@ -195,7 +195,7 @@ class VeilPass(Pass):
 def test_a_new_technique_and_a_new_pass_plug_in_through_the_registry(tmp_path, homogeneous_npy, capsys,
                                                                      monkeypatch):
     """Both are written outside the package; registering them is all it takes for ``--technique``, ``--set``,
-    ``render --help``, ``warpsky info``, the frame, the EXR's channels and metadata and the warnings."""
+    ``render --help-settings``, ``warpsky info``, the frame, the EXR's channels and metadata and the warnings."""
     from warpsky.output.exr import read_exr
     from warpsky.render import registry
 
@@ -206,7 +206,7 @@ def test_a_new_technique_and_a_new_pass_plug_in_through_the_registry(tmp_path, h
     stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy))
 
     with pytest.raises(SystemExit):
-        run_cli(["render", "--help"], capsys)
+        run_cli(["render", "--help-settings", "all"], capsys)
     help_text = capsys.readouterr().out
     assert "glow:" in help_text and "radiance of every pixel" in help_text and "veil.opacity" in help_text
     code, out, err = run_cli(["info", stage, "--technique", "glow", "--set", "veil.opacity=0.5",

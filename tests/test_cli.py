@@ -255,14 +255,14 @@ def test_settings_are_parsed_by_their_declared_types(tmp_path, good_stage, capsy
             assert code == 2 and message in err, err
 
 
-def test_render_help_lists_every_setting_with_its_metadata(capsys):
+def test_help_settings_all_lists_every_setting_with_its_metadata(capsys):
     import dataclasses
 
     from warpsky.passes.stratiform.stratiform import StratiformSettings
     from warpsky.render.registry import technique_class, technique_names
 
     with pytest.raises(SystemExit):
-        main(["render", "--help"])
+        main(["render", "--help-settings", "all"])
     out = capsys.readouterr().out
     for name in technique_names():
         assert all(f.name in out for f in dataclasses.fields(technique_class(name).Settings))

@@ -49,69 +49,59 @@ from warpsky.render.registry import DEFAULT_TECHNIQUE, pass_classes, technique_c
 from warpsky.usd.stage import StageReader
 
 EPILOG_RENDER = """\
-frames:
-  --frames takes usdrecord's grammar: 1 | 1:48 | 1:48x2 | 1.5:3x0.5 | 1,5,9:12
-  Without --frames: the stage's startTimeCode..endTimeCode when OUT has a #### placeholder,
-  else one frame at the earliest time sample.
-  OUT placeholders follow usdrecord: a run of # is the zero-padded frame number (####  -> 0012),
-  ###.## adds decimals for subframes (-> 012.50).
+frames: --frames 1 | 1:48 | 1:48x2 | 1.5:3x0.5 | 1,5,9:12 (usdrecord's grammar);
+  without it, the stage's frames when OUT has a #### placeholder (a run of # is
+  the zero-padded frame number), else one frame at the earliest time sample.
 
-USD render settings and products:
-  A UsdRenderSettings prim (--settings PATH, else the stage's renderSettingsPrimPath, else the first one) gives
-  the camera, resolution, pixelAspectRatio, dataWindowNDC, includedPurposes and renderingColorSpace; each of its
-  UsdRenderProducts (all, or those named by --product) is written to its productName ($F4, $F or #### for the
-  frame) with the channels its orderedVars name (sourceName color, alpha, transmittance, depth, variance,
-  single_scatter, multiple_scatter); a RenderVar warpsky cannot write (another light path expression, a primvar,
-  an id) is left out of its product with a warning. OUT replaces the name of a single product; --camera, --res,
-  --purpose and --colorspace win over the stage. Without RenderProducts, OUT is required and gets warpsky's
-  default channels.
-
-batches, resume and farms:
-  A frame whose EXR exists, opens, has every channel and carries the same settings hash is skipped (--overwrite
-  renders it again). Failed frames are retried (--retries, default 1) unless the input is at fault, and never cost
-  finished ones; every run is appended to OUT's log (out/storm.####.exr -> out/storm.log.json) and summarised.
-  --workers N starts a Dask LocalCluster of N single-threaded worker processes on this machine; --scheduler
-  tcp://HOST:PORT uses an existing Dask cluster: its workers open the stage and the optics cache themselves
-  (put stage, data, $WARPSKY_CACHE and OUT on shared storage) and return paths, never pixels. Pixels are
-  identical whatever the executor. GPU farms: start one worker per GPU with dask-cuda
-  (`dask cuda worker tcp://HOST:PORT`, or LocalCUDACluster in Python), which sets CUDA_VISIBLE_DEVICES per
-  worker, and render with --device cuda.
-
-memory, work and Ctrl-C:
-  A frame estimated above the free memory (--max-memory SIZE) or above 1e8 kernel iterations per pixel or 1e13 per
-  frame (--no-work-limit) is refused with exit code 2 before anything is allocated; `warpsky info` prints the
-  estimates. Ctrl-C stops a render within about a second, writes no EXR and exits with 130.
-
-{settings}
 examples:
   warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
-  warpsky render shot.usda out/shot.####.exr --frames 1:48x2 --res 1280x720 --device cuda
-  warpsky render shot.usda --frames 1:48 --res-scale 25
-  warpsky render usd_scenes/cumulus.usda out/fine.####.exr --frames 1 --target-error 0.02 --time-budget 60
-  warpsky render usd_scenes/cumulus.usda out/fast.####.exr --frames 1 --technique slicing
-  warpsky render usd_scenes/cumulus.usda out/ref.####.exr --frames 1 --technique path_tracer --spp 256 --seed 7
-  warpsky render shot.usda --frames 1:48 --variant weather=storm --load all
-  warpsky render shot.usda out/beauty.####.exr --product /Render/Beauty --colorspace ACEScg
-  warpsky render usd_scenes/storm.usda out/storm.####.exr --res 256 --workers 2
-  warpsky render usd_scenes/storm.usda /shared/storm.####.exr --scheduler tcp://farm:8786
+  warpsky render shot.usda out/shot.####.exr --frames 1:48x2 --res 1280x720
+  warpsky render usd_scenes/cumulus.usda out/c.####.exr --time-budget 60
+  warpsky render usd_scenes/storm.usda out/storm.####.exr --workers 2
+
+RenderProducts, batches, farms and limits: docs/guide/ in the source tree.
+Settings of a technique or pass: warpsky render --help-settings NAME (or all)
 """
 
+SETTINGS_HEADER = ("settings (--set NAME=VALUE, repeatable; 'auto' restores a default; whole numbers for counts, "
+                   "0/1 or\ntrue/false for switches; a pass's settings carry its prefix):\n")
 
-def settings_help() -> str:
-    """Every technique's settings (the default technique first) and then every pass's, as tables generated from
-    the settings classes' field metadata, each followed by its notes."""
-    sections = []
+
+def settings_sections() -> dict[str, list[str]]:
+    """Each technique's settings (the default technique first) and then each pass's, name -> the table generated
+    from the settings class's field metadata and its notes."""
+    sections: dict[str, list[str]] = {}
     for cls in technique_classes():
         title = f"{cls.name} (default)" if cls.name == DEFAULT_TECHNIQUE else cls.name
-        sections.append(f"  {title}:\n" + settings_table(cls.Settings, indent=4))
+        sections[cls.name] = [f"  {title}:\n" + settings_table(cls.Settings, indent=4)]
         if cls.settings_notes:
-            sections.append(textwrap.fill(cls.settings_notes, 114, initial_indent="    ", subsequent_indent="    "))
+            sections[cls.name].append(textwrap.fill(cls.settings_notes, 114, initial_indent="    ",
+                                                    subsequent_indent="    "))
     for cls in pass_classes():
         if cls.Settings is not None:
-            sections.append(f"  {cls.name} pass (prefix {cls.Settings.prefix}; it runs where the stage has what it "
-                            f"draws):\n" + settings_table(cls.Settings, indent=4))
-    return ("settings (--set NAME=VALUE, repeatable; 'auto' restores a default; whole numbers for counts, 0/1 or\n"
-            "true/false for switches; a pass's settings carry its prefix):\n" + "\n".join(sections) + "\n")
+            sections[cls.name] = [f"  {cls.name} pass (prefix {cls.Settings.prefix}; it runs where the stage has "
+                                  f"what it draws):\n" + settings_table(cls.Settings, indent=4)]
+    return sections
+
+
+def settings_help(name: str = "all") -> str:
+    """The settings of technique or pass ``name``, or of every one (``all``)."""
+    sections = settings_sections()
+    chosen = [piece for key, pieces in sections.items() if name in ("all", key) for piece in pieces]
+    return SETTINGS_HEADER + "\n".join(chosen) + "\n"
+
+
+class HelpSettings(argparse.Action):
+    """``--help-settings NAME``: print the settings of technique or pass NAME (``all``: every one) and exit; an
+    unknown NAME exits 2 with one line listing the valid names."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        valid = [*settings_sections(), "all"]
+        if values not in valid:
+            parser.exit(2, f"warpsky: error: {option_string}: unknown technique or pass {values!r}; valid: "
+                        f"{', '.join(valid)}\n")
+        print(settings_help(values), end="")
+        parser.exit(0)
 
 
 class Parser(argparse.ArgumentParser):
@@ -125,20 +115,16 @@ def add_output_files(render) -> None:
     """The render options for what is written beside each EXR and in what precision."""
     render.add_argument("--png", action="store_true", help="also write a tone-mapped PNG preview per frame")
     render.add_argument("--exposure", type=float, default=None, metavar="EV",
-                        help="preview exposure in stops over a white surface facing the sun mapped to 1 (default: "
-                        "from the frame, its 99.5th-percentile luminance mapped to 3, 87%% of white)")
+                        help="preview exposure in stops over a white surface facing the sun mapped to 1 "
+                        "(default: from the frame)")
     render.add_argument("--view", default=DEFAULT_VIEW, metavar="VIEW",
-                        help=f"the PNG preview's view of OpenColorIO's {DISPLAY!r} (default {DEFAULT_VIEW!r}; also "
-                        "'Un-tone-mapped', 'Video (colorimetric)', or 'simple', warpsky's own curve)")
+                        help=f"the preview's OpenColorIO view (default {DEFAULT_VIEW!r}; or 'simple')")
     render.add_argument("--float", dest="full_float", action="store_true", help="write RGBA as 32-bit float "
                         "instead of half")
-    render.add_argument("--deep", action="store_true", help="also write a deep scanline EXR beside each frame "
-                        "(NAME.deep.exr: R, G, B, A, Z, ZBack) that flattens to the frame's beauty: voxel media and "
-                        "fog as volume samples along depth, every other layer a point sample")
+    render.add_argument("--deep", action="store_true", help="also write NAME.deep.exr, a deep image of the "
+                        "frame")
     render.add_argument("--deep-samples", type=int, default=None, metavar="N",
-                        help=f"volume samples per pixel of each volume layer in a deep image, at equal shares of its "
-                        f"opacity (1..{MAX_DEEP_SAMPLES}, default {DEEP_SAMPLES}; also a deepRaster RenderProduct's "
-                        "int warpsky:deepSamples)")
+                        help=f"deep samples per pixel per volume (1..{MAX_DEEP_SAMPLES}, default {DEEP_SAMPLES})")
 
 
 def build_parser(bench=None) -> argparse.ArgumentParser:
@@ -153,12 +139,13 @@ def build_parser(bench=None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
 
     render = sub.add_parser(
-        "render", help="render a stage to EXR frames", description="Render STAGE to OUT (or to its "
-        "RenderProducts), one EXR per frame (RGBA radiance + transmittance.RGB + depth.Z, or the products' vars; "
-        "metadata in the header). Files are written to a temporary "
-        "name and renamed, so no partial EXR is ever left behind.",
-        epilog=EPILOG_RENDER.format(settings=settings_help()), formatter_class=argparse.RawDescriptionHelpFormatter,
+        "render", help="render a stage to EXR frames", usage="%(prog)s STAGE [OUT] [options]",
+        description="Render STAGE to OUT (or to the stage's RenderProducts), one EXR per frame\n"
+        "(RGBA, transmittance.RGB, depth.Z); no partial EXR is ever left behind.",
+        epilog=EPILOG_RENDER, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    render.add_argument("--help-settings", action=HelpSettings, metavar="NAME",
+                        help="print the settings of technique or pass NAME and exit")
     render.add_argument("stage", type=Path, help="USD stage (.usda, .usdc, .usd, .usdz)")
     render.add_argument("output", nargs="?", help="output EXR path, with a #### placeholder for several frames "
                         "(default: each RenderProduct's productName)")
@@ -169,9 +156,10 @@ def build_parser(bench=None) -> argparse.ArgumentParser:
     render.add_argument("--retries", type=int, default=1, metavar="N",
                         help="retry a failed frame N times (default 1; input errors are not retried)")
     render.add_argument("--workers", type=int, metavar="N", help="render on a Dask LocalCluster of N processes")
-    render.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="render on an existing Dask cluster")
+    render.add_argument("--scheduler", metavar="ADDRESS", help="render on an existing Dask cluster "
+                        "(tcp://HOST:PORT)")
     render.add_argument("--scheduler-timeout", type=float, default=10.0, metavar="S",
-                        help="seconds to wait for --scheduler before giving up (default 10)")
+                        help="seconds to wait for --scheduler (default 10)")
     render.add_argument("--log", type=Path, metavar="PATH", help="JSON log of the runs (default: next to OUT, "
                         "out/name.####.exr -> out/name.log.json)")
 

@@ -131,7 +131,7 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--technique", default=DEFAULT_TECHNIQUE, choices=technique_names(),
                         help=f"rendering technique (default: {DEFAULT_TECHNIQUE})")
     parser.add_argument("--set", dest="settings", type=_setting, action="append", default=[], metavar="NAME=VALUE",
-                        help="technique setting, repeatable (see below)")
+                        help="technique or pass setting, repeatable (see --help-settings)")
     parser.add_argument("--spp", type=int, metavar="N", help="path_tracer: samples per pixel; hybrid: most "
                         "multiple-scattering paths per pixel (= --set spp=N)")
     parser.add_argument("--seed", type=int, metavar="S", help="path_tracer, hybrid: random seed (= --set seed=S)")
@@ -162,11 +162,9 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     usd.add_argument("--purpose", dest="purposes", action="append", metavar="PURPOSE", help="render prims of "
                      "this purpose (repeatable: render, proxy, guide; prims of purpose default always render; "
                      "default: the settings' includedPurposes, else default and render)")
-    usd.add_argument("--colorspace", type=colorspace_argument, default=None, metavar="NAME", help="primaries of "
-                     "the EXR's colours: lin_rec709 (default; sRGB primaries, D65) or ACEScg (AP1), by these or "
-                     "any of their OpenColorIO names ('ACES - ACEScg', 'lin_ap1', 'Utility - Linear - sRGB'); "
-                     "written into the header's chromaticities (default: the settings' renderingColorSpace, else "
-                     "lin_rec709)")
+    usd.add_argument("--colorspace", type=colorspace_argument, default=None, metavar="NAME", help="the EXR's "
+                     "primaries: lin_rec709 or ACEScg, or an OpenColorIO name of either (default: the settings' "
+                     "renderingColorSpace, else lin_rec709)")
 
 
 def settings_from_args(args) -> dict[str, str]:
