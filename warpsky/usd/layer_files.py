@@ -19,10 +19,12 @@ import re
 from pathlib import Path
 
 from warpsky.core.errors import SceneError
+from warpsky.usd.generated_data import missing_file_hint
 
 #: The prefix USD puts before every message of a ``Tf.ErrorException``: where in USD's C++ sources it was raised.
 _TF_PREFIX = re.compile(r"\s*Error in '[^']*' at line \d+ in file [^\n]*? : '")
 _CPP_SYMBOL = re.compile(r"pxrInternal_\w+::")
+_ASSET = re.compile(r"@([^@]+)@")
 _LONGEST_MESSAGE = 240  # characters; the parser quotes the rest of the offending line, which can be long
 
 
@@ -92,5 +94,8 @@ def composition_problem(stage) -> str | None:
     lost = {Pcp.ErrorType_InvalidAssetPath, Pcp.ErrorType_InvalidSublayerPath}
     for error in stage.GetCompositionErrors():
         if error.errorType in lost:
-            return " ".join(str(error).split()).removesuffix("; skipping.")
+            message = " ".join(str(error).split()).removesuffix("; skipping.")
+            asset = _ASSET.search(message)  # USD names the missing file between @s, resolved to an absolute path
+            hint = missing_file_hint(asset.group(1)) if asset else ""
+            return message.removesuffix(".") + hint if hint else message
     return None

@@ -14,6 +14,7 @@ from warpsky.core.errors import SceneError
 from warpsky.media.stratiform.thickness import PROCEDURAL_RESOLUTION, load_map, procedural_thickness
 from warpsky.model.scene import Ground
 from warpsky.model.stratiform import GroundTexture, StratiformLayer, ThicknessAdvection
+from warpsky.usd.generated_data import missing_asset_hint
 from warpsky.usd.prims import StagePrims
 
 #: ``warpsky:kind`` of a stratiform layer prim, and the attributes such a prim may carry.
@@ -138,7 +139,8 @@ class SurfaceReading(StagePrims):
             raise SceneError(f"{prim.GetPath()}.{name} must be an asset path (asset {name} = @file@), got {asset!r}")
         if not asset.resolvedPath:
             layer = self.stage.GetRootLayer().realPath
-            raise SceneError(f"{prim.GetPath()}.{name}: file {asset.path!r} not found (relative to {layer})")
+            raise SceneError(f"{prim.GetPath()}.{name}: file {asset.path!r} not found (relative to {layer})"
+                             + missing_asset_hint(layer, asset.path))
         resolved = asset.resolvedPath
         stat = os.stat(resolved)
         key = (resolved, channels, stat.st_mtime_ns, stat.st_size)

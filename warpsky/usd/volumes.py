@@ -38,6 +38,7 @@ from warpsky.media.voxels.fields import level_set_advice, load_field, load_vecto
 from warpsky.media.voxels.velocity import advected_grid
 from warpsky.model.scene import FIELD_SPECIES, DetailSpec, IceCrystals, PhaseKind, PhaseModel, VoxelMedium
 from warpsky.optics.species import get_species
+from warpsky.usd.generated_data import missing_asset_hint
 from warpsky.usd.prims import StagePrims
 
 PHASE_TOKENS = {"isotropic": PhaseKind.ISOTROPIC, "hg": PhaseKind.HG, "rayleigh": PhaseKind.RAYLEIGH}
@@ -207,7 +208,10 @@ class VolumeReading(StagePrims):
                              f"vector grid ({', '.join(VECTOR_DATA_TYPES)})")
         asset_path = asset.GetFilePathAttr().Get(tc)
         if asset_path is None or not asset_path.resolvedPath:
-            raise SceneError(f"field {field_path}: file {getattr(asset_path, 'path', None)!r} not found")
+            layer = vel_prim.GetStage().GetRootLayer().realPath
+            authored = getattr(asset_path, "path", None)
+            raise SceneError(f"field {field_path}: file {authored!r} not found (relative to {layer})"
+                             + missing_asset_hint(layer, authored))
         name = asset.GetFieldNameAttr().Get(tc)
         index = vel_prim.GetAttribute("fieldIndex")
         index = int(index.Get(tc)) if index and index.HasAuthoredValue() else 0
@@ -329,7 +333,8 @@ class VolumeReading(StagePrims):
         resolved = asset_path.resolvedPath
         if not resolved:
             layer = field_prim.GetStage().GetRootLayer().realPath
-            raise SceneError(f"field {field_path}: file {asset_path.path!r} not found (relative to {layer})")
+            raise SceneError(f"field {field_path}: file {asset_path.path!r} not found (relative to {layer})"
+                             + missing_asset_hint(layer, asset_path.path))
         grid_name = asset.GetFieldNameAttr().Get(tc)
         grid_name = str(grid_name) if grid_name else None
         grid_index = self._check_grid_attrs(field_prim, tc, resolved, grid_name)
