@@ -11,13 +11,14 @@ STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 help:
 	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
-	@echo "                          (the render: about 50 s on 2 CPU cores once Warp's kernels are cached)"
+	@echo "                          (its time on 2 CPU cores, cold and warm: measured in the README's Quickstart)"
 	@echo "make test               - install into $(VENV) and run every test on the CPU (899 tests, 8-14 min on 2 cores)"
 	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; under 3 min)"
 	@echo "make lint               - ruff"
 	@echo "make bench              - run evaluation/benchmarks/bench_single_scatter.py (cuda too when present)"
 	@echo "make venv               - create $(VENV) and install warpsky with all extras (redone when pyproject changes)"
-	@echo "make data               - generate the demo cumulus field data/cumulus.nvdb"
+	@echo "make data               - generate the data every stage in usd_scenes/ references, in data/ (the cumulus,"
+	@echo "                          storm, stratocumulus and sundog fields and the terrain; about 20 s on 2 CPU cores)"
 	@echo "make family             - generate the 24-stage validation family (seed 2026) in data/family"
 	@echo "make family-thick       - generate the 12-stage thick family (optical depth 100-1000, seed 2027) in"
 	@echo "                          data/family_thick"
@@ -53,10 +54,26 @@ $(STAMP): pyproject.toml
 	rm -f $(VENV)/.installed-*
 	touch $@
 
+# The data the shipped stages reference (usd_scenes/*.usda). Each command is the one a missing file's error names
+# (warpsky/usd/generated_data.py, with python for $(PY)); a test checks the two agree.
+DATA = data/cumulus.nvdb data/storm/.complete data/stratocumulus/.complete data/sundogs/.complete data/terrain.usda
+
 data/cumulus.nvdb: tools/make_cumulus.py $(STAMP)
+	@echo "make data: the demo cumulus field data/cumulus.nvdb (a few seconds)"
 	$(PY) tools/make_cumulus.py --out data
 
-data: data/cumulus.nvdb
+data/stratocumulus/.complete: tools/make_stratocumulus.py $(STAMP)
+	@echo "make data: the stratocumulus thickness and ground maps in data/stratocumulus/ (a second)"
+	$(PY) tools/make_stratocumulus.py --out data
+	touch $@
+
+data/sundogs/.complete: tools/make_sundogs.py $(STAMP)
+	@echo "make data: the sundogs' two ice sheets in data/sundogs/ (a second)"
+	$(PY) tools/make_sundogs.py --out data/sundogs
+	touch $@
+
+data: $(DATA)
+	@echo "make data: every stage in usd_scenes/ has its data in data/"
 
 # The validation family: 24 seeded stages, tune and test halves (warpsky bench error-vs-time --family data/family).
 data/family/family.json: evaluation/scripts/make_validation_family.py evaluation/family_stages.py \
@@ -103,15 +120,13 @@ cumulus-wind: $(STAMP) data/cumulus.nvdb
 # stratocumulus-anim: the 48-frame advected sequence (Neyret 2003), one EXR + PNG per frame.
 SC_RENDER = $(VENV)/bin/warpsky render --png --exposure 1
 
-stratocumulus: $(STAMP)
-	$(PY) tools/make_stratocumulus.py --out data
+stratocumulus: $(STAMP) data/stratocumulus/.complete
 	$(SC_RENDER) usd_scenes/stratocumulus.usda out/stratocumulus-radiosity-on.exr --res 384
 	$(SC_RENDER) usd_scenes/stratocumulus.usda out/stratocumulus-radiosity-off.exr --res 384 \
 		--set stratiform.radiosity=0
 	$(PY) tools/make_stratocumulus.py --radiosity-light out
 
-stratocumulus-anim: $(STAMP)
-	$(PY) tools/make_stratocumulus.py --out data
+stratocumulus-anim: $(STAMP) data/stratocumulus/.complete
 	$(SC_RENDER) usd_scenes/stratocumulus_anim.usda out/stratocumulus_anim/sc.####.exr --res 256
 
 # The storm: per-frame NanoVDB fields (tools/make_storm.py), two shots rendered as batches (resumable: rerun to
@@ -123,6 +138,7 @@ STORM_TECHNIQUE ?= slicing
 STORM_BATCH      = --technique $(STORM_TECHNIQUE) $(if $(filter 0,$(STORM_WORKERS)),,--workers $(STORM_WORKERS))
 
 data/storm/.complete: tools/make_storm.py $(STAMP)
+	@echo "make data: the storm's 48 frames of cloud, rain, snow and ice in data/storm/ (about 10 s)"
 	$(PY) tools/make_storm.py --out data/storm --frames 48
 	touch $@
 
@@ -138,7 +154,8 @@ storm: $(STAMP) data/storm/.complete
 
 # Terrain, valley fog (Biri 2002) and sunbeams (Max 1986): one terrain mesh, two stages that reference it.
 data/terrain.usda: tools/make_terrain.py $(STAMP)
-	$(PY) tools/make_terrain.py --seed 1 --valley-angle 90 --resolution 257 --out $@
+	@echo "make data: the 4 km terrain mesh data/terrain.usda of the valley fog and sunbeams (a few seconds)"
+	$(PY) tools/make_terrain.py --seed 1 --valley-angle 90 --resolution 257 --out data/terrain.usda
 
 terrain: data/terrain.usda
 
@@ -156,9 +173,7 @@ sunbeams: $(STAMP) data/terrain.usda
 		--set deck.mode=max --time-budget 20
 
 # The gallery: one hero frame per shipped stage (tools/make_gallery.py runs each warpsky render command).
-gallery: $(STAMP) data/cumulus.nvdb data/storm/.complete data/terrain.usda
-	$(PY) tools/make_stratocumulus.py --out data
-	$(PY) tools/make_sundogs.py --out data/sundogs
+gallery: $(STAMP) $(DATA)
 	$(PY) tools/make_gallery.py
 
 clean:
@@ -166,8 +181,7 @@ clean:
 
 # Sundogs: oriented ice plates and columns in a cirrostratus sheet at sunset (single scattering: the sheet is thin),
 # the frame as EXR + PNG and a copy with each arc labelled where its closed form puts it.
-sundogs: $(STAMP)
-	$(PY) tools/make_sundogs.py --out data/sundogs
+sundogs: $(STAMP) data/sundogs/.complete
 	$(VENV)/bin/warpsky render usd_scenes/sundogs.usda out/sundogs/sundogs.####.exr --frames 1 --png \
 		--technique single_scatter --res 768x512
 	$(PY) tools/label_halos.py usd_scenes/sundogs.usda out/sundogs/sundogs.0001.png out/sundogs/sundogs_labelled.png
