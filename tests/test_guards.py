@@ -278,7 +278,7 @@ def test_first_stumbles_get_one_line_and_leave_nothing(tmp_path, box_stage, caps
     def stopped(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("warpsky.cli.main.run_batch", stopped)
+    monkeypatch.setattr("warpsky.batch.run.run_batch", stopped)
     out = tmp_path / "new" / "deeper" / "o.exr"
     code, _, err = run(["render", box_stage, out, "--res", "8", "--technique", "single_scatter"], capsys)
     assert code == 130 and not (tmp_path / "new").exists()

@@ -11,22 +11,9 @@ import sys
 import textwrap
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from warpsky.api import open_stage, with_product
 from warpsky.batch.frames import FramePattern, parse_frame_spec
-from warpsky.batch.run import (
-    DaskExecutor,
-    FrameJob,
-    InProcessExecutor,
-    check_writable,
-    format_summary,
-    log_path_for,
-    plan_first_frame,
-    remove_empty,
-    run_batch,
-    share_reader,
-)
-from warpsky.cli.info import cmd_info
 from warpsky.cli.options import (
     add_render_options,
     explicit_options,
@@ -34,19 +21,19 @@ from warpsky.cli.options import (
     resolution_arg,
     with_res_scale,
 )
-from warpsky.core.device import init_warp
 from warpsky.core.errors import UsageError, WarpskyError
 from warpsky.core.interrupt import Interrupted, report_interrupt, sigint_stops_renders
-from warpsky.core.settings import settings_table
 from warpsky.core.version import __version__
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
 from warpsky.output.deep_bins import DEEP_SAMPLES, MAX_DEEP_SAMPLES
 from warpsky.output.png import DEFAULT_VIEW, DISPLAY, check_view
-from warpsky.output.preview import contact_sheet, stage_preview
-from warpsky.output.products import FULL_WINDOW
 from warpsky.render.registry import DEFAULT_TECHNIQUE, pass_classes, technique_classes
-from warpsky.usd.stage import StageReader
+
+# Warp, pxr, OpenEXR and the renderer load in the commands that use them (inside the functions below), so that
+# ``warpsky --help`` and the argument checks load none of them.
+if TYPE_CHECKING:
+    from warpsky.batch.run import FrameJob
 
 EPILOG_RENDER = """\
 frames: --frames 1 | 1:48 | 1:48x2 | 1.5:3x0.5 | 1,5,9:12 (usdrecord's grammar);
@@ -70,6 +57,8 @@ SETTINGS_HEADER = ("settings (--set NAME=VALUE, repeatable; 'auto' restores a de
 def settings_sections() -> dict[str, list[str]]:
     """Each technique's settings (the default technique first) and then each pass's, name -> the table generated
     from the settings class's field metadata and its notes."""
+    from warpsky.core.settings import settings_table
+
     sections: dict[str, list[str]] = {}
     for cls in technique_classes():
         title = f"{cls.name} (default)" if cls.name == DEFAULT_TECHNIQUE else cls.name
@@ -223,6 +212,8 @@ def bench_commands():
 def shots(args) -> tuple[object, list[tuple[str, object]]]:
     """(the reader, [(output pattern, options)]): one shot per RenderProduct of the stage's render settings, or
     the command line's OUT with the settings' camera and resolution when there are no products."""
+    from warpsky.api import open_stage, with_product
+
     reader, spec, options = open_stage(args.stage, options_from_args(args), args.settings_prim,
                                        explicit=explicit_options(args))
     for note in spec.notes if spec else ():
@@ -268,6 +259,8 @@ def frame_list(reader, pattern, spec: str | None) -> list[float | None]:
 def _same_render(planned: list) -> list[list]:
     """``planned`` (pattern, options) shots grouped by what their pixels depend on: shots that differ only in
     their channels (outputs) and data window are written from one render."""
+    from warpsky.output.products import FULL_WINDOW
+
     groups: list[tuple[object, list]] = []
     for shot in planned:
         window = shot[1].data_window
@@ -283,6 +276,8 @@ def _same_render(planned: list) -> list[list]:
 
 
 def _shot_jobs(args, reader, pattern_text: str, options) -> tuple[FramePattern, list[FrameJob]]:
+    from warpsky.batch.run import FrameJob
+
     pattern = FramePattern(pattern_text)
     times = frame_list(reader, pattern, args.frames)
     span = reader.time_range()
@@ -298,6 +293,8 @@ def _shot_jobs(args, reader, pattern_text: str, options) -> tuple[FramePattern, 
 
 
 def cmd_render(args) -> int:
+    from warpsky.batch.run import check_writable, plan_first_frame, remove_empty, share_reader
+
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
     if args.retries < 0:
@@ -327,6 +324,8 @@ def cmd_render(args) -> int:
 
 def _run_batches(args, batches, far: bool) -> int:
     """Run each shot's frames (their directories made), print the summaries; the command's exit code."""
+    from warpsky.batch.run import DaskExecutor, InProcessExecutor, format_summary, log_path_for, run_batch
+
     if args.scheduler:
         executor = DaskExecutor(address=args.scheduler, timeout=args.scheduler_timeout)
     elif args.workers:
@@ -350,6 +349,9 @@ def _run_batches(args, batches, far: bool) -> int:
 
 
 def cmd_preview(args) -> int:
+    from warpsky.output.preview import stage_preview
+    from warpsky.usd.stage import StageReader
+
     scene = StageReader(args.stage).scene_at(args.frame, camera_path=args.camera)
     print(stage_preview(scene, args.output, size=(args.size[0], args.size[1] or round(args.size[0] * 0.75)),
                         level=args.level))
@@ -357,6 +359,8 @@ def cmd_preview(args) -> int:
 
 
 def cmd_contact_sheet(args) -> int:
+    from warpsky.output.preview import contact_sheet
+
     print(contact_sheet(args.pattern, args.output, columns=args.columns, tile_width=args.tile_width,
                         exposure=args.exposure, view=check_view(args.view)))
     return 0
@@ -377,6 +381,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        from warpsky.cli.info import cmd_info
+        from warpsky.core.device import init_warp
+
         init_warp(verbose=args.verbose)
         if args.command == "optics":
             return run_optics(args)

@@ -7,15 +7,12 @@ import argparse
 import math
 from dataclasses import replace
 
-from warpsky.api import render_options
 from warpsky.core.errors import UsageError
-from warpsky.core.resources import parse_size
 from warpsky.core.settings import field_kinds
 from warpsky.output.color import colorspace_argument
 from warpsky.output.deep_bins import DEEP_SAMPLES, check_deep_samples
 from warpsky.output.png import DEFAULT_VIEW, check_view
 from warpsky.render.motion import DEFAULT_SAMPLES
-from warpsky.render.plan import DEFAULT_WIDTH
 from warpsky.render.registry import DEFAULT_TECHNIQUE, technique_class, technique_classes, technique_names
 
 #: Command-line shorthands for technique settings: ``--spp N`` is ``--set spp=N``.
@@ -73,6 +70,8 @@ def with_res_scale(options, percent: float | None):
     pixel and at least 1; a width-only resolution stays width-only (the height follows the camera)."""
     if percent is None or percent == 100.0:
         return options
+    from warpsky.render.plan import DEFAULT_WIDTH
+
     width, height = options.resolution or (DEFAULT_WIDTH, None)
 
     def scaled(pixels: int) -> int:
@@ -82,6 +81,8 @@ def with_res_scale(options, percent: float | None):
 
 
 def _size(text: str) -> int:
+    from warpsky.core.resources import parse_size  # loads Warp: only for --max-memory
+
     try:
         return parse_size(text)
     except ValueError as exc:
@@ -186,6 +187,8 @@ def settings_from_args(args) -> dict[str, str]:
 
 def options_from_args(args) -> object:
     """The render's options as the Python API builds them (:func:`warpsky.api.render_options`)."""
+    from warpsky.api import render_options
+
     return render_options(
         technique=args.technique,
         settings=settings_from_args(args),

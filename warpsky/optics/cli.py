@@ -1,4 +1,5 @@
-"""``warpsky optics``: prebuild, plot and export the tables techniques use."""
+"""``warpsky optics``: prebuild, plot and export the tables techniques use (the tables' modules load when a verb
+runs, not for ``--help``)."""
 
 from __future__ import annotations
 
@@ -6,12 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from warpsky.core.files import atomic_write
 from warpsky.model.scene import SPECIES_NAMES
-from warpsky.optics.grid import angle_grid
-from warpsky.optics.tables import ams_table, build_tables, phase_table
 
 CHANNEL_COLOURS = ("#d62728", "#2ca02c", "#1f77b4")
 
@@ -41,6 +37,8 @@ def run(args) -> int:
 
 
 def _build(args) -> int:
+    from warpsky.optics.tables import build_tables
+
     tables = build_tables(args.species, orders=args.orders)
     built = {name for name, _, _ in tables.built}
     for name in tables.species:
@@ -52,6 +50,11 @@ def _build(args) -> int:
 
 def _plot(args) -> int:
     import matplotlib  # heavy: loads only for ``warpsky optics plot``
+    import numpy as np
+
+    from warpsky.core.files import atomic_write
+    from warpsky.optics.grid import angle_grid
+    from warpsky.optics.tables import ams_table, phase_table
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -91,6 +94,12 @@ def _plot(args) -> int:
 
 
 def _export(args) -> int:
+    import numpy as np
+
+    from warpsky.core.files import atomic_write
+    from warpsky.optics.grid import angle_grid
+    from warpsky.optics.tables import ams_table, phase_table
+
     if args.order is None:
         table, label = phase_table(args.species), "P"
     else:

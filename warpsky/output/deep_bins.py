@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpsky.core.errors import UsageError
-from warpsky.core.numerics import LUMINANCE_WEIGHTS
 
 #: Volume samples per volume layer and pixel unless asked otherwise (``--deep-samples``): the visibility of a point
 #: inside a density ramp rising 20-fold along the ray is then within 1e-2 of the closed form (4e-3 to 9e-3 measured),
@@ -87,6 +86,8 @@ def profile_samples(layer, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     ``profile`` and the point beyond them where its media show, else the layer as one point at its depth (the
     others then let everything through and carry nothing). Radiance is each sample's own, as a layer's: what it
     sends towards the eye from its front."""
+    from warpsky.core.numerics import LUMINANCE_WEIGHTS  # a kernel module: loads Warp, which --help does without
+
     weights = LUMINANCE_WEIGHTS.astype(np.float64)
     radiance = np.asarray(layer.radiance, np.float64)[rows]
     through = np.clip(np.asarray(layer.transmittance, np.float64)[rows], 0.0, 1.0)
