@@ -250,3 +250,23 @@ def test_render_help_and_info_load_no_evaluation_code_or_peer(tmp_path, homogene
         assert "warpsky.cli.main" in names
         loaded = sorted(n for n in names if n.split(".")[0] in NOT_LOADED)
         assert not loaded, f"warpsky {' '.join(args)} imports {loaded}"
+
+
+#: What printing help must not load: Warp (about 0.4 s), USD and OpenEXR, so that ``warpsky --help`` answers at once.
+HEAVY = ("warp", "pxr", "OpenEXR")
+
+
+def test_help_loads_neither_warp_nor_usd():
+    for args in (["--help"], ["render", "--help"], ["info", "--help"]):
+        loaded = sorted(n for n in _imported(args) if n.split(".")[0] in HEAVY)
+        assert not loaded, f"warpsky {' '.join(args)} imports {loaded}"
+
+
+def test_warp_is_configured_when_first_imported_after_warpsky():
+    """Importing warpsky leaves Warp unimported; Warp, imported later, comes without adjoint code generation."""
+    import subprocess
+
+    code = "import sys, warpsky; print('warp' in sys.modules); import warp; print(warp.config.enable_backward)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split() == ["False", "False"]
