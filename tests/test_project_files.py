@@ -47,9 +47,15 @@ def test_license_is_an_spdx_string():
         assert list(ROOT.glob(path)), path
 
 
-def test_readme_says_how_long_the_long_targets_take():
+def _quickstart() -> str:
+    """The README's Quickstart section: from its heading to the next one."""
     readme = (ROOT / "README.md").read_text()
-    quickstart = readme[readme.index("## Quickstart"): readme.index("## Rendering")]
+    start = readme.index("## Quickstart")
+    return readme[start: readme.index("\n## ", start + 1)]
+
+
+def test_readme_says_how_long_the_long_targets_take():
+    quickstart = _quickstart()
     assert "2-core" in quickstart
     for target in ("make demo", "make test", "make test-fast", "make storm"):
         mentions = re.findall(rf"`{target}`[^\n]*(?:\n  [^\n]*)*", quickstart)  # with a list item's lines
@@ -62,8 +68,7 @@ def test_make_help_and_the_readme_give_the_same_test_time():
     makefile = (ROOT / "Makefile").read_text()
     line = next(text for text in makefile.splitlines() if '"make test ' in text)
     help_count, help_low, help_high = re.search(r"(\d+) tests, (\d+)-(\d+) min", line).groups()
-    readme = (ROOT / "README.md").read_text()
-    quickstart = readme[readme.index("## Quickstart"): readme.index("## Rendering")]
+    quickstart = _quickstart()
     item = re.search(r"- `make test`: (\d+)–(\d+) minutes[^(]*\((\d+) tests", quickstart)
     assert item is not None, "the Quickstart's make test item: '- `make test`: A–B minutes ... (N tests'"
     assert (help_low, help_high, help_count) == item.groups(), (line, item.group(0))

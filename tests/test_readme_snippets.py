@@ -1,18 +1,20 @@
-"""The README's USD snippets are valid USD: each ```usda block parses as a layer, and its render settings read."""
+"""The documents' USD snippets are valid USD: each ```usda block of the README and the user guide parses as a
+layer, and its render settings read."""
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+ROOT = Path(__file__).resolve().parent.parent
+DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs" / "guide").glob("*.md"))]
 
 
 def usda_blocks() -> list[str]:
-    return re.findall(r"```usda\n(.*?)```", README.read_text(), flags=re.S)
+    return [block for path in DOCUMENTS for block in re.findall(r"```usda\n(.*?)```", path.read_text(), flags=re.S)]
 
 
-def test_readme_usda_snippets_parse_and_their_vars_read():
+def test_usda_snippets_parse_and_their_vars_read():
     from pxr import Sdf, Usd, UsdRender
 
     blocks = usda_blocks()
