@@ -29,20 +29,27 @@ unknowns take the plain sine (its horizon is level). Directions: Gauss-Legendre 
 each hemisphere (:data:`ELEVATIONS`) times :data:`AZIMUTHS` midpoints on [0, pi] (the other half by symmetry).
 Unlike Hillaire (2020, §5.5), whose table takes the same two numbers, it does not assume each order as strong as the
 point's own (his geometric series) and keeps the floor's bounces between orders.
+
+A build takes a second or two on a CPU, so the table is kept on disk (:func:`cache_path`) and read from there by later
+processes; a build says so first (:mod:`warpsky.core.progress`).
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import warp as wp
 
 from warpsky.core import device_buffers
+from warpsky.core.files import atomic_write, cache_dir
 from warpsky.core.numerics import exp3
+from warpsky.core.progress import announced
 from warpsky.media.air.analytic import AnalyticAir, analytic_air
 from warpsky.media.air.round_earth_kernels import (
     PANEL_NODES,
@@ -307,18 +314,55 @@ def build(atm, floor: float, albedo, device) -> RoundTable:
                       time.perf_counter() - started, float(atm.mie_g), float(atm.planet_radius))
 
 
+#: What a first build takes, for its progress line (1.4 s on 2 idle CPU cores).
+BUILD_ESTIMATE = "about 2 s on a CPU"
+
+
+def cache_path(key: tuple, albedo: tuple, device: str) -> Path:
+    """Where the table of the air and floor ``key`` and ``albedo`` built on ``device`` is kept:
+    ``$WARPSKY_CACHE/air/round-earth-<hash>.npz``, the hash covering them, the device's kind (a GPU's atomic sums
+    run in another order), the build kernel's Warp module hash (its code and every function it calls) and this
+    file's code, so that a change to the build is never answered from an old file."""
+    source = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+    kind = "cpu" if device.startswith("cpu") else "cuda"
+    text = repr((key, albedo, kind, transport_kernel.module.get_module_hash().hex(), source))
+    return cache_dir() / "air" / f"round-earth-{hashlib.sha256(text.encode()).hexdigest()[:20]}.npz"
+
+
+def _stored(path: Path) -> RoundTable | None:
+    try:
+        with np.load(path) as data:
+            return RoundTable(data["values"], *(float(data[name]) for name in _SCALARS))
+    except (OSError, ValueError, EOFError, KeyError):
+        return None  # missing or unreadable: built again and overwritten
+
+
+_SCALARS = ("floor", "height", "seconds", "mie_g", "radius")
+
+
 @functools.lru_cache(maxsize=32)
 def _cached(key: tuple, albedo: tuple, device: str) -> RoundTable:
+    """The table read from the disk cache, else built (saying so first) and written there."""
+    path = cache_path(key, albedo, device)
+    table = _stored(path) if path.is_file() else None
+    if table is not None:
+        return table
     atm, floor = _KEYED[key]
-    return build(atm, floor, np.array(albedo), device)
+    with announced("air", "building the air table",
+                   f"building the air's multiple-scattering table on {device} ({BUILD_ESTIMATE}, once per air and "
+                   f"ground; then loaded from {path.parent})"):
+        table = build(atm, floor, np.array(albedo), device)
+    atomic_write(path, lambda tmp: np.savez(tmp, values=table.values,
+                                            **{name: getattr(table, name) for name in _SCALARS}))
+    return table
 
 
 _KEYED: dict = {}
 
 
 def round_table(atm, floor: float, albedo, device) -> RoundTable:
-    """The table for ``atm`` over a floor at ``floor`` of ``albedo``, built once per air, floor and device (it
-    holds every sun elevation: a sunrise builds it once)."""
+    """The table for ``atm`` over a floor at ``floor`` of ``albedo``, built once per air, floor and kind of device
+    and kept in the disk cache (it holds every sun elevation: a sunrise builds it once)."""
     key = air_key(atm, floor)
     _KEYED.setdefault(key, (atm, float(floor)))
     return _cached(key, tuple(float(a) for a in np.asarray(albedo, dtype=np.float64)), str(wp.get_device(device)))

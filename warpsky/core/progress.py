@@ -1,0 +1,92 @@
+"""Progress lines for slow first-time work (kernel compiles, optics and air tables), so that nothing runs silently for
+long: one line on stderr before the work says what it is, about how long it takes and where its result is cached, and
+the work is recorded with its time for ``warpsky prepare``'s summary.
+
+``warpsky --quiet`` (or ``$WARPSKY_QUIET=1``, which Dask workers inherit) silences the lines; the records are kept.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+#: The environment variable that silences progress lines (``1``).
+QUIET_ENV = "WARPSKY_QUIET"
+
+
+@dataclass(frozen=True)
+class Work:
+    """One piece of first-time work done in this process: its kind (``kernels``, ``optics``, ``air``), what it
+    was, and its seconds."""
+
+    kind: str
+    what: str
+    seconds: float
+
+
+#: Every piece of first-time work done in this process, in order.
+DONE: list[Work] = []
+_LOCK = threading.Lock()
+
+
+def set_quiet(quiet: bool) -> None:
+    """Silence (or restore) progress lines in this process and in the workers it starts."""
+    if quiet:
+        os.environ[QUIET_ENV] = "1"
+    else:
+        os.environ.pop(QUIET_ENV, None)
+
+
+def quiet() -> bool:
+    return os.environ.get(QUIET_ENV, "") not in ("", "0")
+
+
+def progress(message: str) -> None:
+    """Print ``warpsky: <message>`` on stderr at once, unless quiet."""
+    if not quiet():
+        print(f"warpsky: {message}", file=sys.stderr, flush=True)
+
+
+def record(kind: str, what: str, seconds: float) -> None:
+    with _LOCK:
+        DONE.append(Work(kind, what, float(seconds)))
+
+
+def format_seconds(seconds: float) -> str:
+    """``0.4 s``, ``12 s``, ``3 min 5 s``."""
+    if seconds < 10.0:
+        return f"{seconds:.1f} s"
+    if seconds < 60.0:
+        return f"{seconds:.0f} s"
+    minutes, rest = divmod(round(seconds), 60)
+    return f"{minutes} min {rest} s"
+
+
+@contextmanager
+def announced(kind: str, what: str, start: str, done: str | None = None, *, every: float = 10.0):
+    """Say ``start`` before the work in the ``with`` block, ``done`` (``{seconds}`` filled in) after it, and, while it
+    runs longer, ``... still <what> (N s)`` every ``every`` seconds (the work must release the GIL, as Warp's
+    compilers and kernels do); the work is recorded (:data:`DONE`)."""
+    progress(start)
+    started = time.perf_counter()
+    stop = threading.Event()
+
+    def tick():
+        while not stop.wait(every):
+            progress(f"... still {what} ({format_seconds(time.perf_counter() - started)})")
+
+    ticker = threading.Thread(target=tick, name="warpsky-progress", daemon=True)
+    ticker.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        ticker.join()
+    seconds = time.perf_counter() - started
+    record(kind, what, seconds)
+    if done is not None:
+        progress(done.format(seconds=format_seconds(seconds)))
