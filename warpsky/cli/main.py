@@ -17,6 +17,7 @@ from warpsky.batch.frames import FramePattern, parse_frame_spec
 from warpsky.cli.options import (
     add_render_options,
     explicit_options,
+    join_dash_values,
     options_from_args,
     resolution_arg,
     with_res_scale,
@@ -376,7 +377,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"warpsky: error: {exc}", file=sys.stderr)
             return exc.exit_code
     parser = build_parser(bench)
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_dash_values(given))
     if args.command is None:
         parser.print_help()
         return 2

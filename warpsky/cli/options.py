@@ -33,6 +33,27 @@ def resolution_arg(text: str) -> tuple[int, int | None]:
     return width, height
 
 
+#: Options whose value may begin with a minus that is not a plain number (``--res -96x64``): argparse would take the
+#: value for an option and answer "expected one argument" instead of the option's own check.
+DASH_VALUE_OPTIONS = ("--res",)
+
+
+def join_dash_values(argv: list[str]) -> list[str]:
+    """``argv`` with ``--res -96x64`` written ``--res=-96x64`` (for each of :data:`DASH_VALUE_OPTIONS`), so that
+    the value reaches :func:`resolution_arg` and its one-line message; nothing after a ``--`` changes."""
+    out: list[str] = []
+    pending = False
+    for i, arg in enumerate(argv):
+        if arg == "--":
+            return out + argv[i:]
+        if pending and arg[:1] == "-" and arg[1:2].isdigit():
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+        pending = arg in DASH_VALUE_OPTIONS and out[-1] == arg
+    return out
+
+
 def _fraction(text: str) -> float:
     try:
         value = float(text)
