@@ -25,7 +25,7 @@ from warpsky.render.frame import render_planned, write_frame
 from warpsky.render.image import RenderedImage
 from warpsky.render.options import RenderOptions
 from warpsky.render.planned import planned_frame
-from warpsky.render.registry import DEFAULT_TECHNIQUE, aov_components
+from warpsky.render.registry import DEFAULT_TECHNIQUE, AovComponents
 from warpsky.usd.render_settings import ProductSpec, RenderSpec, read_render_spec
 
 
@@ -99,7 +99,7 @@ def open_stage(stage, options: RenderOptions, settings_prim: str | None, *, expl
     from warpsky.usd.stage import StageReader
 
     reader = StageReader(stage, options.stage)
-    spec = read_render_spec(reader.stage, settings_prim, reader.meters_per_unit, aovs=aov_components())
+    spec = read_render_spec(reader.stage, settings_prim, reader.meters_per_unit, aovs=AovComponents())
     options = with_render_settings(options, spec, explicit=explicit)
     if options.stage != reader.options:  # the settings' includedPurposes
         reader = StageReader(stage, options.stage)

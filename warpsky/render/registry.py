@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+from collections.abc import Mapping
 
 from warpsky.core.errors import UsageError
 
@@ -78,6 +79,24 @@ def aov_components() -> dict[str, str]:
     for cls in technique_classes():
         out.update(cls.aovs)
     return out
+
+
+class AovComponents(Mapping):
+    """:func:`aov_components` as a mapping that imports the techniques on first use: a stage without RenderProducts
+    never reads it, and its frame loads only its own technique (each technique's module defines its kernels)."""
+
+    @functools.cached_property
+    def _all(self) -> dict[str, str]:
+        return aov_components()
+
+    def __getitem__(self, name: str) -> str:
+        return self._all[name]
+
+    def __iter__(self):
+        return iter(self._all)
+
+    def __len__(self) -> int:
+        return len(self._all)
 
 
 def aov_producers(name: str) -> list[str]:
