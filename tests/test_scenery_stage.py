@@ -173,7 +173,8 @@ def test_scenery_pass_settings_come_from_set_and_bad_ones_are_named(tmp_path, ca
     code, out, _ = run_cli(["info", path, "--set", "fog.nodes=2", "--set", "fog.cut_depth=20"], capsys)
     assert code == 0 and "fog.nodes=2, fog.min_pieces=4, fog.max_pieces=64, fog.cut_depth=20" in out
     code, _, err = run_cli(["info", path, "--set", "fog.node=2"], capsys)
-    assert code == 2 and "unknown setting fog.node for fog; known: fog.nodes, fog.min_pieces" in err
+    assert code == 2 and ("unknown setting fog.node for fog; did you mean fog.nodes? known: fog.nodes, fog.min_pieces"
+                          in err)
     code, _, err = run_cli(["info", path, "--set", "fog.nodes=two"], capsys)
     assert code == 2 and "setting fog.nodes: expected a whole number, got 'two'" in err
     code, _, err = run_cli(["info", path, "--set", "fog.max_pieces=2"], capsys)

@@ -32,3 +32,13 @@ class OutputError(WarpskyError):
 
 class UnsupportedVar(SceneError):
     """A RenderVar whose source warpsky does not write: its product is written without it."""
+
+
+def did_you_mean(word: str, candidates, cutoff: float = 0.6) -> str:
+    """``"did you mean X? "`` (or ``"did you mean X or Y? "``) for the ``candidates`` closest to a misspelt ``word``
+    (difflib's similarity at least ``cutoff``; raise it for names that share long prefixes, as prim paths do), ""
+    when none is close: the start of an error's suggestion, before the list of what is valid."""
+    import difflib
+
+    close = difflib.get_close_matches(word, [str(c) for c in candidates], n=2, cutoff=cutoff)
+    return f"did you mean {' or '.join(close)}? " if close else ""

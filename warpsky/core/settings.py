@@ -32,7 +32,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from warpsky.core.errors import UsageError
+from warpsky.core.errors import UsageError, did_you_mean
 
 
 def setting(default, *, unit: str = "--", range: str = "", help: str, auto: str | None = None):  # noqa: A002
@@ -246,7 +246,8 @@ def parse_settings(cls, values: dict | None):
     for key, text in (values or {}).items():
         if key not in kinds:
             known = ", ".join(cls.prefix + name for name in kinds)
-            raise UsageError(f"unknown setting {cls.prefix}{key} for {cls.owner}; known: {known}")
+            guess = did_you_mean(cls.prefix + key, [cls.prefix + name for name in kinds])
+            raise UsageError(f"unknown setting {cls.prefix}{key} for {cls.owner}; {guess}known: {known}")
         value = parse_value(cls, key, text)
         if value is not _DEFAULT:
             kwargs[key] = value
