@@ -26,6 +26,7 @@ from warpsky.model.scene import Scene
 from warpsky.optics.tables import is_cached
 from warpsky.passes.frame import ground_pass
 from warpsky.render.registry import DEFAULT_TECHNIQUE, pass_classes, technique_class, technique_classes
+from warpsky.render.setting_owners import check_owners
 
 DEFAULT_WIDTH = 512
 
@@ -127,6 +128,7 @@ def make_plan(
     classes = pass_classes()
     prefixes = {p.Settings.prefix: p for p in classes if p.Settings is not None}
     own, by_prefix = split_by_prefix(settings or {}, prefixes)
+    check_owners(technique, own, by_prefix, prefixes)
     pass_settings = {p.name: parse_settings(p.Settings, by_prefix[p.Settings.prefix]) for p in prefixes.values()}
     renderer = cls(parse_settings(cls.Settings, own), device=device).resolve(scene)
     width, height = resolve_resolution(scene, resolution)
