@@ -7,7 +7,7 @@ import argparse
 import math
 from dataclasses import replace
 
-from warpsky.core.errors import UsageError
+from warpsky.core.errors import UsageError, did_you_mean
 from warpsky.core.settings import field_kinds
 from warpsky.output.color import colorspace_argument
 from warpsky.output.deep_bins import DEEP_SAMPLES, check_deep_samples
@@ -52,6 +52,14 @@ def join_dash_values(argv: list[str]) -> list[str]:
             out.append(arg)
         pending = arg in DASH_VALUE_OPTIONS and out[-1] == arg
     return out
+
+
+def technique_arg(text: str) -> str:
+    """``--technique``: a registered technique's name; a misspelt one is answered with the closest names."""
+    if text in technique_names():
+        return text
+    raise argparse.ArgumentTypeError(f"unknown technique {text!r}; {did_you_mean(text, technique_names())}"
+                                     f"available: {', '.join(technique_names())}")
 
 
 def _fraction(text: str) -> float:
@@ -150,7 +158,7 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
                         help="scale the resolution (--res, else the stage's, else the default) by PERCENT, as husk's "
                         "--res-scale: 50 renders half the width and height (default 100)")
     parser.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
-    parser.add_argument("--technique", default=DEFAULT_TECHNIQUE, choices=technique_names(),
+    parser.add_argument("--technique", default=DEFAULT_TECHNIQUE, type=technique_arg, choices=technique_names(),
                         help=f"rendering technique (default: {DEFAULT_TECHNIQUE})")
     parser.add_argument("--set", dest="settings", type=_setting, action="append", default=[], metavar="NAME=VALUE",
                         help="technique or pass setting, repeatable (see --help-settings)")

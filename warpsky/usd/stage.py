@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warpsky.core.errors import SceneError
+from warpsky.core.errors import SceneError, did_you_mean
 from warpsky.model.scene import Atmosphere, Camera, Scene
 from warpsky.usd.composition import StageOptions, apply_variants, composition_summary
 from warpsky.usd.ignored import IgnoredReading
@@ -164,10 +164,19 @@ class StageReader(LightReading, VolumeReading, SurfaceReading, SceneryReading, I
             raise SceneError(f"--camera {camera_path!r} is not a valid prim path")
         prim = self.stage.GetPrimAtPath(camera_path)
         if not prim:
-            raise SceneError(f"stage {self.path} has no prim at camera path {camera_path}")
+            raise SceneError(f"stage {self.path} has no prim at camera path {camera_path}; "
+                             + self._cameras_hint(camera_path))
         if not prim.IsA(UsdGeom.Camera):
-            raise SceneError(f"prim {camera_path} is a {prim.GetTypeName() or 'typeless prim'}, not a Camera")
+            raise SceneError(f"prim {camera_path} is a {prim.GetTypeName() or 'typeless prim'}, not a Camera; "
+                             + self._cameras_hint(camera_path))
         return camera_path
+
+    def _cameras_hint(self, camera_path: str) -> str:
+        """"did you mean P? the stage's cameras: A, B" (or "the stage has no camera") for a wrong camera path."""
+        cameras = self.camera_paths()
+        if not cameras:
+            return "the stage has no camera"
+        return f"{did_you_mean(camera_path, cameras, cutoff=0.8)}the stage's cameras: {', '.join(cameras)}"
 
     def read_camera(self, camera_path: str | None = None, time=None) -> Camera:
         from pxr import UsdGeom
