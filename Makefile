@@ -1,5 +1,5 @@
 # warpsky: two commands on a fresh machine (times on a 2-core CPU: README, "Quickstart").
-#   make demo   render usd_scenes/cumulus.usda to out/cumulus.0001.exr (+ PNG preview)
+#   make demo   make data (every shipped stage's data), render usd_scenes/cumulus.usda to out/cumulus.0001.exr (+ PNG)
 #   make test   run the test suite on the CPU (make test-fast: without the tests marked slow)
 PYTHON ?= python3
 VENV   ?= .venv
@@ -10,7 +10,7 @@ STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 	cumulus-wind family family-thick scenery-family terrain valley-fog sunbeams sundogs gallery
 
 help:
-	@echo "make demo               - install into $(VENV), generate sample data, render the demo cumulus to out/"
+	@echo "make demo               - install into $(VENV), make data, render the demo cumulus to out/ (with a PNG)"
 	@echo "                          (its time on 2 CPU cores, cold and warm: measured in the README's Quickstart)"
 	@echo "make test               - install into $(VENV) and run every test on the CPU (899 tests, 8-14 min on 2 cores)"
 	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; under 3 min)"
@@ -18,7 +18,7 @@ help:
 	@echo "make bench              - run evaluation/benchmarks/bench_single_scatter.py (cuda too when present)"
 	@echo "make venv               - create $(VENV) and install warpsky with all extras (redone when pyproject changes)"
 	@echo "make data               - generate the data every stage in usd_scenes/ references, in data/ (the cumulus,"
-	@echo "                          storm, stratocumulus and sundog fields and the terrain; about 20 s on 2 CPU cores)"
+	@echo "                          storm, stratocumulus and sundog fields and the terrain; about 10 s on 2 CPU cores)"
 	@echo "make family             - generate the 24-stage validation family (seed 2026) in data/family"
 	@echo "make family-thick       - generate the 12-stage thick family (optical depth 100-1000, seed 2027) in"
 	@echo "                          data/family_thick"
@@ -98,7 +98,7 @@ data/scenery_family/family.json: evaluation/scripts/make_scenery_family.py evalu
 
 scenery-family: data/scenery_family/family.json
 
-demo: $(STAMP) data/cumulus.nvdb
+demo: $(STAMP) $(DATA)
 	$(VENV)/bin/warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
 
 test: $(STAMP)
@@ -138,7 +138,7 @@ STORM_TECHNIQUE ?= slicing
 STORM_BATCH      = --technique $(STORM_TECHNIQUE) $(if $(filter 0,$(STORM_WORKERS)),,--workers $(STORM_WORKERS))
 
 data/storm/.complete: tools/make_storm.py $(STAMP)
-	@echo "make data: the storm's 48 frames of cloud, rain, snow and ice in data/storm/ (about 10 s)"
+	@echo "make data: the storm's 48 frames of cloud, rain, snow and ice in data/storm/ (a few seconds)"
 	$(PY) tools/make_storm.py --out data/storm --frames 48
 	touch $@
 
