@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import pytest
 from conftest import StageSpec, add_field, write_stage
@@ -61,24 +59,3 @@ def test_two_frame_batch_builds_each_table_once_before_dispatch(tmp_path, monkey
     assert err.count("warpsky: building cloud phase table (≈ ") == 1 and "s, once; then loaded from" in err, err
     if technique == "slicing":
         assert err.count("building cloud multiple-scattering (Ams) table (about a second, once;") == 1, err
-
-
-def test_first_run_says_it_compiles_kernels(tmp_path, monkeypatch):
-    """With no variant of slicing's kernels in Warp's kernel cache the first run says it compiles them; one cached
-    variant is enough to stay quiet."""
-    import warp as wp
-
-    from warpsky.render.kernel_cache import compile_notice, technique_kernel_modules, variant_module_names
-    from warpsky.render.registry import technique_names
-
-    assert all(technique_kernel_modules(name) for name in technique_names())
-
-    monkeypatch.setattr(wp.config, "kernel_cache_dir", str(tmp_path))
-    notice = compile_notice("slicing")
-    assert notice is not None and notice.startswith("compiling Warp kernels for slicing (first run"), notice
-    # the estimate: Warp's generated C++ of slicing's two kernel factories, measured at 0.8 and 0.5 s on 2 cores
-    seconds = float(re.search(r"about (\d+) s on this CPU", notice).group(1))
-    assert 0 <= seconds <= 10, notice
-    (tmp_path / f"wp_{variant_module_names('slicing')[0]}_0123abc").mkdir()
-    assert compile_notice("slicing") is None
-    assert compile_notice("no_such_technique") is None

@@ -378,22 +378,18 @@ def remove_empty(directories: list[Path]) -> None:
 
 def prepare_batch(jobs: list[FrameJob]) -> None:
     """Plan the first frame here, before any frame is dispatched: build the optics tables it needs, so that workers
-    load them from the cache instead of each building them at once, and say when its technique's kernels will be
-    compiled for the first time. A frame whose input is at fault is left to report it when it runs; frames that
-    need other tables still build them themselves."""
+    load them from the cache instead of each building them at once. A frame whose input is at fault is left to
+    report it when it runs; frames that need other tables still build them themselves. (Kernel compiles say so
+    where they happen: :mod:`warpsky.render.compile_progress`; ``warpsky prepare`` does all of it ahead.)"""
     if not jobs or all(Path(job.out).is_file() and not job.overwrite for job in jobs):
         return  # nothing to render unless a finished frame is stale, which then builds what it needs itself
     from warpsky.optics.prepare import prepare_tables
-    from warpsky.render.kernel_cache import compile_notice
 
     try:
         frame = plan_job(jobs[0]).frame  # the frame planned for the up-front checks, else planned here
     except (WarpskyError, OSError):
         return
     prepare_tables(frame.scene, frame.plan)
-    notice = compile_notice(frame.plan.technique)
-    if notice is not None:
-        print(f"warpsky: {notice}", file=sys.stderr, flush=True)
 
 
 def _is_terminal(stream) -> bool:

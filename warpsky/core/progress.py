@@ -33,12 +33,22 @@ DONE: list[Work] = []
 _LOCK = threading.Lock()
 
 
-def set_quiet(quiet: bool) -> None:
-    """Silence (or restore) progress lines in this process and in the workers it starts."""
-    if quiet:
-        os.environ[QUIET_ENV] = "1"
-    else:
-        os.environ.pop(QUIET_ENV, None)
+@contextmanager
+def quieted(silence: bool = True):
+    """Progress lines silenced inside the block (and in the workers started there), as ``--quiet`` asks; the
+    environment is restored after it."""
+    if not silence:
+        yield
+        return
+    previous = os.environ.get(QUIET_ENV)
+    os.environ[QUIET_ENV] = "1"
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop(QUIET_ENV, None)
+        else:
+            os.environ[QUIET_ENV] = previous
 
 
 def quiet() -> bool:
@@ -68,16 +78,17 @@ def format_seconds(seconds: float) -> str:
 
 @contextmanager
 def announced(kind: str, what: str, start: str, done: str | None = None, *, every: float = 10.0):
-    """Say ``start`` before the work in the ``with`` block, ``done`` (``{seconds}`` filled in) after it, and, while it
-    runs longer, ``... still <what> (N s)`` every ``every`` seconds (the work must release the GIL, as Warp's
-    compilers and kernels do); the work is recorded (:data:`DONE`)."""
+    """Say ``start`` before building ``what`` (a table) in the ``with`` block, ``done`` (``{seconds}`` filled in)
+    after it, and, while it runs longer, ``... still building the <what> (N s)`` every ``every`` seconds (Python
+    switches threads while the work runs, unless one call into a C library holds the interpreter's lock all along);
+    the work is recorded (:data:`DONE`)."""
     progress(start)
     started = time.perf_counter()
     stop = threading.Event()
 
     def tick():
         while not stop.wait(every):
-            progress(f"... still {what} ({format_seconds(time.perf_counter() - started)})")
+            progress(f"... still building the {what} ({format_seconds(time.perf_counter() - started)})")
 
     ticker = threading.Thread(target=tick, name="warpsky-progress", daemon=True)
     ticker.start()

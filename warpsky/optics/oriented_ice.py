@@ -38,7 +38,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -49,6 +48,7 @@ import warp as wp
 from warpsky.core.device import cpu_thread_count, resolve_device
 from warpsky.core.errors import SceneError
 from warpsky.core.files import atomic_write, cache_dir
+from warpsky.core.progress import announced
 from warpsky.optics import oriented_ice_kernels as kernels
 from warpsky.optics.grid import angle_grid
 from warpsky.optics.ice import (
@@ -424,11 +424,12 @@ def oriented_ice_table(
         except (OSError, ValueError, EOFError, KeyError):
             pass  # unreadable cache entry: rebuild and overwrite it
     seconds = len(suns) * (3.0 * photons / CPU_PHOTONS_PER_SECOND + DIFFRACTION_SECONDS)
-    print(f"warpsky: building oriented ice table ({orientation.kind} {orientation.habit}s, tilt "
-          f"{orientation.tilt_deg:g}°, {len(suns)} sun elevations; ≈ {seconds:.0f} s on two CPU cores, seconds on a "
-          f"GPU; once, then loaded from {path.parent})", file=sys.stderr, flush=True)
-    table = build_oriented_table(orientation, sun_elevations_deg=suns, grid=grid, photons=photons, seed=seed,
-                                 device=device)
+    with announced("optics", f"oriented ice table ({orientation.kind} {orientation.habit}s)",
+                   f"building oriented ice table ({orientation.kind} {orientation.habit}s, tilt "
+                   f"{orientation.tilt_deg:g}°, {len(suns)} sun elevations; ≈ {seconds:.0f} s on two CPU cores, "
+                   f"seconds on a GPU; once, then loaded from {path.parent})"):
+        table = build_oriented_table(orientation, sun_elevations_deg=suns, grid=grid, photons=photons, seed=seed,
+                                     device=device)
     BUILD_LOG.append(("ice", f"oriented-{orientation.kind}", table.seconds))
     atomic_write(path, lambda tmp: np.savez_compressed(tmp, suns=suns, phase=table.phase,
                                                        area=table.projected_area, trapped=table.trapped_fraction))

@@ -4,13 +4,13 @@ Each table is stored as ``$WARPSKY_CACHE/optics/<species>-<kind>-<hash>.npz`` (d
 where the hash covers the species' parameters, the angular grid and :data:`CACHE_VERSION`. Files are written to a
 temporary name and renamed, so concurrent farm workers never read half a table. :data:`BUILD_LOG` records what this
 process computed (as opposed to loaded), so tests and ``warpsky optics build`` can tell a build from a load. A table
-being built prints a line to stderr first (:func:`build_progress`): a build takes seconds to minutes, once.
+being built prints a line to stderr first (:func:`build_progress`, then one every 10 s while it runs,
+:func:`warpsky.core.progress.announced`): a build takes seconds to minutes, once.
 """
 
 from __future__ import annotations
 
 import functools
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.core.files import atomic_write, cache_dir
+from warpsky.core.progress import announced
 from warpsky.model.scene import PhaseKind
 from warpsky.optics.grid import angle_grid, sphere_integral
 from warpsky.optics.multiple import ams_tables, forward_fractions, modified_mie
@@ -68,9 +69,10 @@ def _cached(species: str, kind: str, build, extra: str = "", *, orders: int | No
                 return {k: data[k] for k in data.files}
         except (OSError, ValueError, EOFError):
             pass  # unreadable cache entry: rebuild and overwrite it
-    print(f"warpsky: {build_progress(species, kind, orders)}", file=sys.stderr, flush=True)
     started = time.perf_counter()
-    arrays = build()
+    with announced("optics", f"{species} {KIND_NAMES.get(kind, kind)} table",
+                   build_progress(species, kind, orders)):
+        arrays = build()
     BUILD_LOG.append((species, kind, time.perf_counter() - started))
     atomic_write(path, lambda tmp: np.savez(tmp, **arrays))
     return arrays

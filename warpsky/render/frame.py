@@ -17,6 +17,8 @@ from pathlib import Path
 from warpsky.model.scene import Scene
 from warpsky.output.exr import write_channels
 from warpsky.output.png import write_png
+from warpsky.render.compile_progress import compiling_for
+from warpsky.render.compile_progress import install as announce_compiles
 from warpsky.render.header import quality_stats
 from warpsky.render.image import FrameRender, RenderedImage, composited, rendered_image
 from warpsky.render.motion import average_renders, sub_frame_technique, sub_frame_times
@@ -69,10 +71,13 @@ def render_planned(frame: PlannedFrame, *, timings: dict[str, float] | None = No
 
 def frame_render(frame: PlannedFrame, *, timings=None, reader=None) -> FrameRender:
     """The planned ``frame``'s pixels: one render at its time code, or with the stage's ``reader`` and an open
-    shutter the average of its sub-frames (:func:`blurred_render`)."""
-    if reader is not None and frame.blurred:
-        return blurred_render(reader, frame, timings)
-    return composited(frame.plan, frame.scene, frame.options, timings=timings)
+    shutter the average of its sub-frames (:func:`blurred_render`). A kernel module compiled on the way says so
+    (:mod:`warpsky.render.compile_progress`)."""
+    announce_compiles()
+    with compiling_for(frame.plan.technique):
+        if reader is not None and frame.blurred:
+            return blurred_render(reader, frame, timings)
+        return composited(frame.plan, frame.scene, frame.options, timings=timings)
 
 
 def blurred_render(reader, frame: PlannedFrame, timings=None) -> FrameRender:

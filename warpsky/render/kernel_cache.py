@@ -1,21 +1,14 @@
-"""Whether a technique's Warp kernels were ever compiled on this machine, so a first run can say it is compiling.
+"""The Warp kernels a technique launches and how long Warp takes to compile them.
 
 Warp compiles a kernel module on its first launch (seconds to a minute, by the size of its generated C++; see
-:func:`compile_seconds`) and keeps the result in its
-kernel cache, one ``wp_<module name>_<hash>`` entry per module in ``wp.config.kernel_cache_dir``; without a word
-a first render on a fresh machine spends minutes there. A factory-made kernel's module name carries a hash of its
-code, so an entry under that name means this code was compiled here. The check is coarse on purpose and cheap (no
-code generation): a technique counts as compiled once any variant of its kernel factories is cached, so the first
-run is announced and a later one that compiles one more variant (another scene feature) is not.
-
-The notice says how long: Warp's code generator (no compiler) writes the C++ of one variant of each of the
-technique's kernel factories, and :func:`compile_seconds` turns its size into seconds by a line fitted to
-measured compiles (``evaluation/benchmarks/bench_compile.py``).
+:func:`compile_seconds`) and keeps the result in its kernel cache, one ``wp_<module name>_<hash>`` entry per module in
+``wp.config.kernel_cache_dir``. A technique's kernel factories (:mod:`warpsky.core.kernel_variants`) are found from its
+``kernel_modules`` (:func:`technique_factories`); :func:`compile_seconds` turns the size of a module's generated C++
+into seconds by a line fitted to measured compiles (``evaluation/benchmarks/bench_compile.py``), which the compile
+progress lines (:mod:`warpsky.render.compile_progress`) quote as their estimate.
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 
 def technique_kernel_modules(technique: str) -> tuple[str, ...]:
@@ -52,24 +45,6 @@ def variant_module_names(technique: str) -> list[str]:
 
     return [kernel.module.name for factory, domains in technique_factories(technique)
             for flags in variants(domains) for kernel in built_kernels(factory, flags)]
-
-
-def compile_notice(technique: str) -> str | None:
-    """``compiling Warp kernels for <technique> (first run ...)`` when no variant of the technique's kernels is in
-    Warp's kernel cache, else None (also for techniques without kernel factories)."""
-    import warp as wp
-
-    from warpsky.core.device import init_warp
-
-    init_warp()
-    names = variant_module_names(technique)
-    cache = Path(wp.config.kernel_cache_dir)
-    entries = {p.name for p in cache.iterdir()} if cache.is_dir() else set()
-    if not names or any(entry.startswith(f"wp_{name}_") for entry in entries for name in names):
-        return None
-    seconds = compile_estimate(technique)
-    how_long = "" if seconds is None else f", about {seconds:.0f} s on this CPU"
-    return f"compiling Warp kernels for {technique} (first run on this machine{how_long}; then loaded from {cache})"
 
 
 #: Compile time of one CPU kernel module with Warp's bundled Clang [s] = intercept + slope * megabytes of its

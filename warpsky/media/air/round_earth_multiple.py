@@ -348,7 +348,7 @@ def _cached(key: tuple, albedo: tuple, device: str) -> RoundTable:
     if table is not None:
         return table
     atm, floor = _KEYED[key]
-    with announced("air", "building the air table",
+    with announced("air", "air table",
                    f"building the air's multiple-scattering table on {device} ({BUILD_ESTIMATE}, once per air and "
                    f"ground; then loaded from {path.parent})"):
         table = build(atm, floor, np.array(albedo), device)
