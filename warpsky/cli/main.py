@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from warpsky.batch.frames import FramePattern, parse_frame_spec
 from warpsky.cli.options import (
+    add_quiet,
     add_render_options,
     explicit_options,
     join_dash_values,
@@ -22,6 +23,7 @@ from warpsky.cli.options import (
     resolution_arg,
     with_res_scale,
 )
+from warpsky.cli.prepare import add_parser as add_prepare
 from warpsky.core.errors import UsageError, WarpskyError
 from warpsky.core.interrupt import Interrupted, report_interrupt, sigint_stops_renders
 from warpsky.core.version import __version__
@@ -126,6 +128,7 @@ def build_parser(bench=None) -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"warpsky {__version__}")
     parser.add_argument("--verbose", action="store_true", help="show Warp's own log (compiles, devices)")
+    add_quiet(parser, command=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
 
     render = sub.add_parser(
@@ -187,6 +190,7 @@ def build_parser(bench=None) -> argparse.ArgumentParser:
     sheet.add_argument("--view", default=DEFAULT_VIEW, metavar="VIEW",
                        help=f"the tiles' view of OpenColorIO's {DISPLAY!r} (default {DEFAULT_VIEW!r}, or 'simple')")
 
+    add_prepare(sub)
     add_optics(sub)
 
     if bench is None:
@@ -383,14 +387,19 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         from warpsky.cli.info import cmd_info
+        from warpsky.cli.prepare import cmd_prepare
         from warpsky.core.device import init_warp
+        from warpsky.core.progress import quieted
+        from warpsky.render.compile_progress import install as announce_compiles
 
         init_warp(verbose=args.verbose)
+        announce_compiles()
         if args.command == "optics":
-            return run_optics(args)
+            with quieted(args.quiet):
+                return run_optics(args)
         commands = {"render": cmd_render, "info": cmd_info, "bench": bench.run if bench else None,
-                    "preview": cmd_preview, "contact-sheet": cmd_contact_sheet}
-        with sigint_stops_renders():
+                    "preview": cmd_preview, "contact-sheet": cmd_contact_sheet, "prepare": cmd_prepare}
+        with sigint_stops_renders(), quieted(args.quiet):
             return commands[args.command](args)
     except WarpskyError as exc:
         print(f"warpsky: error: {exc}", file=sys.stderr)

@@ -195,6 +195,13 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     usd.add_argument("--colorspace", type=colorspace_argument, default=None, metavar="NAME", help="the EXR's "
                      "primaries: lin_rec709 or ACEScg, or an OpenColorIO name of either (default: the settings' "
                      "renderingColorSpace, else lin_rec709)")
+    add_quiet(parser)
+
+
+def add_quiet(parser: argparse.ArgumentParser, *, command: bool = True) -> None:
+    """``-q``/``--quiet``: no progress lines (:mod:`warpsky.core.progress`); before the command or after it."""
+    parser.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS if command else False,
+                        help="no progress lines (kernel compiles, table builds)")
 
 
 def settings_from_args(args) -> dict[str, str]:
