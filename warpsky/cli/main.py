@@ -25,7 +25,7 @@ from warpsky.cli.options import (
 )
 from warpsky.cli.prepare import add_parser as add_prepare
 from warpsky.core.errors import UsageError, WarpskyError
-from warpsky.core.interrupt import Interrupted, report_interrupt, sigint_stops_renders
+from warpsky.core.interrupt import Interrupted, exit_at_once, report_interrupt, sigint_stops_renders
 from warpsky.core.version import __version__
 from warpsky.optics.cli import add_parser as add_optics
 from warpsky.optics.cli import run as run_optics
@@ -372,6 +372,16 @@ def cmd_contact_sheet(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command ``argv`` (None: the program's own arguments) and return its exit code; the program itself
+    exits at once when done (:func:`~warpsky.core.interrupt.exit_at_once`: unloading USD, Warp and numpy would add
+    about 0.3 s after the work)."""
+    code = _run(argv)
+    if argv is None:
+        exit_at_once(code)
+    return code
+
+
+def _run(argv: list[str] | None) -> int:
     given = sys.argv[1:] if argv is None else [str(a) for a in argv]
     bench = None
     if next((a for a in given if not a.startswith("-")), None) == "bench":

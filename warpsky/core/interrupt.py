@@ -112,6 +112,21 @@ def sigint_ignored():
         signal.signal(signal.SIGINT, previous)
 
 
+def exit_at_once(code: int):
+    """Exit the process with ``code`` now, its ``atexit`` handlers run and its output flushed, without unloading the
+    libraries it loaded (USD, Warp and numpy take about 0.3 s to unload on a 2-core CPU); for a program whose work is
+    done and whose ``finally`` blocks have run."""
+    import atexit
+
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe or stream: nothing more can be said there
+            pass
+    os._exit(code)
+
+
 def report_interrupt(*, exit_now: bool = False) -> int:
     """Say "interrupted" on its own line (ending a batch's progress bar first) and return the exit code 130; with
     ``exit_now``, exit the process at once instead: every ``finally`` has run by then (temporary files removed,
