@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.core.errors import SceneError
-from warpsky.media.advection.advection import AdvectedTexture, Flow2D
 from warpsky.model.stratiform import GroundTexture, StratiformLayer, ThicknessAdvection
 from warpsky.output.exr import read_exr
 
@@ -133,6 +132,8 @@ _ADVECTED_MAX = 4
 
 
 def _advected_texture(layer: StratiformLayer, device: str):
+    from warpsky.media.advection.advection import AdvectedTexture, Flow2D  # its kernels load for advected maps only
+
     adv = layer.advection
     digest = hashlib.sha1(layer.thickness.tobytes()).hexdigest()
     key = (layer.name, digest, layer.thickness.shape, tuple(layer.size), adv, str(device))

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
@@ -40,13 +41,14 @@ from warpsky.core.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.core.settings import Settings, documented, setting
 from warpsky.light.dome import ambient_radiance, isotropic_ambient
 from warpsky.light.sun import sunlight
-from warpsky.media.fog import fog_struct
 from warpsky.media.stratiform.stratiform_shadow import layer_shadows
 from warpsky.model.camera_rays import pinhole_camera
 from warpsky.model.scene import Scene
-from warpsky.passes.fog.fog_kernels import FogMarch, fog_kernel, sun_transmittance_kernel
 from warpsky.passes.render_pass import Pass
 from warpsky.surfaces.mesh import no_surfaces
+
+if TYPE_CHECKING:  # the kernels load when the pass renders, not when a frame asks whether it runs
+    from warpsky.passes.fog.fog_kernels import FogMarch
 
 #: Length [m] a horizontal sun ray is followed through the slabs by :func:`fog_sun_transmittance`.
 HORIZONTAL_LENGTH = 1.0e9
@@ -90,6 +92,8 @@ class Fog:
         None: :func:`~warpsky.light.dome.ambient_radiance`, the dome's; ``occluders``: the
         :class:`~warpsky.surfaces.mesh.MeshBuffers` of the frame's meshes, which shadow the fog, or None). The
         scene's stratiform layers shadow the fog's sunlight too (:mod:`~warpsky.media.stratiform.stratiform_shadow`)."""
+        from warpsky.passes.fog.fog_kernels import FogMarch
+
         s = self.settings
         abscissae, weights = np.polynomial.legendre.leggauss(s.nodes)
         march = FogMarch()
@@ -131,6 +135,9 @@ class Fog:
             limit = np.ascontiguousarray(limit, dtype=np.float32)
             if limit.shape != (height, width):
                 raise UsageError(f"fog limit depths must have shape ({height}, {width}), got {limit.shape}")
+        from warpsky.media.fog import fog_struct
+        from warpsky.passes.fog.fog_kernels import fog_kernel
+
         device = self.device
         with wp.ScopedDevice(device):
             fogs = fog_struct(scene.fogs, camera.position, scene.time_s, device)
@@ -155,6 +162,9 @@ def fog_sun_transmittance(scene: Scene, points: np.ndarray, device: str = "cpu")
     light = sunlight(scene)
     if light is None or not scene.fogs or len(points) == 0:
         return np.ones((len(points), 3))
+    from warpsky.media.fog import fog_struct
+    from warpsky.passes.fog.fog_kernels import sun_transmittance_kernel
+
     origin = np.asarray(scene.camera.position, dtype=np.float64)
     with wp.ScopedDevice(device):
         fogs = fog_struct(scene.fogs, origin, scene.time_s, device)
