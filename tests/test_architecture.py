@@ -270,3 +270,16 @@ def test_warp_is_configured_when_first_imported_after_warpsky():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.split() == ["False", "False"]
+
+
+def test_a_render_loads_only_its_own_technique(tmp_path, homogeneous_npy):
+    """A frame imports its technique's modules and no other technique's (each defines its kernels on import); the
+    AOVs of every technique load only for a stage whose RenderProducts ask."""
+    from warpsky.render.registry import TECHNIQUES
+
+    stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy))
+    own = TECHNIQUES["single_scatter"].split(":")[0].rsplit(".", 1)[0]
+    args = ["render", str(stage), str(tmp_path / "o.exr"), "--technique", "single_scatter", "--res", "4"]
+    others = sorted({n.rsplit(".", 1)[0] for n in _imported(args) if n.startswith("warpsky.techniques.")
+                     and n.count(".") >= 3 and not n.startswith(own)})
+    assert not others, f"a single_scatter render imports {others}"

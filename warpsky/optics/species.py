@@ -30,7 +30,6 @@ from warpsky.model.scene import FIELD_SPECIES, SPECIES_NAMES
 from warpsky.optics import mie
 from warpsky.optics.analytic import rayleigh
 from warpsky.optics.grid import SEGMENTS_DEG, angle_grid, normalise
-from warpsky.optics.ice import ice_optics, snow_optics
 
 __all__ = ["FIELD_SPECIES", "SPECIES", "SPECIES_NAMES", "Species", "get_species"]
 
@@ -72,6 +71,8 @@ class Species:
         if self.model == "mie":
             distribution = getattr(mie, self.params["distribution"])
             return np.asarray(mie.mie_optics(distribution).phase, dtype=np.float64)
+        from warpsky.optics.ice import ice_optics, snow_optics  # Warp kernels: loaded for a build only
+
         if self.model == "ice":
             return np.asarray(ice_optics(self.params["habit"], seed=self.params["seed"]).phase, dtype=np.float64)
         if self.model == "snow":
