@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import warp as wp
@@ -49,12 +49,13 @@ from warpsky.core.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.core.settings import Settings, documented, setting
 from warpsky.light.dome import ambient_vec, isotropic_ambient
 from warpsky.light.sun import sun_struct, sunlight
-from warpsky.media.deck.deck_geometry import deck_struct, feature_length, haze_struct, the_deck
 from warpsky.model.camera_rays import pinhole_camera
 from warpsky.model.deck import CloudDeck
 from warpsky.model.scene import Scene
-from warpsky.passes.deck.deck_kernels import DeckMarch, deck_kernel, sun_transmittance_kernel
 from warpsky.passes.render_pass import Pass
+
+if TYPE_CHECKING:  # the kernels load when the pass renders, not when a frame asks whether it runs
+    from warpsky.passes.deck.deck_kernels import DeckMarch
 
 
 def shadow_feature(clouds: CloudDeck) -> float:
@@ -62,7 +63,11 @@ def shadow_feature(clouds: CloudDeck) -> float:
     polynomial's curvature length (the equator's rounding shapes the thickness near the edges, not the holes)."""
     k = np.linalg.norm(clouds.wave_vectors, axis=1) if len(clouds.wave_vectors) else np.zeros(0)
     lengths = [2.0 * math.pi / v for v in k if v > 0.0]
-    return float(min(lengths)) if lengths else feature_length(clouds)
+    if lengths:
+        return float(min(lengths))
+    from warpsky.media.deck.deck_geometry import feature_length
+
+    return feature_length(clouds)
 
 
 def haze_step_bound(clouds: CloudDeck) -> float:
@@ -84,6 +89,8 @@ HAZE_STEPS_PER_FEATURE = 16
 def automatic_steps(clouds: CloudDeck, haze_steps_per_feature: int = HAZE_STEPS_PER_FEATURE
                     ) -> tuple[float, float]:
     """(cloud step, shortest haze step) [m] from the deck's extinction and smallest features (module docstring)."""
+    from warpsky.media.deck.deck_geometry import feature_length
+
     feature = feature_length(clouds)
     sigma = float(np.max(clouds.extinction))
     cloud = min(0.25 / sigma, feature / 16.0) if sigma > 0.0 else feature / 16.0
@@ -129,6 +136,8 @@ class Deck:
 
     def march_settings(self, scene: Scene, clouds: CloudDeck, has_limit: bool,
                        ambient=None) -> DeckMarch:
+        from warpsky.passes.deck.deck_kernels import DeckMarch
+
         s = self.settings
         cloud_auto, haze_auto = automatic_steps(clouds, s.haze_steps_per_feature)
         march = DeckMarch()
@@ -151,6 +160,9 @@ class Deck:
         camera-space depths [m] of the nearest opaque surface; rays stop there and at the far clipping plane.
         ``ambient``: the isotropic sky radiance, RGB (None: the dome's,
         :func:`~warpsky.light.dome.ambient_radiance`)."""
+        from warpsky.media.deck.deck_geometry import deck_struct, haze_struct, the_deck
+        from warpsky.passes.deck.deck_kernels import deck_kernel
+
         camera = scene.camera.conformed(width, height)
         clouds = the_deck(scene)
         started = time.perf_counter()
@@ -187,6 +199,9 @@ def deck_sun_transmittance(scene: Scene, points: np.ndarray, device: str = "cpu"
     its column; a sun at or below the horizon: the exact sun-ray optical depth); ``exact`` uses the exact
     optical depth along the sun ray everywhere. The haze multiplies by exp(-sigma_haze x its path to the slab's
     edge). Ones without a deck or a sun."""
+    from warpsky.media.deck.deck_geometry import deck_struct, haze_struct, the_deck
+    from warpsky.passes.deck.deck_kernels import sun_transmittance_kernel
+
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     clouds = the_deck(scene)
     light = sunlight(scene)
