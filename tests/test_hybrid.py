@@ -116,8 +116,25 @@ def test_time_budget_stops_and_says_so(box, device):
     assert layer.stats["stopped_by"] == "time_budget"
     assert 2 <= layer.stats["passes"] and layer.stats["spp"] < 100000
     assert np.isfinite(layer.stats["error_estimate"]) and layer.stats["error_estimate"] > 0.001
-    (line,) = layer.warnings
+    (line,) = [w for w in layer.warnings if "stopped by" in w]
     assert "time budget" in line and "0.1%" in line and "estimated" in line
+
+
+def test_a_spent_budget_runs_the_two_first_passes_on_coarse_pixels(box, device):
+    """A frame whose budget is already spent when the paths start (its clock opened long before) runs only the two
+    passes the error estimate needs, on the coarsest film, and says so; the budget counts from the frame's start,
+    not the technique's."""
+    from warpsky.core import deadline
+
+    stage = box(extinction_scale=0.3)
+    with deadline.frame_clock(("test",)) as clock:
+        clock.started -= 100.0
+        layer = hybrid(stage, device, 16, target_error=0.001, time_budget=5, spp=100000, seed=1)
+    assert layer.stats["passes"] == 2 and layer.stats["stopped_by"] == "time_budget"
+    assert layer.stats["ms_scale"] == 8
+    assert any("pixels 8x larger" in w for w in layer.warnings)
+    free = hybrid(stage, device, 16, target_error=0.001, time_budget=5, spp=8, seed=1)
+    assert free.stats["ms_scale"] == 1 and free.stats["spp"] == 8  # outside a frame: the technique's own clock
 
 
 def test_all_sky_frame_and_unlit_scene(box, device):

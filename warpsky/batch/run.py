@@ -176,7 +176,7 @@ def run_frame(job: FrameJob, attempt: int = 1) -> FrameRecord:
         if _hook_fails(job.time_code, attempt):
             raise RuntimeError(f"{FAIL_FRAMES_ENV} asks frame {job.time_code:g} to fail (test hook)")
         siblings = [(Path(out), sibling) for (out, _), sibling in zip(job.siblings, planned.siblings, strict=True)]
-        result = write_frame(frame, Path(job.out), siblings=siblings, reader=planned.reader)
+        result = write_frame(frame, Path(job.out), siblings=siblings, reader=planned.reader, started=t0)
         record.timings.update(result.timings)
         record.timings["technique"] = result.render_seconds
         record.quality = result.quality

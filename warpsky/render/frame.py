@@ -14,6 +14,7 @@ import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from warpsky.core import deadline
 from warpsky.model.scene import Scene
 from warpsky.output.exr import write_channels
 from warpsky.output.png import write_png
@@ -51,7 +52,8 @@ def render_frame(reader, time_code, out_path: Path, options: RenderOptions) -> F
     """Render the stage at ``time_code`` (None: earliest) and write ``out_path`` atomically."""
     started = _time.perf_counter()
     frame = planned_frame(reader, time_code, options)
-    return write_frame(frame, out_path, timings={"plan": _time.perf_counter() - started}, reader=reader)
+    return write_frame(frame, out_path, timings={"plan": _time.perf_counter() - started}, reader=reader,
+                       started=started)
 
 
 def render_image(scene: Scene, plan: RenderPlan, options: RenderOptions, *, stage, time_code,
@@ -66,7 +68,18 @@ def render_planned(frame: PlannedFrame, *, timings: dict[str, float] | None = No
     """Render the planned ``frame`` into memory: composited, converted to the output colour space, its channels
     cropped to the data window. With the stage's ``reader`` and an open shutter, the frame is the average of
     sub-frames (:mod:`warpsky.render.motion`)."""
-    return rendered_image(frame_render(frame, timings=timings, reader=reader), frame)
+    with deadline.frame_clock(clock_key(frame)) as clock:
+        image = rendered_image(frame_render(frame, timings=timings, reader=reader), frame)
+        deadline.close(clock)
+    return image
+
+
+def clock_key(frame: PlannedFrame) -> tuple:
+    """The frame's shape for its clock (:mod:`warpsky.core.deadline`): frames of one shape take about as long after
+    their progressive technique."""
+    plan = frame.plan
+    return (plan.technique, plan.passes, plan.width, plan.height, plan.device, bool(frame.options.png),
+            frame.options.deep_product)
 
 
 def frame_render(frame: PlannedFrame, *, timings=None, reader=None) -> FrameRender:
@@ -88,17 +101,34 @@ def blurred_render(reader, frame: PlannedFrame, timings=None) -> FrameRender:
     options, plan = frame.options, frame.plan
     renders = []
     with reader.sub_frames_of(frame.time_code):  # a Volume's velocity moves its density to each sub-frame's time
-        for k, t in enumerate(sub_frame_times(frame.time_code, frame.motion, options.motion_samples)):
+        times = sub_frame_times(frame.time_code, frame.motion, options.motion_samples)
+        for k, t in enumerate(times):
+            clock = deadline.current()
+            if clock is not None:  # a time budget is the whole frame's: each sub-frame takes its share of the rest
+                clock.parts_left = len(times) - k
             renders.append(composited(plan, frame_scene(reader, t, options), options,
                                       technique=sub_frame_technique(plan.renderer, k)))
     return average_renders(renders, timings)
 
 
 def write_frame(frame: PlannedFrame, out_path: Path, *, timings: dict[str, float] | None = None, siblings=(),
-                reader=None) -> FrameResult:
+                reader=None, started: float | None = None) -> FrameResult:
     """Render the planned ``frame`` and write ``out_path`` atomically, plus the PNG preview when asked;
     ``siblings`` ((path, PlannedFrame) pairs: :meth:`~warpsky.render.planned.PlannedFrame.for_options` of
-    products with the same camera and resolution) are written from the same render."""
+    products with the same camera and resolution) are written from the same render. ``started``: when the frame's
+    planning began (perf_counter s), where its time budget starts (default: now)."""
+    with deadline.frame_clock(clock_key(frame), started) as clock:
+        exr, png, image = _render_and_write(frame, out_path, timings, siblings, reader)
+        deadline.close(clock)
+    timings = image.timings
+    layer = image.layer
+    seconds = sum(timings.get(k, 0.0) for k in ("plan", "passes", "composite", "write"))
+    return FrameResult(Path(exr), png, seconds, float(layer.stats.get("seconds", 0.0)), frame.time_code, frame.plan,
+                       timings, quality_stats(layer), image.warnings)
+
+
+def _render_and_write(frame: PlannedFrame, out_path: Path, timings, siblings, reader):
+    """(EXR path, PNG path or None, image) of :func:`write_frame`, inside the frame's clock."""
     options = frame.options
     render = frame_render(frame, timings=timings, reader=reader)
     image = rendered_image(render, frame)
@@ -119,10 +149,7 @@ def write_frame(frame: PlannedFrame, out_path: Path, *, timings: dict[str, float
         png = write_png(Path(out_path).with_suffix(".png"), image.preview,
                         exposure=image.metadata["previewExposure"], view=options.view)
     timings["write"] = _time.perf_counter() - started
-    layer = image.layer
-    seconds = sum(timings.get(k, 0.0) for k in ("plan", "passes", "composite", "write"))
-    return FrameResult(Path(exr), png, seconds, float(layer.stats.get("seconds", 0.0)), frame.time_code, frame.plan,
-                       timings, quality_stats(layer), image.warnings)
+    return exr, png, image
 
 
 def _write_image(image: RenderedImage, path: Path) -> Path:

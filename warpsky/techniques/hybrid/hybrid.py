@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpsky.core import device_buffers
+from warpsky.core import deadline, device_buffers
 from warpsky.core.device import is_cpu
 from warpsky.core.image import ImageLayer
 from warpsky.core.numerics import LUMINANCE_WEIGHTS
@@ -41,6 +41,7 @@ from warpsky.light.sun import above_air
 from warpsky.model.scene import Scene
 from warpsky.passes.media import SceneryFrame, scenery_traceable
 from warpsky.passes.sky.front import front_air_transmittance
+from warpsky.techniques.hybrid.budget import PathBudget, coverage_scale_warning, film_scale, timed_denoise
 from warpsky.techniques.hybrid.denoise import (
     bilinear_upsample,
     block_mean,
@@ -81,9 +82,10 @@ class HybridSettings(Settings):
     owner = "hybrid"
     target_error: float = setting(0.05, range="[0, 1)", help="stop adding paths once the frame's estimated "
                                   "relative RMSE over covered pixels is below this; 0 = exactly spp paths")
-    time_budget: float | None = setting(None, unit="s", range="> 0", help="stop adding paths after this long "
-                                        "(after one pass of each half at least, so that there is an error "
-                                        "estimate; the estimate reached goes into the stats)", auto="no limit")
+    time_budget: float | None = setting(None, unit="s", range="> 0", help="the frame's wall time, from its stage "
+                                        "read to its EXR written: paths are added while the next pass fits; one "
+                                        "pass of each half always runs (the error estimate needs both), on "
+                                        "coarser pixels where they would not fit", auto="no limit")
     spp: int = setting(256, range=">= 1", help="most multiple-scattering paths per pixel (exactly this many with "
                        "target_error = 0)")
     samples_per_pass: int | None = setting(None, range=">= 1", help="paths per pixel per pass; passes alternate "
@@ -259,6 +261,7 @@ class Hybrid(Technique):
             if scene.atmosphere is not None and not scenery:  # the scenery's paths go in front of the air's layer
                 multiple, variance = behind_front_air(scene, width, height, single.depth, multiple, variance,
                                                       self.device)
+            deadline.progressive_done()  # what the frame runs from here on, the next frame's budget sets aside
         stats["seconds"] = time.perf_counter() - started
         stats["settings"] = dataclasses.asdict(settings)
         if scenery:  # the paths' light is attenuated to the eye: in front of the other passes' layers
@@ -331,6 +334,14 @@ class MultipleScattering:
     def run(self, single: ImageLayer, started: float) -> tuple[np.ndarray, np.ndarray, dict]:
         """(denoised multiple scattering, variance of its noisy mean, stats), given the single-scattering layer."""
         s = self.settings
+        asked, budget = self.scale, None
+        if s.time_budget is not None:
+            budget = PathBudget.of(s.time_budget, started, single.radiance.shape[0] * single.radiance.shape[1],
+                                   self.device)
+            scale = film_scale(self.tracing, budget, int(s.samples_per_pass), self.scale, self.device)[0]
+            if scale != self.scale:
+                self.rescale(scale)
+        film_pixels = self.tracing.width * self.tracing.height
         fine_coverage = np.clip(1.0 - single.transmittance, 0.0, 1.0)
         coverage = block_mean(fine_coverage, self.scale) if self.scale > 1 else fine_coverage
         single_radiance = block_mean(single.radiance, self.scale) if self.scale > 1 else single.radiance
@@ -338,25 +349,31 @@ class MultipleScattering:
         per_pass, done, passes, check_at, estimated_at = int(s.samples_per_pass), 0, 0, 2, 0
         estimate, stop = math.inf, "spp"
         while done < s.spp:
+            if budget is not None and passes >= 2 and not budget.next_pass_fits(film_pixels):
+                stop = "time_budget"
+                break
             count = min(per_pass, s.spp - done)
             half = passes % 2
+            launched = time.perf_counter()
             self.tracing.launch(self.halves[half], done, count)  # path indices, hence streams, never repeat
+            if budget is not None:
+                wp.synchronize_device(self.device)
+                budget.pass_seconds = time.perf_counter() - launched
             self.counts[half] += count
             done += count
             passes += 1
             if s.target_error > 0.0 and passes == check_at:
+                checked = time.perf_counter()
                 estimate, estimated_at = self.estimate(single_radiance, coverage, covered), passes
+                timed_denoise(budget, 0.5 * (time.perf_counter() - checked) if s.denoise else 0.0, film_pixels)
                 if estimate <= s.target_error:
                     stop = "target"
                     break
                 check_at = next_check(passes, estimate, s.target_error)
-            if s.time_budget is not None and passes >= 2 and time.perf_counter() - started >= s.time_budget:
-                stop = "time_budget"
-                break
         wp.synchronize_device(self.device)
         film = self.film()
         mean, variance = film.radiance, film.aovs["variance"]
-        image, denoise_seconds, sanitised, warnings = mean, 0.0, 0, []
+        image, denoise_seconds, sanitised, warnings = mean, 0.0, 0, coverage_scale_warning(self.scale, asked)
         if s.denoise:
             result = denoise(mean, coverage, radius=s.mean_radius, device=self.device)
             image, denoise_seconds, sanitised = result.image, result.seconds, result.sanitised
@@ -378,8 +395,16 @@ class MultipleScattering:
                  "sanitised_values": sanitised, "tracking_steps": film.stats["tracking_steps"],
                  "scatter_events": film.stats["scatter_events"], "shadow_steps": film.stats["shadow_steps"],
                  "capped_paths": film.stats["capped_paths"], "paths": done * mean.shape[0] * mean.shape[1],
+                 "ms_scale": self.scale,
                  "warnings": warnings}
         return image, variance, stats
+
+    def rescale(self, scale: int) -> None:
+        """Trace the paths on pixels ``scale`` times the frame's from now on (before any pass ran)."""
+        self.tracing = self.tracing.rescaled(scale)
+        self.scale = scale
+        shape = (self.tracing.height, self.tracing.width)
+        self.halves = [pixel_sums(shape, self.device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
 
     def half_mean(self, half: int) -> np.ndarray:
         """Mean radiance of ``half``'s paths (a download: the error estimate needs it on the host)."""

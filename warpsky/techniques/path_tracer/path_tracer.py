@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import math
@@ -253,6 +254,8 @@ class PathTracing:
         self.air_by_table = bool(air_by_table and air)
         self.device = device
         camera = scene.camera.conformed(width, height)
+        self.frame_camera, self.frame_size = camera, (width, height)  # the frame's own film, before any coarsening
+        self.buffer_name, self.per_sample = buffer_name, per_sample
         if scale > 1:
             camera, width, height = coarse_camera(camera, width, height, scale)
         self.width, self.height = width, height
@@ -287,15 +290,8 @@ class PathTracing:
         majorants.fog = fog_tracking(fogs, camera.position, scene.time_s, device)
         cut_struct.majorants.fog = majorants.fog
         flags = (bool(species), media.has_detail, mesh_buffers is not None, bool(fogs))  # ground, dome: runtime
-        capacity = per_sample_launches(device, width * height, int(settings.samples_per_pass or 1))
-        if per_sample is not None:
-            capacity = max(1, int(settings.samples_per_pass or 1)) if per_sample else 0
-        self.samples_per_launch = capacity  # 0: one thread per pixel
         self.kernel = path_trace_kernel(*flags)
-        self.samples = None  # the kernel's "one thread per pixel"
-        if capacity:
-            self.samples = device_buffers.reusable(f"{buffer_name}:samples", (capacity * height, width),
-                                                   SampleResult, device)
+        self._launch_buffers()
         dome = dome_struct(scene.dome, device)
         oriented = oriented_phases(scene, device, cache="path_tracer")
         continuation = continuation_tables(scene, device, cache="path_tracer")
@@ -305,6 +301,32 @@ class PathTracing:
                       air_struct(scene, camera.position, device, air=air), sun_struct(sunlight(scene)),
                       pinhole_camera(camera, width, height), ground_struct(scene.ground, camera.position), dome,
                       surfaces]
+
+    def _launch_buffers(self) -> None:
+        """How a launch runs on this film (:func:`per_sample_launches`) and the kept paths' buffer it needs."""
+        per_pass = int(self.settings.samples_per_pass or 1)
+        capacity = per_sample_launches(self.device, self.width * self.height, per_pass)
+        if self.per_sample is not None:
+            capacity = max(1, per_pass) if self.per_sample else 0
+        self.samples_per_launch = capacity  # 0: one thread per pixel
+        self.samples = None  # the kernel's "one thread per pixel"
+        if capacity:
+            self.samples = device_buffers.reusable(f"{self.buffer_name}:samples", (capacity * self.height, self.width),
+                                                   SampleResult, self.device)
+
+    def rescaled(self, scale: int) -> PathTracing:
+        """The same paths on a film whose pixels are ``scale`` times the frame's (everything but the camera and the
+        film shared with this one)."""
+        out = copy.copy(self)
+        width, height = self.frame_size
+        out.camera, out.width, out.height = self.frame_camera, width, height
+        if scale > 1:
+            out.camera, out.width, out.height = coarse_camera(self.frame_camera, width, height, scale)
+        out.settings = dataclasses.replace(self.settings, pixel_jitter=self.settings.pixel_jitter or scale > 1)
+        out.fixed = list(self.fixed)
+        out.fixed[6] = pinhole_camera(out.camera, out.width, out.height)
+        out._launch_buffers()
+        return out
 
     def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:
         """Add paths ``first_sample .. first_sample + count - 1`` of every pixel to ``sums`` (asynchronous on
