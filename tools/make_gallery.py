@@ -6,7 +6,8 @@ default OpenColorIO view, exposure from the frame's luminance) to ``docs/gallery
 gives the exact command, the technique, the render's own time and error estimate from the EXR header
 (``warpsky/renderSeconds``, ``warpsky/errorEstimate``: the hybrid and path tracer's estimated relative RMS error;
 deterministic techniques have none), and the wall time of the whole command (stage load, first compiles and table
-builds included unless cached).
+builds included unless cached). Those are this run's own figures; under the demo's picture the page also quotes the
+demo's times from docs/timings.json, the figures the README and ``make help`` quote (tools/measure_timings.py).
 
 Run:  make gallery   (builds the sample data the stages read, then this)
       python tools/make_gallery.py [--only cumulus,storm] [--out docs] [--renders out/gallery]
@@ -112,6 +113,18 @@ def figures_line(record: dict) -> str:
     return ", ".join(parts)
 
 
+def demo_line() -> str:
+    """Under the demo's picture: the demo's times as docs/timings.json has them, marked as tools/measure_timings.py
+    quotes a figure (``--apply`` rewrites them when the file is re-measured)."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    from measure_timings import load, quote
+
+    timings = load()
+    return (f"`make demo` renders this frame in {quote('demo_render', timings)} ({quote('demo', timings)} for the "
+            "whole command) by [the measured timings](timings.json) that the README and `make help` quote; the "
+            "figures above are this gallery run's own.")
+
+
 def page(records: list[dict], *, machine: str) -> str:
     """docs/gallery.md for ``records`` (their PNGs already copied to ``gallery/<name>.png``)."""
     lines = ["# Gallery", "",
@@ -124,6 +137,8 @@ def page(records: list[dict], *, machine: str) -> str:
     for record in records:
         lines += [f"## {record['name']}", "", f"![{record['name']}](gallery/{record['name']}.png)", "",
                   record["note"], "", "```sh", record["command"], "```", "", figures_line(record), ""]
+        if record["name"] == "cumulus":
+            lines += [demo_line(), ""]
     return "\n".join(lines)
 
 
