@@ -6,19 +6,32 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
+# The times make help quotes, on a 2-core CPU: written from docs/timings.json by tools/measure_timings.py --apply.
+TIMING_DEMO            = 76 s
+TIMING_DEMO_COLD       = 4 min 25 s
+TIMING_DATA            = about 10 s
+TIMING_TEST            = 10 min 12 s
+TIMING_TEST_TESTS      = 899
+TIMING_TEST_FAST       = 3 min 55 s
+TIMING_TEST_FAST_TESTS = 774
+TIMING_STORM           = about 3 min
+TIMING_VALLEY_FOG      = about 3 min
+TIMING_SUNBEAMS        = about 8 min
+TIMING_GALLERY         = about 7 min
+
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
 	cumulus-wind family family-thick scenery-family terrain valley-fog sunbeams sundogs gallery
 
 help:
-	@echo "make demo               - install into $(VENV), make data, render the demo cumulus to out/ (with a PNG)"
-	@echo "                          (its time on 2 CPU cores, cold and warm: measured in the README's Quickstart)"
-	@echo "make test               - install into $(VENV) and run every test on the CPU (899 tests, 8-14 min on 2 cores)"
-	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; under 3 min)"
+	@echo "make demo               - install into $(VENV), make data, render the demo cumulus to out/ (with a PNG;"
+	@echo "                          $(TIMING_DEMO) on 2 CPU cores with Warp's kernels cached, $(TIMING_DEMO_COLD) the first time)"
+	@echo "make test               - install into $(VENV) and run every test on the CPU ($(TIMING_TEST_TESTS) tests, $(TIMING_TEST) on 2 cores)"
+	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; $(TIMING_TEST_FAST_TESTS) tests, $(TIMING_TEST_FAST))"
 	@echo "make lint               - ruff"
 	@echo "make bench              - run evaluation/benchmarks/bench_single_scatter.py (cuda too when present)"
 	@echo "make venv               - create $(VENV) and install warpsky with all extras (redone when pyproject changes)"
 	@echo "make data               - generate the data every stage in usd_scenes/ references, in data/ (the cumulus,"
-	@echo "                          storm, stratocumulus and sundog fields and the terrain; about 10 s on 2 CPU cores)"
+	@echo "                          storm, stratocumulus and sundog fields and the terrain; $(TIMING_DATA) on 2 CPU cores)"
 	@echo "make family             - generate the 24-stage validation family (seed 2026) in data/family"
 	@echo "make family-thick       - generate the 12-stage thick family (optical depth 100-1000, seed 2027) in"
 	@echo "                          data/family_thick"
@@ -30,18 +43,18 @@ help:
 	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
 	@echo "make storm-data         - the storm's per-frame NanoVDB fields in data/storm/"
 	@echo "make storm              - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact"
-	@echo "                          sheets, preview (about 3 min once the optics tables are cached)"
+	@echo "                          sheets, preview ($(TIMING_STORM) once the optics tables are cached)"
 	@echo "make terrain            - the seeded 4 km fractal terrain mesh data/terrain.usda (hills, a north-south valley)"
 	@echo "make valley-fog         - 48 frames of morning fog drifting in the terrain's valley (Biri 2002) to"
-	@echo "                          out/valley_fog/ with a contact sheet, each frame's paths to the 5% target (at"
-	@echo "                          most 10 s of them; about 3 min on 2 CPU cores)"
+	@echo "                          out/valley_fog/ with a contact sheet, each frame's paths to the 5% target or"
+	@echo "                          --time-budget 10 ($(TIMING_VALLEY_FOG) on 2 CPU cores)"
 	@echo "make sunbeams           - sunbeams through gaps in a Max 1986 cloud deck over the terrain, lighting the"
 	@echo "                          haze, to out/sunbeams/: frame 1 (exact), 4 drifting frames and a contact sheet,"
-	@echo "                          frame 1 with Max's thickness rule, time-budgeted paths (about 8 min on 2 CPU"
-	@echo "                          cores)"
+	@echo "                          frame 1 with Max's thickness rule, time-budgeted paths"
+	@echo "                          ($(TIMING_SUNBEAMS) on 2 CPU cores)"
 	@echo "make sundogs            - cirrostratus of oriented plates and columns at sunset: sundogs, arcs, labelled PNG"
 	@echo "make gallery            - every shipped stage's hero frame to docs/gallery/ and docs/gallery.md, with each"
-	@echo "                          command, time and error estimate (about 7 min on 2 CPU cores)"
+	@echo "                          command, time and error estimate ($(TIMING_GALLERY) on 2 CPU cores)"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 

@@ -1,5 +1,6 @@
 """The project's own files: ``make help`` lists every target, ``make test-fast`` leaves out the slow tests,
-pyproject's license is an SPDX string, and the README says how long the long targets take."""
+pyproject's license is an SPDX string, and the gallery shows every shipped stage (the times the README and
+``make help`` quote: test_timings_file.py)."""
 
 from __future__ import annotations
 
@@ -45,33 +46,6 @@ def test_license_is_an_spdx_string():
     assert setuptools and int(re.search(r">=\s*(\d+)", setuptools[0]).group(1)) >= 77  # first with SPDX strings
     for path in config["project"].get("license-files", []):
         assert list(ROOT.glob(path)), path
-
-
-def _quickstart() -> str:
-    """The README's Quickstart section: from its heading to the next one."""
-    readme = (ROOT / "README.md").read_text()
-    start = readme.index("## Quickstart")
-    return readme[start: readme.index("\n## ", start + 1)]
-
-
-def test_readme_says_how_long_the_long_targets_take():
-    quickstart = _quickstart()
-    assert "2-core" in quickstart
-    for target in ("make demo", "make test", "make test-fast", "make storm"):
-        mentions = re.findall(rf"`{target}`[^\n]*(?:\n  [^\n]*)*", quickstart)  # with a list item's lines
-        assert any(re.search(r"\d+ minutes?\b", text) for text in mentions), target
-
-
-def test_make_help_and_the_readme_give_the_same_test_time():
-    """`make help` and the Quickstart state one figure for `make test` (its minutes and its test count), so a
-    re-measured time cannot be changed in one place and left stale in the other."""
-    makefile = (ROOT / "Makefile").read_text()
-    line = next(text for text in makefile.splitlines() if '"make test ' in text)
-    help_count, help_low, help_high = re.search(r"(\d+) tests, (\d+)-(\d+) min", line).groups()
-    quickstart = _quickstart()
-    item = re.search(r"- `make test`: (\d+)–(\d+) minutes[^(]*\((\d+) tests", quickstart)
-    assert item is not None, "the Quickstart's make test item: '- `make test`: A–B minutes ... (N tests'"
-    assert (help_low, help_high, help_count) == item.groups(), (line, item.group(0))
 
 
 def test_the_gallery_has_a_shot_of_every_shipped_stage_and_shows_each():
