@@ -1,13 +1,16 @@
 """What a frame will cost, estimated from its plan before anything is allocated or launched, and the guards that refuse
 a frame that cannot fit or would never finish.
 
-Memory: every technique and pass estimates its own buffers (``memory_estimate``: per-pixel images and accumulators,
-uploaded grids, light buffers, denoiser copies, the sky's and the layers' images); the plan
-(:func:`warpsky.render.plan.frame_memory`) adds them up with the composite and the EXR's copies. The estimate is an
-upper bound on what the frame allocates on top of what the process already holds (the stage and its grids are read
-before the plan). It is compared with what is free: on the host ``MemAvailable`` of ``/proc/meminfo`` (within the
-cgroup's limit, if any), on a CUDA device its free memory; ``--max-memory SIZE`` replaces both. On the CPU device,
-device arrays are host memory and count there.
+Memory: the estimate is the peak resident size of the process that renders the frame. It holds, before the frame,
+what the process already holds (:data:`PROCESS_BYTES`: Python, NumPy, Warp, USD and the opened stage) and what
+reading the stage's data cost (:func:`warpsky.render.memory.stage_memory`); every technique and pass then estimates
+its own buffers (``memory_estimate``: per-pixel images and accumulators, uploaded grids, light buffers, denoiser
+copies, the sky's and the layers' images, the tables it builds); the plan (:func:`warpsky.render.plan.frame_memory`)
+adds them up with the composite and the EXR's copies. ``evaluation/benchmarks/bench_memory.py`` measures it
+against the peak resident size of ``warpsky render`` on every shipped stage. The guards compare the frame's own
+part (the estimate less what the process holds before it, :meth:`MemoryEstimate.frame_host`) with what is free: on
+the host ``MemAvailable`` of ``/proc/meminfo`` (within the cgroup's limit, if any), on a CUDA device its free
+memory; ``--max-memory SIZE`` replaces both. On the CPU device, device arrays are host memory and count there.
 
 Work: every technique estimates the inner-loop iterations of its kernels (``work_estimate``: grid lookups of the
 single-scattering march, slices, paths x bounce cap), as worst cases from the settings and the media's extent. A
@@ -30,13 +33,21 @@ from warpsky.core.errors import ResourceError
 MAX_WORK_PER_PIXEL = 1.0e8
 #: Most worst-case kernel iterations a frame may take in all.
 MAX_WORK_PER_FRAME = 1.0e13
-#: Memory the frame needs besides its buffers: optics tables, kernel compiles, numpy temporaries [bytes].
-WORKING_MEMORY = 128 * 2**20
+#: Resident size of a ``warpsky render`` process when it has opened its stage, before it reads the stage's data:
+#: Python with NumPy, Warp (initialised on the CPU) and USD imported, warpsky's modules and the USD stage opened.
+#: Measured as VmRSS after ``StageReader`` on every shipped stage (Warp 1.19, USD 0.26, CPU only, this project's
+#: 2-core x86_64 machine): 285 MiB (289 MiB where the stage references the terrain mesh). A CUDA context adds its
+#: own host memory, not measured here.
+PROCESS_BYTES = 285 * 2**20
+#: Memory a frame's render adds besides the parts the passes estimate: Warp's kernel modules loaded, the air's and
+#: sky's tables, NumPy temporaries. Measured as the render's peak resident growth less the estimated parts at
+#: 96x64: stratocumulus 11 MiB, the storm 18 MiB.
+WORKING_MEMORY = 16 * 2**20
 
 #: Bytes per pixel of the image buffers every frame keeps on the host: the composite (radiance, transmittance,
 #: depth, RGBA and its temporaries, 72 B) and the EXR's channel copies (RGBA as float32 and 3 transmittance
 #: channels, 32 B). Measured on the demo cumulus at 1536x1024 on the CPU (peak RSS growth over the render, the
-#: estimate without :data:`WORKING_MEMORY`): single_scatter 214 / 305 MiB, path_tracer 344 / 571 MiB, slicing
+#: estimate without the working memory): single_scatter 214 / 305 MiB, path_tracer 344 / 571 MiB, slicing
 #: 223 / 450 MiB, hybrid 1302 / 1668 MiB.
 COMPOSITE_BYTES = 72 + 32
 #: Bytes per pixel of an AOV (RGB float32) through the composite and the EXR (techniques add their AOVs).
@@ -101,19 +112,24 @@ def available_device_memory(device: str) -> int | None:
 # ---------------------------------------------------------------------------------------------- estimates
 @dataclass
 class MemoryEstimate:
-    """Bytes a frame allocates, by part: ``parts[name] = (host bytes, device bytes)``. On the CPU device the
-    device bytes are host memory too (see :meth:`host_total`)."""
+    """Bytes a frame's process holds at its peak, by part: ``parts[name] = (host bytes, device bytes)``. On the CPU
+    device the device bytes are host memory too (see :meth:`host_total`). The parts named in ``held`` (host
+    memory only) are what the process holds before the frame allocates anything: the interpreter and its
+    libraries, the stage and its data."""
 
     parts: dict[str, tuple[int, int]] = field(default_factory=dict)
+    held: set[str] = field(default_factory=set)
 
-    def add(self, name: str, host: float = 0, device: float = 0) -> MemoryEstimate:
+    def add(self, name: str, host: float = 0, device: float = 0, *, held: bool = False) -> MemoryEstimate:
         old = self.parts.get(name, (0, 0))
         self.parts[name] = (old[0] + int(host), old[1] + int(device))
+        if held:
+            self.held.add(name)
         return self
 
     def merge(self, other: MemoryEstimate) -> MemoryEstimate:
         for name, (host, device) in other.parts.items():
-            self.add(name, host, device)
+            self.add(name, host, device, held=name in other.held)
         return self
 
     @property
@@ -124,20 +140,33 @@ class MemoryEstimate:
     def device(self) -> int:
         return sum(d for _, d in self.parts.values())
 
+    @property
+    def held_host(self) -> int:
+        """Host bytes the process holds before the frame (the ``held`` parts)."""
+        return sum(self.parts[name][0] for name in self.held)
+
     def host_total(self, device: str) -> int:
-        """Host bytes, with the device's when the device is the CPU."""
+        """Host bytes, with the device's when the device is the CPU: the process's whole peak."""
         return self.host + (self.device if is_cpu(device) else 0)
 
-    def largest_parts(self, count: int = 4) -> str:
-        """The ``count`` largest parts with their sizes (host and device together)."""
-        biggest = sorted(self.parts.items(), key=lambda kv: -(kv[1][0] + kv[1][1]))[:count]
+    def frame_host(self, device: str) -> int:
+        """Host bytes the frame adds to what the process holds before it (:meth:`host_total` less ``held``)."""
+        return self.host_total(device) - self.held_host
+
+    def largest_parts(self, count: int = 4, *, held: bool = True) -> str:
+        """The ``count`` largest parts with their sizes (host and device together); ``held=False`` leaves out
+        what the process holds before the frame."""
+        parts = [kv for kv in self.parts.items() if held or kv[0] not in self.held]
+        biggest = sorted(parts, key=lambda kv: -(kv[1][0] + kv[1][1]))[:count]
         return ", ".join(f"{name} {format_size(h + d)}" for name, (h, d) in biggest)
 
     def describe(self, device: str) -> str:
+        before = f"{format_size(self.held_host)} held before the frame"
         if is_cpu(device):
-            return f"about {format_size(self.host_total(device))} ({self.largest_parts()})"
-        return (f"about {format_size(self.host)} host + {format_size(self.device)} on {device} "
-                f"({self.largest_parts()})")
+            return (f"about {format_size(self.host_total(device))} at the peak ({before}; "
+                    f"{self.largest_parts(held=False)})")
+        return (f"about {format_size(self.host)} host ({before}) + {format_size(self.device)} on {device} "
+                f"({self.largest_parts(held=False)})")
 
 
 @dataclass(frozen=True)
@@ -183,10 +212,11 @@ def check_memory(plan, max_memory: int | None = None) -> None:
     source = "set by --max-memory" if max_memory is not None else "available"
     what = f"{plan.width}x{plan.height} with {plan.technique}"
     advice = "lower --res or raise the limit with --max-memory SIZE (e.g. --max-memory 16G)"
-    need = estimate.host_total(plan.device)
+    need = estimate.frame_host(plan.device)
     if need > host_limit:
         raise ResourceError(f"the frame ({what}) needs about {format_size(need)} of host memory "
-                            f"({estimate.largest_parts()}), more than the {format_size(host_limit)} {source}; {advice}")
+                            f"({estimate.largest_parts(held=False)}), more than the {format_size(host_limit)} "
+                            f"{source}; {advice}")
     if device_limit is not None and estimate.device > device_limit:
         raise ResourceError(f"the frame ({what}) needs about {format_size(estimate.device)} on {plan.device}, more "
                             f"than the {format_size(device_limit)} {source} there; {advice}")
@@ -221,7 +251,7 @@ def resource_lines(plan, max_memory: int | None = None) -> list[str]:
     """What ``warpsky info`` prints about the frame's cost: the estimates and the limits they are held to."""
     host_limit, device_limit = memory_limits(plan.device, max_memory)
     source = "set by --max-memory" if max_memory is not None else "available"
-    fits = plan.memory.host_total(plan.device) <= host_limit and (
+    fits = plan.memory.frame_host(plan.device) <= host_limit and (
         device_limit is None or plan.memory.device <= device_limit)
     limit = f"{format_size(host_limit)} {source}" + (
         "" if device_limit is None else f", {format_size(device_limit)} on {plan.device}")

@@ -219,3 +219,19 @@ def continuation_tables(scene, device, *, elevations=None, photons: int | None =
         else:
             setattr(out, name, device_buffers.upload(f"{cache}:continuation_{name}", array, dtype, device))
     return out
+
+
+def oriented_table_bytes(media) -> tuple[int, int]:
+    """(frame slices, continuation tables) [bytes, float32] of ``media``'s oriented ice: per oriented medium its
+    frame slice (:func:`~warpsky.optics.oriented_phase.frame_slices`, E x A x 3 on the frame's bins) and its
+    continuation table (:data:`SAMPLING_ELEVATIONS` slices of E x A x 3 values, E x (A + 1) conditional and E + 1
+    marginal CDFs on the default bins): what the memory estimates count, without building anything."""
+    from warpsky.optics.oriented_ice import SkyBins
+    from warpsky.optics.oriented_phase import frame_bins, oriented_media
+
+    count = len(oriented_media(media))
+    frame, grid = frame_bins(), SkyBins()
+    e, a = grid.elevation_bins, grid.azimuth_bins
+    per_slice = e * a * 3 + e * (a + 1) + e + 1
+    return (4 * count * frame.elevation_bins * frame.azimuth_bins * 3,
+            4 * count * len(SAMPLING_ELEVATIONS) * per_slice)

@@ -25,6 +25,7 @@ from warpsky.light.dome import mean_radiance
 from warpsky.model.scene import Scene
 from warpsky.optics.tables import is_cached
 from warpsky.passes.frame import ground_pass
+from warpsky.render.memory import held_memory, with_stage_read
 from warpsky.render.registry import DEFAULT_TECHNIQUE, pass_classes, technique_class, technique_classes
 from warpsky.render.setting_owners import check_owners
 
@@ -48,7 +49,7 @@ class RenderPlan:
         unused: ``--set`` names given to passes that do not run in this frame.
         settings_hash: Hash of what changes the frame's pixels, set by :func:`warpsky.render.planned.plan_frame` (the
             batch's resume check and the EXR metadata share it); empty until then.
-        memory: Bytes the frame will allocate, by part (:func:`frame_memory`).
+        memory: Bytes the frame's process will hold at its peak, by part (:func:`frame_memory`).
         work: Worst-case kernel iterations of the frame (:func:`frame_work`).
     """
 
@@ -157,13 +158,15 @@ def check_refusals(scene: Scene, cls, classes) -> None:
 
 
 def frame_memory(scene: Scene, plan: RenderPlan) -> MemoryEstimate:
-    """Memory of the whole frame: every running pass's (the technique's through the media pass), the composite's
-    and the EXR's."""
-    estimate = MemoryEstimate()
+    """Peak memory of the frame's process: what it holds before the frame (:func:`~warpsky.render.memory.
+    held_memory`), every running pass's buffers (the technique's through the media pass), the composite's and the
+    EXR's, and the working memory; at least the stage read's peak (:func:`~warpsky.render.memory.with_stage_read`)."""
+    estimate = held_memory(scene)
     for runner in plan.pass_runners:
         estimate.merge(runner.memory_estimate(scene, plan.width, plan.height))
     estimate.add("composite and EXR", host=plan.width * plan.height * COMPOSITE_BYTES)
-    return estimate.add("working memory", host=WORKING_MEMORY)
+    estimate.add("working memory", host=WORKING_MEMORY)
+    return with_stage_read(estimate, scene, plan.device)
 
 
 def frame_work(scene: Scene, plan: RenderPlan) -> WorkEstimate:

@@ -17,6 +17,8 @@ from warpsky.model.camera_rays import pinhole_camera
 from warpsky.model.scene import Projection, Scene
 from warpsky.passes.render_pass import Pass
 from warpsky.passes.sky.round_sky import launch_round_sky, round_description
+from warpsky.passes.sky.shadowed_air import BATCH as SHADOWED_AIR_BATCH
+from warpsky.passes.sky.shadowed_air import STEPS as SHADOWED_AIR_STEPS
 from warpsky.passes.sky.shadowed_air import shadowed_front
 from warpsky.passes.sky.sky_kernels import sky_kernel
 from warpsky.surfaces.plane import ground_struct
@@ -103,6 +105,11 @@ class Sky:
         return front_layer, back_layer
 
 
+#: Host bytes per point of the shadowed air's batch (its float64 positions, visibilities, coefficients and sums):
+#: the sky pass's peak rose 128 MiB over a full batch of 65,536 pixels x 8 points on the valley fog at 384x256.
+SHADOWED_AIR_POINT_BYTES = 256
+
+
 class SkyPass(Pass):
     """The frame's air: in front of everything the other passes drew and behind it, with the sun's disk. Runs when
     the scene has an atmosphere and the technique does not trace the air; its air lights the media, layers and
@@ -140,9 +147,16 @@ class SkyPass(Pass):
         return out
 
     def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
+        """The air's images, and the temporaries of the shadowed air in front (:data:`SHADOWED_AIR_POINT_BYTES`
+        per point of a batch) where the meshes, the fog or a deck can shade it."""
         pixels = width * height
-        return MemoryEstimate().add("sky", host=pixels * (20 + (0 if is_cpu(self.device) else 36)),
-                                    device=pixels * 40)
+        estimate = MemoryEstimate().add("sky", host=pixels * (20 + (0 if is_cpu(self.device) else 36)),
+                                        device=pixels * 40)
+        shaded = (scene.meshes or scene.fogs or scene.decks) and scene.sun is not None
+        if shaded and scene.camera.projection == Projection.PERSPECTIVE:
+            points = min(pixels, SHADOWED_AIR_BATCH) * SHADOWED_AIR_STEPS
+            estimate.add("shadowed air", host=points * SHADOWED_AIR_POINT_BYTES)
+        return estimate
 
     def render(self, frame) -> list[ImageLayer]:
         """[front, back]: the air in front runs to the nearest opaque surface where one is hit (the haze and fog in
