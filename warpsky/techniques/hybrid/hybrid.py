@@ -38,7 +38,9 @@ from warpsky.core.numerics import LUMINANCE_WEIGHTS
 from warpsky.core.resources import AOV_BYTES, MemoryEstimate, WorkItem
 from warpsky.core.settings import Settings, documented, setting
 from warpsky.light.sun import above_air
+from warpsky.media.voxels.extent import grid_bytes
 from warpsky.model.scene import Scene
+from warpsky.optics.oriented_sampling import oriented_table_bytes
 from warpsky.passes.media import SceneryFrame, scenery_traceable
 from warpsky.passes.sky.front import front_air_transmittance
 from warpsky.techniques.hybrid.budget import PathBudget, coverage_scale_warning, film_scale, timed_denoise
@@ -194,9 +196,15 @@ class Hybrid(Technique):
             return estimate
         scale = int(s.ms_scale)
         coarse = -(-width // scale) * -(-height // scale)
-        estimate.merge(path_tracing_memory(scene, 2 * coarse, s.majorant_block, self.device,
-                                           int(s.samples_per_pass), film_pixels=coarse,
-                                           bake_detail=bool(s.bake_detail)))
+        paths = path_tracing_memory(scene, 2 * coarse, s.majorant_block, self.device, int(s.samples_per_pass),
+                                    film_pixels=coarse, bake_detail=bool(s.bake_detail))
+        host, device = paths.parts.pop("grids")  # the paths trace the march's upload of the grids (one buffer)
+        estimate.merge(paths).add("grids", host=host - 2 * grid_bytes(scene), device=device - grid_bytes(scene))
+        # the paths' oriented ice: the frame slices and the continuation tables, kept per process and uploaded
+        # (24 + 77 MiB measured on the sundogs)
+        slices, continuation = oriented_table_bytes(scene.media)
+        if slices:
+            estimate.add("oriented ice tables", host=slices + continuation, device=slices + continuation)
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.decks and self.scenery_paths(scene):
             estimate.merge(deck_voxel_memory(scene, s.path_tracer(), width, height))
