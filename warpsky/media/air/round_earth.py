@@ -16,6 +16,7 @@ import math
 import numpy as np
 import warp as wp
 
+from warpsky.core.device import launch_rows
 from warpsky.media.air.analytic import AnalyticAir, analytic_air
 from warpsky.media.air.multiple import floor_of
 from warpsky.media.air.round_earth_kernels import (
@@ -95,11 +96,18 @@ def space_transmittance(atm, floor: float, altitude: float, directions: np.ndarr
     return out.numpy().astype(np.float64)
 
 
+#: Directions per row of :func:`radiance`'s launch (rows run in parallel bands on the CPU).
+RADIANCE_ROW = wp.constant(64)
+
+
 @wp.kernel
 def _radiance_kernel(air: AnalyticAir, ra: RoundAir, ms: RoundMultiple, altitude: float, sun: wp.vec3,
                      radius: float, directions: wp.array(dtype=wp.vec3), distance: wp.array(dtype=float),
-                     out: wp.array(dtype=wp.vec3)):
-    i = wp.tid()
+                     out: wp.array(dtype=wp.vec3), row_offset: int):
+    r, c = wp.tid()
+    i = (r + row_offset) * RADIANCE_ROW + c
+    if i >= directions.shape[0]:
+        return
     view = directions[i]
     end = floor_distance(ra, altitude, view[1])
     if end < 0.0:
@@ -131,12 +139,13 @@ def radiance(scene, light, altitude: float, directions: np.ndarray, distance=np.
     distance = np.broadcast_to(np.minimum(np.asarray(distance, dtype=np.float64), 1.0e30), (len(directions),))
     floor = scene_floor(scene)
     out = wp.zeros(len(directions), dtype=wp.vec3, device=HOST)
-    wp.launch(_radiance_kernel, dim=len(directions), inputs=[
+    # in row bands over every core: the skylight of a small frame spent a third of its time here on one
+    launch_rows(_radiance_kernel, -(-len(directions) // RADIANCE_ROW), RADIANCE_ROW, [
         analytic_air(atm, np.zeros(3)), round_struct(atm, floor, HOST), multiple_for(scene),
         float(min(max(altitude, floor), air_top(atm))), wp.vec3(*np.asarray(light.disk_direction).tolist()),
         sun_radius(light.angular_diameter),
         wp.array(directions.astype(np.float32), dtype=wp.vec3, device=HOST),
-        wp.array(distance.astype(np.float32), dtype=float, device=HOST), out], device=HOST)
+        wp.array(distance.astype(np.float32), dtype=float, device=HOST), out], HOST)
     return np.asarray(light.irradiance, dtype=np.float64)[None, :] * out.numpy().astype(np.float64)
 
 
