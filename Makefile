@@ -25,7 +25,7 @@ TIMING_GALLERY         = about 7 min
 help:
 	@echo "make demo               - install into $(VENV), make data, render the demo cumulus to out/ (with a PNG;"
 	@echo "                          $(TIMING_DEMO) on 2 CPU cores with Warp's kernels cached, $(TIMING_DEMO_COLD) the first time)"
-	@echo "make test               - install into $(VENV) and run every test on the CPU ($(TIMING_TEST_TESTS) tests, $(TIMING_TEST) on 2 cores)"
+	@echo "make test               - install into $(VENV), make the sample data and run every test on the CPU ($(TIMING_TEST_TESTS) tests, $(TIMING_TEST) on 2 cores)"
 	@echo "make test-fast          - the tests not marked slow (pytest -m 'not slow'; $(TIMING_TEST_FAST_TESTS) tests, $(TIMING_TEST_FAST))"
 	@echo "make lint               - ruff"
 	@echo "make bench              - run evaluation/benchmarks/bench_single_scatter.py (cuda too when present)"
@@ -114,10 +114,10 @@ scenery-family: data/scenery_family/family.json
 demo: $(STAMP) $(DATA)
 	$(VENV)/bin/warpsky render usd_scenes/cumulus.usda out/cumulus.####.exr --frames 1 --png
 
-test: $(STAMP)
+test: $(STAMP) $(DATA)
 	$(PY) -m pytest -q
 
-test-fast: $(STAMP)
+test-fast: $(STAMP) $(DATA)
 	$(PY) -m pytest -q -m "not slow"
 
 lint: $(STAMP)
