@@ -190,6 +190,7 @@ def test_round_majorants_bound_the_air(device, height):
     assert segments.numpy().max() < 200
 
 
+@pytest.mark.slow  # four views, 8 s
 @pytest.mark.parametrize("view, albedo, air", [((10.0, 90.0), 0.0, "rayleigh"), ((45.0, 180.0), 0.3, "aerosols"),
                                                ((90.0, 0.0), 0.0, "earth"), ((-90.0, 0.0), 0.3, "earth")])
 def test_a_huge_planet_is_the_flat_earth(device, view, albedo, air):

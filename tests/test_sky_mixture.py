@@ -78,6 +78,7 @@ def _scatter_kernel(air: AnalyticAir, rows: wp.array(dtype=wp.vec4), single: wp.
     depth[i] = air_optical_depth(air, r[0], r[1], r[3])
 
 
+@pytest.mark.slow  # 7 s
 def test_device_matches_the_host(device):
     """The float32 kernels (12 nodes per constituent) within 0.3 % of the host's 48-node integrals and 1e-5 in
     transmittance, over random altitudes, views, suns and lengths."""

@@ -119,6 +119,7 @@ def assert_sets_smoothly(means: np.ndarray, allowance: float, label: str) -> Non
         f"{brightest:.4g})")
 
 
+@pytest.mark.slow  # four techniques x two airs: 25 s of the fast suite
 @pytest.mark.parametrize("air", [False, True], ids=["no-air", "air"])
 @pytest.mark.parametrize("technique", list(CASES))
 def test_sunset_is_smooth_in_every_technique(technique, air):
