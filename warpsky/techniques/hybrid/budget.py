@@ -24,6 +24,7 @@ import warp as wp
 
 from warpsky.core import deadline
 from warpsky.core.device import is_cpu
+from warpsky.techniques.path_tracer.path_tracer import pixel_sums
 
 #: Seconds after the hybrid's paths in a first frame (the sky pass, the composite, the EXR and PNG): the constant
 #: part, measured on the shipped stages at 96 x 64 on 2 CPU cores (0.1-0.15 s), and per pixel (the sky pass and
@@ -77,11 +78,10 @@ def timed_denoise(budget: PathBudget | None, seconds: float, film_pixels: int) -
 
 
 def film_scale(tracing, budget: PathBudget, per_pass: int, smallest: int, device: str) -> tuple[int, float]:
-    """(film scale, seconds per path) for paths that must fit ``budget``: the finest of :data:`SCALES` from
-    ``smallest`` on whose two first passes of ``per_pass`` paths per pixel fit :data:`FIRST_PASSES_SHARE` of the
-    time left, timed by one path per pixel on the coarsest film (a probe whose paths are not kept)."""
-    from warpsky.techniques.path_tracer.path_tracer import pixel_sums
-
+    """(film scale, seconds per path) for paths that must fit ``budget``: ``smallest`` (the scale asked), else the
+    finest of the larger :data:`SCALES`, whose two first passes of ``per_pass`` paths per pixel fit
+    :data:`FIRST_PASSES_SHARE` of the time left, timed by one path per pixel on the coarsest film (a probe whose
+    paths are not kept)."""
     coarsest = tracing.rescaled(SCALES[-1])
     sums = pixel_sums((coarsest.height, coarsest.width), device)
     started = time.perf_counter()
@@ -89,7 +89,7 @@ def film_scale(tracing, budget: PathBudget, per_pass: int, smallest: int, device
     wp.synchronize_device(device)
     per_path = (time.perf_counter() - started) / max(coarsest.width * coarsest.height, 1)
     width, height = tracing.frame_size
-    for scale in (s for s in SCALES if s >= smallest):
+    for scale in (smallest, *(s for s in SCALES if s > smallest)):  # the scale asked first, whatever it is
         pixels = -(-width // scale) * -(-height // scale)
         if 2 * per_pass * pixels * per_path <= FIRST_PASSES_SHARE * budget.left(pixels):
             return scale, per_path
