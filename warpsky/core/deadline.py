@@ -1,9 +1,9 @@
 """The frame's clock, so that a time budget is the wall time of the whole frame rather than of one loop in it.
 
-A frame opens its clock (:func:`frame_clock`) when its stage is read (or its passes start) and closes it once its
-EXR is written (:func:`close`). A progressive technique (the hybrid's paths) spends what is left of its budget after
+A frame opens its clock (:func:`frame_clock`) when its stage is read (or its passes start); the block ends once its
+EXR is written. A progressive technique (the hybrid's paths) spends what is left of its budget after
 what ran before it, less what will run after it: the passes that follow, the composite and the write. How long that
-took in the last frame of the same shape in this process is recorded at :func:`close` and expected again
+took in the last frame of the same shape in this process is recorded when the block ends and expected again
 (:func:`expected_after`); a first frame falls back on the technique's prior.
 """
 
@@ -34,7 +34,8 @@ _AFTER: dict[tuple, float] = {}
 @contextmanager
 def frame_clock(key: tuple, started: float | None = None) -> Iterator[FrameClock]:
     """Open the frame's clock for the block, started now or at ``started`` (perf_counter s: when the frame's stage
-    read began); a frame inside a frame (a sub-frame of motion blur) keeps the outer clock."""
+    read began); when the block ends without an error, record how long the frame ran after its progressive technique
+    (if it had one). A frame inside a frame (a sub-frame of motion blur) keeps the outer clock."""
     outer = _CLOCK.get()
     if outer is not None:
         yield outer
@@ -43,6 +44,8 @@ def frame_clock(key: tuple, started: float | None = None) -> Iterator[FrameClock
     token = _CLOCK.set(clock)
     try:
         yield clock
+        if clock.progressive_done is not None:
+            _AFTER[key] = time.perf_counter() - clock.progressive_done
     finally:
         _CLOCK.reset(token)
 
@@ -57,12 +60,6 @@ def progressive_done() -> None:
     clock = _CLOCK.get()
     if clock is not None:
         clock.progressive_done = time.perf_counter()
-
-
-def close(clock: FrameClock) -> None:
-    """The frame is written: record how long it ran after its progressive technique (if it had one)."""
-    if clock.progressive_done is not None:
-        _AFTER[clock.key] = time.perf_counter() - clock.progressive_done
 
 
 def expected_after(clock: FrameClock | None) -> float | None:

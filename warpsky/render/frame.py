@@ -68,10 +68,8 @@ def render_planned(frame: PlannedFrame, *, timings: dict[str, float] | None = No
     """Render the planned ``frame`` into memory: composited, converted to the output colour space, its channels
     cropped to the data window. With the stage's ``reader`` and an open shutter, the frame is the average of
     sub-frames (:mod:`warpsky.render.motion`)."""
-    with deadline.frame_clock(clock_key(frame)) as clock:
-        image = rendered_image(frame_render(frame, timings=timings, reader=reader), frame)
-        deadline.close(clock)
-    return image
+    with deadline.frame_clock(clock_key(frame)):
+        return rendered_image(frame_render(frame, timings=timings, reader=reader), frame)
 
 
 def clock_key(frame: PlannedFrame) -> tuple:
@@ -117,9 +115,8 @@ def write_frame(frame: PlannedFrame, out_path: Path, *, timings: dict[str, float
     ``siblings`` ((path, PlannedFrame) pairs: :meth:`~warpsky.render.planned.PlannedFrame.for_options` of
     products with the same camera and resolution) are written from the same render. ``started``: when the frame's
     planning began (perf_counter s), where its time budget starts (default: now)."""
-    with deadline.frame_clock(clock_key(frame), started) as clock:
+    with deadline.frame_clock(clock_key(frame), started):
         exr, png, image = _render_and_write(frame, out_path, timings, siblings, reader)
-        deadline.close(clock)
     timings = image.timings
     layer = image.layer
     seconds = sum(timings.get(k, 0.0) for k in ("plan", "passes", "composite", "write"))

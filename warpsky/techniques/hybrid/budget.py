@@ -77,8 +77,8 @@ def timed_denoise(budget: PathBudget | None, seconds: float, film_pixels: int) -
         budget.denoise_per_pixel = max(seconds / film_pixels, 0.0)
 
 
-def film_scale(tracing, budget: PathBudget, per_pass: int, smallest: int, device: str) -> tuple[int, float]:
-    """(film scale, seconds per path) for paths that must fit ``budget``: ``smallest`` (the scale asked), else the
+def film_scale(tracing, budget: PathBudget, per_pass: int, smallest: int, device: str) -> int:
+    """The film scale for paths that must fit ``budget``: ``smallest`` (the scale asked), else the
     finest of the larger :data:`SCALES`, whose two first passes of ``per_pass`` paths per pixel fit
     :data:`FIRST_PASSES_SHARE` of the time left, timed by one path per pixel on the coarsest film (a probe whose
     paths are not kept)."""
@@ -92,8 +92,8 @@ def film_scale(tracing, budget: PathBudget, per_pass: int, smallest: int, device
     for scale in (smallest, *(s for s in SCALES if s > smallest)):  # the scale asked first, whatever it is
         pixels = -(-width // scale) * -(-height // scale)
         if 2 * per_pass * pixels * per_path <= FIRST_PASSES_SHARE * budget.left(pixels):
-            return scale, per_path
-    return SCALES[-1], per_path
+            return scale
+    return SCALES[-1]
 
 
 def coverage_scale_warning(scale: int, asked: int) -> list[str]:

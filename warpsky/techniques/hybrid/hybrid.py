@@ -346,7 +346,7 @@ class MultipleScattering:
         if s.time_budget is not None:
             budget = PathBudget.of(s.time_budget, started, single.radiance.shape[0] * single.radiance.shape[1],
                                    self.device)
-            scale = film_scale(self.tracing, budget, int(s.samples_per_pass), self.scale, self.device)[0]
+            scale = film_scale(self.tracing, budget, int(s.samples_per_pass), self.scale, self.device)
             if scale != self.scale:
                 self.rescale(scale)
         film_pixels = self.tracing.width * self.tracing.height
