@@ -76,6 +76,20 @@ def format_seconds(seconds: float) -> str:
     return f"{minutes} min {rest} s"
 
 
+def ticking(doing: str, started: float, every: float) -> tuple[threading.Event, threading.Thread]:
+    """Say ``... still <doing> (N s)`` every ``every`` seconds from ``started`` (perf_counter s) on a daemon thread
+    until the returned event is set; (that event, the thread)."""
+    stop = threading.Event()
+
+    def tick():
+        while not stop.wait(every):
+            progress(f"... still {doing} ({format_seconds(time.perf_counter() - started)})")
+
+    thread = threading.Thread(target=tick, name="warpsky-progress", daemon=True)
+    thread.start()
+    return stop, thread
+
+
 @contextmanager
 def announced(kind: str, what: str, start: str, done: str | None = None, *, every: float = 10.0):
     """Say ``start`` before building ``what`` (a table) in the ``with`` block, ``done`` (``{seconds}`` filled in)
@@ -84,14 +98,7 @@ def announced(kind: str, what: str, start: str, done: str | None = None, *, ever
     the work is recorded (:data:`DONE`)."""
     progress(start)
     started = time.perf_counter()
-    stop = threading.Event()
-
-    def tick():
-        while not stop.wait(every):
-            progress(f"... still building the {what} ({format_seconds(time.perf_counter() - started)})")
-
-    ticker = threading.Thread(target=tick, name="warpsky-progress", daemon=True)
-    ticker.start()
+    stop, ticker = ticking(f"building the {what}", started, every)
     try:
         yield
     finally:

@@ -25,7 +25,7 @@ import os
 import threading
 import time
 
-from warpsky.core.progress import format_seconds, progress, record
+from warpsky.core.progress import format_seconds, progress, record, ticking
 from warpsky.render.kernel_cache import compile_seconds
 
 #: Seconds between the "still compiling" lines of a long compile.
@@ -80,27 +80,21 @@ def _announce(module, source_bytes: int | None) -> None:
         return
     progress(_start_line(module, pending["device"], source_bytes))
     pending["started"] = time.perf_counter()
-    stop = pending["stop"]
-
-    def tick():
-        while not stop.wait(TICK_SECONDS):
-            progress(f"... still compiling {short_name(module.name)} "
-                     f"({format_seconds(time.perf_counter() - pending['started'])})")
-
-    threading.Thread(target=tick, name="warpsky-compile-progress", daemon=True).start()
+    pending["stop"] = ticking(f"compiling {short_name(module.name)}", pending["started"], TICK_SECONDS)[0]
 
 
 def _wrap_compile(original):
     def _compile(self, device=None, output_dir=None, output_name=None, *args, **kwargs):
         if device is None or output_dir is None or output_name is None or _is_cached(output_dir, output_name):
             return original(self, device, output_dir, output_name, *args, **kwargs)
-        pending = {"module": self, "device": device, "started": None, "stop": threading.Event()}
+        pending = {"module": self, "device": device, "started": None, "stop": None}
         outer, _THREAD.pending = getattr(_THREAD, "pending", None), pending
         begun = time.perf_counter()
         try:
             compiled = original(self, device, output_dir, output_name, *args, **kwargs)
         finally:
-            pending["stop"].set()
+            if pending["stop"] is not None:
+                pending["stop"].set()
             _THREAD.pending = outer
         if compiled:
             seconds = time.perf_counter() - begun
