@@ -63,7 +63,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,denoise,compare,farm,preview,color,textures]"
+	$(PY) -m pip install --quiet -e ".[dev,denoise,compare,farm,preview,color,textures,weather]"
 	rm -f $(VENV)/.installed-*
 	touch $@
 
