@@ -20,7 +20,7 @@ TIMING_SUNBEAMS        = about 8 min
 TIMING_GALLERY         = about 7 min
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind family family-thick scenery-family terrain valley-fog sunbeams sundogs gallery
+	cumulus-wind family family-thick scenery-family terrain valley-fog sunbeams sundogs gallery cycles-env
 
 help:
 	@echo "make demo               - install into $(VENV), make data, render the demo cumulus to out/ (with a PNG;"
@@ -55,6 +55,8 @@ help:
 	@echo "make sundogs            - cirrostratus of oriented plates and columns at sunset: sundogs, arcs, labelled PNG"
 	@echo "make gallery            - every shipped stage's hero frame to docs/gallery/ and docs/gallery.md, with each"
 	@echo "                          command, time and error estimate ($(TIMING_GALLERY) on 2 CPU cores)"
+	@echo "make cycles-env         - Blender's bpy 5.0 (Cycles) in its own Python 3.11 environment .venv-cycles, for"
+	@echo "                          evaluation/benchmarks/bench_cycles.py (BPY_WHEELS=DIR: a folder with the wheel)"
 	@echo "make clean              - remove out/, data/ and .pytest_cache"
 	@echo "make help               - this list"
 
@@ -188,6 +190,17 @@ sunbeams: $(STAMP) data/terrain.usda
 # The gallery: one hero frame per shipped stage (tools/make_gallery.py runs each warpsky render command).
 gallery: $(STAMP) $(DATA)
 	$(PY) tools/make_gallery.py
+
+# bpy 5.0 pins Python 3.11 and numpy < 2 (.venv has numpy 2), and brings 1 GB of Blender: its own environment.
+CYCLES_VENV ?= .venv-cycles
+PYTHON311   ?= python3.11
+cycles-env: $(CYCLES_VENV)/.installed
+
+$(CYCLES_VENV)/.installed:
+	test -x $(CYCLES_VENV)/bin/python || $(PYTHON311) -m venv $(CYCLES_VENV)
+	$(CYCLES_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(CYCLES_VENV)/bin/python -m pip install --quiet $(if $(BPY_WHEELS),--find-links $(BPY_WHEELS)) "bpy==5.0.0" "numpy<2"
+	touch $@
 
 clean:
 	rm -rf out data .pytest_cache
