@@ -27,6 +27,7 @@ import math
 import numpy as np
 import warp as wp
 
+from warpsky.core.device import launch_rows
 from warpsky.core.numerics import exp3
 from warpsky.media.air.analytic import AnalyticAir, analytic_air
 from warpsky.media.air.mixture_kernels import ozone_density
@@ -418,10 +419,10 @@ def ray_depth(air: AnalyticAir, ra: RoundAir, h0: float, mu0: float, distance: f
 
 
 @wp.kernel
-def depth_table_kernel(air: AnalyticAir, ra: RoundAir, out: wp.array2d(dtype=wp.vec3)):
-    """Entry (i, j): the optical depth to the top from the ray of x_r = i / (rows - 1), x_mu = j / (cols - 1)."""
-    i, j = wp.tid()
-    x_r = float(i) / float(out.shape[0] - 1)
+def depth_table_kernel(air: AnalyticAir, ra: RoundAir, out: wp.array2d(dtype=wp.vec3), row_offset: int):
+    """Entry (i, j), i = row_offset + k: the optical depth to the top of x_r = i / (rows - 1), x_mu = j / (cols - 1)."""
+    k, j = wp.tid()
+    x_r = float(row_offset + k) / float(out.shape[0] - 1)
     x_mu = float(j) / float(out.shape[1] - 1)
     r_floor = ra.radius + ra.floor
     big_h = wp.sqrt((ra.top - ra.floor) * (2.0 * r_floor + ra.top - ra.floor))
@@ -434,7 +435,7 @@ def depth_table_kernel(air: AnalyticAir, ra: RoundAir, out: wp.array2d(dtype=wp.
     mu = float(1.0)
     if d > 0.0:
         mu = wp.clamp((big_h * big_h - rho * rho - d * d) / (2.0 * r * d), -1.0, 1.0)
-    out[i, j] = ray_depth(air, ra, h, mu, d)
+    out[row_offset + k, j] = ray_depth(air, ra, h, mu, d)
 
 
 @functools.lru_cache(maxsize=16)
@@ -442,7 +443,7 @@ def _table(key: tuple, device: str):
     atm, floor = _KEYED[key]
     ra = round_struct(atm, floor, device, table=False)
     out = wp.zeros((DEPTH_RADII, DEPTH_MUS), dtype=wp.vec3, device=device)
-    wp.launch(depth_table_kernel, dim=out.shape, inputs=[analytic_air(atm, np.zeros(3)), ra, out], device=device)
+    launch_rows(depth_table_kernel, DEPTH_RADII, DEPTH_MUS, [analytic_air(atm, np.zeros(3)), ra, out], device)
     return out
 
 
@@ -458,8 +459,7 @@ def air_key(atm, floor: float) -> tuple:
 
 
 def depth_table(atm, floor: float, device) -> wp.array2d:
-    """The optical depth table of the air ``atm`` over a floor at ``floor`` [m above sea level] on ``device``,
-    built there once and kept per air, floor and device."""
+    """The optical depth table of ``atm`` over a floor at ``floor`` [m above sea level], once per air, floor, device."""
     key = air_key(atm, floor)
     _KEYED.setdefault(key, (atm, float(floor)))
     return _table(key, str(wp.get_device(device)))

@@ -30,8 +30,10 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
+from warpsky.core.device import launch_rows
 from warpsky.core.errors import SceneError
 from warpsky.core.files import atomic_write, cache_dir
+from warpsky.media.voxels.nanovdb_dense import dense_from_leaves
 
 NPY_MAGIC = b"\x93NUMPY"
 NANOVDB_MAGICS = (b"NanoVDB0", b"NanoVDB1", b"NanoVDB2")
@@ -226,15 +228,23 @@ def nanovdb_grids(data: bytes, source: Path) -> list[NanoGrid]:
     return grids
 
 
+# A dense grid's launch runs over rows (i, j) flattened, from row_offset, and k: the rows are shared by the CPU's
+# threads (launch_rows).
+
+
 @wp.kernel
-def _densify_kernel(volume: wp.uint64, origin: wp.vec3i, out: wp.array3d(dtype=float)):
-    i, j, k = wp.tid()
+def _densify_kernel(volume: wp.uint64, origin: wp.vec3i, out: wp.array3d(dtype=float), row_offset: int):
+    row, k = wp.tid()
+    i = (row + row_offset) // out.shape[1]
+    j = (row + row_offset) - i * out.shape[1]
     out[i, j, k] = wp.volume_lookup_f(volume, i + origin[0], j + origin[1], k + origin[2])
 
 
 @wp.kernel
-def _densify_vector_kernel(volume: wp.uint64, origin: wp.vec3i, out: wp.array3d(dtype=wp.vec3)):
-    i, j, k = wp.tid()
+def _densify_vector_kernel(volume: wp.uint64, origin: wp.vec3i, out: wp.array3d(dtype=wp.vec3), row_offset: int):
+    row, k = wp.tid()
+    i = (row + row_offset) // out.shape[1]
+    j = (row + row_offset) - i * out.shape[1]
     out[i, j, k] = wp.volume_lookup_v(volume, i + origin[0], j + origin[1], k + origin[2])
 
 
@@ -276,10 +286,30 @@ def _dense_grid(blob: bytes, name: str, source: Path, *, vector: bool) -> FieldG
                 "float (fog) grids: point fieldName at the density grid"
             )
         raise SceneError(f"grid {name!r} of {source} holds {info.type_str!r} values; expected a float (fog) grid")
-    voxels = volume.get_voxels().numpy()
-    if len(voxels) == 0:  # a simulation's first frame: an empty medium, not an error
+    # a float grid of leaves alone is copied leaf by leaf (nanovdb_dense); others are walked voxel by voxel
+    decoded = None if vector else dense_from_leaves(memoryview(blob)[_single_grid_offset(blob):])
+    values, lo = decoded if decoded is not None else _walked(volume, vector, name, source)
+    if values.size == 0:  # a simulation's first frame: an empty medium, not an error
         return FieldGrid(np.zeros((0, 0, 0) + ((3,) if vector else ()), dtype=np.float32), np.eye(4), str(source),
                          name)
+    linear = np.array(info.transform_matrix, dtype=np.float64).reshape(3, 3)
+    local_from_index = np.eye(4)
+    local_from_index[:3, :3] = linear
+    local_from_index[:3, 3] = np.array(info.translation, dtype=np.float64) + linear @ lo
+    return FieldGrid(values, local_from_index, str(source), name)
+
+
+def _single_grid_offset(blob: bytes) -> int:
+    """Where the grid's own buffer starts in a single-grid file made by :func:`nanovdb_grids`."""
+    (name_size,) = struct.unpack_from("<I", blob, _NVDB_HEADER.size + 136)
+    return _NVDB_HEADER.size + _NVDB_META_SIZE + name_size
+
+
+def _walked(volume, vector: bool, name: str, source: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(values, lo) of :func:`_dense_grid` by looking up every voxel of the active voxels' box in the tree."""
+    voxels = volume.get_voxels().numpy()
+    if len(voxels) == 0:
+        return np.zeros((0, 0, 0), dtype=np.float32), np.zeros(3, dtype=np.int64)
     # per column: numpy reduces an (N, 3) array along its long axis several times slower
     lo = np.array([voxels[:, c].min() for c in range(3)]) - 1
     shape = tuple(int(voxels[:, c].max() - lo[c] + 2) for c in range(3))
@@ -287,9 +317,5 @@ def _dense_grid(blob: bytes, name: str, source: Path, *, vector: bool) -> FieldG
         raise SceneError(f"grid {name!r} of {source} spans {shape} voxels, too large for a dense grid")
     dense = wp.zeros(shape, dtype=wp.vec3 if vector else float, device="cpu")
     kernel = _densify_vector_kernel if vector else _densify_kernel
-    wp.launch(kernel, dim=shape, inputs=[volume.id, wp.vec3i(*lo.tolist()), dense], device="cpu")
-    linear = np.array(info.transform_matrix, dtype=np.float64).reshape(3, 3)
-    local_from_index = np.eye(4)
-    local_from_index[:3, :3] = linear
-    local_from_index[:3, 3] = np.array(info.translation, dtype=np.float64) + linear @ lo
-    return FieldGrid(dense.numpy(), local_from_index, str(source), name)
+    launch_rows(kernel, shape[0] * shape[1], shape[2], [volume.id, wp.vec3i(*lo.tolist()), dense], "cpu")
+    return dense.numpy(), lo

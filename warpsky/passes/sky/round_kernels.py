@@ -117,9 +117,11 @@ def view_lookup(view_table: RoundView, view: wp.vec3, sun: wp.vec3) -> RoundLigh
 
 @wp.kernel
 def view_table_kernel(air: AnalyticAir, ra: RoundAir, ms: RoundMultiple, sun: Sun, sun_radius: float,
-                      out: wp.array3d(dtype=wp.vec3)):
-    """Entry (i, j): the whole ray from the eye at the elevation and azimuth whose coordinates are (i, j)."""
-    i, j = wp.tid()
+                      out: wp.array3d(dtype=wp.vec3), row_offset: int):
+    """Entry (i, j): the whole ray from the eye at the elevation and azimuth whose coordinates are (i, j); the
+    launch covers the rows from ``row_offset`` (:func:`~warpsky.core.device.launch_rows`)."""
+    r, j = wp.tid()
+    i = r + row_offset
     v = 2.0 * float(i) / float(out.shape[0] - 1) - 1.0
     mu = wp.sign(v) * v * v
     azimuth = wp.pi * float(j) / float(out.shape[1] - 1)

@@ -7,6 +7,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.core import device_buffers
+from warpsky.core.device import launch_rows
 from warpsky.light.sun import Sunlight, sun_struct, sunlight
 from warpsky.media.air.analytic import analytic_air
 from warpsky.media.air.multiple import floor_of
@@ -42,8 +43,7 @@ def round_front_inputs(scene, camera, width: int, height: int, device) -> list:
     view.count = 0
     if camera.projection == Projection.PERSPECTIVE and not unlit(light):
         view.table = device_buffers.reusable("sky:round_views", (VIEW_ELEVATIONS, VIEW_AZIMUTHS, 4), wp.vec3, device)
-        wp.launch(view_table_kernel, dim=(VIEW_ELEVATIONS, VIEW_AZIMUTHS),
-                  inputs=[air, ra, ms, sun, radius, view.table], device=device)
+        launch_rows(view_table_kernel, VIEW_ELEVATIONS, VIEW_AZIMUTHS, [air, ra, ms, sun, radius, view.table], device)
         view.count = VIEW_ELEVATIONS * VIEW_AZIMUTHS
     else:
         view.table = device_buffers.reusable("sky:round_no_views", (2, 2, 4), wp.vec3, device)
