@@ -25,6 +25,7 @@ from warpsky.cli.options import (
     with_res_scale,
 )
 from warpsky.cli.prepare import add_parser as add_prepare
+from warpsky.cli.weather import add_parser as add_import_weather
 from warpsky.core.errors import UsageError, WarpskyError
 from warpsky.core.interrupt import Interrupted, exit_at_once, report_interrupt, sigint_stops_renders
 from warpsky.core.version import __version__
@@ -191,8 +192,8 @@ def build_parser(bench=None) -> argparse.ArgumentParser:
     sheet.add_argument("--view", default=DEFAULT_VIEW, metavar="VIEW",
                        help=f"the tiles' view of OpenColorIO's {DISPLAY!r} (default {DEFAULT_VIEW!r}, or 'simple')")
 
-    add_prepare(sub)
-    add_optics(sub)
+    for add_command in (add_prepare, add_optics, add_import_weather):
+        add_command(sub)
 
     if bench is None:
         sub.add_parser("bench", add_help=False, help="measure techniques: error against a path-traced reference vs "
@@ -407,6 +408,7 @@ def _run(argv: list[str] | None) -> int:
     try:
         from warpsky.cli.info import cmd_info
         from warpsky.cli.prepare import cmd_prepare
+        from warpsky.cli.weather import cmd_import_weather
         from warpsky.core.device import init_warp
         from warpsky.core.progress import quieted
         from warpsky.render.compile_progress import install as announce_compiles
@@ -417,7 +419,8 @@ def _run(argv: list[str] | None) -> int:
             with quieted(args.quiet):
                 return run_optics(args)
         commands = {"render": cmd_render, "info": cmd_info, "bench": bench.run if bench else None,
-                    "preview": cmd_preview, "contact-sheet": cmd_contact_sheet, "prepare": cmd_prepare}
+                    "preview": cmd_preview, "contact-sheet": cmd_contact_sheet, "prepare": cmd_prepare,
+                    "import-weather": cmd_import_weather}
         with sigint_stops_renders(), quieted(args.quiet):
             return commands[args.command](args)
     except WarpskyError as exc:
