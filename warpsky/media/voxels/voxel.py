@@ -20,6 +20,7 @@ import warp as wp
 from warpsky.core import device_buffers
 from warpsky.core.errors import ResourceError, UsageError
 from warpsky.core.numerics import trilinear_cell
+from warpsky.media.voxels.bricks import CoarseCells, cell_maxima, effective_block
 from warpsky.media.voxels.detail import MediumDetail, detail_z, factor_of_z, medium_details
 from warpsky.model.scene import VoxelMedium
 from warpsky.optics.kernels import TABLE_KIND
@@ -40,6 +41,7 @@ class VoxelGrid:
     phase_g: float  # HG asymmetry
     reduced_extinction: wp.vec3  # extinction - g scattering: after high-order similarity (isotropic phase), RGB
     reduced_scattering: wp.vec3  # scattering (1 - g), g the phase's mean cosine per channel, RGB
+    cells: CoarseCells  # the grid's cells in the media's occupancy buffer (shape 0: none, walk it as one)
 
 
 @wp.func
@@ -141,6 +143,7 @@ class VoxelMedia:
     grids: wp.array(dtype=VoxelGrid)  # one entry per medium
     details: wp.array(dtype=MediumDetail)  # one entry per medium (read only by kernels specialised on detail)
     count: int  # number of media
+    occupancy: wp.array(dtype=float)  # every grid's largest value per cell of OCCUPANCY_BLOCK voxels, one buffer
 
 
 @wp.struct
@@ -204,6 +207,12 @@ def media_functions(has_detail: bool):
     return sample_media
 
 
+#: Voxels per cell edge of the occupancy the shadow marches skip empty space by (:mod:`~warpsky.media.voxels.
+#: bricks`). On the demo cumulus (8.6 % of its voxels non-zero) 8-voxel cells leave 13 % of the box occupied before
+#: the one-voxel dilation.
+OCCUPANCY_BLOCK = 8
+
+
 @dataclass
 class VoxelMediaBuffers:
     """All voxel media of a scene uploaded to one device, expressed relative to one camera position."""
@@ -214,6 +223,7 @@ class VoxelMediaBuffers:
     min_voxel_size: float  # smallest voxel edge over all grids [m]
     details: wp.array | None = None  # MediumDetail per medium at the upload's time (a 1-entry dummy without detail)
     has_detail: bool = False  # whether any medium has animated detail: pick the samplers' has_detail specialisation
+    occupancy: wp.array | None = None  # each grid's cell maxima (OCCUPANCY_BLOCK voxels), or a 1-entry dummy
 
     @property
     def media(self) -> VoxelMedia:
@@ -223,12 +233,14 @@ class VoxelMediaBuffers:
         out.grids = self.grids
         out.details = self.details
         out.count = self.count
+        out.occupancy = self.occupancy
         return out
 
     @classmethod
     def upload(
         cls, media: tuple[VoxelMedium, ...], camera_position: np.ndarray, device, species: tuple[str, ...] = (),
         *, time_s: float = 0.0, cache: str | None = None, table_offset: int = 0, values: wp.array | None = None,
+        cells: bool = True, occupancy: wp.array | None = None,
     ) -> VoxelMediaBuffers:
         """Upload ``media``; a medium of species ``species[i]`` uses phase table i; animated detail at ``time_s``
         [s] (see :mod:`warpsky.media.voxels.detail`). With ``cache`` (a name such as ``"slicing"``) the values, grid
@@ -236,10 +248,15 @@ class VoxelMediaBuffers:
         ``<cache>:grids`` and ``<cache>:details``: kept on the device across frames and uploaded only when their
         contents change (the returned arrays are then shared: do not write into them). ``table_offset`` shifts the
         species' table indices (tables appended after theirs); ``values`` reuses the field values of buffers
-        already uploaded for the same fields, so only the grid structs are new."""
+        already uploaded for the same fields, so only the grid structs are new (and ``occupancy`` their cell
+        maxima). With ``cells`` each grid gets its cell maxima (:data:`OCCUPANCY_BLOCK`), which the shadow marches
+        skip empty cells by; without, a shadow march walks each grid as one (the path tracer, which has its own
+        majorants, uploads without)."""
         infos = []
         chunks = []
+        cell_chunks = []
         offset = 0
+        cell_offset = 0
         for medium in media:
             index_from_world = np.linalg.inv(medium.world_from_index)
             grid = VoxelGrid()
@@ -258,6 +275,14 @@ class VoxelMediaBuffers:
             reduced_extinction, reduced_scattering = reduced_coefficients(medium)
             grid.reduced_extinction = wp.vec3(*reduced_extinction.tolist())
             grid.reduced_scattering = wp.vec3(*reduced_scattering.tolist())
+            grid.cells = CoarseCells()
+            grid.cells.offset = cell_offset
+            grid.cells.block = float(effective_block(medium.shape, OCCUPANCY_BLOCK))
+            if cells:
+                if occupancy is None:
+                    cell_chunks.append(cell_maxima(medium.density, OCCUPANCY_BLOCK).reshape(-1))
+                grid.cells.shape = wp.vec3i(*(-(-n // int(grid.cells.block)) for n in medium.shape))
+                cell_offset += int(np.prod(grid.cells.shape))
             infos.append(grid)
             if values is None:
                 chunks.append(medium.density.reshape(-1))
@@ -284,4 +309,9 @@ class VoxelMediaBuffers:
             details = device_buffers.upload(
                 f"{cache}:details", wp.array(entries_or_dummy, dtype=MediumDetail, device="cpu").numpy(),
                 MediumDetail, device)
-        return cls(values, grids, len(infos), min(sizes) if sizes else 1.0, details, entries is not None)
+        if occupancy is None:
+            maxima = np.concatenate(cell_chunks) if cell_chunks else np.zeros(1, dtype=np.float32)
+            occupancy = (wp.array(maxima, dtype=float, device=device) if cache is None else
+                         device_buffers.upload(f"{cache}:occupancy", maxima.astype(np.float32, copy=False), float,
+                                               device))
+        return cls(values, grids, len(infos), min(sizes) if sizes else 1.0, details, entries is not None, occupancy)

@@ -16,6 +16,7 @@ import warp as wp
 from warpsky.core import device_buffers
 from warpsky.media.air.medium import Air, air_bound, altitude, coefficient_at, top_entry, vertical
 from warpsky.media.air.round_earth_kernels import Line, altitude_at, make_line
+from warpsky.media.voxels.bricks import CoarseCells, cell_maxima, cell_step, effective_block
 from warpsky.media.voxels.detail import detail_factor_bound
 from warpsky.media.voxels.voxel import VoxelMedia, grid_interval, reduced_coefficients
 from warpsky.model.scene import VoxelMedium
@@ -35,13 +36,9 @@ ALTITUDE_SLACK = wp.constant(0.5)
 ENTRY_STEP = wp.constant(1.0)
 
 
-@wp.struct
-class MajorantGrid:
-    """Coarse upper bounds of one medium's extinction: cell (i, j, k) covers voxels [i*block, (i+1)*block)."""
-
-    offset: int  # first value in the flat majorant buffer
-    shape: wp.vec3i  # coarse cells along index x, y, z
-    block: float  # voxels per cell edge
+#: One medium's majorant cells: cell (i, j, k) covers voxels [i*block, (i+1)*block) (the cells the shadow marches
+#: skip empty ones of, :mod:`warpsky.media.voxels.bricks`).
+MajorantGrid = CoarseCells
 
 
 @wp.struct
@@ -169,28 +166,12 @@ def majorant_segment(media: VoxelMedia, majorants: Majorants, air: Air, origin: 
         if span[0] > t:
             out.end = wp.min(out.end, span[0])  # the medium starts ahead: the majorant changes there
             continue
-        # the cell holding the point just ahead of t (so a point on a boundary belongs to the next cell)
-        # Float rounding can put a computed cell exit a hair before t: the step forward is at least ``nudge``
-        # (1e-4 voxel, or 1e-6 of t far from the camera), so tracking always progresses.
-        reach = wp.max(wp.max(wp.abs(dir_index[0]), wp.abs(dir_index[1])), wp.abs(dir_index[2]))
-        nudge = wp.max(1.0e-4 / wp.max(reach, 1.0e-30), 1.0e-6 * wp.abs(t))
-        probe = p0 + (t + nudge) * dir_index
-        exit_t = span[1]
-        cell = wp.vec3i(0, 0, 0)
-        for a in range(3):
-            c = int(wp.floor((probe[a] + 0.5) / mg.block))
-            c = wp.clamp(c, 0, mg.shape[a] - 1)
-            cell[a] = c
-            if dir_index[a] > 0.0:
-                exit_t = wp.min(exit_t, (float(c + 1) * mg.block - 0.5 - p0[a]) / dir_index[a])
-            elif dir_index[a] < 0.0:
-                exit_t = wp.min(exit_t, (float(c) * mg.block - 0.5 - p0[a]) / dir_index[a])
-        index = mg.offset + (cell[0] * mg.shape[1] + cell[1]) * mg.shape[2] + cell[2]
+        step = cell_step(mg, p0, dir_index, t, span[1])
         if reduced != 0:
-            out.majorant += majorants.reduced[index]
+            out.majorant += majorants.reduced[step.index]
         else:
-            out.majorant += majorants.values[index]
-        out.end = wp.min(out.end, wp.max(exit_t, t + nudge))
+            out.majorant += majorants.values[step.index]
+        out.end = wp.min(out.end, step.end)
     return out
 
 
@@ -217,39 +198,8 @@ def medium_block(medium: VoxelMedium, block: int | None) -> int:
     return edge
 
 
-def effective_block(shape: tuple[int, ...], block: int) -> int:
-    """Majorant cell edge [voxels] actually used for a grid of ``shape``: at most its largest edge."""
-    return max(1, min(int(block), max(shape)))
-
-
-def majorant_grid(density: np.ndarray, block: int) -> np.ndarray:
-    """Upper bounds of a trilinearly interpolated grid over coarse cells of ``block`` voxels.
-
-    A point in cell c interpolates voxels c*block - 1 .. (c+1)*block, so each cell takes the maximum over its
-    voxels dilated by one voxel (edge-clamped like the lookup). ``block`` is clamped to the largest grid edge
-    (:func:`effective_block`), where one cell holds the whole grid. The maximum over a box is taken one axis at a
-    time (:func:`_cell_maxima`), each axis shrinking the array ``block`` times, so the temporaries stay a fraction
-    of the grid (a dilated full-size copy and its padded shifts held five grids at once: 2.6 GiB on a 510 MiB
-    voxelised deck).
-    """
-    d = np.asarray(density, dtype=np.float32)
-    block = effective_block(d.shape, block)
-    for axis in range(3):
-        d = _cell_maxima(d, axis, block)
-    return d
-
-
-def _cell_maxima(values: np.ndarray, axis: int, block: int) -> np.ndarray:
-    """``values`` reduced along ``axis`` to ceil(n / block) cells, cell c holding the maximum over indices
-    c*block - 1 .. (c+1)*block clamped to 0 .. n - 1."""
-    n = values.shape[axis]
-    starts = np.arange(0, n, block)
-    out = np.maximum.reduceat(values, starts, axis=axis)  # c*block .. (c+1)*block - 1
-    before = np.maximum(starts - 1, 0)
-    np.maximum(out, values.take(before, axis=axis), out=out)
-    after = np.minimum(starts + block, n - 1)
-    np.maximum(out, values.take(after, axis=axis), out=out)
-    return out
+#: Upper bounds of a trilinearly interpolated grid over coarse cells of ``block`` voxels.
+majorant_grid = cell_maxima
 
 
 def cell_bounds(cells: np.ndarray, coefficient: float, medium: VoxelMedium) -> np.ndarray:

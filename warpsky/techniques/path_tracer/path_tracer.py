@@ -272,7 +272,7 @@ class PathTracing:
             cut = cut_tables(species, phase, float(settings.forward_cut)) if self.forward_cut else None
             tables = DevicePhaseTables.upload(phase if cut is None else cut.phase, device)
             media = VoxelMediaBuffers.upload(media_list, camera.position, device, species, time_s=scene.time_s,
-                                             cache=cache)
+                                             cache=cache, cells=False)
             majorants, self.majorant_cells = upload_majorants(media_list, settings.majorant_block, device,
                                                               cache_name="path_tracer:majorants",
                                                               reduced=int(settings.similarity_order) > 0)
@@ -281,7 +281,7 @@ class PathTracing:
             if cut is not None:
                 cut_list = tuple(cut_medium(m, species, cut.fraction) for m in media_list)
                 cut_media = VoxelMediaBuffers.upload(cut_list, camera.position, device, species, time_s=scene.time_s,
-                                                     table_offset=len(species), values=media.values)
+                                                     table_offset=len(species), values=media.values, cells=False)
                 cut_struct.media = cut_media.media
                 cut_struct.majorants = upload_majorants(cut_list, settings.majorant_block, device,
                                                         cache_name="path_tracer:majorants:cut")[0]

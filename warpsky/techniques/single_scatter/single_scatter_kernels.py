@@ -27,7 +27,7 @@ from warpsky.light.dome import ambient_ground
 from warpsky.light.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
 from warpsky.media.phase_mixture import oriented_correction_function, phase_sum_function
-from warpsky.media.voxels.shadow import sun_depth_function
+from warpsky.media.voxels.shadow import empty_until, sun_depth_function
 from warpsky.media.voxels.voxel import MediaPoint, VoxelMedia, media_functions, media_span
 from warpsky.model.camera_rays import PinholeCamera, PrimaryRay, primary_ray
 from warpsky.optics.kernels import medium_phase, scattering_angle
@@ -187,16 +187,32 @@ def march_functions(has_tables: bool, has_detail: bool):
                   march: MarchSettings, lobes: AmbientLobes, ray: PrimaryRay, theta: float, t0: float,
                   t1: float) -> EyeMarch:
         """The march of ``ray`` from t0 to t1 [m] in equal steps of at most ``march.step``, until the eye's
-        luminance transmittance falls below ``march.min_transmittance``."""
+        luminance transmittance falls below ``march.min_transmittance``. After a step whose midpoint held no
+        medium, the steps whose midpoints lie in empty cells (:func:`empty_until`) are skipped: each would add
+        exactly nothing."""
         out = eye_march_start()
         if t1 > t0:
             count = wp.max(int(wp.ceil((t1 - t0) / march.step)), 1)
             dt = (t1 - t0) / float(count)
-            for i in range(count):
+            i = int(0)
+            clear = int(1)  # the step before held no medium (the march starts outside the media)
+            while i < count:
+                if clear != 0:
+                    tm = t0 + (float(i) + 0.5) * dt
+                    until = empty_until(media, ray.origin, ray.direction, tm)
+                    if until >= t1:
+                        break
+                    if until > tm:  # on to the first step whose midpoint is at or past ``until``
+                        i = wp.max(i + 1, int(wp.ceil((until - t0) / dt - 0.5)))
+                        out.sun_known = 0
+                        continue
+                before = out.tau
                 out = march_step(media, phase_tables, oriented, sun, march, lobes, ray, theta, out,
                                  t0 + float(i) * dt, dt)
+                clear = wp.where(wp.max(out.tau - before) == 0.0, 1, 0)
                 if luminance(exp3(out.tau)) < march.min_transmittance:
                     break
+                i += 1
         return out
 
     return eye_march
