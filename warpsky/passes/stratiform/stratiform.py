@@ -39,11 +39,10 @@ from warpsky.model.scene import Scene
 from warpsky.optics.prepare import TableNeed
 from warpsky.optics.tables import modified_mie_table, phase_table
 from warpsky.passes.render_pass import Pass
-from warpsky.passes.stratiform.model1d import order_energies, reference_thickness
-from warpsky.passes.stratiform.optics import FORWARD_CUT_DEG, stratiform_optics
-from warpsky.passes.stratiform.radiosity import Radiosity, ground_direct, radiosity_bytes, radiosity_grid
-from warpsky.passes.stratiform.stratiform_kernels import LayerGeometry, stratiform_kernel
 from warpsky.surfaces.plane import ground_struct
+
+# The slab's optics, the radiosity and the kernels (Warp modules) load when a layer is drawn or described, not when
+# a frame asks whether the pass runs.
 
 
 @documented
@@ -127,6 +126,9 @@ class Stratiform:
                          sky: np.ndarray):
         """(grid box (x0, z0, sx, sz), R_G, R_C, RadiosityResult or None) on the shared low-resolution grid; R_G
         and R_C are the solver's device arrays when it ran, host arrays otherwise."""
+        from warpsky.passes.stratiform.model1d import order_energies, reference_thickness
+        from warpsky.passes.stratiform.radiosity import Radiosity, ground_direct, radiosity_grid
+
         s = self.settings
         ground = scene.ground
         h = layer.base_altitude - ground.height
@@ -171,6 +173,9 @@ class Stratiform:
         """Render ``layer`` (at its time, when advected) over the scene's ground, textured by ``ground_texture``
         (default: the ground's ``albedo_map``). ``draw_ground=False`` leaves the ground out of the image (another
         layer draws it) while the radiosity still lights this layer's base."""
+        from warpsky.passes.stratiform.optics import stratiform_optics
+        from warpsky.passes.stratiform.stratiform_kernels import LayerGeometry, stratiform_kernel
+
         started = time.perf_counter()
         layer = at_time(layer, self.device)
         if ground_texture is None and scene.ground is not None:
@@ -275,6 +280,8 @@ class StratiformPass(Pass):
     def memory_estimate(self, scene, width: int, height: int) -> MemoryEstimate:
         """The thickness maps, one layer image per layer (and its host copy on a GPU), the merge's copies and the
         radiosity buffers of every layer above the ground."""
+        from warpsky.passes.stratiform.radiosity import radiosity_bytes
+
         pixels, layers = width * height, len(scene.stratiform_layers)
         copies = 0 if is_cpu(self.device) else layers
         estimate = MemoryEstimate()
@@ -289,6 +296,8 @@ class StratiformPass(Pass):
 
     def tables(self, scene) -> list[TableNeed]:
         """The ``stratus`` phase table and Bouthors' modified Mie table split at the forward cut."""
+        from warpsky.passes.stratiform.optics import FORWARD_CUT_DEG
+
         return [TableNeed(LAYER_SPECIES, "phase", functools.partial(phase_table, LAYER_SPECIES)),
                 TableNeed(LAYER_SPECIES, "bouthors", functools.partial(modified_mie_table, LAYER_SPECIES,
                                                                         FORWARD_CUT_DEG), f"{FORWARD_CUT_DEG:g}")]
@@ -357,6 +366,8 @@ def _radiosity_feature(scene, layer, settings) -> str:
         why = ("stratiform.radiosity=0" if settings.radiosity is not None
                else f"warpsky:stratiform:radiosity = false on {layer.name}")
         return f"off ({why}): sky and cloud light reach the ground once"
+    from warpsky.passes.stratiform.radiosity import radiosity_bytes, radiosity_grid
+
     detail = int(settings.radiosity_detail)
     _, pixel, (nu, nv) = radiosity_grid(layer, ground.height, detail)
     mib = radiosity_bytes(layer, ground.height, detail) / 2**20

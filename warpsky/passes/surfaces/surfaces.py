@@ -18,6 +18,7 @@ light on slopes) and the sky hidden by the terrain itself.
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
@@ -33,15 +34,10 @@ from warpsky.model.camera_rays import pinhole_camera
 from warpsky.model.scene import Scene
 from warpsky.passes.media import scenery_paths
 from warpsky.passes.render_pass import Pass
-from warpsky.passes.surfaces.surfaces_kernels import (
-    SurfaceImage,
-    SurfaceLighting,
-    SurfacePlane,
-    camera_buried,
-    shade_kernel,
-    surface_hits,
-)
 from warpsky.surfaces.mesh import SHADOW_BIAS, MeshBuffers
+
+if TYPE_CHECKING:  # the kernels (a Warp module) load when the pass draws, not when a frame asks whether it runs
+    from warpsky.passes.surfaces.surfaces_kernels import SurfaceImage, SurfacePlane
 
 
 class Surfaces:
@@ -74,6 +70,8 @@ class Surfaces:
             camera's far distance elsewhere). Under the terrain (:meth:`camera_buried`) it is black and opaque at
             the near distance, with one line in its ``warnings``.
         """
+        from warpsky.passes.surfaces.surfaces_kernels import SurfaceLighting, shade_kernel
+
         started = time.perf_counter()
         camera = scene.camera.conformed(width, height)
         with wp.ScopedDevice(self.device):
@@ -126,6 +124,8 @@ class Surfaces:
     def camera_buried(self, buffers: MeshBuffers, plane: SurfacePlane) -> int:
         """The material the eye is under (the ray straight up from it meets that surface's back first, or the eye
         is below the drawn ground plane), else -1."""
+        from warpsky.passes.surfaces.surfaces_kernels import camera_buried
+
         out = wp.zeros(1, dtype=wp.int32, device=self.device)
         wp.launch(camera_buried, dim=1, inputs=[buffers.surfaces, plane, out], device=self.device)
         return int(out.numpy()[0])
@@ -133,6 +133,8 @@ class Surfaces:
     # -------------------------------------------------------------------------------------------- helpers
     def _prepare(self, scene: Scene, eye: np.ndarray, draw_ground: bool) -> tuple[MeshBuffers, SurfacePlane]:
         """The meshes' buffers relative to ``eye`` (kept, refitted or rebuilt) and the plane's struct."""
+        from warpsky.passes.surfaces.surfaces_kernels import SurfacePlane
+
         ground = scene.ground if draw_ground else None
         extra = [(ground.albedo, ground.albedo_map)] if ground is not None else []
         key = (tuple(id(m) for m in scene.meshes), tuple(np.asarray(eye, np.float64).tolist()),
@@ -149,6 +151,8 @@ class Surfaces:
         return self._buffers, plane
 
     def _trace(self, buffers: MeshBuffers, plane: SurfacePlane, cam, width: int, height: int) -> SurfaceImage:
+        from warpsky.passes.surfaces.surfaces_kernels import SurfaceImage, surface_hits
+
         image = SurfaceImage()
         image.point = wp.zeros((height, width), dtype=wp.vec3)
         image.normal = wp.zeros((height, width), dtype=wp.vec3)
