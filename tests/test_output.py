@@ -154,7 +154,7 @@ def test_the_default_view_needs_no_opencolorio(monkeypatch):
     from warpsky.core.errors import UsageError
     from warpsky.output import png
 
-    monkeypatch.setattr(png, "views", lambda: (png.SIMPLE_VIEW,))
+    monkeypatch.setattr(png, "color_installed", lambda: False)
     assert png.check_view(png.DEFAULT_VIEW) == png.DEFAULT_VIEW
     assert png.shown_view(png.DEFAULT_VIEW) == png.SIMPLE_VIEW
     frame = np.full((2, 2, 3), 0.3)

@@ -13,6 +13,7 @@ chunks name the view and the exposure (``warpsky:view``, ``warpsky:exposure``).
 from __future__ import annotations
 
 import functools
+import importlib.util
 import os
 from pathlib import Path
 
@@ -55,9 +56,16 @@ def auto_exposure(rgb: np.ndarray) -> float:
     return AUTO_LEVEL / level if level > 0.0 else 1.0
 
 
+def color_installed() -> bool:
+    """Whether OpenColorIO is installed, asked without importing it (30 ms)."""
+    return importlib.util.find_spec("PyOpenColorIO") is not None
+
+
 def views() -> tuple[str, ...]:
     """The views a preview can take: the OpenColorIO config's views of :data:`DISPLAY` (none without OpenColorIO),
     then :data:`SIMPLE_VIEW`."""
+    if not color_installed():
+        return (SIMPLE_VIEW,)
     try:
         config = _config()
     except ImportError:
@@ -82,7 +90,10 @@ def _processor(view: str):
 
 def check_view(view: str) -> str:
     """``view`` when a preview can take it, else a UsageError naming the choices. The default view is always
-    accepted: without OpenColorIO :func:`encode` shows it through :data:`SIMPLE_VIEW`."""
+    accepted: without OpenColorIO :func:`encode` shows it through :data:`SIMPLE_VIEW` (so OpenColorIO, 30 ms,
+    loads only for another view or a preview)."""
+    if view == DEFAULT_VIEW:
+        return view
     choices = views()
     if view != DEFAULT_VIEW and view not in choices:
         missing = "" if len(choices) > 1 else " (OpenColorIO is not installed: pip install 'warpsky[color]')"
@@ -106,7 +117,7 @@ def encode(rgb: np.ndarray, *, exposure: float = 1.0, view: str = DEFAULT_VIEW) 
 
 def shown_view(view: str) -> str:
     """The view :func:`encode` applies for ``view`` (the default without OpenColorIO is the simple curve)."""
-    return SIMPLE_VIEW if view == DEFAULT_VIEW and views() == (SIMPLE_VIEW,) else view
+    return SIMPLE_VIEW if view == DEFAULT_VIEW and not color_installed() else view
 
 
 def write_png(path: str | os.PathLike, rgb: np.ndarray, *, exposure: float = 1.0, view: str = DEFAULT_VIEW) -> Path:
