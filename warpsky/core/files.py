@@ -49,3 +49,23 @@ def atomic_write(path: str | os.PathLike, write) -> Path:
         if os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def cached_array(folder: str, name: str, identity: tuple, build):
+    """The array ``build()`` returns, kept on disk: ``$WARPSKY_CACHE/FOLDER/NAME-<hash>.npy``, the hash of
+    ``repr(identity)`` (everything the array depends on: its inputs, its shape, the device's kind, the building
+    kernel's Warp module hash). Read back when present and readable (bit for bit what was built), else built and
+    written there atomically."""
+    import hashlib
+
+    import numpy as np
+
+    digest = hashlib.sha256(repr(identity).encode()).hexdigest()[:20]
+    path = cache_dir() / folder / f"{name}-{digest}.npy"
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError):
+        pass  # missing or unreadable: built and (over)written
+    values = np.asarray(build())
+    atomic_write(path, lambda tmp: np.save(tmp, values))
+    return values

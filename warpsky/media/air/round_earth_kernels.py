@@ -21,13 +21,13 @@ floor: x_r = rho / H (rho = sqrt(r^2 - r_floor^2), H its value at the top) and x
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 import warp as wp
 
 from warpsky.core.device import launch_rows
+from warpsky.core.files import cached_array
 from warpsky.core.numerics import exp3
 from warpsky.media.air.analytic import AnalyticAir, analytic_air
 from warpsky.media.air.mixture_kernels import ozone_density
@@ -438,18 +438,6 @@ def depth_table_kernel(air: AnalyticAir, ra: RoundAir, out: wp.array2d(dtype=wp.
     out[row_offset + k, j] = ray_depth(air, ra, h, mu, d)
 
 
-@functools.lru_cache(maxsize=16)
-def _table(key: tuple, device: str):
-    atm, floor = _KEYED[key]
-    ra = round_struct(atm, floor, device, table=False)
-    out = wp.zeros((DEPTH_RADII, DEPTH_MUS), dtype=wp.vec3, device=device)
-    launch_rows(depth_table_kernel, DEPTH_RADII, DEPTH_MUS, [analytic_air(atm, np.zeros(3)), ra, out], device)
-    return out
-
-
-_KEYED: dict = {}
-
-
 def air_key(atm, floor: float) -> tuple:
     """What of ``atm`` and its floor the round air's tables depend on, hashable."""
     colours = (atm.beta_sea_level, atm.mie_scattering, atm.mie_absorption, atm.ozone_absorption)
@@ -458,11 +446,26 @@ def air_key(atm, floor: float) -> tuple:
             float(floor))
 
 
+_TABLES: dict = {}
+
+
 def depth_table(atm, floor: float, device) -> wp.array2d:
-    """The optical depth table of ``atm`` over a floor at ``floor`` [m above sea level], once per air, floor, device."""
-    key = air_key(atm, floor)
-    _KEYED.setdefault(key, (atm, float(floor)))
-    return _table(key, str(wp.get_device(device)))
+    """The optical depth table of ``atm`` over a floor at ``floor`` [m above sea level] on ``device``: built once
+    per air, floor and kind of device and kept on disk (:func:`~warpsky.core.files.cached_array`)."""
+    key, device = air_key(atm, floor), str(wp.get_device(device))
+    if (key, device) not in _TABLES:
+
+        def build():
+            out = wp.zeros((DEPTH_RADII, DEPTH_MUS), dtype=wp.vec3, device=device)
+            inputs = [analytic_air(atm, np.zeros(3)), round_struct(atm, floor, device, table=False), out]
+            launch_rows(depth_table_kernel, DEPTH_RADII, DEPTH_MUS, inputs, device)
+            return out.numpy()
+
+        module = depth_table_kernel.module.get_module_hash().hex()  # the kernel and every function it calls
+        identity = (key, DEPTH_RADII, DEPTH_MUS, device.split(":")[0], module)
+        values = cached_array("air", "round-depth", identity, build)
+        _TABLES[key, device] = wp.array(values, dtype=wp.vec3, device=device)
+    return _TABLES[key, device]
 
 
 def round_struct(atm, floor: float, device, *, table: bool = True) -> RoundAir:
@@ -478,12 +481,9 @@ def round_struct(atm, floor: float, device, *, table: bool = True) -> RoundAir:
     return out
 
 
-# ---- the same on the host, float64: a reference ---------------------------------------------------------------
-
-
 def reference_depth(atm, h0: float, mu0: float, distance: float, count: int = 200_000) -> np.ndarray:
     """(3,) optical depth along a round earth's ray by the trapezoid rule in t over ``count`` points, every point's
-    altitude in float64 (a brute-force reference for tests)."""
+    altitude in float64, on the host (a brute-force reference for tests)."""
     from warpsky.media.air.mixture import mie_extinction
     from warpsky.media.air.mixture import ozone_density as ozone
 
