@@ -70,6 +70,22 @@ def test_hand_made_cm1_extinction_matches_the_formulas(tmp_path):
     assert np.count_nonzero(beta["cloud"]) == 1 and np.count_nonzero(beta["rain"]) == 1
 
 
+def test_two_moment_numbers_set_the_rain_distribution(tmp_path):
+    """CM1's ncr [1/kg] times the dry-air density is the rain's number concentration; the extinction follows
+    the two-moment form instead of Marshall-Palmer's fixed intercept."""
+    shape = (1, 6, 5, 5)
+    qr, ncr = np.zeros(shape), np.zeros(shape)
+    qr[0, 1, 2, 2], ncr[0, 1, 2, 2] = 2e-3, 400.0  # fewer, larger drops than Marshall-Palmer's
+    qr[0, 3, 2, 2] = 1e-3  # no number: Marshall-Palmer
+    (state,) = read_weather([_uniform_cm1(tmp_path, fields={"qr": qr, "ncr": ncr})])
+    rho = _air_density(9.0e4, 300.0, 0.01)
+    beta = state.extinction()["rain"]
+    expected = extinction(HYDROMETEORS["rain"], 2e-3 * rho, number=400.0 * rho)
+    np.testing.assert_allclose(beta[2, 2, 1], expected, rtol=1e-5)
+    assert abs(expected / extinction(HYDROMETEORS["rain"], 2e-3 * rho) - 1.0) > 0.1
+    np.testing.assert_allclose(beta[2, 2, 3], extinction(HYDROMETEORS["rain"], 1e-3 * rho), rtol=1e-5)
+
+
 def test_written_grid_holds_the_extinction_at_the_model_positions(tmp_path):
     """The NanoVDB the stage references gives back each cell's extinction at the cell's own x, y, z [m]."""
     from warpsky.media.voxels.fields import load_field
@@ -215,6 +231,12 @@ def test_cm1_import_info_and_render(tmp_path, capsys):
     assert set(volume.GetFieldPaths()) == {"cloud", "rain", "ice", "snow", "velocity"}
     samples = UsdVol.OpenVDBAsset(stage.GetPrimAtPath("/World/Weather/cloud")).GetFilePathAttr().GetTimeSamples()
     assert samples == [1.0, 2.0]
+    from warpsky.media.voxels.fields import load_vector_field
+
+    velocity = load_vector_field(stage_path.parent / "weather" / "velocity.0002.nvdb").values
+    (state,) = [s for s in read_weather([cm1]) if s.time == 900.0]
+    np.testing.assert_allclose(velocity[..., 2].max(), state.velocity[..., 2].max(), rtol=1e-6)  # the updraft
+    np.testing.assert_allclose(velocity[..., 0].max(), 5.0, rtol=1e-6)  # the westerly
     code, info, err = run_cli(["info", stage_path, "--time", 2], capsys)
     assert code == 0, err
     for species in ("cloud", "rain", "ice", "snow"):

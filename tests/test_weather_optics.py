@@ -116,3 +116,28 @@ def test_hydrometeor_needs_exactly_one_size_model():
     with pytest.raises(SceneError, match="density"):
         Hydrometeor("x", "cloud", 0.0, effective_radius=1e-5)
     assert "r_e=10 um" in repr(HYDROMETEORS["cloud"])
+
+
+@pytest.mark.parametrize("name", ["rain", "snow", "graupel"])
+def test_two_moment_exponential_against_its_integrals(name):
+    """With a number concentration N the slope is Lambda = (pi rho N / W)^(1/3); the distribution
+    N Lambda exp(-Lambda D) then holds N particles and W of water, and its extinction is the closed form."""
+    kind = HYDROMETEORS[name]
+    for content, number in ((1e-4, 1e3), (1e-3, 5e4), (3e-3, 2e5)):
+        slope = (math.pi * kind.particle_density * number / content) ** (1.0 / 3.0)
+        d = np.linspace(0.0, 40.0 / slope, 400_001)
+        n = number * slope * np.exp(-slope * d)
+        np.testing.assert_allclose(np.trapezoid(n, d), number, rtol=1e-6)
+        np.testing.assert_allclose(np.trapezoid(kind.particle_density * math.pi / 6.0 * d**3 * n, d), content,
+                                   rtol=1e-6)
+        beta = np.trapezoid(2.0 * math.pi / 4.0 * d**2 * n, d)
+        np.testing.assert_allclose(float(extinction(kind, content, number=number)), beta, rtol=1e-6)
+
+
+def test_two_moment_droplets_take_the_mean_mass_and_missing_numbers_fall_back():
+    kind = HYDROMETEORS["cloud"]
+    content, number = 1e-3, 1e8  # 1 g/m^3 in 100 droplets per cm^3: r = 13.4 um
+    r = (3 * content / (4 * math.pi * 1000.0 * number)) ** (1 / 3)
+    np.testing.assert_allclose(float(extinction(kind, content, number=number)), 2 * math.pi * r**2 * number)
+    beta = extinction(kind, np.full(2, content), number=np.array([0.0, np.nan]))
+    np.testing.assert_allclose(beta, extinction(kind, np.full(2, content)))

@@ -29,6 +29,12 @@ needs the extinction coefficient β [1/m] of each species warpsky has optics for
      1983, the bulk scheme CM1 and WRF's Lin option use; Morrison's and Thompson's schemes diagnose their own
      N0, which a file does not carry). β is not linear in W: it grows as W^(3/4).
 
+Two-moment schemes (Morrison's, Thompson's rain and ice; CM1's ``ncr ncs ncg nci``, WRF's ``QNRAIN QNSNOW
+QNGRAUPEL QNICE``, per kg of dry air) also carry each category's number concentration N [1/m³ after × ρ_d]; where
+it is given it replaces the fixed intercept or radius: an exponential's slope follows from W and N,
+Λ = (π ρ_p N / W)^(1/3) and β = π N / Λ² = (π N)^(1/3) (W / ρ_p)^(2/3); droplets and ice then all take the mean
+particle mass (r = (3 W / (4 π ρ_p N))^(1/3), β = 2 π r² N).
+
 Graupel has no optics of its own in warpsky (Riley §3.1 leaves it out too); it renders with the ``snow``
 species' phase function (large, irregular ice without halo peaks), its extinction added to the snow's: for two
 fields with the same phase function, Riley's Eq. 3 and 6 make their sum the same medium.
@@ -142,8 +148,8 @@ def water_content(mixing_ratio: np.ndarray, air_density: np.ndarray) -> np.ndarr
     return np.clip(np.asarray(mixing_ratio, dtype=np.float64), 0.0, None) * np.asarray(air_density, np.float64)
 
 
-def extinction(hydrometeor: Hydrometeor, content: np.ndarray, effective_radius: np.ndarray | None = None
-               ) -> np.ndarray:
+def extinction(hydrometeor: Hydrometeor, content: np.ndarray, effective_radius: np.ndarray | None = None,
+               number: np.ndarray | None = None) -> np.ndarray:
     """Extinction coefficient [1/m] of ``content`` [kg/m³] of ``hydrometeor``.
 
     Args:
@@ -151,25 +157,41 @@ def extinction(hydrometeor: Hydrometeor, content: np.ndarray, effective_radius: 
         content: Water content W [kg/m³] (≥ 0).
         effective_radius: Per-cell effective radius [m] for the effective-radius model (a file's ``RE_CLOUD``,
             say); cells where it is not > 0 take the hydrometeor's own. Ignored for exponential distributions.
+        number: Per-cell number concentration N [1/m³] from a two-moment scheme, or None. Where it is > 0 it
+            replaces the fixed size: an exponential distribution's slope follows from W and N,
+            Λ = (π ρ_p N / W)^(1/3), so β = π N / Λ² = (π N)^(1/3) (W / ρ_p)^(2/3); the effective-radius model's
+            particles all take the mean mass, r = (3 W / (4 π ρ_p N))^(1/3), so β = 2 π r² N.
 
     Returns:
-        β [1/m], float64, the shape of ``content``: 3W / (2 ρ_p r_e), or π N0 Λ⁻³ with Λ = (π ρ_p N0 / W)^(1/4).
+        β [1/m], float64, the shape of ``content``: 3W / (2 ρ_p r_e), or π N0 Λ⁻³ with Λ = (π ρ_p N0 / W)^(1/4),
+        or the two-moment forms above where ``number`` is given.
     """
     w = np.clip(np.asarray(content, dtype=np.float64), 0.0, None)
     rho = hydrometeor.particle_density
     if hydrometeor.exponential:
         n0 = hydrometeor.intercept
         # π N0 Λ⁻³ with Λ⁴ = π ρ N0 / W, written in W so that W = 0 gives 0 without a division
-        return math.pi * n0 * (w / (math.pi * rho * n0)) ** 0.75
-    radius = np.full(w.shape, hydrometeor.effective_radius)
-    if effective_radius is not None:
-        given = np.broadcast_to(np.asarray(effective_radius, dtype=np.float64), w.shape)
-        radius = np.where(np.isfinite(given) & (given > 0.0), given, radius)
-    return 3.0 * w / (2.0 * rho * radius)
+        beta = math.pi * n0 * (w / (math.pi * rho * n0)) ** 0.75
+    else:
+        radius = np.full(w.shape, hydrometeor.effective_radius)
+        if effective_radius is not None:
+            given = np.broadcast_to(np.asarray(effective_radius, dtype=np.float64), w.shape)
+            radius = np.where(np.isfinite(given) & (given > 0.0), given, radius)
+        beta = 3.0 * w / (2.0 * rho * radius)
+    if number is None:
+        return beta
+    n = np.broadcast_to(np.nan_to_num(np.asarray(number, dtype=np.float64), nan=0.0), w.shape)
+    counted = np.clip(n, 0.0, None)
+    if hydrometeor.exponential:
+        two_moment = np.cbrt(math.pi * counted) * (w / rho) ** (2.0 / 3.0)
+    else:
+        two_moment = 2.0 * math.pi * counted ** (1.0 / 3.0) * (3.0 * w / (4.0 * math.pi * rho)) ** (2.0 / 3.0)
+    return np.where(n > 0.0, two_moment, beta)
 
 
 def species_extinction(contents: dict[str, np.ndarray], radii: dict[str, np.ndarray] | None = None,
-                       hydrometeors: dict[str, Hydrometeor] | None = None) -> dict[str, np.ndarray]:
+                       hydrometeors: dict[str, Hydrometeor] | None = None,
+                       numbers: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """Extinction [1/m] per warpsky species from water contents [kg/m³] per hydrometeor name.
 
     Hydrometeors rendered as the same species (graupel and snow) add (Riley Eq. 3). Species without any water
@@ -179,14 +201,15 @@ def species_extinction(contents: dict[str, np.ndarray], radii: dict[str, np.ndar
         contents: Hydrometeor name (a key of ``hydrometeors``) -> water content [kg/m³].
         radii: Hydrometeor name -> per-cell effective radius [m], where the file gives one.
         hydrometeors: The categories (default :data:`HYDROMETEORS`).
+        numbers: Hydrometeor name -> per-cell number concentration [1/m³], where a two-moment scheme gives one.
     """
     table = HYDROMETEORS if hydrometeors is None else hydrometeors
-    radii = radii or {}
+    radii, numbers = radii or {}, numbers or {}
     out: dict[str, np.ndarray] = {}
     for name, content in contents.items():
         if name not in table:
             raise SceneError(f"unknown hydrometeor {name!r}; known: {', '.join(table)}")
         kind = table[name]
-        beta = extinction(kind, content, radii.get(name))
+        beta = extinction(kind, content, radii.get(name), numbers.get(name))
         out[kind.species] = out[kind.species] + beta if kind.species in out else beta
     return out

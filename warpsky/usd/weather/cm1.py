@@ -15,6 +15,8 @@ variable       dimensions                   unit      meaning
 ``qc qr qi     time, zh, yh, xh             kg/kg     cloud water, rain, cloud ice, snow, graupel (or hail, when
 qs qg``                                               ``ihail = 1``) mixing ratios; those present are read, at
                                                       least one is required
+``nci ncr      time, zh, yh, xh             1/kg      number concentrations of a two-moment scheme (Morrison:
+ncs ncg``                                             ``ptype = 5``), optional: they set the size distributions
 ``u, v, w``    on ``xf``, ``yf``, ``zf``    m/s       ground-relative wind on the staggered faces (optional: all
                                                       three give the velocity for motion blur)
 ``time``       time                         s         time since the simulation began
@@ -37,6 +39,8 @@ from warpsky.usd.weather.weather_state import WeatherState
 
 #: CM1 variable -> hydrometeor (:data:`~warpsky.model.water_optics.HYDROMETEORS`).
 MIXING_RATIOS = {"qc": "cloud", "qr": "rain", "qi": "ice", "qs": "snow", "qg": "graupel"}
+#: CM1 number concentrations [1/kg] of two-moment schemes -> hydrometeor.
+NUMBERS = {"nci": "ice", "ncr": "rain", "ncs": "snow", "ncg": "graupel"}
 
 
 def is_cm1(ds) -> bool:
@@ -77,6 +81,8 @@ def read_cm1(path, ds, *, dz: float | None = None) -> list[WeatherState]:
                          f"{', '.join(MIXING_RATIOS)})")
     ratios = {hydro: netcdf.values(ds, path, name, dims, "mixing ratio [kg/kg]") for name, hydro in found.items()}
     vapour = netcdf.values(ds, path, "qv", dims, "water vapour [kg/kg]") if "qv" in ds.variables else None
+    numbers = {hydro: netcdf.values(ds, path, name, dims, "number concentration [1/kg]")
+               for name, hydro in NUMBERS.items() if name in ds.variables and hydro in ratios}
     wind = _staggered_wind(ds, path, dims)
     times, moves = _times(ds, path, theta.ndim > 3, theta.shape[0] if theta.ndim > 3 else 1)
     levels, spacing = _levels(z, dz)
@@ -89,13 +95,15 @@ def read_cm1(path, ds, *, dz: float | None = None) -> list[WeatherState]:
                               None if vapour is None else netcdf.at_time(vapour, 3, index))
         water = {hydro: _regular(water_content(netcdf.at_time(q, 3, index), rho), z, levels)
                  for hydro, q in ratios.items()}
+        number = {hydro: _regular(water_content(netcdf.at_time(n, 3, index), rho), z, levels).astype(np.float32)
+                  for hydro, n in numbers.items()}
         velocity = None
         if wind is not None:
             velocity = np.stack([_regular(netcdf.at_time(c, 3, index), z, levels) for c in wind], axis=-1)
         states.append(WeatherState(
             source=str(path), time=float(seconds), label=f"t={seconds:g}s",
             origin=(x[0] + east, y[0] + north, levels[0]), spacing=(dx, dy, spacing),
-            water={k: v.astype(np.float32) for k, v in water.items()},
+            water={k: v.astype(np.float32) for k, v in water.items()}, number=number,
             velocity=None if velocity is None else velocity.astype(np.float32)))
     return states
 

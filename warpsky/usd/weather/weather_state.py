@@ -44,6 +44,8 @@ class WeatherState:
     water         kg/m³        hydrometeor name (``cloud``, ``rain``, ``ice``, ``snow``, ``graupel``) -> water
                                content, shape (nx, ny, nz); 0 under the ground and outside the model's levels
     radius        m            hydrometeor name -> effective radius per cell, where the file gives one
+    number        1/m³         hydrometeor name -> number concentration per cell, where a two-moment scheme
+                               gives one
     velocity      m/s          (nx, ny, nz, 3) wind (east, north, up) at the cell centres, or None
     terrain       –            :class:`Terrain`, or None (flat ground at z = 0)
     ============= ============ ===================================================================================
@@ -56,6 +58,7 @@ class WeatherState:
     spacing: np.ndarray
     water: dict[str, np.ndarray]
     radius: dict[str, np.ndarray] = field(default_factory=dict)
+    number: dict[str, np.ndarray] = field(default_factory=dict)
     velocity: np.ndarray | None = None
     terrain: Terrain | None = None
 
@@ -82,5 +85,5 @@ class WeatherState:
     def extinction(self, hydrometeors=None) -> dict[str, np.ndarray]:
         """Extinction [1/m] per warpsky species (``cloud``, ``rain``, ``ice``, ``snow``), float32, indexed
         [x, y, z] (:func:`~warpsky.model.water_optics.species_extinction`)."""
-        beta = species_extinction(self.water, self.radius, hydrometeors)
+        beta = species_extinction(self.water, self.radius, hydrometeors, self.number)
         return {name: grid.astype(np.float32) for name, grid in beta.items()}

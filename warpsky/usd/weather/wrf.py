@@ -12,6 +12,9 @@ variable                        grid                  unit    meaning
                                                               height z = (PH + PHB) / g, g = 9.81 m/s²
 ``QCLOUD QRAIN QICE QSNOW       mass points           kg/kg   hydrometeor mixing ratios; those present are read,
 QGRAUP``                                                      at least one is required
+``QNCLOUD QNICE QNRAIN QNSNOW    mass points           1/kg    number concentrations of two-moment schemes
+QNGRAUPEL``                                                   (Morrison, Thompson), optional: they set the size
+                                                              distributions
 ``QVAPOR``                      mass points           kg/kg   water vapour (optional: refines the dry-air density)
 ``RE_CLOUD``, ``RE_ICE``        mass points           m       effective radii (optional; where > 0 they replace
                                                               the default droplet and ice radii)
@@ -41,6 +44,8 @@ from warpsky.usd.weather.weather_state import Terrain, WeatherState
 
 #: WRF variable -> hydrometeor (:data:`~warpsky.model.water_optics.HYDROMETEORS`).
 MIXING_RATIOS = {"QCLOUD": "cloud", "QRAIN": "rain", "QICE": "ice", "QSNOW": "snow", "QGRAUP": "graupel"}
+#: WRF number concentrations [1/kg] of two-moment schemes -> hydrometeor.
+NUMBERS = {"QNCLOUD": "cloud", "QNICE": "ice", "QNRAIN": "rain", "QNSNOW": "snow", "QNGRAUPEL": "graupel"}
 #: WRF's effective-radius diagnostics [m] -> hydrometeor.
 RADII = {"RE_CLOUD": "cloud", "RE_ICE": "ice"}
 #: Gravity [m/s²] of WRF's geopotential (module_model_constants: g = 9.81).
@@ -89,6 +94,8 @@ def read_wrf(path, ds, *, dz: float | None = None) -> list[WeatherState]:
     vapour = netcdf.values(ds, path, "QVAPOR", MASS, "water vapour [kg/kg]") if "QVAPOR" in ds.variables else None
     radii = {hydro: netcdf.values(ds, path, name, MASS, "effective radius [m]")
              for name, hydro in RADII.items() if name in ds.variables}
+    numbers = {hydro: netcdf.values(ds, path, name, MASS, "number concentration [1/kg]")
+               for name, hydro in NUMBERS.items() if name in ds.variables and hydro in ratios}
     hgt = netcdf.values(ds, path, "HGT", MASS[1:], "terrain height [m]") if "HGT" in ds.variables else None
     wind = _staggered_wind(ds, path)
     seconds, labels = _times(ds, path, p.shape[0] if p.ndim > 3 else 1)
@@ -101,7 +108,7 @@ def read_wrf(path, ds, *, dz: float | None = None) -> list[WeatherState]:
         spacing = float(dz) if dz is not None else default_spacing(heights, bottom, top)
         levels = regular_levels(bottom, top, spacing)
         states.append(_state(path, index, t, label, (dx, dy, spacing), levels, heights, ground,
-                             (p, theta, vapour, ratios, radii, wind)))
+                             (p, theta, vapour, ratios, radii, numbers, wind)))
     return states
 
 
@@ -109,7 +116,7 @@ def _state(path, index: int, t: float, label: str, spacing, levels, heights, gro
     """One time's WeatherState: the water, radii and wind of time ``index`` resampled to the regular levels."""
     from warpsky.model.water_optics import dry_air_density, temperature_from_theta, water_content
 
-    p, theta, vapour, ratios, radii, wind = fields
+    p, theta, vapour, ratios, radii, numbers, wind = fields
 
     def column(data, ndim: int = 3) -> np.ndarray:  # (k, y, x) at this time -> (x, y, k)
         return np.transpose(netcdf.at_time(data, ndim, index), (2, 1, 0))
@@ -123,11 +130,12 @@ def _state(path, index: int, t: float, label: str, spacing, levels, heights, gro
 
     water = {hydro: regular(water_content(column(q), rho)) for hydro, q in ratios.items()}
     radius = {hydro: regular(column(r)) for hydro, r in radii.items()}
+    number = {hydro: regular(water_content(column(n), rho)) for hydro, n in numbers.items()}
     velocity = None
     if wind is not None:
         velocity = np.stack([regular(column(c)) for c in wind], axis=-1)
     return WeatherState(source=str(path), time=float(t), label=label, origin=(0.0, 0.0, levels[0]),
-                        spacing=spacing, water=water, radius=radius, velocity=velocity,
+                        spacing=spacing, water=water, radius=radius, number=number, velocity=velocity,
                         terrain=Terrain(np.asarray(ground, dtype=np.float64)))
 
 
