@@ -26,7 +26,7 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from warpsky.batch.frames import PLACEHOLDER
+from warpsky.batch.frames import PLACEHOLDER, PlainLines
 from warpsky.core.device import init_warp
 from warpsky.core.errors import UsageError, WarpskyError
 from warpsky.core.files import atomic_write
@@ -401,8 +401,6 @@ def _is_terminal(stream) -> bool:
 
 def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, log: Path) -> BatchResult:
     """Run ``jobs`` on ``executor``, retrying failures; append this run to ``log`` after every frame."""
-    from tqdm import tqdm
-
     started = time.perf_counter()
     prepare_batch(jobs)
     run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "stage": str(Path(stage).resolve()),
@@ -412,8 +410,12 @@ def run_batch(stage: str, jobs: list[FrameJob], executor, *, retries: int = 0, l
     pending = list(enumerate(jobs))
     # a bar redraws with carriage returns: only on a terminal (a log or a pipe gets the plain per-frame lines)
     terminal = _is_terminal(sys.stderr)
-    bar = tqdm(total=len(jobs), unit="frame", disable=len(jobs) < 2 or not terminal, file=sys.stderr,
-               dynamic_ncols=True)
+    if len(jobs) > 1 and terminal:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(jobs), unit="frame", file=sys.stderr, dynamic_ncols=True)
+    else:
+        bar = PlainLines()
     if len(jobs) > 1 and not terminal:
         print(f"warpsky: {len(jobs)} frames to render ({executor.name}); each frame's path follows when written",
               file=sys.stderr, flush=True)
