@@ -165,8 +165,10 @@ def main(argv=None) -> int:
         print(f"\n{label} ({tree_report['path']})\n  whole {m['whole']:.3f} s   renderSeconds {m['render']:.3f} s   "
               f"whole - renderSeconds {m['outside']:.3f} s   warpsky --help {tree_report['help_median']:.3f} s")
         print("  phases of one run (in process):")
-        for name, seconds in tree_report["phases"].items():
-            print(f"    {seconds:7.3f} s  {name}")
+        order = ["import warpsky.cli.main", *(label for _, _, label in PHASES), "whole (in process)"]
+        for name in order:
+            if name in tree_report["phases"]:
+                print(f"    {tree_report['phases'][name]:7.3f} s  {name}")
         print("  largest imports of one run (python -X importtime, cumulative):")
         for seconds, name in tree_report["imports"]:
             print(f"    {seconds:7.3f} s  {name}")
