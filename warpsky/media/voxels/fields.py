@@ -195,32 +195,32 @@ def nanovdb_grids(data: bytes, source: Path) -> list[NanoGrid]:
             metas.append((meta, name, grid_size, file_size))
             offset += _NVDB_META_SIZE + name_size
         for meta, name, grid_size, _file_size in metas:
+            # the grid's bytes as pieces, joined once below (a cloud's grid is tens of MB: each copy costs)
             if codec == 0:
-                payload = data[offset : offset + grid_size]
+                pieces = [memoryview(data)[offset : offset + grid_size]]
                 offset += grid_size
             elif codec == 1:
                 # Zip chunks, each prefixed by its byte count. Writers disagree on whether the metadata's file
                 # size counts the prefixes, so read chunks until the grid is complete instead of trusting it.
-                raw = bytearray()
-                while len(raw) < grid_size and offset + 8 <= len(data):
+                pieces = []
+                while sum(map(len, pieces)) < grid_size and offset + 8 <= len(data):
                     (chunk,) = struct.unpack_from("<Q", data, offset)
                     try:
-                        raw += zlib.decompress(data[offset + 8 : offset + 8 + chunk])
+                        pieces.append(zlib.decompress(memoryview(data)[offset + 8 : offset + 8 + chunk]))
                     except zlib.error as exc:
                         raise SceneError(f"NanoVDB file {source} is corrupt: {exc}") from exc
                     offset += 8 + chunk
-                payload = bytes(raw)
             else:
                 raise SceneError(
                     f"NanoVDB file {source} uses codec {codec} (blosc); re-save it uncompressed or with zip"
                 )
-            if len(payload) != grid_size:
+            if sum(map(len, pieces)) != grid_size:
                 raise SceneError(f"NanoVDB file {source} is truncated or corrupt (grid {name.decode()!r})")
             # Re-frame the grid as an uncompressed single-grid file that Warp's loader accepts.
             struct.pack_into("<Q", meta, 8, grid_size)
             struct.pack_into("<I", meta, 136, len(name) + 1)
             struct.pack_into("<H", meta, _NVDB_CODEC_OFFSET, 0)
-            single = _NVDB_HEADER.pack(magic, version, 1, 0) + bytes(meta) + name + b"\0" + payload
+            single = b"".join([_NVDB_HEADER.pack(magic, version, 1, 0), meta, name, b"\0", *pieces])
             (grid_class,) = struct.unpack_from("<I", meta, _NVDB_CLASS_OFFSET)
             grids.append(NanoGrid(name.decode("utf-8", "replace"), single, grid_class))
     if not grids:
