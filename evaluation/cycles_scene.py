@@ -273,26 +273,41 @@ def configure(scene, description: dict, *, samples: int, variant: str, seed: int
     image.color_mode = "RGBA"
 
 
+def _status_times(stats: list[tuple[float, str]]) -> list[tuple[float, str]]:
+    """Cycles' status lines (the text after the last ``|``) with the seconds into the render call each first
+    showed: where the time before the first sample goes."""
+    out: list[tuple[float, str]] = []
+    for seconds, text in stats:
+        status = text.rsplit("|", 1)[-1].strip()
+        status = status.split(" Sample ")[0] if "Sample" in status else status
+        if not out or out[-1][1] != status:
+            out.append((round(seconds, 3), status))
+    return out
+
+
 def render(description_path: Path, out: Path, *, samples: int, variant: str, seed: int = 0,
            threads: int = 0) -> dict:
     """Render the description to ``out`` (32-bit float EXR, linear radiance) and write ``out`` with ``.json``:
     ``render_seconds`` (the wall time of Cycles' render call: scene sync, BVH, volume upload, sampling,
-    denoising; not Blender's start-up nor the EXR write), ``cycles_time`` (Cycles' own last status line)."""
+    denoising; not Blender's start-up nor the EXR write) and ``cycles_status``, Cycles' status lines with the
+    seconds each first showed."""
     import bpy
 
     description = json.loads(description_path.read_text())
     scene = build_scene(description, description_path.parent)
     configure(scene, description, samples=samples, variant=variant, seed=seed, threads=threads)
     scene.render.filepath = str(out)
-    stats: list[str] = []
-    bpy.app.handlers.render_stats.append(lambda text: stats.append(str(text)))
+    stats: list[tuple[float, str]] = []
     started = time.perf_counter()
+    bpy.app.handlers.render_stats.append(lambda text: stats.append((time.perf_counter() - started, str(text))))
     bpy.ops.render.render(write_still=False)
     seconds = time.perf_counter() - started
     bpy.data.images["Render Result"].save_render(str(out), scene=scene)
     record = {"render_seconds": seconds, "samples": samples, "variant": variant, "seed": seed,
-              "blender": bpy.app.version_string, "cycles_status": stats[-1] if stats else "",
+              "blender": bpy.app.version_string, "cycles_status": _status_times(stats),
               "threads": scene.render.threads}
+    record["first_sample_seconds"] = next((t for t, text in record["cycles_status"] if text.startswith("Sample")),
+                                          math.nan)
     out.with_suffix(".json").write_text(json.dumps(record, indent=1))
     return record
 
@@ -315,7 +330,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     record = render(args.description.resolve(), args.out.resolve(), samples=args.samples, variant=args.variant,
                     seed=args.seed, threads=args.threads)
-    print(json.dumps(record))
+    print(f"{args.out}: {record['render_seconds']:.2f} s in Cycles' render call, the first sample at "
+          f"{record['first_sample_seconds']:.2f} s")
     return 0 if math.isfinite(record["render_seconds"]) else 1
 
 

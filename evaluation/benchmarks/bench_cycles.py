@@ -17,12 +17,13 @@ pixel filter; 1024 bounces), run in bpy's Python (``make cycles-env`` makes ``.v
    renderers interleaved, each run a fresh process (``warpsky render`` / ``python cycles_scene.py render``) so the
    whole command's wall time is known beside the render phase (warpsky: the EXR header's ``renderSeconds``; Cycles:
    its render call, scene sync and denoising included). A renderer stops climbing once it reaches the smallest
-   target. Every command runs once untimed first (compiled kernels, warm file caches).
+   target or its error levels off (a bias more samples do not remove). Every command runs once untimed first
+   (compiled kernels, warm file caches).
 
 Writes the table to ``--out`` (Markdown, the command that made it on top) and the rows to the same name ``.json``.
 
 Run:  python evaluation/benchmarks/bench_cycles.py [--targets 0.10,0.05] [--repeats 1] [--out docs/validation/cycles.md]
-          [--reference-spp 4096] [--variants path,oidn,guided_oidn] [--max-samples 4096] [--max-seconds 900]
+          [--reference-spp 4096] [--variants path,oidn,guided_oidn] [--max-samples 16384] [--max-seconds 900]
 """
 
 from __future__ import annotations
@@ -121,7 +122,7 @@ def run_cycles(python: Path, description: Path, out: Path, samples: int, variant
     command_seconds = time.perf_counter() - started
     record = json.loads(out.with_suffix(".json").read_text())
     return {"command_seconds": command_seconds, "render_seconds": record["render_seconds"],
-            "image": radiance_of(out)}
+            "first_sample_seconds": record["first_sample_seconds"], "image": radiance_of(out)}
 
 
 class Judge:
@@ -209,6 +210,7 @@ def ladders(judge: Judge, setup: dict, targets: list[float], args, log) -> list[
             row = {"renderer": renderer["name"], "n": n, "unit": renderer["unit"], "repeats": args.repeats,
                    **{key: float(np.median([r[key] for r in runs]))
                       for key in ("net_rmse", "rel_rmse", "bias", "render_seconds", "command_seconds")},
+                   "first_sample_seconds": float(np.median([r.get("first_sample_seconds", math.nan) for r in runs])),
                    "load": os.getloadavg()[0]}
             rows.append(row)
             log(f"{row['renderer']:20s} {n:5d} {row['unit']:7s} net {row['net_rmse']:.4f}  bias {row['bias']:+.4f}"
@@ -270,11 +272,14 @@ def markdown(report: dict) -> str:
         reached = f"{t['n']} {t['unit']}" if t["reached"] else f"not reached (best {t['n']} {t['unit']})"
         lines.append(f"| {t['target']:.3f} | {t['renderer']} | {reached} | {t['net_rmse']:.4f} | "
                      f"{t['render_seconds']:.2f} | {t['interpolated_seconds']:.2f} | {t['command_seconds']:.2f} |")
-    lines += ["", "## Every rung", "", "| renderer | n | net | bias | render s | command s | load |",
-              "|---|---:|---:|---:|---:|---:|---:|"]
+    lines += ["", "## Every rung", "", "Cycles' *first sample*: seconds into its render call when the first sample "
+              "started (scene sync and the volume's density octree before it).", "",
+              "| renderer | n | net | bias | render s | first sample s | command s | load |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for row in report["rows"]:
+        first = "" if math.isnan(row["first_sample_seconds"]) else f"{row['first_sample_seconds']:.2f}"
         lines.append(f"| {row['renderer']} | {row['n']} {row['unit']} | {row['net_rmse']:.4f} | {row['bias']:+.4f} | "
-                     f"{row['render_seconds']:.2f} | {row['command_seconds']:.2f} | {row['load']:.2f} |")
+                     f"{row['render_seconds']:.2f} | {first} | {row['command_seconds']:.2f} | {row['load']:.2f} |")
     return "\n".join(lines + [""])
 
 
@@ -286,8 +291,8 @@ def parse(argv):
     parser.add_argument("--repeats", type=int, default=1, help="runs per rung (seeds 1..N), medians kept")
     parser.add_argument("--variants", default="path,oidn,guided_oidn", help="Cycles variants, comma-separated")
     parser.add_argument("--reference-spp", type=int, default=4096)
-    parser.add_argument("--check-samples", default="16,64,256", help="the mean check's Cycles samples")
-    parser.add_argument("--max-samples", type=int, default=4096, help="highest rung of any renderer")
+    parser.add_argument("--check-samples", default="16,64,256,1024", help="the mean check's Cycles samples")
+    parser.add_argument("--max-samples", type=int, default=16384, help="highest rung of any renderer")
     parser.add_argument("--max-seconds", type=float, default=900.0, help="a renderer stops after a rung this long")
     parser.add_argument("--python", type=Path, default=ROOT / ".venv-cycles" / "bin" / "python",
                         help="bpy's Python (make cycles-env)")
