@@ -266,3 +266,21 @@ def test_wrf_import_with_terrain_renders(tmp_path, capsys):
     code, _, err = run_cli(["render", stage_path, tmp_path / "r" / "wrf.####.exr", "--frames", "1", "--res",
                             "32x32", "--set", "spp=8"], capsys)
     assert code == 0, err
+
+
+def test_column_resampling_matches_numpy_interp_on_random_columns():
+    """Every column against np.interp (linear, held below the lowest level down to the ground, 0 under the ground
+    and above the top level), on random increasing levels and targets that hit levels exactly."""
+    from warpsky.usd.weather.regrid import ColumnWeights
+
+    rng = np.random.default_rng(3)
+    heights = np.cumsum(rng.uniform(20.0, 400.0, size=(7, 5, 12)), axis=-1)
+    values = rng.normal(size=heights.shape)
+    ground = heights[..., 0] - rng.uniform(0.0, 30.0, size=heights.shape[:2])
+    levels = np.sort(np.concatenate([rng.uniform(0.0, heights.max() + 200.0, 60), heights[3, 2, [0, 5, 11]]]))
+    result = ColumnWeights.between(heights, levels, ground).apply(values)
+    for i in range(7):
+        for j in range(5):
+            expected = np.interp(levels, heights[i, j], values[i, j])
+            expected[(levels < ground[i, j]) | (levels > heights[i, j, -1])] = 0.0
+            np.testing.assert_allclose(result[i, j], expected, rtol=1e-12, atol=1e-12)

@@ -34,7 +34,7 @@ import numpy as np
 
 from warpsky.core.errors import SceneError
 from warpsky.usd.weather import netcdf
-from warpsky.usd.weather.regrid import default_spacing, destagger, regular_levels, to_heights
+from warpsky.usd.weather.regrid import ColumnWeights, default_spacing, destagger, regular_levels
 from warpsky.usd.weather.weather_state import WeatherState
 
 #: CM1 variable -> hydrometeor (:data:`~warpsky.model.water_optics.HYDROMETEORS`).
@@ -85,7 +85,7 @@ def read_cm1(path, ds, *, dz: float | None = None) -> list[WeatherState]:
                for name, hydro in NUMBERS.items() if name in ds.variables and hydro in ratios}
     wind = _staggered_wind(ds, path, dims)
     times, moves = _times(ds, path, theta.ndim > 3, theta.shape[0] if theta.ndim > 3 else 1)
-    levels, spacing = _levels(z, dz)
+    levels, spacing, weights = _levels(z, dz, (len(x), len(y)))
     states = []
     for index, (seconds, (east, north)) in enumerate(zip(times, moves, strict=True)):
         from warpsky.model.water_optics import dry_air_density, temperature_from_theta, water_content
@@ -93,13 +93,13 @@ def read_cm1(path, ds, *, dz: float | None = None) -> list[WeatherState]:
         p = netcdf.at_time(pressure, 3, index)
         rho = dry_air_density(p, temperature_from_theta(netcdf.at_time(theta, 3, index), p),
                               None if vapour is None else netcdf.at_time(vapour, 3, index))
-        water = {hydro: _regular(water_content(netcdf.at_time(q, 3, index), rho), z, levels)
+        water = {hydro: _regular(water_content(netcdf.at_time(q, 3, index), rho), weights)
                  for hydro, q in ratios.items()}
-        number = {hydro: _regular(water_content(netcdf.at_time(n, 3, index), rho), z, levels).astype(np.float32)
+        number = {hydro: _regular(water_content(netcdf.at_time(n, 3, index), rho), weights).astype(np.float32)
                   for hydro, n in numbers.items()}
         velocity = None
         if wind is not None:
-            velocity = np.stack([_regular(netcdf.at_time(c, 3, index), z, levels) for c in wind], axis=-1)
+            velocity = np.stack([_regular(netcdf.at_time(c, 3, index), weights) for c in wind], axis=-1)
         states.append(WeatherState(
             source=str(path), time=float(seconds), label=f"t={seconds:g}s",
             origin=(x[0] + east, y[0] + north, levels[0]), spacing=(dx, dy, spacing),
@@ -108,25 +108,27 @@ def read_cm1(path, ds, *, dz: float | None = None) -> list[WeatherState]:
     return states
 
 
-def _levels(z: np.ndarray, dz: float | None) -> tuple[np.ndarray, float]:
-    """The regular levels (cell centres [m]) and their spacing: CM1's own when uniform and no ``dz`` is asked."""
+def _levels(z: np.ndarray, dz: float | None, columns: tuple[int, int]
+            ) -> tuple[np.ndarray, float, ColumnWeights | None]:
+    """The regular levels (cell centres [m]), their spacing, and where each falls among CM1's levels (the same in
+    every one of the ``columns``); CM1's own levels and None when they are uniform and no ``dz`` is asked."""
     steps = np.diff(z)
     if np.any(steps <= 0.0):
         raise SceneError("CM1 scalar levels must increase upwards")
     if dz is None and np.ptp(steps) <= 1e-3 * steps.mean():
-        return z.copy(), float(steps.mean())
+        return z.copy(), float(steps.mean()), None
     bottom = max(0.0, z[0] - 0.5 * steps[0])
     top = z[-1] + 0.5 * steps[-1]
     spacing = float(dz) if dz is not None else default_spacing(z, bottom, top)
-    return regular_levels(bottom, top, spacing), spacing
+    levels = regular_levels(bottom, top, spacing)
+    weights = ColumnWeights.between(np.broadcast_to(z, (*columns, len(z))), levels, np.zeros(columns))
+    return levels, spacing, weights
 
 
-def _regular(field_zyx: np.ndarray, z: np.ndarray, levels: np.ndarray) -> np.ndarray:
-    """A (z, y, x) field as (x, y, z) on the regular ``levels`` (unchanged values when they are CM1's own)."""
+def _regular(field_zyx: np.ndarray, weights: ColumnWeights | None) -> np.ndarray:
+    """A (z, y, x) field as (x, y, z) on the regular levels (CM1's own when ``weights`` is None)."""
     xyz = np.transpose(field_zyx, (2, 1, 0))
-    if len(levels) == len(z) and np.allclose(levels, z):
-        return xyz
-    return to_heights(xyz, z, levels, ground=np.zeros(xyz.shape[:2]))
+    return xyz if weights is None else weights.apply(xyz)
 
 
 def _staggered_wind(ds, path, dims) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:

@@ -7,6 +7,8 @@ average to the centre value, and linear interpolation between levels reproduces 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from warpsky.core.errors import SceneError
@@ -47,27 +49,58 @@ def to_heights(values: np.ndarray, heights: np.ndarray, levels: np.ndarray, grou
         (..., nz) values: linear between the two levels around each target height, 0 above the top level.
     """
     values = np.asarray(values, dtype=np.float64)
-    heights = np.broadcast_to(np.asarray(heights, dtype=np.float64), values.shape)
-    nk = values.shape[-1]
-    if nk < 2:
-        raise SceneError(f"resampling to heights needs at least 2 levels per column, got {nk}")
-    if np.any(np.diff(heights, axis=-1) <= 0.0):
-        raise SceneError("model level heights must increase upwards in every column")
-    out = np.zeros((*values.shape[:-1], len(levels)))
-    for index, level in enumerate(np.asarray(levels, dtype=np.float64)):
-        below = np.count_nonzero(heights < level, axis=-1)  # levels strictly below the target, 0..nk
-        k0 = np.clip(below - 1, 0, nk - 2)[..., None]
-        z0 = np.take_along_axis(heights, k0, axis=-1)[..., 0]
-        z1 = np.take_along_axis(heights, k0 + 1, axis=-1)[..., 0]
-        weight = np.clip((level - z0) / (z1 - z0), 0.0, 1.0)
-        v0 = np.take_along_axis(values, k0, axis=-1)[..., 0]
-        v1 = np.take_along_axis(values, k0 + 1, axis=-1)[..., 0]
-        column = v0 + weight * (v1 - v0)
-        column = np.where(below >= nk, 0.0, column)  # above the top level
+    return ColumnWeights.between(np.broadcast_to(heights, values.shape), levels, ground).apply(values)
+
+
+@dataclass
+class ColumnWeights:
+    """Where each regular level falls in its column's model levels: computed once per time and grid, applied to
+    every field (:meth:`apply`).
+
+    Attributes:
+        lower: (..., nz) index of the model level at or below each target height (clipped to 0 .. nk - 2).
+        weight: (..., nz) linear weight of the level above, in [0, 1].
+        keep: (..., nz) False above the top level and under the ground (the result there is 0).
+    """
+
+    lower: np.ndarray
+    weight: np.ndarray
+    keep: np.ndarray
+
+    @classmethod
+    def between(cls, heights: np.ndarray, levels: np.ndarray, ground: np.ndarray | None = None) -> ColumnWeights:
+        """The weights of columns whose model levels are at ``heights`` [m] (..., nk), increasing along the last
+        axis, for the regular ``levels`` (nz,) [m], with each column's ``ground`` (...) [m] or None."""
+        heights = np.asarray(heights, dtype=np.float64)
+        levels = np.asarray(levels, dtype=np.float64)
+        nk = heights.shape[-1]
+        if nk < 2:
+            raise SceneError(f"resampling to heights needs at least 2 levels per column, got {nk}")
+        if np.any(np.diff(heights, axis=-1) <= 0.0):
+            raise SceneError("model level heights must increase upwards in every column")
+        # model levels strictly below each target height, counted per column without comparing every pair: model
+        # level k lies below the targets from starts[k] on (a histogram of starts, summed up the column)
+        starts = np.searchsorted(levels, heights, side="right")
+        counts = np.zeros((*heights.shape[:-1], len(levels) + 1), dtype=np.int32)
+        for k in range(nk):
+            index = starts[..., k:k + 1]
+            np.put_along_axis(counts, index, np.take_along_axis(counts, index, axis=-1) + 1, axis=-1)
+        below = np.cumsum(counts[..., :-1], axis=-1)
+        lower = np.clip(below - 1, 0, nk - 2)
+        z0 = np.take_along_axis(heights, lower, axis=-1)
+        z1 = np.take_along_axis(heights, lower + 1, axis=-1)
+        weight = np.clip((levels - z0) / (z1 - z0), 0.0, 1.0)
+        keep = below < nk
         if ground is not None:
-            column = np.where(level < np.asarray(ground), 0.0, column)
-        out[..., index] = column
-    return out
+            keep &= levels >= np.asarray(ground, dtype=np.float64)[..., None]
+        return cls(lower, weight, keep)
+
+    def apply(self, values: np.ndarray) -> np.ndarray:
+        """(..., nk) values on the model levels -> (..., nz) on the regular levels."""
+        values = np.asarray(values, dtype=np.float64)
+        v0 = np.take_along_axis(values, self.lower, axis=-1)
+        v1 = np.take_along_axis(values, self.lower + 1, axis=-1)
+        return np.where(self.keep, v0 + self.weight * (v1 - v0), 0.0)
 
 
 def default_spacing(heights: np.ndarray, bottom: float, top: float, max_levels: int = 256) -> float:

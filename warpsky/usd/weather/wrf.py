@@ -39,7 +39,7 @@ import numpy as np
 
 from warpsky.core.errors import SceneError
 from warpsky.usd.weather import netcdf
-from warpsky.usd.weather.regrid import default_spacing, destagger, regular_levels, to_heights
+from warpsky.usd.weather.regrid import ColumnWeights, default_spacing, destagger, regular_levels
 from warpsky.usd.weather.weather_state import Terrain, WeatherState
 
 #: WRF variable -> hydrometeor (:data:`~warpsky.model.water_optics.HYDROMETEORS`).
@@ -125,8 +125,10 @@ def _state(path, index: int, t: float, label: str, spacing, levels, heights, gro
     rho = dry_air_density(pressure, temperature_from_theta(column(theta), pressure),
                           None if vapour is None else column(vapour))
 
+    weights = ColumnWeights.between(heights, levels, ground)  # once for every field of this time
+
     def regular(values: np.ndarray) -> np.ndarray:
-        return to_heights(values, heights, levels, ground).astype(np.float32)
+        return weights.apply(values).astype(np.float32)
 
     water = {hydro: regular(water_content(column(q), rho)) for hydro, q in ratios.items()}
     radius = {hydro: regular(column(r)) for hydro, r in radii.items()}
