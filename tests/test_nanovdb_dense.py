@@ -11,7 +11,7 @@ import pytest
 import warp as wp
 
 from warpsky.media.voxels import fields
-from warpsky.media.voxels.nanovdb_dense import dense_from_leaves
+from warpsky.media.voxels.nanovdb_dense import dense_from_leaves, grid_map
 
 
 def _grid_buffer(blob: bytes) -> memoryview:
@@ -50,7 +50,13 @@ def test_leaves_copied_equal_the_walk(tmp_path):
     assert decoded[0].shape == walked.shape
     np.testing.assert_array_equal(decoded[0].view(np.uint32), walked.view(np.uint32))
     np.testing.assert_array_equal(decoded[1], lo)
-    # and load_field gives the same grid and placement as the walk
+    # the map read from the buffer is the one Warp's loader gives
+    info = wp.Volume.load_from_nvdb(grid.blob, device="cpu").get_grid_info()
+    linear, translation = grid_map(_grid_buffer(grid.blob))
+    np.testing.assert_array_equal(linear, np.array(info.transform_matrix, dtype=np.float64).reshape(3, 3))
+    np.testing.assert_array_equal(translation, np.array(info.translation, dtype=np.float64))
+    assert linear[0, 0] == 1.5
+    # and load_field gives the same grid as the walk
     field = fields.load_field(path)
     np.testing.assert_array_equal(field.values.view(np.uint32), walked.view(np.uint32))
     # the source values come back where they were written (one voxel of background around the active box)

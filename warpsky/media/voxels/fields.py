@@ -33,7 +33,7 @@ import warp as wp
 from warpsky.core.device import launch_rows
 from warpsky.core.errors import SceneError
 from warpsky.core.files import atomic_write, cache_dir
-from warpsky.media.voxels.nanovdb_dense import dense_from_leaves
+from warpsky.media.voxels.nanovdb_dense import dense_from_leaves, grid_map
 
 NPY_MAGIC = b"\x93NUMPY"
 NANOVDB_MAGICS = (b"NanoVDB0", b"NanoVDB1", b"NanoVDB2")
@@ -270,7 +270,29 @@ def _pick_grid(grids: list[NanoGrid], grid_name: str | None, grid_index: int, so
 
 
 def _dense_grid(blob: bytes, name: str, source: Path, *, vector: bool) -> FieldGrid:
-    """A NanoVDB grid copied into a dense array over its active voxels, one voxel of background on each side."""
+    """A NanoVDB grid copied into a dense array over its active voxels, one voxel of background on each side: a
+    float grid of leaves alone by NumPy (:mod:`~warpsky.media.voxels.nanovdb_dense`, no Warp volume), any other
+    grid by looking up every voxel in Warp."""
+    grid = memoryview(blob)[_single_grid_offset(blob):]
+    try:
+        decoded = None if vector else dense_from_leaves(grid)
+    except (ValueError, IndexError):  # a buffer the leaves cannot be read from: Warp's loader says what is wrong
+        decoded = None
+    if decoded is not None:
+        (values, lo), (linear, translation) = decoded, grid_map(grid)
+    else:
+        values, lo, linear, translation = _walked_grid(blob, name, source, vector)
+    if values.size == 0:  # a simulation's first frame: an empty medium, not an error
+        return FieldGrid(np.zeros((0, 0, 0) + ((3,) if vector else ()), dtype=np.float32), np.eye(4), str(source),
+                         name)
+    local_from_index = np.eye(4)
+    local_from_index[:3, :3] = linear
+    local_from_index[:3, 3] = translation + linear @ lo
+    return FieldGrid(values, local_from_index, str(source), name)
+
+
+def _walked_grid(blob: bytes, name: str, source: Path, vector: bool):
+    """(values, lo, 3x3 matrix, translation) of a grid loaded by Warp, checked for its value type."""
     try:
         volume = wp.Volume.load_from_nvdb(blob, device="cpu")
     except RuntimeError as exc:
@@ -286,17 +308,9 @@ def _dense_grid(blob: bytes, name: str, source: Path, *, vector: bool) -> FieldG
                 "float (fog) grids: point fieldName at the density grid"
             )
         raise SceneError(f"grid {name!r} of {source} holds {info.type_str!r} values; expected a float (fog) grid")
-    # a float grid of leaves alone is copied leaf by leaf (nanovdb_dense); others are walked voxel by voxel
-    decoded = None if vector else dense_from_leaves(memoryview(blob)[_single_grid_offset(blob):])
-    values, lo = decoded if decoded is not None else _walked(volume, vector, name, source)
-    if values.size == 0:  # a simulation's first frame: an empty medium, not an error
-        return FieldGrid(np.zeros((0, 0, 0) + ((3,) if vector else ()), dtype=np.float32), np.eye(4), str(source),
-                         name)
+    values, lo = _walked(volume, vector, name, source)
     linear = np.array(info.transform_matrix, dtype=np.float64).reshape(3, 3)
-    local_from_index = np.eye(4)
-    local_from_index[:3, :3] = linear
-    local_from_index[:3, 3] = np.array(info.translation, dtype=np.float64) + linear @ lo
-    return FieldGrid(values, local_from_index, str(source), name)
+    return values, lo, linear, np.array(info.translation, dtype=np.float64)
 
 
 def _single_grid_offset(blob: bytes) -> int:

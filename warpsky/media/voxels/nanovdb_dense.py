@@ -18,6 +18,7 @@ import numpy as np
 GRID_TYPE_FLOAT = 1
 _GRID_SIZE = 672
 _GRID_TYPE_OFFSET = 636
+_MAP_OFFSET = 296  # the grid's map: its float32 3x3 matrix (index to world), then the float32 translation at + 72
 _ROOT_SIZE, _ROOT_TILE_SIZE, _ROOT_BACKGROUND = 64, 32, 28
 #: (node size, value-mask offset, child-mask offset, table offset, table entries) of the upper and lower nodes.
 _INTERNAL = ((270_400, 32, 4128, 8256, 32_768), (33_856, 32, 544, 1088, 4096))
@@ -55,13 +56,23 @@ def _tiles_are_background(buffer: np.ndarray, tree: int, background: np.uint32) 
     return True
 
 
+def grid_map(grid: bytes | memoryview) -> tuple[np.ndarray, np.ndarray]:
+    """(3x3 matrix, translation) float64 of the grid's index-to-world map: the float32 values Warp's
+    ``Volume.get_grid_info`` gives as ``transform_matrix`` and ``translation``."""
+    buffer = np.frombuffer(grid, dtype=np.uint8)
+    matrix = buffer[_MAP_OFFSET : _MAP_OFFSET + 36].view("<f4").reshape(3, 3)
+    return matrix.astype(np.float64), buffer[_MAP_OFFSET + 72 : _MAP_OFFSET + 84].view("<f4").astype(np.float64)
+
+
 def dense_from_leaves(grid: bytes | memoryview) -> tuple[np.ndarray, np.ndarray] | None:
     """(values, lo) of a float grid's buffer (one grid, uncompressed): ``values`` float32 indexed ``[x, y, z]`` over
     the active voxels' bounding box grown by one voxel of background on each side, ``lo`` the index of its
     ``[0, 0, 0]`` (int64, 3); values of shape (0, 0, 0) when no voxel is active. None when the grid is not a float
     grid or holds tiles (see the module's docstring): the caller walks the tree instead."""
     buffer = np.frombuffer(grid, dtype=np.uint8)
-    if len(buffer) < _GRID_SIZE + 64 or int(buffer[_GRID_TYPE_OFFSET : _GRID_TYPE_OFFSET + 4].view("<u4")[0]) != 1:
+    if (len(buffer) < _GRID_SIZE + 64 or bytes(buffer[:7]) != b"NanoVDB"
+            or int(buffer[16:20].view("<u4")[0]) >> 21 != 32  # the layout of NanoVDB's major version 32
+            or int(buffer[_GRID_TYPE_OFFSET : _GRID_TYPE_OFFSET + 4].view("<u4")[0]) != GRID_TYPE_FLOAT):
         return None
     tree = _GRID_SIZE
     offsets = buffer[tree : tree + 32].view("<u8")
