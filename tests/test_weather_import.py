@@ -315,3 +315,24 @@ def test_the_written_wind_moves_the_weather_within_a_blurred_frame(tmp_path, cap
 
     # measured: 1123.0, 446.3, 0 m (the step's trilinear lookups and the grid's floor trim a little)
     np.testing.assert_allclose(centroid(1.25) - centroid(1.0), [5.0 * 225.0, 2.0 * 225.0, 0.0], atol=10.0)
+
+
+def test_options_change_the_optics_and_bad_values_exit_2(tmp_path, capsys):
+    from warpsky.media.voxels.fields import load_field
+
+    shape = (1, 6, 5, 5)
+    qc, qg = np.zeros(shape), np.zeros(shape)
+    qc[0, 2, 2, 2], qg[0, 3, 2, 2] = 1e-3, 1e-3
+    path = _uniform_cm1(tmp_path, fields={"qc": qc, "qg": qg})
+    peaks = {}
+    for name, options in (("base", []), ("big", ["--cloud-radius", "20", "--graupel-density", "900"])):
+        code, _, err = run_cli(["import-weather", path, "--out", tmp_path / "o", "--name", name, *options], capsys)
+        assert code == 0, err
+        peaks[name] = {s: float(load_field(tmp_path / "o" / name / f"{s}.0001.nvdb").values.max())
+                       for s in ("cloud", "snow")}
+    np.testing.assert_allclose(peaks["big"]["cloud"], peaks["base"]["cloud"] / 2.0, rtol=1e-6)
+    np.testing.assert_allclose(peaks["big"]["snow"], peaks["base"]["snow"] * (400.0 / 900.0) ** 0.75, rtol=1e-6)
+    for bad, message in ((["--dz", "0"], "--dz"), (["--sun", "95,0"], "elevation"), (["--sun", "x"], "--sun"),
+                         (["--ice-radius", "-1"], "--ice-radius"), (["--graupel-density", "0"], "--graupel")):
+        code, _, err = run_cli(["import-weather", path, "--out", tmp_path / "o", *bad], capsys)
+        assert code == 2 and message in err and err.strip().count("\n") == 0, err

@@ -31,6 +31,9 @@ def add_parser(sub) -> None:
                      help="effective radius of cloud droplets [um] (default 10; a file's RE_CLOUD wins)")
     cmd.add_argument("--ice-radius", type=float, default=None, metavar="UM",
                      help="effective radius of cloud ice [um] (default 25; a file's RE_ICE wins)")
+    cmd.add_argument("--graupel-density", type=float, default=None, metavar="KG_M3",
+                     help="bulk density of the graupel category [kg/m^3] (default 400; 900 where it holds hail, as "
+                     "CM1's Morrison scheme with ihail = 1)")
     cmd.add_argument("--sun", default="35,225", metavar="ELEV,AZIM",
                      help="sun elevation and azimuth clockwise from north [degrees] (default 35,225: south-west)")
     cmd.add_argument("--res", type=resolution_arg, default=(384, 256), metavar="WxH",
@@ -57,6 +60,10 @@ def _hydrometeors(args):
             if not option > 0.0:
                 raise UsageError(f"--{name}-radius must be > 0 um, got {option:g}")
             table[name] = replace(table[name], effective_radius=option * 1e-6)
+    if args.graupel_density is not None:
+        if not args.graupel_density > 0.0:
+            raise UsageError(f"--graupel-density must be > 0 kg/m^3, got {args.graupel_density:g}")
+        table["graupel"] = replace(table["graupel"], particle_density=args.graupel_density)
     return table
 
 
