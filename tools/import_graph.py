@@ -24,6 +24,7 @@ LAYERS = (
     ("passes and techniques", ("passes", "techniques")),
     ("render", ("render",)),
     ("batch", ("batch",)),
+    ("simulate", ("simulate",)),
     ("cli and api", ("cli", "", "api", "__main__")),
 )
 
