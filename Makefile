@@ -20,7 +20,8 @@ TIMING_SUNBEAMS        = about 8 min
 TIMING_GALLERY         = about 7 min
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
-	cumulus-wind family family-thick scenery-family terrain valley-fog sunbeams sundogs gallery cycles-env
+	cumulus-wind family family-thick scenery-family terrain valley-fog sunbeams sundogs gallery cycles-env \
+	simulate-storm
 
 help:
 	@echo "make demo               - install into $(VENV), make data, render the demo cumulus to out/ (with a PNG;"
@@ -44,6 +45,8 @@ help:
 	@echo "make storm-data         - the storm's per-frame NanoVDB fields in data/storm/"
 	@echo "make storm              - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact"
 	@echo "                          sheets, preview ($(TIMING_STORM) once the optics tables are cached)"
+	@echo "make simulate-storm     - grow a storm with the cloud solver (warpsky simulate's defaults: 128x128x64"
+	@echo "                          cells, 48 frames) to out/simulate/, and render its last frame with slicing"
 	@echo "make terrain            - the seeded 4 km fractal terrain mesh data/terrain.usda (hills, a north-south valley)"
 	@echo "make valley-fog         - 48 frames of morning fog drifting in the terrain's valley (Biri 2002) to"
 	@echo "                          out/valley_fog/ with a contact sheet, each frame's paths to the 5% target or"
@@ -166,6 +169,11 @@ storm: $(STAMP) data/storm/.complete
 	$(VENV)/bin/warpsky contact-sheet out/storm/rainbow.####.exr -o out/storm/rainbow_sheet.png
 	$(VENV)/bin/warpsky contact-sheet out/storm/anvil.####.exr -o out/storm/anvil_sheet.png
 	$(VENV)/bin/warpsky preview usd_scenes/storm.usda -o out/storm/preview.png --frame 40
+
+simulate-storm: $(STAMP)
+	$(VENV)/bin/warpsky simulate --out out/simulate --frames 48 --minutes 40
+	$(VENV)/bin/warpsky render out/simulate/storm.usda out/simulate/storm.####.exr --frames 48 --technique slicing \
+		--res 256 --png
 
 # Terrain, valley fog (Biri 2002) and sunbeams (Max 1986): one terrain mesh, two stages that reference it.
 data/terrain.usda: tools/make_terrain.py $(STAMP)

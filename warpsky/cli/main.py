@@ -25,6 +25,7 @@ from warpsky.cli.options import (
     with_res_scale,
 )
 from warpsky.cli.prepare import add_parser as add_prepare
+from warpsky.cli.simulate import add_parser as add_simulate
 from warpsky.cli.weather import add_parser as add_import_weather
 from warpsky.core.errors import UsageError, WarpskyError
 from warpsky.core.interrupt import Interrupted, exit_at_once, report_interrupt, sigint_stops_renders
@@ -192,7 +193,7 @@ def build_parser(bench=None) -> argparse.ArgumentParser:
     sheet.add_argument("--view", default=DEFAULT_VIEW, metavar="VIEW",
                        help=f"the tiles' view of OpenColorIO's {DISPLAY!r} (default {DEFAULT_VIEW!r}, or 'simple')")
 
-    for add_command in (add_prepare, add_optics, add_import_weather):
+    for add_command in (add_prepare, add_optics, add_import_weather, add_simulate):
         add_command(sub)
 
     if bench is None:
@@ -408,6 +409,7 @@ def _run(argv: list[str] | None) -> int:
     try:
         from warpsky.cli.info import cmd_info
         from warpsky.cli.prepare import cmd_prepare
+        from warpsky.cli.simulate import cmd_simulate
         from warpsky.cli.weather import cmd_import_weather
         from warpsky.core.device import init_warp
         from warpsky.core.progress import quieted
@@ -420,7 +422,7 @@ def _run(argv: list[str] | None) -> int:
                 return run_optics(args)
         commands = {"render": cmd_render, "info": cmd_info, "bench": bench.run if bench else None,
                     "preview": cmd_preview, "contact-sheet": cmd_contact_sheet, "prepare": cmd_prepare,
-                    "import-weather": cmd_import_weather}
+                    "import-weather": cmd_import_weather, "simulate": cmd_simulate}
         with sigint_stops_renders(), quieted(args.quiet):
             return commands[args.command](args)
     except WarpskyError as exc:
