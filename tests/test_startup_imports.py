@@ -79,3 +79,38 @@ def test_the_round_earths_depth_table_comes_back_from_disk_bit_for_bit(tmp_path,
     monkeypatch.setattr(ar, "_TABLES", {})
     other = ar.depth_table(atm, 500.0, "cpu").numpy()
     assert len(list((tmp_path / "air").glob("round-depth-*.npy"))) == 2 and not np.array_equal(other, built)
+
+
+@pytest.mark.skipif(not (ROOT / "data" / "cumulus.nvdb").is_file(), reason="needs make data (data/cumulus.nvdb)")
+def test_the_view_table_is_kept_by_the_value_of_its_inputs(tmp_path, monkeypatch):
+    """The sky's view table read back from disk is the one the kernel builds; another sun is another table; the
+    least recently used tables go beyond VIEW_TABLES_KEPT."""
+    import numpy as np
+    import warp as wp
+
+    from warpsky.passes.sky import round_sky
+    from warpsky.usd.stage import StageReader
+
+    monkeypatch.setenv("WARPSKY_CACHE", str(tmp_path))
+    scene = StageReader(CUMULUS).scene_at(None)
+    _, air, ra, ms, view, sun, radius = round_sky.round_front_inputs(scene, scene.camera, 32, 32, "cpu")
+    first = view.table.numpy().copy()
+    fresh = wp.zeros(first.shape[:2] + (4,), dtype=wp.vec3, device="cpu")
+    wp.launch(round_sky.view_table_kernel, dim=first.shape[:2], inputs=[air, ra, ms, sun, radius, fresh, 0],
+              device="cpu")
+    np.testing.assert_array_equal(first, fresh.numpy())  # built over row bands = one launch
+    assert len(list((tmp_path / "air").glob("round-views-*.npy"))) == 1
+
+    def no_launch(*args):
+        raise AssertionError("the view table was built again")
+
+    monkeypatch.setattr(round_sky, "launch_rows", no_launch)
+    np.testing.assert_array_equal(round_sky.view_table([air, ra, ms, sun, radius], "cpu").numpy(), first)
+    monkeypatch.undo()
+    monkeypatch.setenv("WARPSKY_CACHE", str(tmp_path))
+    monkeypatch.setattr(round_sky, "VIEW_TABLES_KEPT", 2)
+    for angle in (0.1, 0.2):
+        sun.disk_direction = wp.vec3(np.sin(angle), np.cos(angle), 0.0)
+        other = round_sky.view_table([air, ra, ms, sun, radius], "cpu").numpy()
+        assert not np.array_equal(other, first)
+    assert len(list((tmp_path / "air").glob("round-views-*.npy"))) == 2

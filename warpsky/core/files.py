@@ -51,11 +51,11 @@ def atomic_write(path: str | os.PathLike, write) -> Path:
     return path
 
 
-def cached_array(folder: str, name: str, identity: tuple, build):
+def cached_array(folder: str, name: str, identity: tuple, build, *, keep: int | None = None):
     """The array ``build()`` returns, kept on disk: ``$WARPSKY_CACHE/FOLDER/NAME-<hash>.npy``, the hash of
     ``repr(identity)`` (everything the array depends on: its inputs, its shape, the device's kind, the building
     kernel's Warp module hash). Read back when present and readable (bit for bit what was built), else built and
-    written there atomically."""
+    written there atomically; with ``keep``, at most that many NAME files stay, the least recently used go."""
     import hashlib
 
     import numpy as np
@@ -63,9 +63,29 @@ def cached_array(folder: str, name: str, identity: tuple, build):
     digest = hashlib.sha256(repr(identity).encode()).hexdigest()[:20]
     path = cache_dir() / folder / f"{name}-{digest}.npy"
     try:
-        return np.load(path, allow_pickle=False)
+        values = np.load(path, allow_pickle=False)
+        if keep is not None:
+            os.utime(path)  # recently used
+        return values
     except (OSError, ValueError, EOFError):
         pass  # missing or unreadable: built and (over)written
     values = np.asarray(build())
     atomic_write(path, lambda tmp: np.save(tmp, values))
+    if keep is not None:
+        _keep_newest(path.parent.glob(f"{name}-*.npy"), keep)
     return values
+
+
+def _keep_newest(paths, keep: int) -> None:
+    """Remove all but the ``keep`` most recently modified of ``paths`` (files another process removes are skipped)."""
+    dated = []
+    for path in paths:
+        try:
+            dated.append((path.stat().st_mtime_ns, path))
+        except OSError:
+            pass
+    for _, path in sorted(dated, reverse=True)[keep:]:
+        try:
+            path.unlink()
+        except OSError:
+            pass
