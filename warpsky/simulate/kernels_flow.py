@@ -28,10 +28,11 @@ def departure(flow: Flow, grid: Grid, p: wp.vec3, dt: float) -> wp.vec3:
 
 @wp.kernel
 def advect(grid: Grid, flow: Flow, source: wp.array3d(dtype=float), target: wp.array3d(dtype=float),
-           offset: wp.vec3, dt: float):
+           offset: wp.vec3, dt: float, x_offset: int):
     """``target`` = ``source`` carried by ``flow`` over ``dt`` [s]; ``offset`` places the arrays' samples in their
     cells ((½, ½, ½) for centres, 0 along the axis of a face array). Samples on the floor and the lid are kept."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     if offset[1] == 0.0 and (j == 0 or j == grid.ny):
         target[i, j, k] = source[i, j, k]
         return

@@ -72,9 +72,10 @@ def y_flux(grid: Grid, q: wp.array3d(dtype=float), v: float, i: int, j: int, k: 
 
 @wp.kernel
 def transport(grid: Grid, column: Column, flow: Flow, source: wp.array3d(dtype=float),
-              target: wp.array3d(dtype=float), dt: float):
+              target: wp.array3d(dtype=float), dt: float, x_offset: int):
     """``target`` = ``source`` after a conservative sub-step of ``dt`` [s] (module docstring)."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     ip = wrap(i + 1, grid.nx)
     kp = wrap(k + 1, grid.nz)
     rho = column.density[j]

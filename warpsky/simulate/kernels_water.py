@@ -43,9 +43,10 @@ def saturation_slope(temperature: float, pressure: float) -> float:
 
 
 @wp.kernel
-def microphysics(column: Column, water: Water, dt: float):
+def microphysics(column: Column, water: Water, dt: float, x_offset: int):
     """One step of Kessler warm rain then saturation adjustment at every cell."""
-    i, j, k = wp.tid()
+    x, j, k = wp.tid()
+    i = x + x_offset
     exner = column.exner[j]
     pressure = column.pressure[j]
     density = column.density[j]

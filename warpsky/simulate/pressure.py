@@ -21,6 +21,7 @@ import numpy as np
 import warp as wp
 
 from warpsky.simulate.fields import Column, Flow, Grid, wrap
+from warpsky.simulate.launch import launch_slabs
 
 
 @wp.func
@@ -42,9 +43,10 @@ def divergence(grid: Grid, column: Column, flow: Flow, out: wp.array(dtype=float
 
 @wp.kernel
 def apply_operator(grid: Grid, column: Column, x: wp.array(dtype=float), y: wp.array(dtype=float),
-                   z: wp.array(dtype=float), alpha: float, beta: float):
+                   z: wp.array(dtype=float), alpha: float, beta: float, x_offset: int):
     """z = alpha A x + beta y, A = -dx^2 ∇·(ρ0 ∇) with no flux through the floor and the lid."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     c = flat(grid, i, j, k)
     xc = x[c]
     rho = column.density[j]
@@ -61,10 +63,12 @@ def apply_operator(grid: Grid, column: Column, x: wp.array(dtype=float), y: wp.a
 @wp.kernel
 def column_solve(grid: Grid, lower: wp.array(dtype=float), inverse_pivot: wp.array(dtype=float),
                  upper: wp.array(dtype=float), x: wp.array(dtype=float), y: wp.array(dtype=float),
-                 z: wp.array(dtype=float), scratch: wp.array(dtype=float), alpha: float, beta: float):
+                 z: wp.array(dtype=float), scratch: wp.array(dtype=float), alpha: float, beta: float,
+                 x_offset: int):
     """z = alpha T^-1 x + beta y, T the operator's couplings within each column (its LU factors per level,
     :func:`column_factors`). Launched over (nx, nz)."""
-    i, k = wp.tid()
+    t, k = wp.tid()
+    i = t + x_offset
     previous = float(0.0)
     for j in range(grid.ny):
         c = flat(grid, i, j, k)
@@ -107,9 +111,11 @@ def column_factors(density: np.ndarray, density_face: np.ndarray, ratio: float) 
 
 
 @wp.kernel
-def column_dot(grid: Grid, a: wp.array(dtype=float), b: wp.array(dtype=float), partial: wp.array2d(dtype=float)):
+def column_dot(grid: Grid, a: wp.array(dtype=float), b: wp.array(dtype=float), partial: wp.array2d(dtype=float),
+               x_offset: int):
     """partial[i, k] = Σ_j a b over column (i, k) (the first of a dot product's fixed-order sums)."""
-    i, k = wp.tid()
+    t, k = wp.tid()
+    i = t + x_offset
     total = float(0.0)
     for j in range(grid.ny):
         c = flat(grid, i, j, k)
@@ -196,17 +202,17 @@ class Projection:
         self.floor = float(grid.dx * np.mean(base.density) * np.sqrt(self.cell_count))
 
     def _apply(self, x, out):
-        wp.launch(apply_operator, dim=(self.grid.nx, self.grid.ny, self.grid.nz),
-                  inputs=[self.grid, self.column, x, x, out, 1.0, 0.0], device=self.device)
+        launch_slabs(apply_operator, (self.grid.nx, self.grid.ny, self.grid.nz),
+                     [self.grid, self.column, x, x, out, 1.0, 0.0], self.device)
 
     def _precondition(self, x, out):
-        wp.launch(column_solve, dim=(self.grid.nx, self.grid.nz),
-                  inputs=[self.grid, self.lower, self.inverse_pivot, self.upper, x, x, out, self.scratch, 1.0, 0.0],
-                  device=self.device)
+        launch_slabs(column_solve, (self.grid.nx, self.grid.nz),
+                     [self.grid, self.lower, self.inverse_pivot, self.upper, x, x, out, self.scratch, 1.0, 0.0],
+                     self.device)
 
     def _dot(self, a, b, slot: int) -> None:
         d = self.device
-        wp.launch(column_dot, dim=(self.grid.nx, self.grid.nz), inputs=[self.grid, a, b, self.partial], device=d)
+        launch_slabs(column_dot, (self.grid.nx, self.grid.nz), [self.grid, a, b, self.partial], d)
         wp.launch(row_sum, dim=self.grid.nx, inputs=[self.partial, self.rows], device=d)
         wp.launch(total_sum, dim=1, inputs=[self.rows, self.scalars, slot], device=d)
 

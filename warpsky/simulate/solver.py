@@ -19,6 +19,7 @@ from warpsky.simulate import kernels_flow as kf
 from warpsky.simulate import kernels_transport as kt
 from warpsky.simulate import kernels_water as kw
 from warpsky.simulate.fields import Column, Flow, Grid, Water
+from warpsky.simulate.launch import launch_slabs
 from warpsky.simulate.pressure import Projection
 from warpsky.simulate.sounding import BaseState, Sounding, base_state
 
@@ -169,7 +170,7 @@ class CloudSolver:
         flow.vel_x.assign(np.broadcast_to(b.wind_u[None, :, None], X.shape).astype(np.float32))
         flow.vel_z.assign(np.broadcast_to(b.wind_v[None, :, None], X.shape).astype(np.float32))
         # condense what the bubble or the sounding holds above saturation before the first step
-        wp.launch(kw.microphysics, dim=X.shape, inputs=[self.column, water, 0.0], device=self.device)
+        launch_slabs(kw.microphysics, X.shape, [self.column, water, 0.0], self.device)
 
     # -- the step ------------------------------------------------------------------------------------------------
     def step(self, dt: float) -> None:
@@ -180,7 +181,7 @@ class CloudSolver:
         for source, target, offset in ((flow.vel_x, new_flow.vel_x, wp.vec3(0.0, 0.5, 0.5)),
                                        (flow.vel_y, new_flow.vel_y, wp.vec3(0.5, 0.0, 0.5)),
                                        (flow.vel_z, new_flow.vel_z, wp.vec3(0.5, 0.5, 0.0))):
-            wp.launch(kf.advect, dim=target.shape, inputs=[g, flow, source, target, offset, float(dt)], device=d)
+            launch_slabs(kf.advect, target.shape, [g, flow, source, target, offset, float(dt)], d)
         self.flows.reverse()
         flow, water = self.flows[0], self.waters[0]
         if self.settings.confinement > 0.0:
@@ -191,7 +192,7 @@ class CloudSolver:
                   inputs=[g, self.column, water, self.force, flow, float(dt)], device=d)
         wp.launch(kf.damp_theta, dim=shape, inputs=[self.column, water, float(dt)], device=d)
         self.projection.project(flow)
-        wp.launch(kw.microphysics, dim=shape, inputs=[self.column, water, float(dt)], device=d)
+        launch_slabs(kw.microphysics, shape, [self.column, water, float(dt)], d)
         substeps = max(1, int(np.ceil(dt * 15.0 / (0.9 * g.dy))))  # rain falls under 15 m/s below 20 km
         wp.launch(kw.sediment, dim=(g.nx, g.nz), inputs=[g, self.column, water, self.fallen, float(dt), substeps],
                   device=d)
@@ -210,9 +211,9 @@ class CloudSolver:
         for _ in range(substeps):
             water, new_water = self.waters
             for name in ("theta", "vapour", "cloud", "rain"):
-                wp.launch(kt.transport, dim=(g.nx, g.ny, g.nz),
-                          inputs=[g, self.column, self.flows[0], getattr(water, name), getattr(new_water, name),
-                                  float(dt / substeps)], device=d)
+                launch_slabs(kt.transport, (g.nx, g.ny, g.nz),
+                             [g, self.column, self.flows[0], getattr(water, name), getattr(new_water, name),
+                              float(dt / substeps)], d)
             self.waters.reverse()
 
     def run(self, seconds: float, *, callback=None) -> None:
