@@ -26,20 +26,33 @@ def test_simulate_writes_frames_and_a_stage_that_renders(tmp_path, capsys):
     assert "/World/Weather:cloud" in capsys.readouterr().out
 
 
-def test_a_velocity_frame_holds_the_solvers_wind(tmp_path):
-    """The velocity grid is the solver's wind on the meteorological axes: the sounding's 15 tanh(z / 3 km) m/s
-    along +x far from the bubble, read back from the NanoVDB file."""
-    from warpsky.media.voxels.fields import load_vector_field
+def test_a_frame_holds_the_solvers_wind_on_meteorological_axes_around_the_media(tmp_path):
+    """The solver's (x, up, z) fields become the stage's (east, north, up) grids: a cloud blob at solver cell
+    (5, 3, 7) is at east 5, north 7, level 3 in the cloud grid, and the velocity file holds (u, v, w) = the solver's
+    (x, z, up) components within 2 cells of the blob and nothing far from it (the sparse velocity grid)."""
+    from warpsky.media.voxels.fields import load_field, load_vector_field
+    from warpsky.simulate.frames import FrameWriter, weather_state
+    from warpsky.simulate.sounding import base_state, weisman_klemp
 
-    assert main(["simulate", *SMALL, "--frames", "1", "--minutes", "1", "--out", str(tmp_path)]) == 0
-    grid = load_vector_field(tmp_path / "storm" / "velocity.0001.nvdb")
-    values = grid.values
-    assert values.shape[-1] == 3
-    z_index = np.arange(values.shape[2])
-    heights = (grid.local_from_index @ np.c_[np.zeros((len(z_index), 2)), z_index, np.ones(len(z_index))].T)[2]
-    corner = values[2, 2, :, 0]  # the first data column (the file pads the grid), far from the bubble
-    inside = (heights > 0.0) & (heights < 8000.0)
-    np.testing.assert_allclose(corner[inside], 15.0 * np.tanh(heights[inside] / 3000.0), atol=0.5)
+    shape = (10, 8, 12)
+    base = base_state(weisman_klemp(), shape[1], 500.0)
+    fields = {"theta": np.broadcast_to(base.theta[None, :, None], shape).copy(),
+              "vapour": np.broadcast_to(base.vapour[None, :, None], shape).copy(),
+              "cloud": np.zeros(shape), "rain": np.zeros(shape)}
+    fields["cloud"][5, 3, 7] = 1.0e-3
+    fields["velocity"] = np.broadcast_to(np.array([1.0, 2.0, 3.0], np.float32), (*shape, 3)).copy()
+    state = weather_state(fields, base, (1000.0, 500.0), 60.0)
+    FrameWriter(tmp_path / "f", tmp_path / "f.usda", 60.0).write(state)
+    cloud = load_field(tmp_path / "f" / "cloud.0001.nvdb")
+    lit = np.argwhere(cloud.values > 0.0)
+    assert len(lit) == 1
+    centre = cloud.local_from_index @ np.r_[lit[0], 1.0]
+    np.testing.assert_allclose(centre[:3], [500.0, 1500.0, 1750.0])  # east 5.5 - 5 km, north 7.5 - 6 km, 3.5 levels
+    velocity = load_vector_field(tmp_path / "f" / "velocity.0001.nvdb")
+    moving = np.argwhere(np.linalg.norm(velocity.values, axis=-1) > 0.0)
+    np.testing.assert_allclose(velocity.values[tuple(moving.T)], np.tile([1.0, 3.0, 2.0], (len(moving), 1)))
+    spread = np.abs(moving - lit[0]).max(axis=0)
+    np.testing.assert_array_equal(spread, [2, 2, 2])
 
 
 def test_a_failed_frame_keeps_the_finished_ones(tmp_path, monkeypatch):

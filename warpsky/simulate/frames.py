@@ -30,6 +30,9 @@ from warpsky.usd.weather.weather_state import SPECIES_ORDER, WeatherState
 
 #: Temperatures [K] of the condensate's partition: all liquid above the first, all ice below the second.
 ALL_LIQUID, ALL_ICE = 273.15, 253.15
+#: The velocity is written only this many cells around the media (what motion blur moves), which keeps its grids
+#: sparse: the environment's wind fills the whole domain (a dense 128 x 128 x 64 grid is 12 MB per frame).
+VELOCITY_MARGIN = 2
 #: Fields each frame writes.
 FIELDS = (*SPECIES_ORDER, "velocity")
 
@@ -61,6 +64,22 @@ def weather_state(fields: dict[str, np.ndarray], base, spacing: tuple[float, flo
     return WeatherState(source="warpsky simulate", time=float(time), label=f"t={time:.0f}s", origin=origin,
                         spacing=(dx, dx, dy), water={name: met(grid) for name, grid in contents.items()},
                         velocity=met(velocity).astype(np.float32))
+
+
+def near_media(beta: dict[str, np.ndarray], margin: int) -> np.ndarray:
+    """1 in the cells within ``margin`` cells (periodically along x and y, held at the floor and the lid) of one
+    with extinction, else 0, as float32."""
+    occupied = sum(beta.values()) > 0.0 if beta else np.zeros((1, 1, 1), bool)
+    grown = occupied.copy()
+    for axis in range(3):
+        for _ in range(margin):
+            before = grown.copy()
+            if axis < 2:
+                grown |= np.roll(before, 1, axis=axis) | np.roll(before, -1, axis=axis)
+            else:
+                grown[..., 1:] |= before[..., :-1]
+                grown[..., :-1] |= before[..., 1:]
+    return grown.astype(np.float32)
 
 
 def write_grid(path: Path, grid: np.ndarray, origin: np.ndarray, spacing: np.ndarray) -> Path:
@@ -102,8 +121,9 @@ class FrameWriter:
             self.peaks[species] = max(self.peaks.get(species, 0.0), float(grid.max()))
             files[species] = write_grid(self.folder / f"{species}.{frame:04d}.nvdb", grid, state.origin,
                                         state.spacing)
-        files["velocity"] = write_grid(self.folder / f"velocity.{frame:04d}.nvdb", state.velocity, state.origin,
-                                       state.spacing)
+        near = near_media(beta, VELOCITY_MARGIN)
+        files["velocity"] = write_grid(self.folder / f"velocity.{frame:04d}.nvdb", state.velocity * near[..., None],
+                                       state.origin, state.spacing)
         lower, upper = framing([state], [beta])
         if self.box is not None and any(p > 0.0 for p in self.peaks.values()):
             lower, upper = np.minimum(lower, self.box[0]), np.maximum(upper, self.box[1])
