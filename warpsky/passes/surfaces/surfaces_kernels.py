@@ -9,7 +9,7 @@ cloud shadows); :func:`shade_kernel`'s kernel shades them:
     E_sky(n) = pi L_sky (1 + n_y) / 2 * exp(-tau_up),
 
 with V_sun the meshes' shadow (a BVH any-hit ray towards the sun), T_sun the transmittance of the voxel media
-towards the sun (:func:`~warpsky.media.voxels.shadow.sun_depth_function`, the march the single-scatter technique uses)
+towards the sun (:func:`~warpsky.media.voxels.shadow.depth_functions`, the march the single-scatter technique uses)
 times the host's factor, and E_sky the irradiance a plane of normal n receives from a uniform sky of radiance
 L_sky over the upper hemisphere and black below the horizon (the view factor of the sky from a plane tilted by
 acos(n_y) is (1 + n_y) / 2), under the voxel media's transmittance towards the zenith exp(-tau_up) as the ground of
@@ -25,7 +25,7 @@ import warp as wp
 from warpsky.core.kernel_variants import kernel_variants
 from warpsky.core.numerics import exp3
 from warpsky.light.sun import Sun
-from warpsky.media.voxels.shadow import sun_depth_function
+from warpsky.media.voxels.shadow import depth_functions
 from warpsky.media.voxels.voxel import VoxelMedia
 from warpsky.model.camera_rays import PinholeCamera, primary_ray
 from warpsky.surfaces.mesh import SurfaceHit, SurfaceMeshes, material_albedo, mesh_hit, mesh_occluded, no_hit
@@ -125,7 +125,7 @@ def camera_buried(surfaces: SurfaceMeshes, plane: SurfacePlane, out: wp.array(dt
 @functools.cache
 def shade_kernel(has_detail: bool) -> wp.Kernel:
     """The shading launch, specialised on the voxel media's animated detail (their shadow march samples it)."""
-    sun_optical_depth = sun_depth_function(has_detail)
+    sun_optical_depth, vertical_optical_depth = depth_functions(has_detail)
 
     @wp.func
     def sun_term(surfaces: SurfaceMeshes, media: VoxelMedia, sun: Sun, lighting: SurfaceLighting, p: wp.vec3,
@@ -157,8 +157,7 @@ def shade_kernel(has_detail: bool) -> wp.Kernel:
         direct = sun_term(surfaces, media, sun, lighting, p, n, image.scale[row, col])
         light = wp.cw_mul(direct, sun_factor[row, col]) / wp.pi
         if lighting.sky_on != 0:
-            up = sun_optical_depth(media, p, 0.0, wp.vec3(0.0, 1.0, 0.0), wp.vec3(0.0, 1.0, 0.0),
-                                   lighting.shadow_step)
+            up = vertical_optical_depth(media, p, 0.0, wp.vec3(0.0, 1.0, 0.0), 0, lighting.shadow_step)
             light += wp.cw_mul(lighting.sky, exp3(wp.vec3(up[0], up[1], up[2]))) * (0.5 * (1.0 + n[1]))
         radiance[row, col] = wp.cw_mul(image.albedo[row, col], light)
         transmittance[row, col] = wp.vec3(0.0)

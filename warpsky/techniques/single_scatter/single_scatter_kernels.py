@@ -27,7 +27,7 @@ from warpsky.light.dome import ambient_ground
 from warpsky.light.skylight import AmbientLobes, SkyEnvironment, ambient_inscatter, ambient_lobes, mixed_asymmetry
 from warpsky.light.sun import Sun
 from warpsky.media.phase_mixture import oriented_correction_function, phase_sum_function
-from warpsky.media.voxels.shadow import empty_until, sun_depth_function
+from warpsky.media.voxels.shadow import depth_functions, empty_until
 from warpsky.media.voxels.voxel import MediaPoint, VoxelMedia, media_functions, media_span
 from warpsky.model.camera_rays import PinholeCamera, PrimaryRay, primary_ray
 from warpsky.optics.kernels import medium_phase, scattering_angle
@@ -81,7 +81,7 @@ def light_functions(has_detail: bool):
     """``(sun_step, sky_step, ground_light)``, the light one step of the eye march and the ground gather through
     the media's shadow marches, specialised on animated detail."""
 
-    sun_optical_depth = sun_depth_function(has_detail)
+    sun_optical_depth, vertical_optical_depth = depth_functions(has_detail)
 
     @wp.func
     def sun_step(media: VoxelMedia, sun: Sun, march: MarchSettings, ray: PrimaryRay, state: EyeMarch, ta: float,
@@ -114,12 +114,11 @@ def light_functions(has_detail: bool):
         when the lower hemisphere holds light) from the midpoint."""
         out = state
         if march.ambient_on != 0 and wp.max(here.scattering) > 0.0:
-            up = sun_optical_depth(media, ray.origin, tm, ray.direction, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
+            up = vertical_optical_depth(media, ray.origin, tm, ray.direction, 0, march.shadow_step)
             out.lookups += wp.int64(up[3])
             t_down = wp.vec3(0.0)
             if march.environment.lower_lit != 0:
-                down = sun_optical_depth(media, ray.origin, tm, ray.direction, wp.vec3(0.0, -1.0, 0.0),
-                                         march.shadow_step)
+                down = vertical_optical_depth(media, ray.origin, tm, ray.direction, 1, march.shadow_step)
                 out.lookups += wp.int64(down[3])
                 t_down = exp3(wp.vec3(down[0], down[1], down[2]))
             g = mixed_asymmetry(media, here, march.environment.asymmetry)
@@ -139,7 +138,7 @@ def light_functions(has_detail: bool):
             lit_ground = wp.cw_mul(ground.albedo, sun.irradiance) * (wp.max(sun.direction[1], 0.0) / wp.pi)
             out.light += wp.cw_mul(wp.cw_mul(lit_ground, exp3(wp.vec3(shadow[0], shadow[1], shadow[2]))), trans)
         if march.ambient_on != 0:
-            up = sun_optical_depth(media, ray.origin, t_end, ray.direction, wp.vec3(0.0, 1.0, 0.0), march.shadow_step)
+            up = vertical_optical_depth(media, ray.origin, t_end, ray.direction, 0, march.shadow_step)
             out.lookups += wp.int64(up[3])
             shown = ambient_ground(ground.albedo, march.ground_ambient, wp.vec3(up[0], up[1], up[2]))
             out.light += wp.cw_mul(shown, trans)

@@ -12,7 +12,7 @@ from warpsky.core.kernel_variants import kernel_variants
 from warpsky.core.numerics import exp3
 from warpsky.light.dome import ambient_ground
 from warpsky.light.sun import Sun
-from warpsky.media.voxels.shadow import sun_depth_function
+from warpsky.media.voxels.shadow import depth_functions
 from warpsky.media.voxels.voxel import VoxelMedia
 from warpsky.model.camera_rays import PinholeCamera, primary_ray
 from warpsky.surfaces.plane import Ground
@@ -24,7 +24,7 @@ def ground_kernel(has_detail: bool = False, has_dome: bool = False):
     """The ground pass, specialised on animated detail (the shadow rays see the same detailed media) and on a dome
     (its ambient light, occluded by the media towards the zenith)."""
 
-    sun_optical_depth = sun_depth_function(has_detail)
+    sun_optical_depth, vertical_optical_depth = depth_functions(has_detail)
 
     @wp.kernel(module="unique")
     def ground_pass(
@@ -58,7 +58,7 @@ def ground_kernel(has_detail: bool = False, has_dome: bool = False):
         before = transmittance[row, col]
         radiance[row, col] = radiance[row, col] + wp.cw_mul(before, wp.cw_mul(ground.albedo, lit))
         if wp.static(has_dome):
-            up = sun_optical_depth(media, wp.vec3(0.0), t, view, wp.vec3(0.0, 1.0, 0.0), shadow_step)
+            up = vertical_optical_depth(media, wp.vec3(0.0), t, view, 0, shadow_step)
             shown = ambient_ground(ground.albedo, ground_ambient, wp.vec3(up[0], up[1], up[2]))
             radiance[row, col] = radiance[row, col] + wp.cw_mul(before, shown)
         if (before[0] + before[1] + before[2]) > 1.5:  # mostly clear: the ground is what the pixel shows
