@@ -47,7 +47,7 @@ def empty_kernel(media: VoxelMedia, points: wp.array(dtype=wp.vec3), dirs: wp.ar
 
 
 def sparse_medium(shape=(40, 24, 32), seed=3, voxel=10.0) -> VoxelMedium:
-    """Three Gaussian puffs lowered by 5 % of their peak and clipped at exactly 0, in a box mostly empty; 10 m voxels."""
+    """Three Gaussian puffs lowered by 5 % of their peak and clipped at 0, in a box mostly empty; 10 m voxels."""
     rng = np.random.default_rng(seed)
     idx = np.stack(np.meshgrid(*[np.arange(n, dtype=np.float32) for n in shape], indexing="ij"), -1)
     density = np.zeros(shape, np.float32)
