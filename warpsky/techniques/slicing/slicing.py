@@ -167,7 +167,7 @@ class Slicing(Technique):
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
         """Bytes a frame allocates: the eye buffers, the two light buffers (``light_resolution``^2 RGB each), their
-        copies at a chunk's slice planes and the media's upload."""
+        copies at a chunk's slice planes and the media's upload (its column sums as large)."""
         res = int(self.settings.light_resolution)
         planes = int(self.settings.slice_count or self.AUTO_SLICES[1]) if scene.media else 0
         pixels = width * height
@@ -176,7 +176,8 @@ class Slicing(Technique):
                 .add("images", host=pixels * (self.HOST_PIXEL_BYTES + copies * self.PIXEL_BYTES),
                      device=pixels * (self.PIXEL_BYTES + LAYER_DEVICE_BYTES))
                 .add("light buffers", device=2 * res * res * 12 * (1 + chunk_planes(planes, res, self.device)))
-                .add("grids", host=grid_bytes(scene), device=grid_bytes(scene)))
+                .add("grids", host=grid_bytes(scene), device=grid_bytes(scene))
+                .add("column sums", host=grid_bytes(scene), device=grid_bytes(scene)))
 
     def tables(self, scene: Scene) -> list[TableNeed]:
         """A phase table and the Ams_0..orders tables (at the ``orders`` setting) per species."""
