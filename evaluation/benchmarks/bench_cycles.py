@@ -193,12 +193,13 @@ def render_once(renderer: dict, n: int, seed: int, setup: dict, out: Path) -> di
     return run_cycles(setup["python"], setup["description"], out, n, renderer["variant"], seed)
 
 
-def ladders(judge: Judge, setup: dict, targets: list[float], args, log) -> list[dict]:
+def ladders(judge: Judge, setup: dict, targets: list[float], args, log, rows: list[dict], progress) -> bool:
     """Every renderer's rungs (doubling from 1), interleaved: rung k of each renderer still climbing, then rung
-    k + 1. A renderer stops once its median net error is at most the smallest target, its rung passes
-    ``--max-samples``, its median render time ``--max-seconds``, or its error has levelled off (:data:`PLATEAU`:
-    a bias, such as a denoiser's, that more samples do not remove)."""
-    folder, rows = setup["folder"], []
+    k + 1, appended to ``rows`` (``progress(rows)`` after each). A renderer stops once its median net error is at
+    most the smallest target, its rung passes ``--max-samples``, its median render time ``--max-seconds``, or its
+    error has levelled off (:data:`PLATEAU`: a bias, such as a denoiser's, that more samples do not remove). No rung
+    starts after ``--max-minutes``. Returns whether every renderer stopped by those rules (False: out of time)."""
+    folder, deadline = setup["folder"], time.perf_counter() + 60.0 * (args.max_minutes or math.inf)
     climbing = renderers(args.variants)
     for renderer in climbing:  # untimed: compiles, file caches
         render_once(renderer, 1, 0, setup, folder / "warm.exr")
@@ -206,6 +207,9 @@ def ladders(judge: Judge, setup: dict, targets: list[float], args, log) -> list[
     while climbing:
         n = 2 ** k
         for renderer in list(climbing):
+            if time.perf_counter() > deadline:
+                log(f"--max-minutes {args.max_minutes:g} passed: {', '.join(r['name'] for r in climbing)} stopped")
+                return False
             runs = []
             for repeat in range(args.repeats):
                 run = render_once(renderer, n, 1 + repeat, setup, folder / "run.exr")
@@ -216,6 +220,7 @@ def ladders(judge: Judge, setup: dict, targets: list[float], args, log) -> list[
                    "first_sample_seconds": float(np.median([r.get("first_sample_seconds", math.nan) for r in runs])),
                    "load": os.getloadavg()[0]}
             rows.append(row)
+            progress(rows)
             log(f"{row['renderer']:20s} {n:5d} {row['unit']:7s} net {row['net_rmse']:.4f}  bias {row['bias']:+.4f}"
                 f"  render {row['render_seconds']:7.2f} s  command {row['command_seconds']:7.2f} s  "
                 f"load {row['load']:.2f}")
@@ -225,7 +230,7 @@ def ladders(judge: Judge, setup: dict, targets: list[float], args, log) -> list[
                     or row["render_seconds"] > args.max_seconds or plateau):
                 climbing.remove(renderer)
         k += 1
-    return rows
+    return True
 
 
 def time_to_target(rows: list[dict], renderer: str, target: float) -> dict:
@@ -249,6 +254,9 @@ def markdown(report: dict) -> str:
     """The page ``--out`` holds: settings, the mean check and time to each target per renderer."""
     ref, lines = report["reference"], []
     lines += ["# warpsky against Blender Cycles 5: error against time", "",
+              *([] if report["finished"] else [
+                  "**Partial**: written while (or after) the ladders stopped short of their rules (`--max-minutes`"
+                  " or an interrupted run); a renderer still climbing shows *not reached*.", ""]),
               f"Written by `{report['command']}` at commit {report['commit']} on {report['date']} "
               f"({report['machine']}; load average "
               f"{report['load_before']:.2f} before, {report['load_after']:.2f} after: the CPU was shared).", "",
@@ -297,6 +305,8 @@ def parse(argv):
     parser.add_argument("--check-samples", default="16,64,256,1024", help="the mean check's Cycles samples")
     parser.add_argument("--max-samples", type=int, default=16384, help="highest rung of any renderer")
     parser.add_argument("--max-seconds", type=float, default=900.0, help="a renderer stops after a rung this long")
+    parser.add_argument("--max-minutes", type=float, default=0.0,
+                        help="start no rung after this many minutes of ladders (default 0: no limit)")
     parser.add_argument("--python", type=Path, default=ROOT / ".venv-cycles" / "bin" / "python",
                         help="bpy's Python (make cycles-env)")
     parser.add_argument("--work", type=Path, default=ROOT / "data" / "cycles", help="derived stage, VDB, EXRs")
@@ -304,6 +314,34 @@ def parse(argv):
     args = parser.parse_args(argv)
     args.variants = [v for v in args.variants.split(",") if v]
     return args
+
+
+def run_facts(args) -> dict:
+    """What the page says about the run: the command, commit, Blender, machine and load."""
+    def output(*command):
+        return subprocess.run(command, capture_output=True, text=True).stdout.strip()
+
+    dirty = output("git", "-C", str(ROOT), "status", "--porcelain", "--", "warpsky", "evaluation")
+    return {"command": " ".join(["python", str(Path(sys.argv[0]).resolve().relative_to(ROOT)), *sys.argv[1:]]),
+            "commit": output("git", "-C", str(ROOT), "rev-parse", "--short", "HEAD")
+            + (" with uncommitted changes" if dirty else ""),
+            "blender": output(str(args.python), "-c", "import bpy; print(bpy.app.version_string)"),
+            "machine": f"{os.cpu_count()}-core CPU, no GPU used", "load_before": os.getloadavg()[0],
+            "stage": args.stage.name, "size": args.size}
+
+
+def write_report(facts: dict, judge: Judge, check: list[dict], rows: list[dict], args, finished: bool) -> dict:
+    """Write the page and its JSON (also while the ladders climb: ``finished`` False marks it partial)."""
+    targets = [float(t) for t in args.targets.split(",")]
+    report = {**facts, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "finished": finished,
+              "load_after": os.getloadavg()[0], "reference": judge.info, "mean_check": check, "rows": rows,
+              "time_to_target": [{"target": t, **time_to_target(rows, r["name"], t)}
+                                 for t in targets for r in renderers(args.variants)
+                                 if any(row["renderer"] == r["name"] for row in rows)]}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(markdown(report))
+    args.out.with_suffix(".json").write_text(json.dumps(report, indent=1))
+    return report
 
 
 def main(argv=None) -> int:
@@ -318,7 +356,7 @@ def main(argv=None) -> int:
     if not args.python.is_file():
         log(f"{args.python} is missing: run `make cycles-env` (bpy 5.0 in its own Python 3.11 environment)")
         return 2
-    load_before = os.getloadavg()[0]
+    facts = run_facts(args)
     stage, scene, description = prepare(args.stage, args.work, args.size, args.python)
     setup = {"stage": stage, "size": args.size, "python": args.python, "description": description,
              "folder": args.work}
@@ -326,25 +364,10 @@ def main(argv=None) -> int:
     check = mean_check(judge, args.python, description, args.work,
                        [int(n) for n in args.check_samples.split(",") if n], log)
     targets = [float(t) for t in args.targets.split(",")]
-    rows = ladders(judge, setup, targets, args, log)
-    blender = subprocess.run([str(args.python), "-c", "import bpy; print(bpy.app.version_string)"],
-                             capture_output=True, text=True).stdout.strip()
-    command = " ".join(["python", str(Path(sys.argv[0]).resolve().relative_to(ROOT)), *sys.argv[1:]])
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip()
-    dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--", "warpsky", "evaluation"],
-                           capture_output=True, text=True).stdout.strip()
-    report = {"commit": commit + (" with uncommitted changes" if dirty else ""), "command": command,
-              "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-              "machine": f"{os.cpu_count()}-core CPU, no GPU used", "load_before": load_before,
-              "load_after": os.getloadavg()[0], "stage": args.stage.name, "size": args.size, "blender": blender,
-              "reference": judge.info, "mean_check": check, "rows": rows,
-              "time_to_target": [{"target": t, **time_to_target(rows, r["name"], t)}
-                                 for t in targets for r in renderers(args.variants)]}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(markdown(report))
-    args.out.with_suffix(".json").write_text(json.dumps(report, indent=1))
-    print(markdown(report))
+    rows: list[dict] = []
+    finished = ladders(judge, setup, targets, args, log, rows,
+                       lambda so_far: write_report(facts, judge, check, so_far, args, finished=False))
+    print(markdown(write_report(facts, judge, check, rows, args, finished)))
     return 0
 
 
