@@ -15,13 +15,13 @@ CUMULUS = ROOT / "usd_scenes" / "cumulus.usda"
 
 #: Never loaded to start or to render: the evaluation code beside the package, peers, farms and plotting.
 NEVER = ("evaluation", "mitsuba", "drjit", "dask", "distributed", "pyvista", "vtk", "matplotlib", "scipy")
-#: Not loaded by a frame of a cloud under a clear sky (no stratiform layer, no mesh, no preview): the stratiform
-#: pass's optics, radiosity and kernels, the surfaces pass's kernels and OpenColorIO (the default view needs it only
-#: to write a preview).
+#: Not loaded by a frame of a cloud under a clear sky (no stratiform layer, no mesh, no fog, no preview): the
+#: stratiform pass's optics, radiosity and kernels, the surfaces pass's kernels, the meshes, the shadowed air in
+#: front and OpenColorIO (the default view needs it only to write a preview).
 UNUSED_BY_A_CLOUD = ("warpsky.passes.stratiform.stratiform_kernels", "warpsky.passes.stratiform.radiosity",
                      "warpsky.passes.stratiform.optics", "warpsky.passes.stratiform.slab",
                      "warpsky.passes.stratiform.model1d", "warpsky.passes.surfaces.surfaces_kernels",
-                     "PyOpenColorIO")
+                     "warpsky.surfaces.mesh", "warpsky.passes.sky.shadowed_air", "PyOpenColorIO")
 
 
 def _modules_after(code: str) -> set[str]:

@@ -45,7 +45,6 @@ from warpsky.media.stratiform.stratiform_shadow import layer_shadows
 from warpsky.model.camera_rays import pinhole_camera
 from warpsky.model.scene import Scene
 from warpsky.passes.render_pass import Pass
-from warpsky.surfaces.mesh import no_surfaces
 
 if TYPE_CHECKING:  # the kernels load when the pass renders, not when a frame asks whether it runs
     from warpsky.passes.fog.fog_kernels import FogMarch
@@ -107,7 +106,12 @@ class Fog:
         march.sun_direction = wp.vec3d(*direction.tolist())
         march.sun_irradiance = wp.vec3d(*(np.zeros(3) if light is None else light.irradiance).tolist())
         march.sun_on = int(light is not None and light.lit and direction[1] > 0.0)
-        march.occluders = no_surfaces(self.device) if occluders is None else occluders.surfaces
+        if occluders is None:
+            from warpsky.surfaces.mesh import no_surfaces  # the meshes' module loads where fog is drawn
+
+            march.occluders = no_surfaces(self.device)
+        else:
+            march.occluders = occluders.surfaces
         march.layers = layer_shadows(scene.stratiform_layers, scene.camera.position, self.device)
         ambient = ambient_radiance(scene) if ambient is None else ambient
         march.ambient = wp.vec3d(*np.asarray(ambient, dtype=np.float64).tolist())

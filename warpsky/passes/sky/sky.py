@@ -17,9 +17,6 @@ from warpsky.model.camera_rays import pinhole_camera
 from warpsky.model.scene import Projection, Scene
 from warpsky.passes.render_pass import Pass
 from warpsky.passes.sky.round_sky import launch_round_sky, round_description
-from warpsky.passes.sky.shadowed_air import BATCH as SHADOWED_AIR_BATCH
-from warpsky.passes.sky.shadowed_air import STEPS as SHADOWED_AIR_STEPS
-from warpsky.passes.sky.shadowed_air import shadowed_front
 from warpsky.passes.sky.sky_kernels import sky_kernel
 from warpsky.surfaces.plane import ground_struct
 
@@ -154,7 +151,9 @@ class SkyPass(Pass):
                                         device=pixels * 40)
         shaded = (scene.meshes or scene.fogs or scene.decks) and scene.sun is not None
         if shaded and scene.camera.projection == Projection.PERSPECTIVE:
-            points = min(pixels, SHADOWED_AIR_BATCH) * SHADOWED_AIR_STEPS
+            from warpsky.passes.sky.shadowed_air import BATCH, STEPS
+
+            points = min(pixels, BATCH) * STEPS
             estimate.add("shadowed air", host=points * SHADOWED_AIR_POINT_BYTES)
         return estimate
 
@@ -170,7 +169,11 @@ class SkyPass(Pass):
         seen = frame.light.lit_at_media(frame.scene)
         shadows = [shadow for runner in frame.runners if runner.shades_air
                    for shadow in [runner.shadow(seen)] if shadow is not None]
-        shaded = shadowed_front(frame, air_depth, shadows)  # the scenery's shadows in the air in front
+        shaded = None
+        if shadows or frame.occluders is not None:  # the scenery's shadows in the air in front (kernels load here)
+            from warpsky.passes.sky.shadowed_air import shadowed_front
+
+            shaded = shadowed_front(frame, air_depth, shadows)
         if shaded is not None:
             front.radiance = np.maximum(front.radiance - shaded, 0.0).astype(np.float32)
             front.stats["shadowed_air"] = float(shaded.mean())

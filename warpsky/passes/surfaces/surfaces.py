@@ -34,10 +34,10 @@ from warpsky.model.camera_rays import pinhole_camera
 from warpsky.model.scene import Scene
 from warpsky.passes.media import scenery_paths
 from warpsky.passes.render_pass import Pass
-from warpsky.surfaces.mesh import SHADOW_BIAS, MeshBuffers
 
-if TYPE_CHECKING:  # the kernels (a Warp module) load when the pass draws, not when a frame asks whether it runs
+if TYPE_CHECKING:  # the kernels and meshes (Warp modules) load when the pass draws, not when a frame asks if it runs
     from warpsky.passes.surfaces.surfaces_kernels import SurfaceImage, SurfacePlane
+    from warpsky.surfaces.mesh import MeshBuffers
 
 
 class Surfaces:
@@ -71,6 +71,7 @@ class Surfaces:
             the near distance, with one line in its ``warnings``.
         """
         from warpsky.passes.surfaces.surfaces_kernels import SurfaceLighting, shade_kernel
+        from warpsky.surfaces.mesh import SHADOW_BIAS
 
         started = time.perf_counter()
         camera = scene.camera.conformed(width, height)
@@ -134,6 +135,7 @@ class Surfaces:
     def _prepare(self, scene: Scene, eye: np.ndarray, draw_ground: bool) -> tuple[MeshBuffers, SurfacePlane]:
         """The meshes' buffers relative to ``eye`` (kept, refitted or rebuilt) and the plane's struct."""
         from warpsky.passes.surfaces.surfaces_kernels import SurfacePlane
+        from warpsky.surfaces.mesh import MeshBuffers
 
         ground = scene.ground if draw_ground else None
         extra = [(ground.albedo, ground.albedo_map)] if ground is not None else []
