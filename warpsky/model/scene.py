@@ -200,9 +200,10 @@ class VoxelMedium:
         if dens.ndim != 3 or min(dens.shape) < 1:
             raise SceneError(f"medium {self.name}: density must be a non-empty 3-D grid, got shape {dens.shape}")
         dens = np.ascontiguousarray(dens, dtype=np.float32)
-        bad = int(np.count_nonzero(~np.isfinite(dens)))
-        neg = int(np.count_nonzero(dens < 0.0))
-        if bad or neg:
+        low, high = float(dens.min()), float(dens.max())
+        if not (low >= 0.0 and math.isfinite(high)):  # a NaN makes both false: count what is wrong only then
+            bad = int(np.count_nonzero(~np.isfinite(dens)))
+            neg = int(np.count_nonzero(dens < 0.0))
             raise SceneError(
                 f"medium {self.name}: field {self.source or '(in memory)'} has {bad} NaN/Inf and {neg} negative "
                 "values; expected finite values >= 0"
