@@ -98,13 +98,18 @@ def dense_from_leaves(grid: bytes | memoryview) -> tuple[np.ndarray, np.ndarray]
         return None  # too large for a dense grid: the walk says so
     corner = (lo // 8) * 8  # the leaf-aligned box over the dense one
     blocks = -(-(hi + 1 - corner) // 8)
-    aligned = np.full(8 * blocks, background.view(np.float32), dtype=np.float32)
+    if background == 0:
+        aligned = np.zeros(8 * blocks, dtype=np.float32)
+    else:
+        aligned = np.full(8 * blocks, background.view(np.float32), dtype=np.float32)
     index = (origins - corner) // 8
     inside = np.all((index >= 0) & (index < blocks), axis=1)
     values = np.ndarray((leaf_count, 8, 8, 8), dtype="<f4", buffer=buffer, offset=first + _LEAF_TABLE,
                         strides=(_LEAF_SIZE, 256, 32, 4))
+    if not inside.all():  # leaves without an active voxel outside the box
+        index, values = index[inside], values[inside]
     as_blocks = aligned.reshape(blocks[0], 8, blocks[1], 8, blocks[2], 8).transpose(0, 2, 4, 1, 3, 5)
-    as_blocks[index[inside, 0], index[inside, 1], index[inside, 2]] = values[inside]
+    as_blocks[index[:, 0], index[:, 1], index[:, 2]] = values
     start = lo - corner
     stop = start + (hi - lo + 1)
     return np.ascontiguousarray(aligned[start[0] : stop[0], start[1] : stop[1], start[2] : stop[2]]), lo
