@@ -60,7 +60,7 @@ def with_render_settings(options: RenderOptions, spec: RenderSpec | None, *, exp
     space filled in where ``explicit`` (the option names given by the caller) does not set them."""
     if spec is None:
         return options
-    changes = {"pixel_aspect": spec.pixel_aspect, "data_window": spec.data_window}
+    changes = {name: getattr(spec, name) for name in ("pixel_aspect", "data_window") if name not in explicit}
     if "camera" not in explicit and spec.camera is not None:
         changes["camera"] = spec.camera
     if "resolution" not in explicit and spec.resolution is not None:
