@@ -120,6 +120,10 @@ def test_data_window_and_pixel_aspect(tmp_path, stage, capsys):
                                settings={"step_length": 1})
     assert np.array_equal(api.channels["R"], image.channels["R"])
     assert api.frame.rgba.shape == (8, 16, 4)
+    # a data window the caller gives wins over the product's and the settings'
+    whole = warpsky.render_stage(stage, product="/Render/P", device="cpu", technique="single_scatter",
+                                 settings={"step_length": 1}, data_window=(0.0, 0.0, 1.0, 1.0))
+    assert whole.window is None and whole.channels["R"].shape == (8, 16)
 
 
 def test_colorspace_acescg_is_rec709_times_the_standard_matrix(tmp_path, stage, capsys):

@@ -82,8 +82,8 @@ def with_product(options: RenderOptions, product: ProductSpec, *, explicit: set[
                  ) -> RenderOptions:
     """``options`` with a RenderProduct's camera, resolution, pixel aspect, data window, vars, type and deep samples
     (its own values or those it inherits from its settings), except what ``explicit`` names."""
-    changes = {"pixel_aspect": product.pixel_aspect, "data_window": product.data_window, "outputs": product.outputs,
-               "deep_product": product.deep}
+    changes = {"outputs": product.outputs, "deep_product": product.deep}
+    changes |= {name: getattr(product, name) for name in ("pixel_aspect", "data_window") if name not in explicit}
     if "deep_samples" not in explicit and product.deep_samples is not None:
         changes["deep_samples"] = product.deep_samples
     if "camera" not in explicit and product.camera is not None:
