@@ -2,11 +2,12 @@
 
 At 384x256 and 1920x1080 a path-traced reference of a crop (``dataWindowNDC``) around the cloud's centre is too
 costly for the whole frame but cheap for the crop; the hybrid renders whole frames (under each ``--time-budget``,
-and with its default error target alone) and is measured on the same crop's covered pixels (the reference's
-luminance transmittance below 0.99): ``net`` is the relative RMSE with the reference's own noise taken out
+and with its default error target alone) and is measured on the same crop's covered pixels (the media alone
+transmit less than 0.99 of the luminance): ``net`` is the relative RMSE with the reference's own noise taken out
 (:func:`evaluation.error_vs_time.error_metrics`), ``estimate`` the frame's own error estimate (what stops it),
 ``est/net`` their ratio. Times: ``render`` the frame's passes (the EXR header's renderSeconds), ``call`` the whole
-in-process call (stage read, plan, frame), after one untimed frame per size (warm kernel and table caches).
+in-process call (stage read, plan, frame), ``march`` the single-scattering march's part of the render, after one
+untimed frame per size (warm kernel and table caches).
 
 Run:  python evaluation/benchmarks/bench_frame_error.py [--stage usd_scenes/cumulus.usda]
           [--sizes 384x256,1920x1080] [--budgets 2,5,10,20] [--reference-spp 1024] [--crop-pixels 80]
@@ -31,16 +32,22 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from evaluation.error_vs_time import error_metrics  # noqa: E402
+from evaluation.family import covered_pixels  # noqa: E402
 from warpsky.api import render_stage  # noqa: E402
 from warpsky.core.files import atomic_write, cache_dir  # noqa: E402
+from warpsky.usd.stage import StageReader  # noqa: E402
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+def media_covered(stage: str, size: tuple[int, int]) -> np.ndarray:
+    """(H, W) bool: the pixels the media cover (:func:`evaluation.family.covered_pixels`: a noise-free
+    single-scatter frame of the media alone)."""
+    scene = StageReader(stage).scene_at(None)
+    return covered_pixels(scene, size[0], size[1], "cpu")
 
 
 def cloud_centre(stage: str) -> tuple[float, float]:
-    """NDC (x, y) of the centroid of the pixels the media cover, from a 96-wide single-scatter frame (y down)."""
-    frame = render_stage(stage, resolution=(96, 64), technique="single_scatter").frame
-    covered = (np.asarray(frame.transmittance) @ LUMA) < 0.99
+    """NDC (x, y) of the centroid of the pixels the media cover at 96x64 (y down)."""
+    covered = media_covered(stage, (96, 64))
     ys, xs = np.nonzero(covered)
     if xs.size == 0:
         return 0.5, 0.5
@@ -78,7 +85,7 @@ def reference_crop(stage: str, size: tuple[int, int], window, spp: int, seed: in
     return out
 
 
-def hybrid_row(stage: str, size: tuple[int, int], window, reference: dict, budget: float | None) -> dict:
+def hybrid_row(stage: str, size: tuple[int, int], reference: dict, covered: np.ndarray, budget: float | None) -> dict:
     """One whole hybrid frame, measured on the crop."""
     settings = {} if budget is None else {"time_budget": str(budget)}
     started = time.perf_counter()
@@ -89,13 +96,13 @@ def hybrid_row(stage: str, size: tuple[int, int], window, reference: dict, budge
     ref = reference["radiance"]
     if radiance.shape != ref.shape:
         raise RuntimeError(f"crop {radiance.shape} against reference {ref.shape}")
-    covered = (reference["transmittance"] @ LUMA) < 0.99
     metrics = error_metrics(radiance, ref, covered, reference["variance"])
     stats = image.layer.stats
     estimate = float(stats.get("error_estimate", math.nan))
     net = metrics["net_rmse"]
     return {"size": f"{size[0]}x{size[1]}", "budget": budget, "render": float(image.timings.get("passes", math.nan)),
-            "call": call, "spp": stats.get("spp"), "ms_scale": stats.get("settings", {}).get("ms_scale"),
+            "call": call, "march": float(stats.get("single_scatter_seconds", math.nan)), "spp": stats.get("spp"),
+            "ms_scale": stats.get("ms_scale"),
             "stopped_by": stats.get("stopped_by"), "estimate": estimate, "net": metrics["net_rmse"],
             "bias": metrics["bias"], "est_over_net": estimate / net if net else math.nan}
 
@@ -111,18 +118,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     centre = cloud_centre(args.stage)
     rows = []
-    print(f"{'size':>10} {'budget':>7} {'render':>8} {'call':>8} {'spp':>5} {'ms':>3} {'stopped by':>12} "
+    print(f"{'size':>10} {'budget':>7} {'render':>8} {'call':>8} {'march':>7} {'spp':>5} {'ms':>3} {'stopped by':>12} "
           f"{'estimate':>9} {'net':>7} {'bias':>7} {'est/net':>8}")
     for text in args.sizes.split(","):
         size = tuple(int(v) for v in text.lower().split("x"))
         window = crop_window(centre, *size, args.crop_pixels)
         reference = reference_crop(args.stage, size, window, args.reference_spp)
+        x0, y0, x1, y1 = (int(v) for v in reference["bounds"])
+        covered = media_covered(args.stage, size)[y0:y1, x0:x1]
         render_stage(args.stage, resolution=size, settings={"time_budget": "1"})  # warm: compiles, tables
         for budget in [float(b) for b in args.budgets.split(",") if b] + [None]:
-            row = hybrid_row(args.stage, size, window, reference, budget)
+            row = hybrid_row(args.stage, size, reference, covered, budget)
             rows.append(row | {"reference_seconds": float(reference["seconds"])})
             print(f"{row['size']:>10} {('-' if budget is None else f'{budget:g} s'):>7} {row['render']:8.2f} "
-                  f"{row['call']:8.2f} {row['spp']!s:>5} {row['ms_scale']!s:>3} {row['stopped_by']!s:>12} "
+                  f"{row['call']:8.2f} {row['march']:7.2f} {row['spp']!s:>5} {row['ms_scale']!s:>3} "
+                  f"{row['stopped_by']!s:>12} "
                   f"{row['estimate']:9.4f} {row['net']:7.4f} {row['bias']:+7.4f} {row['est_over_net']:8.2f}",
                   flush=True)
     if args.json:
