@@ -83,19 +83,13 @@ def column_depth(media: VoxelMedia, m: int, p: wp.vec3, down: int) -> float:
 
 
 @functools.cache
-def depth_functions(has_detail: bool):
-    """``(sun_optical_depth, vertical_optical_depth)``, specialised on animated detail:
-
-    ``sun_optical_depth(media, origin, t, view_dir, sun_dir, shadow_step) -> vec4``: optical depth (RGB in xyz)
-    from the point ``origin + t * view_dir`` of the view ray towards ``sun_dir``, summed over all grids, and the
-    number of grid lookups it took (w). Each grid's chord is walked cell by cell
+def walk_function(has_detail: bool):
+    """``medium_depth(media, m, start, world, direction, shadow_step) -> vec2``, specialised on animated detail:
+    (the integral of medium ``m``'s value from the index point ``start`` (camera-relative ``world``) along
+    ``direction`` out of its box [m of field], lookups). The chord is walked cell by cell
     (:func:`~warpsky.media.voxels.bricks.cell_step`); every run of non-empty cells is integrated by the midpoint
-    rule in equal steps of at most ``shadow_step``, and empty cells, where every lookup is exactly 0, are skipped.
-    A grid without cells, or whose cells are all occupied, is one run over its whole chord.
-
-    ``vertical_optical_depth(media, origin, t, view_dir, down, shadow_step) -> vec4``: the same straight up
-    (``down`` 0) or down (1), exact from the column sums (:func:`column_depth`) in grids whose index y is vertical
-    when the media carry no detail, else walked."""
+    rule in equal steps of at most ``shadow_step``, and empty cells, where every lookup is exactly 0, are skipped. A
+    grid without cells, or whose cells are all occupied, is one run over its whole chord."""
 
     @wp.func
     def run_depth(media: VoxelMedia, m: int, start: wp.vec3, toward_sun: wp.vec3, world: wp.vec3, sun_dir: wp.vec3,
@@ -144,6 +138,23 @@ def depth_functions(has_detail: bool):
                 in_run = 0
             u = cell.end
         return total
+
+    return medium_depth
+
+
+@functools.cache
+def depth_functions(has_detail: bool):
+    """``(sun_optical_depth, vertical_optical_depth)``, specialised on animated detail:
+
+    ``sun_optical_depth(media, origin, t, view_dir, sun_dir, shadow_step) -> vec4``: optical depth (RGB in xyz)
+    from the point ``origin + t * view_dir`` of the view ray towards ``sun_dir``, summed over all grids, and the
+    number of grid lookups it took (w); each grid walked by :func:`walk_function`.
+
+    ``vertical_optical_depth(media, origin, t, view_dir, down, shadow_step) -> vec4``: the same straight up
+    (``down`` 0) or down (1), exact from the column sums (:func:`column_depth`) in grids whose index y is vertical
+    when the media carry no detail, else walked."""
+
+    medium_depth = walk_function(has_detail)
 
     @wp.func
     def sun_optical_depth(media: VoxelMedia, origin: wp.vec3, t: float, view_dir: wp.vec3, sun_dir: wp.vec3,

@@ -232,6 +232,43 @@ def column_sums(density: np.ndarray) -> np.ndarray:
     return out
 
 
+def grid_struct(medium: VoxelMedium, index_from_world: np.ndarray, camera_position, offset: int,
+                species: tuple[str, ...], table_offset: int) -> VoxelGrid:
+    """``medium``'s :class:`VoxelGrid` (its cells left to the caller): its values from ``offset`` in the flat
+    buffer, the camera in its index space, its coefficients and phase."""
+    grid = VoxelGrid()
+    grid.offset = offset
+    grid.shape = wp.vec3i(*medium.shape)
+    eye = index_from_world @ np.append(np.asarray(camera_position, dtype=np.float64), 1.0)
+    grid.eye_index = wp.vec3(*eye[:3].tolist())
+    grid.index_from_world = wp.mat33(*index_from_world[:3, :3].reshape(-1).tolist())
+    grid.extinction = wp.vec3(*medium.extinction_scale.tolist())
+    grid.scattering = wp.vec3(*(medium.extinction_scale * medium.albedo).tolist())
+    if medium.species is not None:
+        grid.phase_kind = int(TABLE_KIND) + table_offset + species.index(medium.species)
+    else:
+        grid.phase_kind = int(medium.phase.kind)
+    grid.phase_g = float(medium.phase.g)
+    reduced_extinction, reduced_scattering = reduced_coefficients(medium)
+    grid.reduced_extinction = wp.vec3(*reduced_extinction.tolist())
+    grid.reduced_scattering = wp.vec3(*reduced_scattering.tolist())
+    return grid
+
+
+def cell_buffers(cell_chunks: list, column_chunks: list, occupancy, cache: str | None, device):
+    """(occupancy, columns) on ``device``: the grids' cell maxima (``occupancy`` itself when given) and column sums
+    concatenated (1-entry dummies when none), through :func:`warpsky.core.device_buffers.upload` with ``cache``."""
+    def upload(name: str, chunks: list):
+        data = np.concatenate(chunks).astype(np.float32, copy=False) if chunks else np.zeros(1, np.float32)
+        if cache is None:
+            return wp.array(data, dtype=float, device=device)
+        return device_buffers.upload(f"{cache}:{name}", data, float, device)
+
+    if occupancy is None:
+        occupancy = upload("occupancy", cell_chunks)
+    return occupancy, upload("columns", column_chunks)
+
+
 #: Voxels per cell edge of the occupancy the shadow marches skip empty space by (:mod:`~warpsky.media.voxels.
 #: bricks`). On the demo cumulus (8.6 % of its voxels non-zero) 8-voxel cells leave 13 % of the box occupied before
 #: the one-voxel dilation.
@@ -287,22 +324,7 @@ class VoxelMediaBuffers:
         cell_offset = 0
         for medium in media:
             index_from_world = np.linalg.inv(medium.world_from_index)
-            grid = VoxelGrid()
-            grid.offset = offset
-            grid.shape = wp.vec3i(*medium.shape)
-            eye = index_from_world @ np.append(np.asarray(camera_position, dtype=np.float64), 1.0)
-            grid.eye_index = wp.vec3(*eye[:3].tolist())
-            grid.index_from_world = wp.mat33(*index_from_world[:3, :3].reshape(-1).tolist())
-            grid.extinction = wp.vec3(*medium.extinction_scale.tolist())
-            grid.scattering = wp.vec3(*(medium.extinction_scale * medium.albedo).tolist())
-            if medium.species is not None:
-                grid.phase_kind = int(TABLE_KIND) + table_offset + species.index(medium.species)
-            else:
-                grid.phase_kind = int(medium.phase.kind)
-            grid.phase_g = float(medium.phase.g)
-            reduced_extinction, reduced_scattering = reduced_coefficients(medium)
-            grid.reduced_extinction = wp.vec3(*reduced_extinction.tolist())
-            grid.reduced_scattering = wp.vec3(*reduced_scattering.tolist())
+            grid = grid_struct(medium, index_from_world, camera_position, offset, species, table_offset)
             grid.cells = CoarseCells()
             grid.cells.offset = cell_offset
             grid.cells.block = float(effective_block(medium.shape, OCCUPANCY_BLOCK))
@@ -312,9 +334,8 @@ class VoxelMediaBuffers:
                 grid.cells.shape = wp.vec3i(*(-(-n // int(grid.cells.block)) for n in medium.shape))
                 cell_offset += int(np.prod(grid.cells.shape))
                 grid.up_metres = upright_metres(index_from_world)
-                if values is None:
-                    column_chunks.append(column_sums(medium.density).reshape(-1) if grid.up_metres > 0.0 else
-                                         np.zeros(medium.density.size, np.float32))
+                column_chunks.append(column_sums(medium.density).reshape(-1) if grid.up_metres > 0.0 else
+                                     np.zeros(medium.density.size, np.float32))
             infos.append(grid)
             if values is None:
                 chunks.append(medium.density.reshape(-1))
@@ -341,14 +362,8 @@ class VoxelMediaBuffers:
             details = device_buffers.upload(
                 f"{cache}:details", wp.array(entries_or_dummy, dtype=MediumDetail, device="cpu").numpy(),
                 MediumDetail, device)
-        if occupancy is None:
-            maxima = np.concatenate(cell_chunks) if cell_chunks else np.zeros(1, dtype=np.float32)
-            occupancy = (wp.array(maxima, dtype=float, device=device) if cache is None else
-                         device_buffers.upload(f"{cache}:occupancy", maxima.astype(np.float32, copy=False), float,
-                                               device))
-        sums = (np.concatenate(column_chunks) if column_chunks and any(g.up_metres > 0.0 for g in infos)
-                else np.zeros(1, dtype=np.float32))
-        columns = (wp.array(sums, dtype=float, device=device) if cache is None else
-                   device_buffers.upload(f"{cache}:columns", sums, float, device))
+        if not any(g.up_metres > 0.0 for g in infos):
+            column_chunks = []  # no grid reads them
+        occupancy, columns = cell_buffers(cell_chunks, column_chunks, occupancy, cache, device)
         return cls(values, grids, len(infos), min(sizes) if sizes else 1.0, details, entries is not None, occupancy,
                    columns)
