@@ -75,12 +75,7 @@ def read_cm1(path, ds, *, dz: float | None = None) -> list[WeatherState]:
     dy = netcdf.uniform_spacing(y, path, "yh")
     theta = netcdf.values(ds, path, "th", dims, "potential temperature [K]")
     pressure = netcdf.values(ds, path, "prs", dims, "pressure [Pa]")
-    found = {name: hydro for name, hydro in MIXING_RATIOS.items() if name in ds.variables}
-    if not found:
-        raise SceneError(f"{path}: missing variable 'qc' (no hydrometeor mixing ratio: expected any of "
-                         f"{', '.join(MIXING_RATIOS)})")
-    ratios = {hydro: netcdf.values(ds, path, name, dims, "mixing ratio [kg/kg]") for name, hydro in found.items()}
-    vapour = netcdf.values(ds, path, "qv", dims, "water vapour [kg/kg]") if "qv" in ds.variables else None
+    ratios, vapour = netcdf.water(ds, path, dims, MIXING_RATIOS, "qv")
     numbers = {hydro: netcdf.values(ds, path, name, dims, "number concentration [1/kg]")
                for name, hydro in NUMBERS.items() if name in ds.variables and hydro in ratios}
     wind = _staggered_wind(ds, path, dims)

@@ -98,3 +98,14 @@ def uniform_spacing(coords: np.ndarray, path, name: str) -> float:
         raise SceneError(f"{path}: coordinate {name!r} is stretched (steps {steps.min():g} to {steps.max():g}); "
                          "only a uniform horizontal grid is read")
     return float(steps.mean())
+
+
+def water(ds, path, dims: tuple[str, ...], names: dict[str, str], vapour: str):
+    """(hydrometeor -> mixing ratio [kg/kg], water vapour [kg/kg] or None) of the variables ``names`` (file name ->
+    hydrometeor) the file holds; a SceneError naming the first of them when it holds none."""
+    found = {name: hydro for name, hydro in names.items() if name in ds.variables}
+    if not found:
+        raise SceneError(f"{path}: missing variable {next(iter(names))!r} (no hydrometeor mixing ratio: expected any "
+                         f"of {', '.join(names)})")
+    ratios = {hydro: values(ds, path, name, dims, "mixing ratio [kg/kg]") for name, hydro in found.items()}
+    return ratios, values(ds, path, vapour, dims, "water vapour [kg/kg]") if vapour in ds.variables else None

@@ -86,12 +86,7 @@ def read_wrf(path, ds, *, dz: float | None = None) -> list[WeatherState]:
     theta = netcdf.values(ds, path, "T", MASS, "perturbation potential temperature [K]") + 300.0
     geopotential = netcdf.values(ds, path, "PH", W_LEVELS, "perturbation geopotential [m2/s2]")
     geopotential = geopotential + netcdf.values(ds, path, "PHB", W_LEVELS, "base-state geopotential [m2/s2]")
-    found = {name: hydro for name, hydro in MIXING_RATIOS.items() if name in ds.variables}
-    if not found:
-        raise SceneError(f"{path}: missing variable 'QCLOUD' (no hydrometeor mixing ratio: expected any of "
-                         f"{', '.join(MIXING_RATIOS)})")
-    ratios = {hydro: netcdf.values(ds, path, name, MASS, "mixing ratio [kg/kg]") for name, hydro in found.items()}
-    vapour = netcdf.values(ds, path, "QVAPOR", MASS, "water vapour [kg/kg]") if "QVAPOR" in ds.variables else None
+    ratios, vapour = netcdf.water(ds, path, MASS, MIXING_RATIOS, "QVAPOR")
     radii = {hydro: netcdf.values(ds, path, name, MASS, "effective radius [m]")
              for name, hydro in RADII.items() if name in ds.variables}
     numbers = {hydro: netcdf.values(ds, path, name, MASS, "number concentration [1/kg]")
