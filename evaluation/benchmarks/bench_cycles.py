@@ -281,8 +281,9 @@ def markdown(report: dict) -> str:
               "|---:|---|---:|---:|---:|---:|---:|"]
     for t in report["time_to_target"]:
         reached = f"{t['n']} {t['unit']}" if t["reached"] else f"not reached (best {t['n']} {t['unit']})"
+        interpolated = "–" if math.isnan(t["interpolated_seconds"]) else f"{t['interpolated_seconds']:.2f}"
         lines.append(f"| {t['target']:.3f} | {t['renderer']} | {reached} | {t['net_rmse']:.4f} | "
-                     f"{t['render_seconds']:.2f} | {t['interpolated_seconds']:.2f} | {t['command_seconds']:.2f} |")
+                     f"{t['render_seconds']:.2f} | {interpolated} | {t['command_seconds']:.2f} |")
     lines += ["", "## Every rung", "", "Cycles' *first sample*: seconds into its render call when the first sample "
               "started (scene sync and the volume's density octree before it).", "",
               "| renderer | n | net | bias | render s | first sample s | command s | load |",
@@ -330,6 +331,15 @@ def run_facts(args) -> dict:
             "stage": args.stage.name, "size": args.size}
 
 
+def finite(value):
+    """``value`` with every NaN float replaced by None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [finite(v) for v in value]
+    return None if isinstance(value, float) and math.isnan(value) else value
+
+
 def write_report(facts: dict, judge: Judge, check: list[dict], rows: list[dict], args, finished: bool) -> dict:
     """Write the page and its JSON (also while the ladders climb: ``finished`` False marks it partial)."""
     targets = [float(t) for t in args.targets.split(",")]
@@ -340,7 +350,7 @@ def write_report(facts: dict, judge: Judge, check: list[dict], rows: list[dict],
                                  if any(row["renderer"] == r["name"] for row in rows)]}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(markdown(report))
-    args.out.with_suffix(".json").write_text(json.dumps(report, indent=1))
+    args.out.with_suffix(".json").write_text(json.dumps(finite(report), indent=1))
     return report
 
 
