@@ -32,6 +32,14 @@ def test_exr_round_trip(tmp_path, half):
     assert not validate_exr(path, required_channels=["R"], metadata_expect={"count": 4})
 
 
+def test_counts_beyond_an_exr_int_are_kept_as_floats(tmp_path):
+    rgba, trans, depth = frame()
+    meta = {"lookups": 2_794_000_000, "count": -2**31}  # a 1080p march's lookups pass 2^31
+    image = read_exr(write_exr(tmp_path / "a.exr", rgba, transmittance=trans, depth=depth, metadata=meta))
+    assert image.metadata["lookups"] == pytest.approx(2_794_000_000, rel=1e-7)  # not wrapped below zero
+    assert image.metadata["count"] == -2**31
+
+
 def test_written_files_get_normal_permissions(tmp_path):
     import os
     import stat

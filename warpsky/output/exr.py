@@ -90,7 +90,8 @@ def write_exr(
 
 def header_attributes(metadata: dict | None, standard: dict | None = None) -> dict:
     """OpenEXR header attributes: ``standard`` as given, then ``metadata`` under ``warpsky/<key>`` (str, int or
-    float; bools as 0/1)."""
+    float; bools as 0/1; an integer beyond the 32 bits of an EXR int, a 1080p frame's grid lookups say, as a float
+    to 7 digits rather than wrapped)."""
     header = dict(standard or {})
     for key, value in (metadata or {}).items():
         if isinstance(value, (bool, np.bool_)):
@@ -99,6 +100,8 @@ def header_attributes(metadata: dict | None, standard: dict | None = None) -> di
             value = value.item()
         if not isinstance(value, (str, int, float)):
             raise OutputError(f"metadata {key!r}: expected str, int or float, got {type(value).__name__}")
+        if isinstance(value, int) and not -2**31 <= value < 2**31:
+            value = float(value)
         header[METADATA_PREFIX + key] = value
     return header
 
