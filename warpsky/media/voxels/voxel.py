@@ -257,12 +257,18 @@ def grid_struct(medium: VoxelMedium, index_from_world: np.ndarray, camera_positi
 
 def cell_buffers(cell_chunks: list, column_chunks: list, occupancy, cache: str | None, device):
     """(occupancy, columns) on ``device``: the grids' cell maxima (``occupancy`` itself when given) and column sums
-    concatenated (1-entry dummies when none), through :func:`warpsky.core.device_buffers.upload` with ``cache``."""
+    concatenated, through :func:`warpsky.core.device_buffers.upload` as ``<cache>:occupancy`` and
+    ``<cache>:columns``. None of either (grids uploaded without cells, or none upright) is a 1-entry dummy kept
+    under a name of its own, so that an upload without cells of the same ``cache`` (the path tracer's, after the
+    march's) does not replace the march's buffers."""
     def upload(name: str, chunks: list):
-        data = np.concatenate(chunks).astype(np.float32, copy=False) if chunks else np.zeros(1, np.float32)
+        if not chunks:
+            data, key = np.zeros(1, np.float32), f"voxel_media:no_{name}"
+        else:
+            data, key = np.concatenate(chunks).astype(np.float32, copy=False), f"{cache}:{name}"
         if cache is None:
             return wp.array(data, dtype=float, device=device)
-        return device_buffers.upload(f"{cache}:{name}", data, float, device)
+        return device_buffers.upload(key, data, float, device)
 
     if occupancy is None:
         occupancy = upload("occupancy", cell_chunks)
@@ -357,8 +363,10 @@ class VoxelMediaBuffers:
         else:
             values = device_buffers.upload(f"{cache}:values", flat.astype(np.float32, copy=False), float, device)
             # structs travel as NumPy records so that their bytes key the upload
-            grids = device_buffers.upload(f"{cache}:grids", wp.array(grid_list, dtype=VoxelGrid, device="cpu").numpy(),
-                                          VoxelGrid, device)
+            # grids without cells under a name of their own: the path tracer's upload after the march's, of the same
+            # values, would otherwise replace the march's grids every frame
+            grids = device_buffers.upload(f"{cache}:grids" if cells else f"{cache}:grids:no_cells",
+                                          wp.array(grid_list, dtype=VoxelGrid, device="cpu").numpy(), VoxelGrid, device)
             details = device_buffers.upload(
                 f"{cache}:details", wp.array(entries_or_dummy, dtype=MediumDetail, device="cpu").numpy(),
                 MediumDetail, device)
