@@ -7,11 +7,11 @@ PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
 # The times make help quotes, on a 2-core CPU: written from docs/timings.json by tools/measure_timings.py --apply.
-TIMING_DEMO            = 101 s
-TIMING_DEMO_COLD       = 4 min 25 s
-TIMING_DATA            = about 10 s
-TIMING_TEST            = 7 min 44 s
-TIMING_TEST_TESTS      = 953
+TIMING_DEMO            = 94 s
+TIMING_DEMO_COLD       = 2 min 4 s
+TIMING_DATA            = 7.5 s
+TIMING_TEST            = 8 min 11 s
+TIMING_TEST_TESTS      = 1041
 TIMING_TEST_FAST       = 2 min 24 s
 TIMING_TEST_FAST_TESTS = 815
 TIMING_STORM           = about 3 min
