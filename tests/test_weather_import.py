@@ -219,6 +219,7 @@ def test_missing_dimension_and_attribute_and_no_hydrometeor(tmp_path, capsys):
     assert code == 2 and "absent.nc: no such file" in err
 
 
+@pytest.mark.slow  # its first render builds the rain, ice and snow phase tables (about 40 s in the full suite)
 def test_cm1_import_info_and_render(tmp_path, capsys):
     from pxr import Usd, UsdVol
 
