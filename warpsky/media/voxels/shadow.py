@@ -193,8 +193,3 @@ def depth_functions(has_detail: bool):
         return wp.vec4(tau[0], tau[1], tau[2], lookups)
 
     return sun_optical_depth, vertical_optical_depth
-
-
-def sun_depth_function(has_detail: bool):
-    """``sun_optical_depth`` of :func:`depth_functions`."""
-    return depth_functions(has_detail)[0]
