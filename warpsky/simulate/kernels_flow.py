@@ -2,7 +2,8 @@
 and the sponge.
 
 Advection is semi-Lagrangian (Staniforth & Côté 1991; Stam 1999): each sample traces back along the velocity over
-the step (midpoint rule) and takes the trilinear value there, stable at any Courant number. Buoyancy is the
+the step (midpoint rule; the first stage's velocity is the face's own, its other components means of four faces)
+and takes the trilinear value there, stable at any Courant number. Buoyancy is the
 anelastic one of Ogura & Phillips (1962) with the condensate's weight: B = g (θ'/θ0 + 0.608 q_v' - q_c - q_r).
 Vorticity confinement (Steinhoff & Underhill 1994; Fedkiw et al. 2001; used for clouds by Harris et al. 2003)
 gives back the small eddies the interpolation smooths: f = ε h (N x ω), N = ∇|ω| / |∇|ω||, ε [1/s]. The sponge
@@ -19,26 +20,63 @@ GRAVITY = 9.81  # [m/s^2]
 
 
 @wp.func
-def departure(flow: Flow, grid: Grid, p: wp.vec3, dt: float) -> wp.vec3:
-    """Where the air at ``p`` [cells] was ``dt`` [s] ago (midpoint rule) [cells]."""
+def departure(flow: Flow, grid: Grid, p: wp.vec3, start: wp.vec3, dt: float) -> wp.vec3:
+    """Where the air at ``p`` [cells], moving at ``start`` [m/s] there, was ``dt`` [s] ago (midpoint rule) [cells]."""
     to_cells = wp.vec3(1.0 / grid.dx, 1.0 / grid.dy, 1.0 / grid.dx)
-    half = p - 0.5 * dt * wp.cw_mul(velocity_at(flow, p), to_cells)
+    half = p - 0.5 * dt * wp.cw_mul(start, to_cells)
     return p - dt * wp.cw_mul(velocity_at(flow, half), to_cells)
 
 
+@wp.func
+def x_face_velocity(flow: Flow, grid: Grid, i: int, j: int, k: int) -> wp.vec3:
+    """The velocity [m/s] on x-face (i, j, k): its own component and the four-face means of the others (the
+    trilinear values there, without the general lookup)."""
+    a = wrap(i - 1, grid.nx)
+    c = wrap(k + 1, grid.nz)
+    v = 0.25 * (flow.vel_y[a, j, k] + flow.vel_y[i, j, k] + flow.vel_y[a, j + 1, k] + flow.vel_y[i, j + 1, k])
+    w = 0.25 * (flow.vel_z[a, j, k] + flow.vel_z[i, j, k] + flow.vel_z[a, j, c] + flow.vel_z[i, j, c])
+    return wp.vec3(flow.vel_x[i, j, k], v, w)
+
+
+@wp.func
+def y_face_velocity(flow: Flow, grid: Grid, i: int, j: int, k: int) -> wp.vec3:
+    """The velocity [m/s] on y-face (i, j, k), 0 < j < ny (as :func:`x_face_velocity`)."""
+    a = wrap(i + 1, grid.nx)
+    c = wrap(k + 1, grid.nz)
+    u = 0.25 * (flow.vel_x[i, j - 1, k] + flow.vel_x[a, j - 1, k] + flow.vel_x[i, j, k] + flow.vel_x[a, j, k])
+    w = 0.25 * (flow.vel_z[i, j - 1, k] + flow.vel_z[i, j - 1, c] + flow.vel_z[i, j, k] + flow.vel_z[i, j, c])
+    return wp.vec3(u, flow.vel_y[i, j, k], w)
+
+
+@wp.func
+def z_face_velocity(flow: Flow, grid: Grid, i: int, j: int, k: int) -> wp.vec3:
+    """The velocity [m/s] on z-face (i, j, k) (as :func:`x_face_velocity`)."""
+    a = wrap(i + 1, grid.nx)
+    c = wrap(k - 1, grid.nz)
+    u = 0.25 * (flow.vel_x[i, j, c] + flow.vel_x[a, j, c] + flow.vel_x[i, j, k] + flow.vel_x[a, j, k])
+    v = 0.25 * (flow.vel_y[i, j, c] + flow.vel_y[i, j, k] + flow.vel_y[i, j + 1, c] + flow.vel_y[i, j + 1, k])
+    return wp.vec3(u, v, flow.vel_z[i, j, k])
+
+
 @wp.kernel
-def advect(grid: Grid, flow: Flow, source: wp.array3d(dtype=float), target: wp.array3d(dtype=float),
-           offset: wp.vec3, dt: float, x_offset: int):
-    """``target`` = ``source`` carried by ``flow`` over ``dt`` [s]; ``offset`` places the arrays' samples in their
-    cells ((½, ½, ½) for centres, 0 along the axis of a face array). Samples on the floor and the lid are kept."""
+def advect(grid: Grid, flow: Flow, target: Flow, dt: float, x_offset: int):
+    """``target`` = ``flow`` carried by itself over ``dt`` [s], all three components in one launch over
+    (nx, ny + 1, nz); the floor's and the lid's vertical samples are kept."""
     t, j, k = wp.tid()
     i = t + x_offset
-    if offset[1] == 0.0 and (j == 0 or j == grid.ny):
-        target[i, j, k] = source[i, j, k]
+    p = wp.vec3(float(i), float(j) + 0.5, float(k) + 0.5)
+    if j < grid.ny:
+        q = departure(flow, grid, p, x_face_velocity(flow, grid, i, j, k), dt)
+        target.vel_x[i, j, k] = lerp3(flow.vel_x, q[0], q[1] - 0.5, q[2] - 0.5)
+        p = wp.vec3(float(i) + 0.5, float(j) + 0.5, float(k))
+        q = departure(flow, grid, p, z_face_velocity(flow, grid, i, j, k), dt)
+        target.vel_z[i, j, k] = lerp3(flow.vel_z, q[0] - 0.5, q[1] - 0.5, q[2])
+    if j == 0 or j == grid.ny:
+        target.vel_y[i, j, k] = flow.vel_y[i, j, k]
         return
-    p = wp.vec3(float(i), float(j), float(k)) + offset
-    q = departure(flow, grid, p, dt) - offset
-    target[i, j, k] = lerp3(source, q[0], q[1], q[2])
+    p = wp.vec3(float(i) + 0.5, float(j), float(k) + 0.5)
+    q = departure(flow, grid, p, y_face_velocity(flow, grid, i, j, k), dt)
+    target.vel_y[i, j, k] = lerp3(flow.vel_y, q[0] - 0.5, q[1], q[2] - 0.5)
 
 
 @wp.kernel

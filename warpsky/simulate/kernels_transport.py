@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from warpsky.simulate.fields import Column, Flow, Grid, wrap
+from warpsky.simulate.fields import Column, Flow, Grid, Water, wrap
 
 #: Largest sum of the three Courant numbers of a transport sub-step.
 MAX_COURANT = 0.8
@@ -70,26 +70,37 @@ def y_flux(grid: Grid, q: wp.array3d(dtype=float), v: float, i: int, j: int, k: 
     return v * (here - 0.5 * (1.0 + courant) * slope)
 
 
-@wp.kernel
-def transport(grid: Grid, column: Column, flow: Flow, source: wp.array3d(dtype=float),
-              target: wp.array3d(dtype=float), dt: float, x_offset: int):
-    """``target`` = ``source`` after a conservative sub-step of ``dt`` [s] (module docstring)."""
-    t, j, k = wp.tid()
-    i = t + x_offset
+@wp.func
+def carried(grid: Grid, column: Column, q: wp.array3d(dtype=float), i: int, j: int, k: int, faces: wp.vec3,
+            far: wp.vec3, dt: float) -> float:
+    """q of cell (i, j, k) after a conservative sub-step of ``dt`` [s] through its faces, whose velocities [m/s] are
+    ``faces`` (the lower x, y and z faces) and ``far`` (the upper ones)."""
     ip = wrap(i + 1, grid.nx)
     kp = wrap(k + 1, grid.nz)
-    rho = column.density[j]
-    horizontal = (x_flux(grid, source, flow.vel_x[ip, j, k], ip, j, k, dt)
-                  - x_flux(grid, source, flow.vel_x[i, j, k], i, j, k, dt)
-                  + z_flux(grid, source, flow.vel_z[i, j, kp], i, j, kp, dt)
-                  - z_flux(grid, source, flow.vel_z[i, j, k], i, j, k, dt)) / grid.dx
+    horizontal = (x_flux(grid, q, far[0], ip, j, k, dt) - x_flux(grid, q, faces[0], i, j, k, dt)
+                  + z_flux(grid, q, far[2], i, j, kp, dt) - z_flux(grid, q, faces[2], i, j, k, dt)) / grid.dx
     up = float(0.0)
     if j + 1 < grid.ny:
-        up = column.density_face[j + 1] * y_flux(grid, source, flow.vel_y[i, j + 1, k], i, j + 1, k, dt)
+        up = column.density_face[j + 1] * y_flux(grid, q, far[1], i, j + 1, k, dt)
     down = float(0.0)
     if j > 0:
-        down = column.density_face[j] * y_flux(grid, source, flow.vel_y[i, j, k], i, j, k, dt)
-    target[i, j, k] = source[i, j, k] - dt * (horizontal + (up - down) / (rho * grid.dy))
+        down = column.density_face[j] * y_flux(grid, q, faces[1], i, j, k, dt)
+    return q[i, j, k] - dt * (horizontal + (up - down) / (column.density[j] * grid.dy))
+
+
+@wp.kernel
+def transport(grid: Grid, column: Column, flow: Flow, source: Water, target: Water, dt: float, x_offset: int):
+    """``target`` = ``source`` (θ, q_v, q_c and q_r) after a conservative sub-step of ``dt`` [s] (module
+    docstring)."""
+    t, j, k = wp.tid()
+    i = t + x_offset
+    faces = wp.vec3(flow.vel_x[i, j, k], flow.vel_y[i, j, k], flow.vel_z[i, j, k])
+    far = wp.vec3(flow.vel_x[wrap(i + 1, grid.nx), j, k], flow.vel_y[i, j + 1, k],
+                  flow.vel_z[i, j, wrap(k + 1, grid.nz)])
+    target.theta[i, j, k] = carried(grid, column, source.theta, i, j, k, faces, far, dt)
+    target.vapour[i, j, k] = carried(grid, column, source.vapour, i, j, k, faces, far, dt)
+    target.cloud[i, j, k] = carried(grid, column, source.cloud, i, j, k, faces, far, dt)
+    target.rain[i, j, k] = carried(grid, column, source.rain, i, j, k, faces, far, dt)
 
 
 @wp.kernel

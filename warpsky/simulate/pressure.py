@@ -10,7 +10,9 @@ solver's residual, so the projection's accuracy is the solver's tolerance.
 The conjugate gradients are written here rather than taken from ``warp.optim.linear.cg``: on the CPU, that
 solver's reductions took 28 ms each on 8,192 cells (1.3 s of a 1.4 s step, measured with cProfile), where these
 column-then-row sums take a fraction of a millisecond; they also add in a fixed order, so a run repeats bit for
-bit on any device. The scalars α and β stay on the device; the host reads the residual every few iterations.
+bit on any device. The scalars α and β stay on the device; the host reads the residual every iteration on the CPU
+(every few on a GPU). An iteration is two passes over the columns: A p with its sums of p·A p, then the update of
+φ and r with the preconditioner and the sums of r·z and r·r.
 
 The system is scaled by dx^2 so that its entries are densities [kg/m^3] and ratios of spacings.
 """
@@ -21,7 +23,12 @@ import numpy as np
 import warp as wp
 
 from warpsky.simulate.fields import Column, Flow, Grid, wrap
+from warpsky.core.device import is_cpu
 from warpsky.simulate.launch import launch_slabs
+
+
+#: Slots of the solver's device scalars.
+RZ, PAP, RZ_NEW, RR, BB = 0, 1, 2, 3, 4
 
 
 @wp.func
@@ -41,23 +48,45 @@ def divergence(grid: Grid, column: Column, flow: Flow, out: wp.array(dtype=float
     out[flat(grid, i, j, k)] = scale * flux
 
 
-@wp.kernel
-def apply_operator(grid: Grid, column: Column, x: wp.array(dtype=float), y: wp.array(dtype=float),
-                   z: wp.array(dtype=float), alpha: float, beta: float, x_offset: int):
-    """z = alpha A x + beta y, A = -dx^2 ∇·(ρ0 ∇) with no flux through the floor and the lid."""
-    t, j, k = wp.tid()
-    i = t + x_offset
+@wp.func
+def operator_row(grid: Grid, column: Column, x: wp.array(dtype=float), i: int, j: int, k: int) -> float:
+    """(A x) at cell (i, j, k), A = -dx^2 ∇·(ρ0 ∇) with no flux through the floor and the lid."""
     c = flat(grid, i, j, k)
     xc = x[c]
-    rho = column.density[j]
     ratio = (grid.dx / grid.dy) * (grid.dx / grid.dy)
-    ax = rho * (4.0 * xc - x[flat(grid, i + 1, j, k)] - x[flat(grid, i - 1, j, k)]
-                - x[flat(grid, i, j, k + 1)] - x[flat(grid, i, j, k - 1)])
+    ax = column.density[j] * (4.0 * xc - x[flat(grid, i + 1, j, k)] - x[flat(grid, i - 1, j, k)]
+                              - x[flat(grid, i, j, k + 1)] - x[flat(grid, i, j, k - 1)])
     if j + 1 < grid.ny:
         ax += ratio * column.density_face[j + 1] * (xc - x[flat(grid, i, j + 1, k)])
     if j > 0:
         ax += ratio * column.density_face[j] * (xc - x[flat(grid, i, j - 1, k)])
-    z[c] = alpha * ax + beta * y[c]
+    return ax
+
+
+@wp.kernel
+def apply_operator(grid: Grid, column: Column, x: wp.array(dtype=float), y: wp.array(dtype=float),
+                   z: wp.array(dtype=float), alpha: float, beta: float, x_offset: int):
+    """z = alpha A x + beta y (:func:`operator_row`)."""
+    t, j, k = wp.tid()
+    i = t + x_offset
+    c = flat(grid, i, j, k)
+    z[c] = alpha * operator_row(grid, column, x, i, j, k) + beta * y[c]
+
+
+@wp.kernel
+def apply_dot(grid: Grid, column: Column, p: wp.array(dtype=float), ap: wp.array(dtype=float),
+              partial: wp.array2d(dtype=float), x_offset: int):
+    """ap = A p and partial[i, k] = Σ_j p (A p) over column (i, k): the operator and the first sum of p·A p in one
+    pass. Launched over (nx, nz)."""
+    t, k = wp.tid()
+    i = t + x_offset
+    total = float(0.0)
+    for j in range(grid.ny):
+        c = flat(grid, i, j, k)
+        value = operator_row(grid, column, p, i, j, k)
+        ap[c] = value
+        total += p[c] * value
+    partial[i, k] = total
 
 
 @wp.kernel
@@ -80,6 +109,41 @@ def column_solve(grid: Grid, lower: wp.array(dtype=float), inverse_pivot: wp.arr
         c = flat(grid, i, j, k)
         following = scratch[c] - upper[j] * following
         z[c] = alpha * following + beta * y[c]
+
+
+@wp.kernel
+def update_precondition(grid: Grid, lower: wp.array(dtype=float), inverse_pivot: wp.array(dtype=float),
+                        upper: wp.array(dtype=float), scalars: wp.array(dtype=float), p: wp.array(dtype=float),
+                        ap: wp.array(dtype=float), x: wp.array(dtype=float), r: wp.array(dtype=float),
+                        z: wp.array(dtype=float), scratch: wp.array(dtype=float), partial_rz: wp.array2d(dtype=float),
+                        partial_rr: wp.array2d(dtype=float), x_offset: int):
+    """One conjugate-gradient update of column (i, k) in one pass: x += α p and r -= α A p (α = (r·z) / (p·A p)),
+    z = T^-1 r (as :func:`column_solve`), and the column's sums of r z and r r. Launched over (nx, nz)."""
+    t, k = wp.tid()
+    i = t + x_offset
+    alpha = float(0.0)
+    if scalars[PAP] != 0.0:
+        alpha = scalars[RZ] / scalars[PAP]
+    rr = float(0.0)
+    previous = float(0.0)
+    for j in range(grid.ny):
+        c = flat(grid, i, j, k)
+        x[c] = x[c] + alpha * p[c]
+        rc = r[c] - alpha * ap[c]
+        r[c] = rc
+        rr += rc * rc
+        previous = (rc - lower[j] * previous) * inverse_pivot[j]
+        scratch[c] = previous
+    rz = float(0.0)
+    following = float(0.0)
+    for jj in range(grid.ny):
+        j = grid.ny - 1 - jj
+        c = flat(grid, i, j, k)
+        following = scratch[c] - upper[j] * following
+        z[c] = following
+        rz += r[c] * following
+    partial_rz[i, k] = rz
+    partial_rr[i, k] = rr
 
 
 @wp.kernel
@@ -140,26 +204,10 @@ def total_sum(rows: wp.array(dtype=float), scalars: wp.array(dtype=float), slot:
     scalars[slot] = total
 
 
-#: Slots of the solver's device scalars.
-RZ, PAP, RZ_NEW, RR, BB = 0, 1, 2, 3, 4
-
-
 @wp.kernel
 def residual_start(b: wp.array(dtype=float), ax: wp.array(dtype=float), r: wp.array(dtype=float)):
     c = wp.tid()
     r[c] = b[c] - ax[c]
-
-
-@wp.kernel
-def step_solution(scalars: wp.array(dtype=float), p: wp.array(dtype=float), ap: wp.array(dtype=float),
-                  x: wp.array(dtype=float), r: wp.array(dtype=float)):
-    """x += α p, r -= α A p, α = (r·z) / (p·A p)."""
-    c = wp.tid()
-    alpha = float(0.0)
-    if scalars[PAP] != 0.0:
-        alpha = scalars[RZ] / scalars[PAP]
-    x[c] = x[c] + alpha * p[c]
-    r[c] = r[c] - alpha * ap[c]
 
 
 @wp.kernel
@@ -184,14 +232,16 @@ class Projection:
     """
 
     def __init__(self, grid: Grid, column: Column, base, device, *, tolerance: float = 1.0e-4,
-                 max_iterations: int = 300, check_every: int = 4):
+                 max_iterations: int = 300, check_every: int | None = None):
         self.grid, self.column, self.device = grid, column, device
-        self.tolerance, self.max_iterations, self.check_every = tolerance, max_iterations, check_every
+        self.tolerance, self.max_iterations = tolerance, max_iterations
+        # r·r comes with every iteration's sums; reading it waits for a GPU, not for the CPU
+        self.check_every = check_every or (1 if is_cpu(device) else 4)
         self.cell_count = grid.nx * grid.ny * grid.nz
         n = self.cell_count
         self.rhs, self.phi, self.scratch, self.r, self.z, self.p, self.ap = (
             wp.zeros(n, dtype=float, device=device) for _ in range(7))
-        self.partial = wp.zeros((grid.nx, grid.nz), dtype=float, device=device)
+        self.partial, self.partial_rr = (wp.zeros((grid.nx, grid.nz), dtype=float, device=device) for _ in range(2))
         self.rows = wp.zeros(grid.nx, dtype=float, device=device)
         self.scalars = wp.zeros(5, dtype=float, device=device)
         ratio = (grid.dx / grid.dy) ** 2
@@ -211,10 +261,27 @@ class Projection:
                      self.device)
 
     def _dot(self, a, b, slot: int) -> None:
-        d = self.device
-        launch_slabs(column_dot, (self.grid.nx, self.grid.nz), [self.grid, a, b, self.partial], d)
-        wp.launch(row_sum, dim=self.grid.nx, inputs=[self.partial, self.rows], device=d)
-        wp.launch(total_sum, dim=1, inputs=[self.rows, self.scalars, slot], device=d)
+        launch_slabs(column_dot, (self.grid.nx, self.grid.nz), [self.grid, a, b, self.partial], self.device)
+        self._sum(self.partial, slot)
+
+    def _sum(self, partial, slot: int) -> None:
+        """scalars[slot] = the sum of ``partial``'s columns, rows then all (a fixed order)."""
+        wp.launch(row_sum, dim=self.grid.nx, inputs=[partial, self.rows], device=self.device)
+        wp.launch(total_sum, dim=1, inputs=[self.rows, self.scalars, slot], device=self.device)
+
+    def _iterate(self) -> None:
+        """One conjugate-gradient iteration: A p with p·A p, the update with the preconditioner and r·z, r·r, the
+        new direction."""
+        g, d, n = self.grid, self.device, self.cell_count
+        launch_slabs(apply_dot, (g.nx, g.nz), [g, self.column, self.p, self.ap, self.partial], d)
+        self._sum(self.partial, PAP)
+        launch_slabs(update_precondition, (g.nx, g.nz),
+                     [g, self.lower, self.inverse_pivot, self.upper, self.scalars, self.p, self.ap, self.phi, self.r,
+                      self.z, self.scratch, self.partial, self.partial_rr], d)
+        self._sum(self.partial, RZ_NEW)
+        self._sum(self.partial_rr, RR)
+        wp.launch(step_direction, dim=n, inputs=[self.scalars, self.z, self.p], device=d)
+        wp.launch(keep_rz, dim=1, inputs=[self.scalars], device=d)
 
     def divergence(self, flow: Flow, out: wp.array, scale: float = 1.0) -> wp.array:
         """``scale`` ∇·(ρ0 u) of ``flow`` into ``out`` [kg/(m^3 s)]."""
@@ -233,23 +300,15 @@ class Projection:
         self._precondition(self.r, self.z)
         wp.copy(self.p, self.z)
         self._dot(self.r, self.z, RZ)
+        self._dot(self.r, self.r, RR)
         self.iterations = 0
         while True:
             if self.iterations % self.check_every == 0 or self.iterations >= self.max_iterations:
-                self._dot(self.r, self.r, RR)
                 values = self.scalars.numpy()
                 self.relative_residual = float(np.sqrt(values[RR] / max(values[BB], self.floor ** 2)))
-                if self.relative_residual <= self.tolerance:
+                if self.relative_residual <= self.tolerance or self.iterations >= self.max_iterations:
                     return
-                if self.iterations >= self.max_iterations:
-                    return
-            self._apply(self.p, self.ap)
-            self._dot(self.p, self.ap, PAP)
-            wp.launch(step_solution, dim=n, inputs=[self.scalars, self.p, self.ap, self.phi, self.r], device=d)
-            self._precondition(self.r, self.z)
-            self._dot(self.r, self.z, RZ_NEW)
-            wp.launch(step_direction, dim=n, inputs=[self.scalars, self.z, self.p], device=d)
-            wp.launch(keep_rz, dim=1, inputs=[self.scalars], device=d)
+            self._iterate()
             self.iterations += 1
 
     def project(self, flow: Flow) -> None:

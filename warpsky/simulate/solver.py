@@ -178,10 +178,7 @@ class CloudSolver:
         g, d, shape = self.grid, self.device, (self.grid.nx, self.grid.ny, self.grid.nz)
         self._transport_scalars(dt)
         flow, new_flow = self.flows
-        for source, target, offset in ((flow.vel_x, new_flow.vel_x, wp.vec3(0.0, 0.5, 0.5)),
-                                       (flow.vel_y, new_flow.vel_y, wp.vec3(0.5, 0.0, 0.5)),
-                                       (flow.vel_z, new_flow.vel_z, wp.vec3(0.5, 0.5, 0.0))):
-            launch_slabs(kf.advect, target.shape, [g, flow, source, target, offset, float(dt)], d)
+        launch_slabs(kf.advect, (g.nx, g.ny + 1, g.nz), [g, flow, new_flow, float(dt)], d)
         self.flows.reverse()
         flow, water = self.flows[0], self.waters[0]
         if self.settings.confinement > 0.0:
@@ -210,10 +207,8 @@ class CloudSolver:
         self.transport_substeps = substeps
         for _ in range(substeps):
             water, new_water = self.waters
-            for name in ("theta", "vapour", "cloud", "rain"):
-                launch_slabs(kt.transport, (g.nx, g.ny, g.nz),
-                             [g, self.column, self.flows[0], getattr(water, name), getattr(new_water, name),
-                              float(dt / substeps)], d)
+            launch_slabs(kt.transport, (g.nx, g.ny, g.nz),
+                         [g, self.column, self.flows[0], water, new_water, float(dt / substeps)], d)
             self.waters.reverse()
 
     def run(self, seconds: float, *, callback=None) -> None:
