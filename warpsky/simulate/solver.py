@@ -35,7 +35,7 @@ class SimulationSettings:
     ny                     -      64         >= 8        levels
     dx                     m      500        >= 10       horizontal spacing
     dy                     m      250        >= 10       level spacing (64 levels reach 16 km)
-    time_step              s      6          > 0         the longest step (frames get equal steps)
+    time_step              s      10         > 0         the longest step (frames get equal steps)
     bubble_theta           K      2          any         warm bubble's θ excess at its centre
     bubble_radius          m      10000      > 0         its horizontal radius (Weisman & Klemp 1982)
     bubble_depth           m      1400       > 0         its vertical radius; centred that high too
@@ -53,7 +53,7 @@ class SimulationSettings:
     nz: int = 128
     dx: float = 500.0
     dy: float = 250.0
-    time_step: float = 6.0
+    time_step: float = 10.0
     bubble_theta: float = 2.0
     bubble_radius: float = 10000.0
     bubble_depth: float = 1400.0
