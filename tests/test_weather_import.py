@@ -255,6 +255,7 @@ def test_cm1_import_info_and_render(tmp_path, capsys):
     assert rgba[16, 16, 1] > 3.0 * rgba[0, 16, 1]
 
 
+@pytest.mark.slow  # its render builds the rain and ice phase tables (about 40 s) where no earlier test has
 def test_wrf_import_with_terrain_renders(tmp_path, capsys):
     from pxr import Usd, UsdGeom
 
