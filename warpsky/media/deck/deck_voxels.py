@@ -32,10 +32,6 @@ from warpsky.media.stratiform.stratiform_voxels import VOXEL_BUDGET, ColumnGrid
 from warpsky.model.deck import CloudDeck, surface_heights
 from warpsky.model.scene import PhaseKind, PhaseModel, VoxelMedium
 
-#: Sub-column samples per chunk of the host computation (bounds its float64 temporaries to a few hundred MiB).
-CHUNK_SAMPLES = 2**22
-
-
 def deck_grid(clouds: CloudDeck, centre_xz, half_size: float, width: float, height: float, *,
               max_voxels: int = VOXEL_BUDGET, setting: str = "voxel") -> ColumnGrid:
     """The grid :func:`voxelize_deck` fills, checked against ``max_voxels`` (nothing is allocated).
@@ -66,33 +62,26 @@ def sub_column_offsets(width: float, supersample: int) -> np.ndarray:
     return ((np.arange(supersample) + 0.5) / supersample - 0.5) * width
 
 
-def cloud_fractions(clouds: CloudDeck, grid: ColumnGrid, time_s: float, supersample: int) -> np.ndarray:
-    """(n_x, n_y, n_z) float32 partial-volume densities of the deck at ``time_s`` [s] (module docstring)."""
-    s = int(supersample)
+def cloud_fractions(clouds: CloudDeck, grid: ColumnGrid, time_s: float, supersample: int,
+                    device: str = "cpu") -> np.ndarray:
+    """(n_x, n_y, n_z) float32 partial-volume densities of the deck at ``time_s`` [s] (module docstring), computed
+    by :mod:`~warpsky.media.deck.deck_voxel_kernels` on ``device`` (row bands over the CPU's threads)."""
+    import warp as wp
+
+    from warpsky.core.device import launch_rows
+    from warpsky.media.deck.deck_voxel_kernels import deck_columns, deck_fractions_kernel
+
     nx, ny, nz = grid.shape
-    xs, zs = grid.column_centres()
-    offsets = sub_column_offsets(grid.width[0], s)
-    sub_z = (zs[:, None] + offsets[None, :]).reshape(-1)
-    edges = grid.floor - clouds.mean_altitude + np.arange(ny + 1) * grid.height  # row edges above the mean plane
-    out = np.empty((nx, ny, nz), np.float32)
-    chunk = max(1, CHUNK_SAMPLES // max(1, s * s * nz * ny))
-    for first in range(0, nx, chunk):
-        sub_x = (xs[first:first + chunk, None] + offsets[None, :]).reshape(-1)
-        f = clouds.pattern(sub_x[:, None], sub_z[None, :], time_s)
-        top, base = surface_heights(f, clouds.rounding, clouds.bottom_depth)
-        top = np.where(f > 0.0, top, 0.0)
-        base = np.where(f > 0.0, base, 0.0)
-        cover = (np.minimum(top[:, None, :], edges[None, 1:, None])
-                 - np.maximum(base[:, None, :], edges[None, :-1, None]))
-        cover = np.clip(cover, 0.0, grid.height) / grid.height
-        n = len(sub_x) // s
-        out[first:first + n] = cover.reshape(n, s, ny, nz, s).mean(axis=(1, 4))
-    return out
+    with wp.ScopedDevice(device):
+        out = wp.zeros((nx, ny, nz), dtype=float)
+        launch_rows(deck_fractions_kernel, nx, nz, [deck_columns(clouds, grid, time_s, supersample, device), out],
+                    device)
+        return out.numpy()
 
 
 def voxelize_deck(clouds: CloudDeck, time_s: float, centre_xz, half_size: float, width: float,
                   height: float, *, supersample: int = 4, max_voxels: int = VOXEL_BUDGET,
-                  setting: str = "voxel") -> tuple[VoxelMedium, ...]:
+                  setting: str = "voxel", device: str = "cpu") -> tuple[VoxelMedium, ...]:
     """The deck at ``time_s`` [s] (waves moved to that time) over the square of half-size ``half_size`` [m] around
     world ``centre_xz`` as a partial-volume voxel medium, and its haze (if any) as a homogeneous box.
 
@@ -106,6 +95,7 @@ def voxelize_deck(clouds: CloudDeck, time_s: float, centre_xz, half_size: float,
         supersample: Sub-columns per column along x and z (s; s^2 per column).
         max_voxels: A grid over this many voxels is refused (UsageError) before anything is allocated.
         setting: What set the sizes, for the error message.
+        device: Where the voxelisation's kernel runs (the grid is returned on the host).
 
     Returns:
         (cloud,) or (cloud, haze): the cloud of extinction rho * extinction_scale [1/m] per unit density, its albedo
@@ -117,7 +107,7 @@ def voxelize_deck(clouds: CloudDeck, time_s: float, centre_xz, half_size: float,
     grid = deck_grid(clouds, centre_xz, half_size, width, height, max_voxels=max_voxels, setting=setting)
     cloud = VoxelMedium(
         name=clouds.name,
-        density=cloud_fractions(clouds, grid, time_s, int(supersample)),
+        density=cloud_fractions(clouds, grid, time_s, int(supersample), device),
         world_from_index=grid.world_from_index(),
         extinction_scale=clouds.extinction,
         albedo=clouds.albedo,

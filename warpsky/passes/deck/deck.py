@@ -16,9 +16,18 @@ setting             unit  default                       range     meaning
                           along rays close to the sun
 ``haze_steps_per_   --    16                            1..1024   automatic haze step: steps per shortest feature of
 feature``                                                         the deck's shadow
+``shadow_map_texels`` --  2 / pixel angle               0, 16..   texels per side of each level of the deck's
+                                                        2048      shadow map on the haze; 0: the exact sun-ray
+                                                                  optical depth at every haze step (below)
 ``max_steps``       --    4096                          >= 1      most steps per piece of constant extinction
 ``min_transmittance`` --  1e-4                          [0, 1)    stop once the view is this opaque
 =================== ===== ============================= ========= =================================================
+
+In clear haze below the deck the sunlight's optical depth through the deck is read from a per-frame shadow map
+(:mod:`~warpsky.passes.deck.shadow_map`): one exact sun-ray depth per texel instead of one per march step, texels
+about a pixel's footprint wide, the march's steps growing with them. On the sunbeams stage at 96 x 64 the pass went
+from 16.9 s to 2.2 s (2 CPU cores under load); its difference from the per-step march is a blur of shaft details
+finer than a pixel's footprint, without bias (measured in the tests).
 
 ``feature`` is :func:`~warpsky.media.deck.deck_geometry.feature_length` (the shortest wavelength, the equator's rounding
 and the polynomial's curvature length). The measured quadrature error against a 4x finer march is in the tests.
@@ -49,6 +58,7 @@ from warpsky.core.resources import LAYER_BYTES, MemoryEstimate
 from warpsky.core.settings import Settings, documented, setting
 from warpsky.light.dome import ambient_vec, isotropic_ambient
 from warpsky.light.sun import sun_struct, sunlight
+from warpsky.model.camera import Projection
 from warpsky.model.camera_rays import pinhole_camera
 from warpsky.model.deck import CloudDeck
 from warpsky.model.scene import Scene
@@ -118,6 +128,10 @@ class DeckSettings(Settings):
     haze_steps_per_feature: int = setting(HAZE_STEPS_PER_FEATURE, range="1..1024", help="automatic haze step: "
                                           "steps per shortest feature of the deck's shadow (median quadrature error on "
                                           "the scenery family 1-2 %; more for shafts finer than the pixels)")
+    shadow_map_texels: int | None = setting(None, range="0 or 16..2048", help="texels per side of each level of "
+                                            "the deck's shadow map on the haze (0: the exact sun-ray optical depth at "
+                                            "every haze step)", auto="2 / the pixel's angle (a texel about a pixel's "
+                                            "footprint wide)")
     max_steps: int = setting(4096, range=">= 1", help="most steps per piece of constant extinction")
     min_transmittance: float = setting(1.0e-4, range="[0, 1)", help="stop once the view is this opaque")
 
@@ -180,14 +194,43 @@ class Deck:
             radiance = wp.zeros((height, width), dtype=wp.vec3)
             transmittance = wp.zeros((height, width), dtype=wp.vec3)
             depth = wp.zeros((height, width), dtype=float)
-            inputs = [deck_struct(clouds, camera.position, scene.time_s, device),
-                      haze_struct(clouds, camera.position), pinhole_camera(camera, width, height),
-                      sun_struct(sunlight(scene)), march, depth_limit, radiance, transmittance, depth]
+            hf, haze = deck_struct(clouds, camera.position, scene.time_s, device), haze_struct(clouds, camera.position)
+            sun = sun_struct(sunlight(scene))
+            shadows = self.shadow_map(clouds, camera, width, hf, haze, sun, march)
+            inputs = [hf, haze, pinhole_camera(camera, width, height), sun, march, shadows, depth_limit, radiance,
+                      transmittance, depth]
             launch_rows(deck_kernel, height, width, inputs, device)
             wp.synchronize_device(device)
             return ImageLayer(radiance.numpy(), transmittance.numpy(), depth.numpy(), stats={
                 "seconds": time.perf_counter() - started, "mode": self.settings.mode,
-                "step_length": march.cloud_step, "haze_step_length": march.haze_step})
+                "step_length": march.cloud_step, "haze_step_length": march.haze_step,
+                "shadow_map": f"{shadows.levels} x {shadows.texels}^2 texels of {shadows.texel:.4g} m"
+                if shadows.on else "off"})
+
+    def shadow_map(self, clouds: CloudDeck, camera, width: int, hf, haze, sun, march: DeckMarch):
+        """The deck's shadow on the haze for this frame (:mod:`~warpsky.passes.deck.shadow_map`), or an unused map:
+        without haze, with the setting 0, in ``max`` or ``sexp`` mode, with the sun within 0.06 deg of the
+        horizon, or by default through an orthographic camera (whose pixels' footprints do not grow with
+        distance)."""
+        from warpsky.passes.deck.shadow_map import auto_texels, build_shadow_map, off_map
+
+        texels = self.settings.shadow_map_texels
+        orthographic = camera.projection is Projection.ORTHOGRAPHIC
+        if (clouds.haze is None or texels == 0 or self.settings.mode != "exact" or not sun.lit
+                or (texels is None and orthographic)):
+            return off_map(self.device)
+        if texels is None:
+            texels = auto_texels(pixel_angle(camera, width))
+        direction = np.array([sun.direction[0], sun.direction[1], sun.direction[2]], dtype=np.float64)
+        texel = march.haze_feature if march.haze_feature > 0.0 else march.haze_step
+        reach = camera.far * (1.0 + math.hypot(direction[0], direction[2]) / max(direction[1], 1.0e-3))
+        return build_shadow_map(hf, min(haze.top, hf.band_low), direction, texel, texels, reach, self.device,
+                                launch_rows)
+
+
+def pixel_angle(camera, width: int) -> float:
+    """The mean angle [rad] a pixel of a perspective camera spans across the view."""
+    return 2.0 * math.atan(0.5 * camera.horizontal_aperture / camera.focal_length) / max(width, 1)
 
 
 def deck_sun_transmittance(scene: Scene, points: np.ndarray, device: str = "cpu", *,

@@ -50,6 +50,13 @@ from warpsky.media.deck.deck_geometry import (
 from warpsky.media.voxels.voxel import slab_interval
 from warpsky.model.camera_rays import PinholeCamera, primary_ray
 from warpsky.optics.phase import phase_hg
+from warpsky.passes.deck.shadow_map import (
+    MIN_SUN_SINE,
+    DeckShadowMap,
+    deck_sun_transmittance_at,
+    map_point,
+    map_texel,
+)
 
 
 @wp.struct
@@ -116,19 +123,26 @@ def sun_depth(hf: HeightField, haze: HazeSlab, p: wp.vec3, sun_dir: wp.vec3, sha
 
 
 @wp.func
-def haze_step_along(march: DeckMarch, view: wp.vec3, sun_dir: wp.vec3) -> float:
-    """Step [m] of clear haze along ``view``: the shadow pattern seen along the ray changes as fast as the point
-    where the ray towards the sun meets a horizontal plane moves, |view_xz - (view_y / sun_y) sun_xz| per metre, so
-    a feature of the shadow gets ``haze_steps_per_feature`` steps (``haze_feature`` is the feature over that
-    count); never below ``haze_step``, nor above ``haze_step_max`` (a
-    quarter of the haze's mean free path: the sky light's occlusion is taken at the step's middle)."""
+def haze_rate(view: wp.vec3, sun_dir: wp.vec3) -> float:
+    """How fast [m/m] the point where the ray towards the sun meets a horizontal plane moves along ``view``:
+    |view_xz - (view_y / sun_y) sun_xz| (|view_xz| with the sun on or below the horizon)."""
     rate = wp.sqrt(view[0] * view[0] + view[2] * view[2])
     if sun_dir[1] > 1.0e-6:
         k = view[1] / sun_dir[1]
         dx = view[0] - k * sun_dir[0]
         dz = view[2] - k * sun_dir[2]
         rate = wp.sqrt(dx * dx + dz * dz)
-    step = wp.max(march.haze_step, march.haze_feature / wp.max(rate, 1.0e-6))
+    return rate
+
+
+@wp.func
+def haze_step_along(march: DeckMarch, view: wp.vec3, sun_dir: wp.vec3) -> float:
+    """Step [m] of clear haze along ``view``: the shadow pattern seen along the ray changes as fast as the point
+    where the ray towards the sun meets a horizontal plane moves, |view_xz - (view_y / sun_y) sun_xz| per metre, so
+    a feature of the shadow gets ``haze_steps_per_feature`` steps (``haze_feature`` is the feature over that
+    count); never below ``haze_step``, nor above ``haze_step_max`` (a
+    quarter of the haze's mean free path: the sky light's occlusion is taken at the step's middle)."""
+    step = wp.max(march.haze_step, march.haze_feature / wp.max(haze_rate(view, sun_dir), 1.0e-6))
     return wp.min(step, wp.max(march.haze_step_max, march.haze_step))
 
 
@@ -217,11 +231,58 @@ def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, sta
 
 
 @wp.func
-def march_segment(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, state: MarchState,
-                  o: wp.vec3, view: wp.vec3, a: float, b: float, in_haze: float, cos_axis: float) -> MarchState:
-    """March [a, b], which lies wholly inside (``in_haze`` 1) or outside the haze slab: its clear gaps (haze
-    only) and its pieces of cloud in order."""
+def march_haze_mapped(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, smap: DeckShadowMap,
+                      state: MarchState, o: wp.vec3, view: wp.vec3, a: float, b: float, cos_axis: float
+                      ) -> MarchState:
+    """Integrate the clear-haze piece [a, b] front to back with the deck's transmittance towards the sun read from
+    the shadow map (:mod:`~warpsky.passes.deck.shadow_map`): one step per texel of the level in use, never shorter
+    than :func:`haze_step_along`'s nor longer than the haze's bound; sources and quadrature as in
+    :func:`march_piece`'s clear haze (the deck's transmittance averaged over the step's ends)."""
     out = state
+    base = haze_step_along(march, view, sun.direction)
+    longest = wp.max(march.haze_step_max, march.haze_step)
+    shortest = (b - a) / float(march.max_steps)
+    rate = wp.max(haze_rate(view, sun.direction), 1.0e-6)
+    sigma_haze = haze.scattering * phase_hg(wp.dot(sun.direction, view), haze.g)
+    sunlit = sun.lit != 0 and wp.max(sigma_haze) > 0.0
+    deck_a = wp.vec3(1.0)
+    haze_a = wp.vec3(0.0)
+    if sunlit:
+        deck_a = deck_sun_transmittance_at(hf, smap, o + a * view, sun.direction)
+        haze_a = haze.extinction * haze_path(haze, o + a * view, sun.direction)
+    t = a
+    while t < b and out.done == 0:
+        texel = map_texel(smap, map_point(smap, o + t * view, sun.direction))
+        dt = wp.min(wp.max(wp.max(base, texel / rate), shortest), longest)
+        if b - t < 1.25 * dt:  # no sliver of a last step
+            dt = b - t
+        tau_b = out.tau + haze.extinction * dt
+        if sunlit:
+            p = o + (t + dt) * view
+            deck_b = deck_sun_transmittance_at(hf, smap, p, sun.direction)
+            haze_b = haze.extinction * haze_path(haze, p, sun.direction)
+            mean = wp.cw_mul(exp_lerp_mean3(out.tau + haze_a, tau_b + haze_b), 0.5 * (deck_a + deck_b))
+            out.light += wp.cw_mul(wp.cw_mul(sigma_haze, sun.irradiance), mean) * dt
+            deck_a = deck_b
+            haze_a = haze_b
+        tm = t + 0.5 * dt
+        if march.ambient_on != 0:
+            occlusion = exp3(zenith_depth(hf, haze, o + tm * view))
+            source = wp.cw_mul(wp.cw_mul(haze.scattering, march.ambient), occlusion)
+            out.light += wp.cw_mul(source, exp_lerp_mean3(out.tau, tau_b)) * dt
+        out = record_opacity(out, tau_b, tm * cos_axis, march.min_transmittance)
+        t = t + dt
+    return out
+
+
+@wp.func
+def march_segment(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, smap: DeckShadowMap,
+                  state: MarchState, o: wp.vec3, view: wp.vec3, a: float, b: float, in_haze: float,
+                  cos_axis: float) -> MarchState:
+    """March [a, b], which lies wholly inside (``in_haze`` 1) or outside the haze slab: its clear gaps (haze
+    only; read from the shadow map where it is on) and its pieces of cloud in order."""
+    out = state
+    mapped = smap.on != 0 and march.shadow == 0 and march.sexp == 0 and sun.direction[1] > MIN_SUN_SINE
     slope = hf_ray_slope(hf, view)
     t = a
     while t < b and out.done == 0:
@@ -236,7 +297,10 @@ def march_segment(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, s
                 cloud = 1.0
             run = (k == 0 and in_haze > 0.0 and hi > lo) or (k == 1 and piece[0] < b)
             if run and out.done == 0:
-                out = march_piece(hf, haze, sun, march, out, o, view, lo, hi, cloud, in_haze, cos_axis)
+                if k == 0 and mapped:
+                    out = march_haze_mapped(hf, haze, sun, march, smap, out, o, view, lo, hi, cos_axis)
+                else:
+                    out = march_piece(hf, haze, sun, march, out, o, view, lo, hi, cloud, in_haze, cos_axis)
         if piece[0] >= b:
             break
         t = wp.max(piece[1], piece[0] + hf.tolerance)
@@ -250,6 +314,7 @@ def deck_kernel(
     cam: PinholeCamera,
     sun: Sun,
     march: DeckMarch,
+    smap: DeckShadowMap,
     limit: wp.array2d(dtype=float),
     radiance: wp.array2d(dtype=wp.vec3),
     transmittance: wp.array2d(dtype=wp.vec3),
@@ -282,8 +347,8 @@ def deck_kernel(
         for k in range(3):
             if state.done == 0 and cuts[k + 1] > cuts[k]:
                 in_haze = wp.where(k == 1, 1.0, 0.0)
-                state = march_segment(hf, haze, sun, march, state, o, view, cuts[k], cuts[k + 1], in_haze,
-                                      ray.cos_axis)
+                state = march_segment(hf, haze, sun, march, smap, state, o, view, cuts[k], cuts[k + 1],
+                                      in_haze, ray.cos_axis)
     radiance[row, col] = state.light
     transmittance[row, col] = exp3(state.tau)
     if state.weight_sum > 1.0e-6:

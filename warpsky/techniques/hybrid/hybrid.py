@@ -207,7 +207,7 @@ class Hybrid(Technique):
             estimate.add("oriented ice tables", host=slices + continuation, device=slices + continuation)
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
         if scene.decks and self.scenery_paths(scene):
-            estimate.merge(deck_voxel_memory(scene, s.path_tracer(), width, height))
+            estimate.merge(deck_voxel_memory(scene, s.path_tracer(), width, height, time_budget=s.time_budget))
         if scene.stratiform_layers and self.scenery_paths(scene):  # the layers its paths trace, voxelised
             estimate.merge(layer_voxel_memory(scene, s.path_tracer()))
         if scene.atmosphere is not None:
@@ -230,7 +230,7 @@ class Hybrid(Technique):
         if not s.multiple_scattering:
             return features
         if scene.decks and self.scenery_paths(scene):
-            features = deck_paths_features(scene, s.path_tracer(), width, height, features)
+            features = deck_paths_features(scene, s.path_tracer(), width, height, features, s.time_budget)
         return cut_feature(scene, float(s.forward_cut), features)
 
     def scenery_paths(self, scene: Scene) -> bool:
@@ -257,7 +257,8 @@ class Hybrid(Technique):
         paths, band = scene, None
         if scenery:
             around = around or SceneryFrame()
-            paths, band = paths_scene(scene, around, settings.path_tracer(), width, height, self.device)
+            paths, band = paths_scene(scene, around, settings.path_tracer(), width, height, self.device,
+                                      time_budget=settings.time_budget)
         lit = (scene.sun is not None and (scene.media or scenery)) or (
             scene.dome is not None and (scene.media or scene.ground or scenery))
         if settings.multiple_scattering and lit:
@@ -284,10 +285,10 @@ class Hybrid(Technique):
 
 
 def deck_paths_features(scene: Scene, settings: PathTracerSettings, width: int, height: int,
-                        features: dict[str, str]) -> dict[str, str]:
+                        features: dict[str, str], time_budget: float | None = None) -> dict[str, str]:
     """``features`` with the height-field line saying that the paths trace the deck voxelised (square, voxels)
-    beside the deck pass's single scattering."""
-    clouds, grid, sub = deck_plan(scene, settings, width, height)
+    beside the deck pass's single scattering (in a frame of ``time_budget`` seconds, which caps the voxels)."""
+    clouds, grid, sub = deck_plan(scene, settings, width, height, time_budget=time_budget)
     line = (f"; multiple scattering path traced by hybrid through the deck{' and haze' if clouds.haze else ''} "
             f"voxelised over a square of half-size {0.5 * grid.width[0] * grid.shape[0]:.4g} m around the camera "
             f"({grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} = {grid.voxels:,} voxels, {sub}x{sub} sub-columns); "

@@ -44,12 +44,13 @@ from warpsky.techniques.path_tracer.stratiform_media import with_stratiform_as_m
 
 
 def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height: int,
-                device: str = "cpu") -> tuple[Scene, tuple[float, float] | None]:
+                device: str = "cpu", *, time_budget: float | None = None) -> tuple[Scene, tuple[float, float] | None]:
     """(the scene the paths trace, the altitude band [m] where a camera ray's first event ends its path or None):
     ``scene`` with ``around.ground`` as its ground plane where another pass draws it, no opaque depth on the camera
     (the surfaces pass's meshes and ground, which the paths trace themselves), its height-field deck voxelised into
     its media (``settings``: the path tracer's, for the deck's square and voxels;
-    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`) and ``around.stratiform_layers``, the
+    :func:`~warpsky.techniques.path_tracer.deck_media.with_deck_as_media`; ``time_budget``, the frame's, caps its
+    voxels) and ``around.stratiform_layers``, the
     stratiform layers another pass draws, voxelised into them too; their band is the one returned."""
     ground = scene.ground if scene.ground is not None else around.ground
     camera = dataclasses.replace(scene.camera, opaque_depth=None)
@@ -63,7 +64,7 @@ def paths_scene(scene: Scene, around: SceneryFrame, settings, width: int, height
             heights = np.concatenate([m.world_corners()[:, 1] for m in added])
             band = (float(heights.min()), float(heights.max()))
         traced = layered
-    return with_deck_as_media(traced, settings, width, height), band
+    return with_deck_as_media(traced, settings, width, height, time_budget=time_budget, device=device), band
 
 
 def scenery_guide(scene: Scene, single: ImageLayer, device: str, around: SceneryFrame) -> ImageLayer:

@@ -15,8 +15,8 @@ Three path tracer settings, with these automatic values:
 - ``deck_voxel``: vertical voxel edge [m]. Auto: the band's height / :data:`DECK_VOXEL_ROWS`. Every column's optical
   depth is exact whatever the size (partial volume); the rows set where the tops and bases lie within a voxel.
 
-When the automatic sizes make a grid over :data:`~warpsky.media.stratiform.stratiform_voxels.VOXEL_BUDGET` voxels they
-grow together by the smallest factor that fits; given sizes are kept, and a grid they make over the budget is refused
+When the automatic sizes make a grid over :data:`~warpsky.media.stratiform.stratiform_voxels.VOXEL_BUDGET` voxels (under
+a time budget, over what :func:`voxel_budget` gives it) they grow together by the smallest factor that fits; given sizes are kept, and a grid they make over the budget is refused
 with one line naming the settings. Each column is split into :func:`supersample` ^ 2 sub-columns (4 x 4 when cheap).
 """
 
@@ -43,6 +43,12 @@ DECK_VOXELS_PER_FEATURE = 8
 DECK_EXTENT_CAP = 50.0e3
 #: Sub-column samples (columns x s^2) up to which the columns are split 4 x 4 (then 2 x 2, then 1).
 SUPERSAMPLE_SAMPLES = 2**25
+#: Seconds per voxel of the voxelised deck before the first path, measured at 96 x 64 on the sunbeams stage's deck of
+#: 133.8 million voxels on 2 CPU cores: the voxelisation's kernel, the majorants, the upload's copy and its checksum
+#: (6.3 s at load 4; about half that idle).
+VOXEL_SECONDS = 4.0e-8
+#: The share of a frame's time budget the voxelised deck may take before the first path.
+VOXEL_BUDGET_SHARE = 0.15
 #: Settings names, for messages.
 SETTINGS = "deck_extent / deck_voxel_width / deck_voxel"
 
@@ -114,6 +120,15 @@ def deck_voxel_sizes(scene: Scene, clouds: CloudDeck, settings, width: int, heig
             rows * (scale if given_height is None else 1.0))
 
 
+def voxel_budget(time_budget: float | None) -> int:
+    """Most voxels of the automatic grid: :data:`~warpsky.media.stratiform.stratiform_voxels.VOXEL_BUDGET`, or under
+    a frame's ``time_budget`` [s] what :data:`VOXEL_BUDGET_SHARE` of it voxelises at :data:`VOXEL_SECONDS` a voxel
+    (given voxel sizes are kept whatever the time)."""
+    if time_budget is None:
+        return VOXEL_BUDGET
+    return int(min(VOXEL_BUDGET, max(2**16, VOXEL_BUDGET_SHARE * float(time_budget) / VOXEL_SECONDS)))
+
+
 def supersample(grid: ColumnGrid) -> int:
     """Sub-columns per column along each axis: 4 while the grid's sub-column samples stay within
     :data:`SUPERSAMPLE_SAMPLES`, else 2, else 1."""
@@ -123,45 +138,44 @@ def supersample(grid: ColumnGrid) -> int:
     return 1
 
 
-def deck_plan(scene: Scene, settings, width: int, height: int) -> tuple[CloudDeck, ColumnGrid, int] | None:
+def deck_plan(scene: Scene, settings, width: int, height: int, *, time_budget: float | None = None
+              ) -> tuple[CloudDeck, ColumnGrid, int] | None:
     """(deck, grid, sub-columns per axis) of the scene's deck as the path tracer voxelises it (None without a
-    deck); a grid over the budget is refused (UsageError naming the settings)."""
+    deck) for a frame of ``time_budget`` [s] (None: none); a grid over the budget is refused (UsageError naming the
+    settings)."""
     clouds = the_deck(scene)
     if clouds is None:
         return None
-    extent, across, rows = deck_voxel_sizes(scene, clouds, settings, width, height)
+    extent, across, rows = deck_voxel_sizes(scene, clouds, settings, width, height, budget=voxel_budget(time_budget))
     grid = deck_grid(clouds, scene.camera.position[[0, 2]], extent, across, rows, setting=SETTINGS)
     return clouds, grid, supersample(grid)
 
 
-def with_deck_as_media(scene: Scene, settings, width: int, height: int) -> Scene:
-    """``scene`` with its deck (and haze) voxelised at the scene's time and appended to its media (no decks left);
-    ``scene`` itself when it has none."""
-    planned = deck_plan(scene, settings, width, height)
+def with_deck_as_media(scene: Scene, settings, width: int, height: int, *, time_budget: float | None = None,
+                       device: str = "cpu") -> Scene:
+    """``scene`` with its deck (and haze) voxelised on ``device`` at the scene's time and appended to its media (no
+    decks left); ``scene`` itself when it has none. ``time_budget``: the frame's [s], which caps the voxels."""
+    planned = deck_plan(scene, settings, width, height, time_budget=time_budget)
     if planned is None:
         return scene
     clouds, grid, s = planned
     media = voxelize_deck(clouds, scene.time_s, scene.camera.position[[0, 2]], 0.5 * grid.width[0] * grid.shape[0],
-                          grid.width[0], grid.height, supersample=s, setting=SETTINGS)
+                          grid.width[0], grid.height, supersample=s, setting=SETTINGS, device=device)
     return dataclasses.replace(scene, media=scene.media + media, decks=())
 
 
-#: Host bytes of the voxelisation's chunked temporaries at their peak (sub-column heights and covers of
-#: :data:`~warpsky.media.deck.deck_voxels.CHUNK_SAMPLES` samples): 128 MiB measured on the sunbeams' deck.
-VOXELIZE_TEMPORARY_BYTES = 128 * 2**20
-
-
-def deck_voxel_memory(scene: Scene, settings, width: int, height: int) -> MemoryEstimate:
-    """Bytes of the voxelised deck: on the host the float32 grid and either the upload's concatenated copy of it
-    or the voxelisation's temporaries (which do not coexist); on the device the grid and its majorants. On the
+def deck_voxel_memory(scene: Scene, settings, width: int, height: int, *, time_budget: float | None = None
+                      ) -> MemoryEstimate:
+    """Bytes of the voxelised deck: on the host the float32 grid (written in place by the voxelisation's kernel)
+    and the upload's concatenated copy of it; on the device the grid and its majorants. On the
     sunbeams' deck of 133.8 million voxels (510 MiB) the render's peak was 1.50 GiB above the process before the
     deck, with the grid, its concatenated copy and its upload held at once."""
     estimate = MemoryEstimate()
-    planned = deck_plan(scene, settings, width, height)
+    planned = deck_plan(scene, settings, width, height, time_budget=time_budget)
     if planned is not None:
         voxels = planned[1].voxels
         block = max(1, int(settings.majorant_block or AUTO_BLOCKS[0]))
-        estimate.add("deck voxels", host=4 * voxels + max(4 * voxels, VOXELIZE_TEMPORARY_BYTES),
+        estimate.add("deck voxels", host=8 * voxels,
                      device=4 * voxels + 4 * voxels / block**3 + 8)
     return estimate
 

@@ -201,7 +201,8 @@ class PathTracer(Technique):
     def render(self, scene: Scene, width: int, height: int, *, progress=None) -> ImageLayer:
         settings = self.settings_for(scene)
         started = time.perf_counter()
-        scene = with_deck_as_media(with_stratiform_as_media(scene, settings, self.device), settings, width, height)
+        scene = with_deck_as_media(with_stratiform_as_media(scene, settings, self.device), settings, width, height,
+                                   device=self.device)
         with device_buffers.exclusive("path_tracer", self.device):  # the sums and kept paths below
             tracing = PathTracing(scene, width, height, settings, self.device, meshes=True, fog=True)
             sums = pixel_sums((height, width), self.device, name="path_tracer")
