@@ -13,7 +13,8 @@ SMALL = ["--grid", "12x12x16", "--dx", "1000", "--dz", "500", "--time-step", "10
 
 def test_simulate_writes_frames_and_a_stage_that_renders(tmp_path, capsys):
     """Two frames over 4 minutes: every field's grid per frame, the sounding, and a stage whose Volume has the
-    species and the velocity, time-sampled per frame; ``warpsky info`` reads it."""
+    species, the velocity (time-sampled per frame) and render-time detail, with the overview camera and the rainbow
+    shot, its default; ``warpsky info`` reads it."""
     assert main(["simulate", *SMALL, "--frames", "2", "--minutes", "4", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr()
     assert "2 frames over 4.0 min" in out.out and "frame 2/2" in out.err
@@ -22,8 +23,10 @@ def test_simulate_writes_frames_and_a_stage_that_renders(tmp_path, capsys):
     assert (tmp_path / "storm.input_sounding").read_text().split()[:3] == ["1000.000", "300.0000", "14.00000"]
     text = (tmp_path / "storm.usda").read_text()
     assert "field:velocity" in text and "storm/cloud.0002.nvdb" in text and "endTimeCode = 2" in text
+    assert "warpsky:detail:amplitude = 0.35" in text and "def Camera \"Camera\"" in text
     assert main(["info", str(tmp_path / "storm.usda")]) == 0
-    assert "/World/Weather:cloud" in capsys.readouterr().out
+    info = capsys.readouterr().out
+    assert "/World/Weather:cloud" in info and "RainbowCam" in info
 
 
 def test_a_frame_holds_the_solvers_wind_on_meteorological_axes_around_the_media(tmp_path):

@@ -12,7 +12,9 @@ is droplets above 0 C and ice below -20 C, linearly between (the partition of th
 e.g., Lord et al. 1984's saturation adjustment), and precipitation is rain or snow by the same weights.
 
 Each grid is written to a temporary file and renamed, and the stage is written (the same way) after each frame
-with every frame so far: a run stopped part way leaves a stage of the frames it finished.
+with every frame so far: a run stopped part way leaves a stage of the frames it finished. The stage's default
+camera is the rainbow shot of :mod:`.shot` (``/World/RainbowCam``, following the rain shaft, the sun at its back);
+``/World/Camera`` frames everything cloudy so far.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 from warpsky.core.errors import OutputError
 from warpsky.core.files import atomic_write
 from warpsky.model.water_optics import dry_air_density, water_content
+from warpsky.simulate.shot import Shaft, author_shot, find_shaft, shot_sun
 from warpsky.usd.weather.weather_state import SPECIES_ORDER, WeatherState
 
 #: Temperatures [K] of the condensate's partition: all liquid above the first, all ice below the second.
@@ -104,8 +107,9 @@ class FrameWriter:
     stage: Path
     seconds_per_frame: float
     resolution: tuple[int, int] = (384, 256)
-    sun: tuple[float, float] = (20.0, 250.0)
+    sun: tuple[float, float] = field(default_factory=shot_sun)
     grids: list[dict[str, Path]] = field(default_factory=list)
+    shafts: list[Shaft] = field(default_factory=list)
     peaks: dict[str, float] = field(default_factory=dict)
     box: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -129,6 +133,7 @@ class FrameWriter:
             lower, upper = np.minimum(lower, self.box[0]), np.maximum(upper, self.box[1])
         self.box = (lower, upper) if float(sum(g.max() for g in beta.values())) > 0.0 else self.box
         self.grids.append(files)
+        self.shafts.append(find_shaft(beta, state.origin, state.spacing))
         self._write_stage(state)
         return files
 
@@ -145,6 +150,7 @@ class FrameWriter:
         try:
             author_stage(tmp, [state], self.grids, codes, 1.0 / self.seconds_per_frame, framing=box, sun=self.sun,
                          resolution=self.resolution, doc=doc)
+            author_shot(tmp, self.shafts, codes, self.sun)
             os.replace(tmp, self.stage)
         except OSError as exc:
             raise OutputError(f"cannot write {self.stage}: {exc.strerror or exc}") from None

@@ -22,10 +22,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warpsky.simulate.fields import Column, Flow, Grid, wrap
 from warpsky.core.device import is_cpu
+from warpsky.simulate.fields import Column, Flow, Grid, wrap
 from warpsky.simulate.launch import launch_slabs
-
 
 #: Slots of the solver's device scalars.
 RZ, PAP, RZ_NEW, RR, BB = 0, 1, 2, 3, 4
