@@ -21,7 +21,7 @@ TIMING_GALLERY         = about 7 min
 
 .PHONY: demo test test-fast lint bench venv data clean help storm storm-data stratocumulus stratocumulus-anim \
 	cumulus-wind family family-thick scenery-family terrain valley-fog sunbeams sundogs gallery cycles-env \
-	simulate-storm
+	simulate-storm storm-procedural
 
 help:
 	@echo "make demo               - install into $(VENV), make data, render the demo cumulus to out/ (with a PNG;"
@@ -43,10 +43,13 @@ help:
 	@echo "make stratocumulus      - stratocumulus over water, sand and snow, radiosity on and off, to out/"
 	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
 	@echo "make storm-data         - the storm's per-frame NanoVDB fields in data/storm/"
-	@echo "make storm              - 48-frame storm (rainbow and anvil-halo shots) at 256 wide with slicing, contact"
-	@echo "                          sheets, preview ($(TIMING_STORM) once the optics tables are cached)"
-	@echo "make simulate-storm     - grow a storm with the cloud solver (warpsky simulate's defaults: 128x128x64"
-	@echo "                          cells, 48 frames) to out/simulate/, and render its last frame with slicing"
+	@echo "make storm              - the simulated storm (make simulate-storm, cached by its inputs), 48 frames of"
+	@echo "                          two shots (rainbow, whole storm) at 256 wide with slicing, contact sheets, preview"
+	@echo "                          ($(TIMING_STORM) on 2 CPU cores once simulated and the optics tables cached)"
+	@echo "make simulate-storm     - grow the storm with the cloud solver (warpsky simulate: 128x128x64 cells, 48"
+	@echo "                          frames) to out/simulate/; redone when its options, STORM_SOUNDING or the solver"
+	@echo "                          change (docs/guide/simulate.md gives its time)"
+	@echo "make storm-procedural   - the procedural storm (usd_scenes/storm.usda: rainbow and anvil-halo shots)"
 	@echo "make terrain            - the seeded 4 km fractal terrain mesh data/terrain.usda (hills, a north-south valley)"
 	@echo "make valley-fog         - 48 frames of morning fog drifting in the terrain's valley (Biri 2002) to"
 	@echo "                          out/valley_fog/ with a contact sheet, each frame's paths to the 5% target or"
@@ -147,13 +150,21 @@ stratocumulus: $(STAMP) data/stratocumulus/.complete
 stratocumulus-anim: $(STAMP) data/stratocumulus/.complete
 	$(SC_RENDER) usd_scenes/stratocumulus_anim.usda out/stratocumulus_anim/sc.####.exr --res 256
 
-# The storm: per-frame NanoVDB fields (tools/make_storm.py), two shots rendered as batches (resumable: rerun to
-# finish an interrupted one), a contact sheet per shot and a 3-D preview. STORM_WORKERS=0 renders in-process.
-# Slicing renders a storm frame in seconds on a CPU; STORM_TECHNIQUE=hybrid takes minutes per frame there.
+# The storm, grown by the cloud solver (warpsky simulate: 128x128x64 cells of 500 m x 250 m, 48 frames over 40
+# minutes), simulated once per sounding, options and solver source (the stamp's name holds the options' checksum),
+# then two shots rendered as batches (resumable: rerun to finish an interrupted one): the rainbow shot (the stage's
+# RainbowCam, sun at its back) and the whole storm (/World/Camera), a contact sheet per shot and a 3-D preview.
+# Slicing, because the default technique's storm frame still costs minutes on a CPU (STORM_TECHNIQUE=hybrid picks
+# it). STORM_WORKERS=0 renders in-process. STORM_SOUNDING=FILE grows it from a CM1 input_sounding.
+# The procedural storm (tools/make_storm.py, usd_scenes/storm.usda): make storm-data, make storm-procedural.
 STORM_WORKERS   ?= 2
 STORM_RES       ?= 256
 STORM_TECHNIQUE ?= slicing
 STORM_BATCH      = --technique $(STORM_TECHNIQUE) $(if $(filter 0,$(STORM_WORKERS)),,--workers $(STORM_WORKERS))
+STORM_SOUNDING  ?=
+STORM_SIMULATE  ?= --frames 48 --minutes 40 --time-step 10
+STORM_SIM       := out/simulate
+STORM_SIM_STAMP := $(STORM_SIM)/.complete-$(shell echo '$(STORM_SIMULATE) $(STORM_SOUNDING)' | cksum | cut -d' ' -f1)
 
 data/storm/.complete: tools/make_storm.py $(STAMP)
 	@echo "make data: the storm's 48 frames of cloud, rain, snow and ice in data/storm/ (a few seconds)"
@@ -162,18 +173,27 @@ data/storm/.complete: tools/make_storm.py $(STAMP)
 
 storm-data: data/storm/.complete
 
-storm: $(STAMP) data/storm/.complete
-	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm/rainbow.####.exr --res $(STORM_RES) $(STORM_BATCH)
-	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm/anvil.####.exr --camera /World/AnvilCam \
+$(STORM_SIM_STAMP): $(STAMP) $(STORM_SOUNDING) $(wildcard warpsky/simulate/*.py)
+	rm -f $(STORM_SIM)/.complete-*
+	$(VENV)/bin/warpsky simulate --out $(STORM_SIM) $(if $(STORM_SOUNDING),--sounding $(STORM_SOUNDING)) \
+		$(STORM_SIMULATE)
+	touch $@
+
+simulate-storm: $(STORM_SIM_STAMP)
+
+storm: $(STORM_SIM_STAMP)
+	$(VENV)/bin/warpsky render $(STORM_SIM)/storm.usda out/storm/rainbow.####.exr --res $(STORM_RES) $(STORM_BATCH)
+	$(VENV)/bin/warpsky render $(STORM_SIM)/storm.usda out/storm/whole.####.exr --camera /World/Camera \
 		--res $(STORM_RES) $(STORM_BATCH)
 	$(VENV)/bin/warpsky contact-sheet out/storm/rainbow.####.exr -o out/storm/rainbow_sheet.png
-	$(VENV)/bin/warpsky contact-sheet out/storm/anvil.####.exr -o out/storm/anvil_sheet.png
-	$(VENV)/bin/warpsky preview usd_scenes/storm.usda -o out/storm/preview.png --frame 40
+	$(VENV)/bin/warpsky contact-sheet out/storm/whole.####.exr -o out/storm/whole_sheet.png
+	$(VENV)/bin/warpsky preview $(STORM_SIM)/storm.usda -o out/storm/preview.png --frame 40
 
-simulate-storm: $(STAMP)
-	$(VENV)/bin/warpsky simulate --out out/simulate --frames 48 --minutes 40
-	$(VENV)/bin/warpsky render out/simulate/storm.usda out/simulate/storm.####.exr --frames 48 --technique slicing \
-		--res 256 --png
+storm-procedural: $(STAMP) data/storm/.complete
+	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm_procedural/rainbow.####.exr --res $(STORM_RES) \
+		$(STORM_BATCH)
+	$(VENV)/bin/warpsky render usd_scenes/storm.usda out/storm_procedural/anvil.####.exr --camera /World/AnvilCam \
+		--res $(STORM_RES) $(STORM_BATCH)
 
 # Terrain, valley fog (Biri 2002) and sunbeams (Max 1986): one terrain mesh, two stages that reference it.
 data/terrain.usda: tools/make_terrain.py $(STAMP)
