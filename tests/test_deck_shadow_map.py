@@ -90,7 +90,9 @@ def test_render_converges_to_the_exact_march_without_bias(device):
         return float(np.sqrt(np.mean((layer.radiance - reference.radiance) ** 2)) / reference.radiance.mean())
 
     exact, automatic = error(shadow_map_texels=0), error()
+    print(exact, automatic)
     fine = error(shadow_map_texels=256, haze_steps_per_feature=64)
+    print(fine)
     # measured: exact at 16 steps 2.7 %, the automatic map 4.5 %, the map at 256 texels and 64 steps 0.7 %
     assert automatic < 2.0 * exact and fine < 0.4 * automatic, (exact, automatic, fine)
 

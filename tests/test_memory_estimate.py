@@ -30,7 +30,7 @@ MEASURED_PEAK_MIB = {
     "storm.usda": {"96x64": 350, "384x256": 380},
     "stratocumulus.usda": {"96x64": 316, "384x256": 331},
     "stratocumulus_anim.usda": {"96x64": 320, "384x256": 335},
-    "sunbeams.usda": {"96x64": 1878, "384x256": 1884},
+    "sunbeams.usda": {"96x64": 408, "384x256": 580},
     "sundogs.usda": {"96x64": 457, "384x256": 465},
     "sunrise.usda": {"96x64": 431, "384x256": 431},
     "valley_fog.usda": {"96x64": 370, "384x256": 520},

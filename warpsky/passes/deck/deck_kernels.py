@@ -54,6 +54,7 @@ from warpsky.passes.deck.shadow_map import (
     MIN_SUN_SINE,
     DeckShadowMap,
     deck_sun_transmittance_at,
+    map_mark,
     map_point,
     map_texel,
 )
@@ -231,6 +232,21 @@ def march_piece(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, sta
 
 
 @wp.func
+def mapped_step(march: DeckMarch, smap: DeckShadowMap, sun_dir: wp.vec3, o: wp.vec3, view: wp.vec3, t: float,
+                a: float, b: float) -> float:
+    """The step [m] from ``t`` of the mapped clear-haze march over [a, b]: one texel of the map's level there, never
+    shorter than :func:`haze_step_along`'s nor longer than the haze's bound, nor shorter than a ``max_steps``-th of
+    the piece; the rest of the piece where less than 1.25 steps are left (no sliver)."""
+    rate = wp.max(haze_rate(view, sun_dir), 1.0e-6)
+    texel = map_texel(smap, map_point(smap, o + t * view, sun_dir))
+    dt = wp.max(wp.max(haze_step_along(march, view, sun_dir), texel / rate), (b - a) / float(march.max_steps))
+    dt = wp.min(dt, wp.max(march.haze_step_max, march.haze_step))
+    if b - t < 1.25 * dt:
+        dt = b - t
+    return dt
+
+
+@wp.func
 def march_haze_mapped(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarch, smap: DeckShadowMap,
                       state: MarchState, o: wp.vec3, view: wp.vec3, a: float, b: float, cos_axis: float
                       ) -> MarchState:
@@ -239,10 +255,6 @@ def march_haze_mapped(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarc
     than :func:`haze_step_along`'s nor longer than the haze's bound; sources and quadrature as in
     :func:`march_piece`'s clear haze (the deck's transmittance averaged over the step's ends)."""
     out = state
-    base = haze_step_along(march, view, sun.direction)
-    longest = wp.max(march.haze_step_max, march.haze_step)
-    shortest = (b - a) / float(march.max_steps)
-    rate = wp.max(haze_rate(view, sun.direction), 1.0e-6)
     sigma_haze = haze.scattering * phase_hg(wp.dot(sun.direction, view), haze.g)
     sunlit = sun.lit != 0 and wp.max(sigma_haze) > 0.0
     deck_a = wp.vec3(1.0)
@@ -252,10 +264,7 @@ def march_haze_mapped(hf: HeightField, haze: HazeSlab, sun: Sun, march: DeckMarc
         haze_a = haze.extinction * haze_path(haze, o + a * view, sun.direction)
     t = a
     while t < b and out.done == 0:
-        texel = map_texel(smap, map_point(smap, o + t * view, sun.direction))
-        dt = wp.min(wp.max(wp.max(base, texel / rate), shortest), longest)
-        if b - t < 1.25 * dt:  # no sliver of a last step
-            dt = b - t
+        dt = mapped_step(march, smap, sun.direction, o, view, t, a, b)
         tau_b = out.tau + haze.extinction * dt
         if sunlit:
             p = o + (t + dt) * view
@@ -358,16 +367,42 @@ def deck_kernel(
 
 
 @wp.kernel
+def mark_kernel(haze: HazeSlab, cam: PinholeCamera, sun: Sun, march: DeckMarch, smap: DeckShadowMap,
+                limit: wp.array2d(dtype=float), row_offset: int):
+    """Mark the map's texels the pixel's mapped clear-haze march will read: its nodes where the march is mapped
+    (the haze slab below the map's plane; the deck's pieces above it are not mapped)."""
+    r, col = wp.tid()
+    row = r + row_offset
+    ray = primary_ray(cam, row, col, 0.5, 0.5)
+    t_end = ray.t_far
+    if march.has_limit != 0:
+        t_end = wp.min(t_end, limit[row, col] / ray.cos_axis)
+    span = slab_interval(ray.origin[1], ray.direction[1], haze.floor, haze.top, ray.t_near, t_end)
+    t = span[0]
+    if t < span[1]:
+        map_mark(smap, map_point(smap, ray.origin + t * ray.direction, sun.direction))
+    while t < span[1]:
+        t = t + mapped_step(march, smap, sun.direction, ray.origin, ray.direction, t, span[0], span[1])
+        map_mark(smap, map_point(smap, ray.origin + t * ray.direction, sun.direction))
+
+
+@wp.kernel
 def sun_transmittance_kernel(
     hf: HeightField,
     haze: HazeSlab,
     sun_dir: wp.vec3,
     points: wp.array(dtype=wp.vec3),
     exact: int,
+    smap: DeckShadowMap,
     out: wp.array(dtype=wp.vec3),
 ):
     """Transmittance (RGB) of the sunlight reaching camera-relative ``points``: Max's thickness rule
-    (:func:`deck_shadow_length`), or the exact sun-ray optical depth with ``exact``; times the haze's along the sun
-    ray."""
+    (:func:`deck_shadow_length`), or with ``exact`` the exact sun-ray optical depth (read from the frame's shadow
+    map where it holds the point); times the haze's along the sun ray."""
     i = wp.tid()
-    out[i] = exp3(sun_depth(hf, haze, points[i], sun_dir, 1 - exact))
+    p = points[i]
+    if exact != 0:
+        haze_depth = haze.extinction * haze_path(haze, p, sun_dir)
+        out[i] = wp.cw_mul(deck_sun_transmittance_at(hf, smap, p, sun_dir), exp3(haze_depth))
+    else:
+        out[i] = exp3(sun_depth(hf, haze, p, sun_dir, 1))

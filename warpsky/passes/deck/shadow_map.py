@@ -20,7 +20,9 @@ texel (a step per texel), so a ray takes O(N log(range)) steps instead of O(rang
 
 The map holds transmittance (per channel), not optical depth, so that where a texel spans several shadow features
 its bilinear blend is a mean transmittance rather than the transmittance of a mean depth. Points outside every level,
-above P, or a sun within about 0.06 deg of the horizon read the exact optical depth instead.
+above P, or a sun within about 0.06 deg of the horizon read the exact optical depth instead. Only the texels the
+frame's marches will read are computed: a first pass walks each pixel's steps and marks them (a texel another read
+needs and no walk marked falls back to the exact depth too).
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ class DeckShadowMap:
     plane: float  # P minus the eye's y [m]
     centre: wp.vec2  # c: q of the eye [m]
     transmittance: wp.array2d(dtype=wp.vec3)  # (levels * N, N): level k's row i at k * N + i
+    marks: wp.array2d(dtype=wp.int32)  # 1 where a march will read the texel (only those are computed)
 
 
 @wp.func
@@ -82,20 +85,40 @@ def map_texel(m: DeckShadowMap, q: wp.vec2) -> float:
 
 
 @wp.func
-def map_read(m: DeckShadowMap, k: int, q: wp.vec2) -> wp.vec3:
-    """Bilinear transmittance of level ``k`` at ``q`` (relative to c)."""
+def map_read(m: DeckShadowMap, k: int, q: wp.vec2) -> wp.vec4:
+    """Bilinear transmittance (RGB) of level ``k`` at ``q`` (relative to c), and 1 where all four texels were
+    computed (0: one was not marked, and the transmittance must come from elsewhere)."""
     s = m.texel * wp.pow(2.0, float(k))
     n = m.texels
     u = q[0] / s + 0.5 * float(n) - 0.5
     v = q[1] / s + 0.5 * float(n) - 0.5
     i = wp.clamp(int(wp.floor(u)), 0, n - 2)
     j = wp.clamp(int(wp.floor(v)), 0, n - 2)
+    row = k * n + i
+    if m.marks[row, j] * m.marks[row, j + 1] * m.marks[row + 1, j] * m.marks[row + 1, j + 1] == 0:
+        return wp.vec4(0.0)
     fu = wp.clamp(u - float(i), 0.0, 1.0)
     fv = wp.clamp(v - float(j), 0.0, 1.0)
-    row = k * n + i
     a = m.transmittance[row, j] * (1.0 - fv) + m.transmittance[row, j + 1] * fv
     b = m.transmittance[row + 1, j] * (1.0 - fv) + m.transmittance[row + 1, j + 1] * fv
-    return a * (1.0 - fu) + b * fu
+    t = a * (1.0 - fu) + b * fu
+    return wp.vec4(t[0], t[1], t[2], 1.0)
+
+
+@wp.func
+def map_mark(m: DeckShadowMap, q: wp.vec2):
+    """Mark the texels :func:`map_read` reads at ``q`` (relative to c), if the map reaches it."""
+    k = map_level(m, q)
+    if k < m.levels:
+        s = m.texel * wp.pow(2.0, float(k))
+        n = m.texels
+        i = wp.clamp(int(wp.floor(q[0] / s + 0.5 * float(n) - 0.5)), 0, n - 2)
+        j = wp.clamp(int(wp.floor(q[1] / s + 0.5 * float(n) - 0.5)), 0, n - 2)
+        row = k * n + i
+        m.marks[row, j] = 1
+        m.marks[row, j + 1] = 1
+        m.marks[row + 1, j] = 1
+        m.marks[row + 1, j + 1] = 1
 
 
 @wp.func
@@ -106,7 +129,9 @@ def deck_sun_transmittance_at(hf: HeightField, m: DeckShadowMap, p: wp.vec3, sun
         q = map_point(m, p, sun_dir)
         k = map_level(m, q)
         if k < m.levels:
-            return map_read(m, k, q)
+            t = map_read(m, k, q)
+            if t[3] > 0.0:
+                return wp.vec3(t[0], t[1], t[2])
     return exp3(hf_optical_depth(hf, p, sun_dir, 0.0, hf.max_length))
 
 
@@ -115,6 +140,8 @@ def shadow_map_kernel(hf: HeightField, m: DeckShadowMap, sun_dir: wp.vec3, row_o
     """One texel (row = level * N + i, column j): the exact transmittance of the sun ray from (q, P)."""
     r, j = wp.tid()
     row = r + row_offset
+    if m.marks[row, j] == 0:
+        return
     k = row // m.texels
     i = row - k * m.texels
     s = m.texel * wp.pow(2.0, float(k))
@@ -146,14 +173,16 @@ def off_map(device) -> DeckShadowMap:
     m.on, m.levels, m.texels, m.texel, m.plane = 0, 0, 2, 1.0, 0.0
     m.centre = wp.vec2(0.0, 0.0)
     m.transmittance = wp.zeros((2, 2), dtype=wp.vec3, device=device)
+    m.marks = wp.zeros((2, 2), dtype=wp.int32, device=device)
     return m
 
 
 def build_shadow_map(hf: HeightField, plane: float, sun_dir, texel: float, texels: int, reach: float,
-                     device, launch) -> DeckShadowMap:
+                     device, launch, mark=None) -> DeckShadowMap:
     """The map over the plane ``plane`` (camera-relative y [m]) for the sun direction ``sun_dir`` (towards the
     sun), texels of ``texel`` [m] at level 0, ``texels`` per side, levels out to ``reach`` [m] in q; ``launch`` is
-    :func:`~warpsky.core.device.launch_rows` (rows in parallel bands on the CPU)."""
+    :func:`~warpsky.core.device.launch_rows` (rows in parallel bands on the CPU). ``mark(m)``, when given, marks
+    the texels the frame will read (:func:`map_mark`) and only those are computed; without it every texel is."""
     sun = np.asarray(sun_dir, dtype=np.float64)
     if sun[1] <= float(MIN_SUN_SINE) or not (texel > 0.0 and math.isfinite(texel)) or hf.present == 0:
         return off_map(device)
@@ -162,5 +191,10 @@ def build_shadow_map(hf: HeightField, plane: float, sun_dir, texel: float, texel
     m.on, m.levels, m.texels, m.texel, m.plane = 1, levels, n, float(texel), float(plane)
     m.centre = wp.vec2(float(sun[0] * plane / sun[1]), float(sun[2] * plane / sun[1]))
     m.transmittance = wp.zeros((levels * n, n), dtype=wp.vec3, device=device)
+    if mark is None:
+        m.marks = wp.ones((levels * n, n), dtype=wp.int32, device=device)
+    else:
+        m.marks = wp.zeros((levels * n, n), dtype=wp.int32, device=device)
+        mark(m)
     launch(shadow_map_kernel, levels * n, n, [hf, m, wp.vec3(*sun.tolist())], device)
     return m
