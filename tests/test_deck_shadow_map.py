@@ -106,3 +106,19 @@ def test_sun_on_or_below_the_horizon_reads_the_exact_depth(device, elevation):
     assert automatic.stats["shadow_map"] == "off"
     np.testing.assert_array_equal(automatic.radiance, exact.radiance)
     assert np.all(np.isfinite(exact.radiance)) and exact.radiance.min() >= 0.0
+
+
+def test_a_time_budget_shrinks_the_map_only_where_it_cannot_afford_it():
+    """A budget too short for the automatic map gets fewer texels, cloud steps of a quarter of the mean free path and
+    a march stopped at 1 % transmittance; a long one, or texels the user set, keep the settings as they are."""
+    from types import SimpleNamespace
+
+    from warpsky.passes.deck.deck import DeckSettings, budget_settings
+
+    scene, width, height = _frame(sun_towards(0.4, 0.6, -0.5), 96, 64)
+    frame = SimpleNamespace(scene=scene, width=width, height=height)
+    short = budget_settings(DeckSettings(), 0.2, frame)
+    assert 16 <= short.shadow_map_texels < 132 and short.min_transmittance == 0.01
+    assert short.step_length == pytest.approx(0.25 / 0.02)  # wavy_deck's density
+    assert budget_settings(DeckSettings(), 60.0, frame) == DeckSettings()
+    assert budget_settings(DeckSettings(shadow_map_texels=64), 0.2, frame) == DeckSettings(shadow_map_texels=64)

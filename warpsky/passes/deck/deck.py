@@ -44,6 +44,7 @@ overhead sun and fit for thin decks; it runs about 80 times faster than ``exact`
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -95,6 +96,14 @@ def haze_step_bound(clouds: CloudDeck) -> float:
 #: the tune half's worst pixel error within 1 %: under a sun 8.5 deg up the shafts are finer than the pixels (74 %
 #: at 16 steps, 49 % at 32 for 3x the time), so the default stays at 16 and such decks are not trustworthy per pixel.
 HAZE_STEPS_PER_FEATURE = 16
+#: The share of a frame's time budget the pass's march may take (:func:`budget_texels`).
+BUDGET_SHARE = 0.25
+#: Where the march stops under a time budget it cannot afford at the automatic settings (the light beyond is at most
+#: 1 % of what it gathered).
+BUDGET_TRANSMITTANCE = 0.01
+#: Seconds of the march per pixel and per texel of the shadow map's side, on 2 CPU cores: 2.5 s for 96 x 64 pixels
+#: at 132 texels on the sunbeams stage at load 3 (3.1e-6), about half that idle.
+MARCH_SECONDS = 2.5e-6
 #: The shadow map's finest texels per shortest haze step. Bilinear transmittance over texels as long as the step
 #: blurs the shafts' edges (on a deck of 700 m waves at 16 steps per feature: 4.8 % relative RMS error against a
 #: march 4x finer, +0.2 % bias, where the per-step exact depth gave 0.6 %); at a quarter of the step the finest
@@ -246,6 +255,33 @@ class Deck:
         return build_shadow_map(hf, haze.top, direction, texel, texels, reach, self.device, launch_rows, mark)
 
 
+def budget_settings(settings: DeckSettings, budget: float, frame) -> DeckSettings:
+    """``settings`` for a frame of ``budget`` seconds: where the automatic shadow map costs more than the budget
+    affords (:func:`budget_texels`), a smaller one, cloud steps of a quarter of the mean free path (not the features'
+    16th) and a march that stops at a transmittance of 1 % (their automatic values only)."""
+    from warpsky.media.deck.deck_geometry import the_deck
+    from warpsky.passes.deck.shadow_map import auto_texels
+
+    camera = frame.scene.camera.conformed(frame.width, frame.height)
+    texels = budget_texels(budget, camera, frame.width, frame.height)
+    if settings.shadow_map_texels is not None or texels >= auto_texels(pixel_angle(camera, frame.width)):
+        return settings
+    sigma = float(np.max(the_deck(frame.scene).extinction))
+    step = settings.step_length if settings.step_length is not None or sigma <= 0.0 else 0.25 / sigma
+    return dataclasses.replace(settings, shadow_map_texels=texels, step_length=step,
+                               min_transmittance=max(settings.min_transmittance, BUDGET_TRANSMITTANCE))
+
+
+def budget_texels(budget: float, camera, width: int, height: int) -> int:
+    """The shadow map's texels per side in a frame of ``budget`` seconds: the automatic size (2 / the pixel's angle),
+    or fewer, so that the pass's march takes about :data:`BUDGET_SHARE` of the budget at
+    :data:`MARCH_SECONDS` per pixel and texel (the march takes about N / 2 steps per level a ray crosses)."""
+    from warpsky.passes.deck.shadow_map import auto_texels
+
+    affordable = BUDGET_SHARE * budget / (MARCH_SECONDS * max(width * height, 1))
+    return int(max(16, min(auto_texels(pixel_angle(camera, width)), affordable)))
+
+
 def frame_key(scene: Scene) -> tuple:
     """What a frame's shadow map depends on besides the settings: the deck, the time, the camera's position and the
     sun's direction."""
@@ -343,7 +379,9 @@ class DeckPass(Pass):
             ambient = isotropic_ambient(seen, frame.light.sky)
             if frame.technique.scenery_paths(frame.scene):
                 ambient = np.zeros(3)
-            deck = Deck(self.settings, device=self.device)
+            budget = getattr(getattr(frame.technique, "settings", None), "time_budget", None)
+            settings = self.settings if budget is None else budget_settings(self.settings, float(budget), frame)
+            deck = Deck(settings, device=self.device)
             layer = deck.render(seen, frame.width, frame.height, limit=frame.limit, ambient=ambient)
             self._shadows = (frame_key(frame.scene), deck.shadows)
             return layer

@@ -43,9 +43,9 @@ DECK_VOXELS_PER_FEATURE = 8
 DECK_EXTENT_CAP = 50.0e3
 #: Sub-column samples (columns x s^2) up to which the columns are split 4 x 4 (then 2 x 2, then 1).
 SUPERSAMPLE_SAMPLES = 2**25
-#: Seconds per voxel of the voxelised deck before the first path, measured at 96 x 64 on the sunbeams stage's deck of
-#: 133.8 million voxels on 2 CPU cores: the voxelisation's kernel, the majorants, the upload's copy and its checksum
-#: (6.3 s at load 4; about half that idle).
+#: Seconds per voxel of the voxelised deck before the first path, on 2 CPU cores: the voxelisation's kernel (1 x 1
+#: sub-columns: 23-42 ns a voxel at load 3 on the sunbeams' deck under budgets of 5 and 1 s), the majorants, the
+#: upload's copy and its checksum (the three 23 ns a voxel at load 4 on its 133.8 million voxels).
 VOXEL_SECONDS = 4.0e-8
 #: The share of a frame's time budget the voxelised deck may take before the first path.
 VOXEL_BUDGET_SHARE = 0.15
@@ -129,9 +129,12 @@ def voxel_budget(time_budget: float | None) -> int:
     return int(min(VOXEL_BUDGET, max(2**16, VOXEL_BUDGET_SHARE * float(time_budget) / VOXEL_SECONDS)))
 
 
-def supersample(grid: ColumnGrid) -> int:
+def supersample(grid: ColumnGrid, time_budget: float | None = None) -> int:
     """Sub-columns per column along each axis: 4 while the grid's sub-column samples stay within
-    :data:`SUPERSAMPLE_SAMPLES`, else 2, else 1."""
+    :data:`SUPERSAMPLE_SAMPLES`, else 2, else 1; 1 under a time budget (2 x 2 took 3.6 times as long to voxelise
+    as 1 on the sunbeams' deck under a 1 s budget: 0.57 against 0.16 s)."""
+    if time_budget is not None:
+        return 1
     for s in (4, 2):
         if grid.voxels * s * s <= SUPERSAMPLE_SAMPLES:
             return s
@@ -148,7 +151,7 @@ def deck_plan(scene: Scene, settings, width: int, height: int, *, time_budget: f
         return None
     extent, across, rows = deck_voxel_sizes(scene, clouds, settings, width, height, budget=voxel_budget(time_budget))
     grid = deck_grid(clouds, scene.camera.position[[0, 2]], extent, across, rows, setting=SETTINGS)
-    return clouds, grid, supersample(grid)
+    return clouds, grid, supersample(grid, time_budget)
 
 
 def with_deck_as_media(scene: Scene, settings, width: int, height: int, *, time_budget: float | None = None,
