@@ -16,8 +16,8 @@ setting             unit  default                       range     meaning
                           along rays close to the sun
 ``haze_steps_per_   --    16                            1..1024   automatic haze step: steps per shortest feature of
 feature``                                                         the deck's shadow
-``shadow_map_texels`` --  2 / pixel angle               0, 16..   texels per side of each level of the deck's
-                                                        2048      shadow map on the haze; 0: the exact sun-ray
+``shadow_map_texels`` --  2 / pixel angle               0..2048   texels per side of each level of the deck's
+                                                                  shadow map on the haze; 0: the exact sun-ray
                                                                   optical depth at every haze step (below)
 ``max_steps``       --    4096                          >= 1      most steps per piece of constant extinction
 ``min_transmittance`` --  1e-4                          [0, 1)    stop once the view is this opaque
@@ -39,7 +39,8 @@ sun ray through a deck thicker than its features crosses several of them. On the
 300 m thick with features of 200 m to 3 km; 48 x 32 pixels) its radiance against ``exact``: sun overhead, NRMSE
 3e-6 (the same integral); 17 deg from the zenith, 13% (bias +6%); 38 deg, 184% (bias +53%); at the stage's own sun
 (52 deg from the zenith, 96 x 64 pixels) 276% (bias +128%), and ``sexp`` 76% (bias +49%). It is exact for an
-overhead sun and fit for thin decks; it runs about 80 times faster than ``exact`` there.
+overhead sun and fit for thin decks; it ran about 80 times faster than ``exact`` there with the sun's depth exact at
+every step (``shadow_map_texels`` 0).
 """
 
 from __future__ import annotations
@@ -143,10 +144,10 @@ class DeckSettings(Settings):
     haze_steps_per_feature: int = setting(HAZE_STEPS_PER_FEATURE, range="1..1024", help="automatic haze step: "
                                           "steps per shortest feature of the deck's shadow (median quadrature error on "
                                           "the scenery family 1-2 %; more for shafts finer than the pixels)")
-    shadow_map_texels: int | None = setting(None, range="0 or 16..2048", help="texels per side of each level of "
-                                            "the deck's shadow map on the haze (0: the exact sun-ray optical depth at "
-                                            "every haze step)", auto="2 / the pixel's angle (a texel about a pixel's "
-                                            "footprint wide)")
+    shadow_map_texels: int | None = setting(None, range="0..2048", help="texels per side of each level of the "
+                                            "deck's shadow map on the haze (0: the exact sun-ray optical depth at "
+                                            "every haze step; 1-3 are taken as 4)", auto="2 / the pixel's angle (a texel about a pixel's "
+                                            "footprint wide; fewer under a time budget too short for it)")
     max_steps: int = setting(4096, range=">= 1", help="most steps per piece of constant extinction")
     min_transmittance: float = setting(1.0e-4, range="[0, 1)", help="stop once the view is this opaque")
 
