@@ -22,8 +22,9 @@ TOLERANCE = 1e-6
 
 
 def _params():
-    """Every case; the storm's are marked slow (they build the rain, snow and ice tables)."""
-    return [pytest.param(c, id=c.name, marks=[pytest.mark.slow] if c.stage == "storm" else [])
+    """Every case; the storm's and the stratocumulus' are marked slow (they build the rain, snow and ice tables, and
+    the stratus phase and modified Mie tables: about 30 s)."""
+    return [pytest.param(c, id=c.name, marks=[pytest.mark.slow] if c.stage in ("storm", "stratocumulus") else [])
             for c in make_goldens.CASES]
 
 
