@@ -57,7 +57,7 @@ def test_map_is_exact_at_its_texels_and_where_it_does_not_reach(device):
         heights = rng.uniform(-200.0, plane - 1.0, size=len(q))
         down = (plane - heights) / sun[1]
         points += [[centre[0] + qx - sun[0] * d, y, centre[1] + qz - sun[2] * d]
-                   for (qx, qz), y, d in zip(q, heights, down)]
+                   for (qx, qz), y, d in zip(q, heights, down, strict=True)]
     m, mapped, exact = _read(device, clouds, sun, points)
     assert m.levels > 5 and 0.05 < np.mean(exact < 0.999) < 0.95  # the points see both clouds and holes
     np.testing.assert_allclose(mapped, exact, atol=1e-4)

@@ -86,3 +86,25 @@ def test_the_air_table_is_built_once_and_read_from_the_disk_cache(tmp_path, monk
     assert (loaded.floor, loaded.height, loaded.mie_g, loaded.radius) == (built.floor, built.height, built.mie_g,
                                                                           built.radius)
     rem._cached.cache_clear()
+
+
+def test_a_long_frame_says_every_interval_where_it_stands(capsys, monkeypatch):
+    """Work inside ``working`` prints ``... still <doing> (N s; status)`` every interval with the last status the
+    work reported, nothing after the block, and nothing under ``--quiet``; ``status`` outside one does nothing."""
+    import time
+
+    from warpsky.core import progress
+
+    progress.status("ignored: no work is being timed")
+    monkeypatch.delenv(progress.QUIET_ENV, raising=False)
+    with progress.working("rendering frame 3", every=0.05):
+        progress.status("hybrid: 8 of at most 256 paths per pixel")
+        time.sleep(0.18)
+    time.sleep(0.1)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) >= 2
+    assert all(line.startswith("warpsky: ... still rendering frame 3 (") for line in lines)
+    assert lines[-1].endswith("; hybrid: 8 of at most 256 paths per pixel)")
+    with progress.quieted(), progress.working("rendering frame 4", every=0.02):
+        time.sleep(0.1)
+    assert capsys.readouterr().err == ""

@@ -12,6 +12,7 @@ import sys
 import threading
 import time
 from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 #: The environment variable that silences progress lines (``1``).
@@ -76,14 +77,17 @@ def format_seconds(seconds: float) -> str:
     return f"{minutes} min {rest} s"
 
 
-def ticking(doing: str, started: float, every: float) -> tuple[threading.Event, threading.Thread]:
+def ticking(doing: str, started: float, every: float, detail=None) -> tuple[threading.Event, threading.Thread]:
     """Say ``... still <doing> (N s)`` every ``every`` seconds from ``started`` (perf_counter s) on a daemon thread
-    until the returned event is set; (that event, the thread)."""
+    until the returned event is set, with ``detail()`` after the seconds where it returns text; (that event, the
+    thread)."""
     stop = threading.Event()
 
     def tick():
         while not stop.wait(every):
-            progress(f"... still {doing} ({format_seconds(time.perf_counter() - started)})")
+            extra = detail() if detail is not None else ""
+            elapsed = format_seconds(time.perf_counter() - started)
+            progress(f"... still {doing} ({elapsed}{'; ' + extra if extra else ''})")
 
     thread = threading.Thread(target=tick, name="warpsky-progress", daemon=True)
     thread.start()
@@ -108,3 +112,29 @@ def announced(kind: str, what: str, start: str, done: str | None = None, *, ever
     record(kind, what, seconds)
     if done is not None:
         progress(done.format(seconds=format_seconds(seconds)))
+
+
+#: The status line of the work :func:`working` is timing in this context (a one-item list), or None.
+_STATUS: ContextVar[list | None] = ContextVar("warpsky_status", default=None)
+
+
+@contextmanager
+def working(doing: str, every: float = 10.0):
+    """Say ``... still <doing> (N s; <status>)`` every ``every`` seconds while the block runs (a frame: nothing for
+    one that takes less), with the last :func:`status` the work inside reported."""
+    holder = [""]
+    token = _STATUS.set(holder)
+    stop, ticker = ticking(doing, time.perf_counter(), every, lambda: holder[0])
+    try:
+        yield
+    finally:
+        stop.set()
+        ticker.join()
+        _STATUS.reset(token)
+
+
+def status(text: str) -> None:
+    """Report where the work :func:`working` times stands (shown in its next line); nothing outside one."""
+    holder = _STATUS.get()
+    if holder is not None:
+        holder[0] = text

@@ -14,7 +14,7 @@ import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from warpsky.core import deadline
+from warpsky.core import deadline, progress
 from warpsky.model.scene import Scene
 from warpsky.output.exr import write_channels
 from warpsky.output.png import write_png
@@ -115,7 +115,8 @@ def write_frame(frame: PlannedFrame, out_path: Path, *, timings: dict[str, float
     ``siblings`` ((path, PlannedFrame) pairs: :meth:`~warpsky.render.planned.PlannedFrame.for_options` of
     products with the same camera and resolution) are written from the same render. ``started``: when the frame's
     planning began (perf_counter s), where its time budget starts (default: now)."""
-    with deadline.frame_clock(clock_key(frame), started):
+    label = "the frame" if frame.time_code is None else f"frame {frame.time_code:g}"
+    with deadline.frame_clock(clock_key(frame), started), progress.working(f"rendering {label}"):
         exr, png, image = _render_and_write(frame, out_path, timings, siblings, reader)
     timings = image.timings
     layer = image.layer

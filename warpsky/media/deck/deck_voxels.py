@@ -29,8 +29,9 @@ import numpy as np
 
 from warpsky.core.errors import UsageError
 from warpsky.media.stratiform.stratiform_voxels import VOXEL_BUDGET, ColumnGrid
-from warpsky.model.deck import CloudDeck, surface_heights
+from warpsky.model.deck import CloudDeck
 from warpsky.model.scene import PhaseKind, PhaseModel, VoxelMedium
+
 
 def deck_grid(clouds: CloudDeck, centre_xz, half_size: float, width: float, height: float, *,
               max_voxels: int = VOXEL_BUDGET, setting: str = "voxel") -> ColumnGrid:

@@ -144,10 +144,10 @@ class DeckSettings(Settings):
     haze_steps_per_feature: int = setting(HAZE_STEPS_PER_FEATURE, range="1..1024", help="automatic haze step: "
                                           "steps per shortest feature of the deck's shadow (median quadrature error on "
                                           "the scenery family 1-2 %; more for shafts finer than the pixels)")
-    shadow_map_texels: int | None = setting(None, range="0..2048", help="texels per side of each level of the "
-                                            "deck's shadow map on the haze (0: the exact sun-ray optical depth at "
-                                            "every haze step; 1-3 are taken as 4)", auto="2 / the pixel's angle (a texel about a pixel's "
-                                            "footprint wide; fewer under a time budget too short for it)")
+    shadow_map_texels: int | None = setting(
+        None, range="0..2048", help="texels per side of each level of the deck's shadow map on the haze (0: the "
+        "exact sun-ray optical depth at every haze step; 1-3 are taken as 4)", auto="2 / the pixel's angle (a texel "
+        "about a pixel's footprint wide; fewer under a time budget too short for it)")
     max_steps: int = setting(4096, range=">= 1", help="most steps per piece of constant extinction")
     min_transmittance: float = setting(1.0e-4, range="[0, 1)", help="stop once the view is this opaque")
 

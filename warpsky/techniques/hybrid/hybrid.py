@@ -35,6 +35,7 @@ from warpsky.core import deadline, device_buffers
 from warpsky.core.device import is_cpu
 from warpsky.core.image import ImageLayer
 from warpsky.core.numerics import LUMINANCE_WEIGHTS
+from warpsky.core.progress import status as progress_status
 from warpsky.core.resources import AOV_BYTES, MemoryEstimate, WorkItem
 from warpsky.core.settings import Settings, documented, setting
 from warpsky.light.sun import above_air
@@ -379,6 +380,9 @@ class MultipleScattering:
                     stop = "target"
                     break
                 check_at = next_check(passes, estimate, s.target_error)
+            progress_status(f"hybrid: {done} of at most {s.spp} paths per pixel"
+                            + (f", estimated error {estimate:.1%} (target {s.target_error:.1%})"
+                               if math.isfinite(estimate) else ""))
         wp.synchronize_device(self.device)
         film = self.film()
         mean, variance = film.radiance, film.aovs["variance"]

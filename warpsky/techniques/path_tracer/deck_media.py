@@ -15,9 +15,10 @@ Three path tracer settings, with these automatic values:
 - ``deck_voxel``: vertical voxel edge [m]. Auto: the band's height / :data:`DECK_VOXEL_ROWS`. Every column's optical
   depth is exact whatever the size (partial volume); the rows set where the tops and bases lie within a voxel.
 
-When the automatic sizes make a grid over :data:`~warpsky.media.stratiform.stratiform_voxels.VOXEL_BUDGET` voxels (under
-a time budget, over what :func:`voxel_budget` gives it) they grow together by the smallest factor that fits; given sizes are kept, and a grid they make over the budget is refused
-with one line naming the settings. Each column is split into :func:`supersample` ^ 2 sub-columns (4 x 4 when cheap).
+When the automatic sizes make a grid over :data:`~warpsky.media.stratiform.stratiform_voxels.VOXEL_BUDGET` voxels
+(under a time budget, over what :func:`voxel_budget` gives it) they grow together by the smallest factor that fits;
+given sizes are kept, and a grid they make over the budget is refused with one line naming the settings. Each column
+is split into :func:`supersample` ^ 2 sub-columns (4 x 4 when cheap, 1 under a time budget).
 """
 
 from __future__ import annotations
