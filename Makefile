@@ -69,9 +69,10 @@ help:
 venv: $(STAMP)
 
 $(STAMP): pyproject.toml
+	@echo "make venv: installing warpsky and its dependencies into $(VENV) (about 2.3 GB; a few minutes when pip downloads them)"
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,denoise,compare,farm,preview,color,textures,weather]"
+	$(PY) -m pip install --progress-bar off -e ".[dev,denoise,compare,farm,preview,color,textures,weather]"
 	rm -f $(VENV)/.installed-*
 	touch $@
 
