@@ -30,7 +30,7 @@ SUN_ELEVATION = 12.0
 VIEW_AZIMUTH = 0.0
 #: [m] the camera's distance from the shaft, its height over the ground, and [deg] how far it looks up and right
 #: of the shaft (the tower and the anvil stand downwind, east of the shaft).
-DISTANCE, EYE_HEIGHT, PITCH, YAW = 14000.0, 150.0, 22.0, 15.0
+DISTANCE, EYE_HEIGHT, PITCH, YAW = 14000.0, 150.0, 30.0, 15.0
 #: [mm] the shot camera's lens and film back.
 FOCAL_LENGTH, APERTURE = 14.0, (36.0, 24.0)
 #: Extinction [1/m] that counts as rain in the shaft and as cloud at the base.
