@@ -100,7 +100,7 @@ def test_render_converges_to_the_exact_march_without_bias(device):
 @pytest.mark.parametrize("elevation", [0.0, -5.0, 0.03])
 def test_sun_on_or_below_the_horizon_reads_the_exact_depth(device, elevation):
     e = math.radians(elevation)
-    scene, width, height = _frame(sun_towards(math.cos(e), math.sin(e), 0.0), 16, 12)
+    scene, width, height = _frame(sun_towards(math.cos(e), math.sin(e), 0.0), 8, 6)
     automatic = Deck(device=device).render(scene, width, height)
     exact = Deck(device=device, shadow_map_texels=0).render(scene, width, height)
     assert automatic.stats["shadow_map"] == "off"
