@@ -194,6 +194,7 @@ def test_halving_the_voxels_changes_a_cloudy_region_by_under_5_percent(device):
 
 
 # ------------------------------------------------------------------------------------------ through the tools
+@pytest.mark.slow  # its render builds the stratus phase table
 def test_render_and_info_trace_the_layer(tmp_path, capsys):
     """``warpsky render --technique path_tracer`` on a stage with a layer (sky, ground, albedo map) writes finite,
     non-negative pixels with the cloud in them; ``info`` says the layer is voxelised and how."""
@@ -218,6 +219,7 @@ def test_render_and_info_trace_the_layer(tmp_path, capsys):
     assert code == 2 and "setting layer_voxel must be a number > 0 [m] or auto, got -1" in err
 
 
+@pytest.mark.slow  # builds the stratus modified Mie table (about 10 s)
 def test_error_vs_time_judges_the_stratiform_pass(tmp_path, monkeypatch):
     """On a stage of a layer alone the report's rows name the stratiform pass and the reference path-traces the
     voxelised layer; the ground's albedo map is left out of both sides."""

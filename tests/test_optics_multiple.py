@@ -92,6 +92,7 @@ def test_forward_weight_of_hg_has_its_closed_form():
     assert np.all(split.p_f[0][THETA > cut + 1e-9] == 0) and np.all(split.p_s[0][THETA < cut - 1e-9] == 0)
 
 
+@pytest.mark.slow  # builds the stratus phase and modified Mie tables (about 15 s)
 def test_bouthors_stratus_forward_weight(species_phase):
     # Bouthors 2006 §4.1 reports P_f = 51% for theta_f = 5 deg with his droplets; ours (N0 300/cm^3, gamma 2,
     # r_e 7 um, band-averaged) lands at 44-47%: the paper's figure is for a different spectral sampling
