@@ -80,9 +80,10 @@ def advect(grid: Grid, flow: Flow, target: Flow, dt: float, x_offset: int):
 
 
 @wp.kernel
-def vorticity(grid: Grid, flow: Flow, curl: wp.array3d(dtype=wp.vec3)):
+def vorticity(grid: Grid, flow: Flow, curl: wp.array3d(dtype=wp.vec3), x_offset: int):
     """The vorticity ω = ∇ x u [1/s] at the cell centres (central differences of the centred velocity)."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     dxp = cell_velocity(flow, grid, i + 1, j, k)
     dxm = cell_velocity(flow, grid, i - 1, j, k)
     dyp = cell_velocity(flow, grid, i, j + 1, k)
@@ -102,9 +103,11 @@ def curl_size(curl: wp.array3d(dtype=wp.vec3), grid: Grid, i: int, j: int, k: in
 
 
 @wp.kernel
-def confinement(grid: Grid, curl: wp.array3d(dtype=wp.vec3), strength: float, force: wp.array3d(dtype=wp.vec3)):
+def confinement(grid: Grid, curl: wp.array3d(dtype=wp.vec3), strength: float, force: wp.array3d(dtype=wp.vec3),
+                x_offset: int):
     """The confinement force ε h (N x ω) [m/s^2] at the cell centres, h the horizontal spacing."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     gradient = wp.vec3((curl_size(curl, grid, i + 1, j, k) - curl_size(curl, grid, i - 1, j, k)) / grid.dx,
                        (curl_size(curl, grid, i, j + 1, k) - curl_size(curl, grid, i, j - 1, k)) / grid.dy,
                        (curl_size(curl, grid, i, j, k + 1) - curl_size(curl, grid, i, j, k - 1)) / grid.dx)
@@ -125,10 +128,11 @@ def buoyancy(column: Column, water: Water, i: int, j: int, k: int) -> float:
 
 @wp.kernel
 def apply_forces(grid: Grid, column: Column, water: Water, force: wp.array3d(dtype=wp.vec3), flow: Flow,
-                 dt: float):
+                 dt: float, x_offset: int):
     """Add buoyancy and the confinement force over ``dt`` [s] to the face velocities, then damp them towards the
     environment's wind in the sponge (implicitly, stable at any rate). Launched over (nx, ny + 1, nz)."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     if j < grid.ny:
         rate = dt * column.damping[j]
         fx = 0.5 * (force[wrap(i - 1, grid.nx), j, k][0] + force[i, j, k][0])
@@ -142,8 +146,9 @@ def apply_forces(grid: Grid, column: Column, water: Water, force: wp.array3d(dty
 
 
 @wp.kernel
-def damp_theta(column: Column, water: Water, dt: float):
+def damp_theta(column: Column, water: Water, dt: float, x_offset: int):
     """Relax θ towards the environment's in the sponge (implicitly)."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     rate = dt * column.damping[j]
     water.theta[i, j, k] = (water.theta[i, j, k] + rate * column.theta[j]) / (1.0 + rate)

@@ -104,9 +104,10 @@ def transport(grid: Grid, column: Column, flow: Flow, source: Water, target: Wat
 
 
 @wp.kernel
-def column_courant(grid: Grid, flow: Flow, dt: float, partial: wp.array2d(dtype=float)):
+def column_courant(grid: Grid, flow: Flow, dt: float, partial: wp.array2d(dtype=float), x_offset: int):
     """The largest summed Courant number of each column over ``dt`` [s]."""
-    i, k = wp.tid()
+    t, k = wp.tid()
+    i = t + x_offset
     largest = float(0.0)
     for j in range(grid.ny):
         cx = wp.max(wp.abs(flow.vel_x[i, j, k]), wp.abs(flow.vel_x[wrap(i + 1, grid.nx), j, k])) / grid.dx

@@ -98,11 +98,13 @@ def fall_speed(column: Column, rain: float, j: int) -> float:
 
 
 @wp.kernel
-def sediment(grid: Grid, column: Column, water: Water, fallen: wp.array2d(dtype=float), dt: float, substeps: int):
+def sediment(grid: Grid, column: Column, water: Water, fallen: wp.array2d(dtype=float), dt: float, substeps: int,
+             x_offset: int):
     """The rain's fall over ``dt`` [s] in each column (launched over (nx, nz)): upwind fluxes of ρ q_r V in
     ``substeps`` steps (each below a Courant number of 1), what leaves through the floor added to ``fallen``
     [kg/m^2]."""
-    i, k = wp.tid()
+    t, k = wp.tid()
+    i = t + x_offset
     step = dt / float(substeps)
     for _ in range(substeps):
         # bottom-up: each level loses its own flux and gains the one from above, read before it changes

@@ -36,9 +36,10 @@ def flat(grid: Grid, i: int, j: int, k: int) -> int:
 
 
 @wp.kernel
-def divergence(grid: Grid, column: Column, flow: Flow, out: wp.array(dtype=float), scale: float):
+def divergence(grid: Grid, column: Column, flow: Flow, out: wp.array(dtype=float), scale: float, x_offset: int):
     """``out`` = ``scale`` ∇·(ρ0 u) at every cell [kg/(m^3 s)] (flattened [x, y, z])."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     rho = column.density[j]
     flux = rho * (flow.vel_x[wrap(i + 1, grid.nx), j, k] - flow.vel_x[i, j, k]) / grid.dx
     flux += rho * (flow.vel_z[i, j, wrap(k + 1, grid.nz)] - flow.vel_z[i, j, k]) / grid.dx
@@ -146,9 +147,10 @@ def update_precondition(grid: Grid, lower: wp.array(dtype=float), inverse_pivot:
 
 
 @wp.kernel
-def subtract_gradient(grid: Grid, phi: wp.array(dtype=float), flow: Flow):
+def subtract_gradient(grid: Grid, phi: wp.array(dtype=float), flow: Flow, x_offset: int):
     """u -= ∇φ on every face but the floor's and the lid's. Launched over (nx, ny + 1, nz)."""
-    i, j, k = wp.tid()
+    t, j, k = wp.tid()
+    i = t + x_offset
     if j < grid.ny:
         here = phi[flat(grid, i, j, k)]
         flow.vel_x[i, j, k] -= (here - phi[flat(grid, i - 1, j, k)]) / grid.dx
@@ -284,8 +286,8 @@ class Projection:
 
     def divergence(self, flow: Flow, out: wp.array, scale: float = 1.0) -> wp.array:
         """``scale`` ∇·(ρ0 u) of ``flow`` into ``out`` [kg/(m^3 s)]."""
-        wp.launch(divergence, dim=(self.grid.nx, self.grid.ny, self.grid.nz),
-                  inputs=[self.grid, self.column, flow, out, float(scale)], device=self.device)
+        launch_slabs(divergence, (self.grid.nx, self.grid.ny, self.grid.nz),
+                     [self.grid, self.column, flow, out, float(scale)], self.device)
         return out
 
     def solve(self) -> None:
@@ -314,5 +316,5 @@ class Projection:
         """Make ``flow`` satisfy ∇·(ρ0 u) = 0 to the solver's tolerance."""
         self.divergence(flow, self.rhs, -self.grid.dx * self.grid.dx)
         self.solve()
-        wp.launch(subtract_gradient, dim=(self.grid.nx, self.grid.ny + 1, self.grid.nz),
-                  inputs=[self.grid, self.phi, flow], device=self.device)
+        launch_slabs(subtract_gradient, (self.grid.nx, self.grid.ny + 1, self.grid.nz), [self.grid, self.phi, flow],
+                     self.device)

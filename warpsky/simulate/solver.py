@@ -182,17 +182,14 @@ class CloudSolver:
         self.flows.reverse()
         flow, water = self.flows[0], self.waters[0]
         if self.settings.confinement > 0.0:
-            wp.launch(kf.vorticity, dim=shape, inputs=[g, flow, self.curl], device=d)
-            wp.launch(kf.confinement, dim=shape, inputs=[g, self.curl, float(self.settings.confinement), self.force],
-                      device=d)
-        wp.launch(kf.apply_forces, dim=(g.nx, g.ny + 1, g.nz),
-                  inputs=[g, self.column, water, self.force, flow, float(dt)], device=d)
-        wp.launch(kf.damp_theta, dim=shape, inputs=[self.column, water, float(dt)], device=d)
+            launch_slabs(kf.vorticity, shape, [g, flow, self.curl], d)
+            launch_slabs(kf.confinement, shape, [g, self.curl, float(self.settings.confinement), self.force], d)
+        launch_slabs(kf.apply_forces, (g.nx, g.ny + 1, g.nz), [g, self.column, water, self.force, flow, float(dt)], d)
+        launch_slabs(kf.damp_theta, shape, [self.column, water, float(dt)], d)
         self.projection.project(flow)
         launch_slabs(kw.microphysics, shape, [self.column, water, float(dt)], d)
         substeps = max(1, int(np.ceil(dt * 15.0 / (0.9 * g.dy))))  # rain falls under 15 m/s below 20 km
-        wp.launch(kw.sediment, dim=(g.nx, g.nz), inputs=[g, self.column, water, self.fallen, float(dt), substeps],
-                  device=d)
+        launch_slabs(kw.sediment, (g.nx, g.nz), [g, self.column, water, self.fallen, float(dt), substeps], d)
         self.time += dt
         self.step_count += 1
 
@@ -200,8 +197,7 @@ class CloudSolver:
         """θ, q_v, q_c, q_r carried conservatively by the current flow over ``dt`` [s], in sub-steps whose summed
         Courant numbers stay under :data:`~.kernels_transport.MAX_COURANT`."""
         g, d = self.grid, self.device
-        wp.launch(kt.column_courant, dim=(g.nx, g.nz), inputs=[g, self.flows[0], float(dt), self.courant_partial],
-                  device=d)
+        launch_slabs(kt.column_courant, (g.nx, g.nz), [g, self.flows[0], float(dt), self.courant_partial], d)
         wp.launch(kt.largest_value, dim=1, inputs=[self.courant_partial, self.courant], device=d)
         substeps = max(1, int(np.ceil(float(self.courant.numpy()[0]) / kt.MAX_COURANT)))
         self.transport_substeps = substeps
