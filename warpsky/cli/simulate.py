@@ -52,7 +52,7 @@ def add_parser(sub) -> None:
                      help="level spacing [m] (default 250: 64 levels reach 16 km)")
     cmd.add_argument("--frames", type=int, default=48, help="frames to write, evenly over the run (default 48)")
     cmd.add_argument("--minutes", type=float, default=40.0, help="minutes of storm life to simulate (default 40)")
-    cmd.add_argument("--time-step", type=float, default=6.0, metavar="S", help="longest time step [s] (default 6)")
+    cmd.add_argument("--time-step", type=float, default=10.0, metavar="S", help="longest time step [s] (default 10)")
     cmd.add_argument("--seed", type=int, default=1, help="seed of the bubble's small random perturbation")
     cmd.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the stage and its grids")
     cmd.add_argument("--name", default="storm", help="stage name: DIR/NAME.usda and DIR/NAME/ (default storm)")
