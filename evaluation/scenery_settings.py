@@ -40,11 +40,13 @@ FOG_CANDIDATES = ((1, 4, 16), (2, 4, 64), (2, 16, 64), (2, 32, 64), (4, 4, 16), 
 #: The fog pass's finer quadrature every candidate is measured against: 16 nodes on 16..512 pieces.
 FOG_REFERENCE = (16, 16, 512)
 #: Candidates for the deck pass: (cloud step factor on its automatic value, None: automatic; the haze's
-#: automatic steps per shortest feature of the deck's shadow, ``haze_steps_per_feature``).
-DECK_CANDIDATES = ((None, 8), (None, 12), (None, 16), (None, 24), (None, 32), (0.5, 16))
+#: automatic steps per shortest feature of the deck's shadow, ``haze_steps_per_feature``; the shadow map's texels per
+#: side, ``shadow_map_texels``: None automatic, 0 the sun's depth exact at every step).
+DECK_CANDIDATES = ((None, 8, 0), (None, 12, 0), (None, 16, 0), (None, 24, 0), (None, 32, 0), (0.5, 16, 0),
+                   (None, 8, None), (None, 16, None), (None, 32, None))
 #: The finer march: the cloud step an eighth of its automatic value, the haze step a 64th of the shadow's shortest
-#: feature (at most an eighth of its quarter mean free path) everywhere.
-DECK_REFERENCE = (0.125, 64)
+#: feature (at most an eighth of its quarter mean free path) everywhere, the sun's depth exact at every step.
+DECK_REFERENCE = (0.125, 64, 0)
 #: Renders per candidate whose median time is taken.
 REPEATS = 3
 
@@ -67,15 +69,17 @@ def fog_settings(candidate: tuple[int, int, int]) -> dict:
     return {"fog.nodes": nodes, "fog.min_pieces": low, "fog.max_pieces": high}
 
 
-def deck_settings(scene, candidate: tuple[float | None, int], authored: bool = False) -> dict:
-    """The height-field settings of ``candidate`` (cloud factor or None, haze steps per feature); ``authored``:
-    the haze step written out (the same everywhere) instead of the automatic rule."""
+def deck_settings(scene, candidate: tuple[float | None, int, int | None], authored: bool = False) -> dict:
+    """The height-field settings of ``candidate`` (cloud factor or None, haze steps per feature, shadow map texels
+    or None); ``authored``: the haze step written out (the same everywhere) instead of the automatic rule."""
     from warpsky.media.deck.deck_geometry import the_deck
     from warpsky.passes.deck.deck import automatic_steps, haze_step_bound, shadow_feature
 
-    factor, per_feature = candidate
+    factor, per_feature, texels = candidate
     clouds = the_deck(scene)
     out = {"deck.haze_steps_per_feature": per_feature}
+    if texels is not None:
+        out["deck.shadow_map_texels"] = texels
     if factor is not None:
         out["deck.step_length"] = factor * automatic_steps(clouds, per_feature)[0]
     if authored:
@@ -83,10 +87,11 @@ def deck_settings(scene, candidate: tuple[float | None, int], authored: bool = F
     return out
 
 
-def deck_name(candidate: tuple[float | None, int]) -> str:
-    factor, per_feature = candidate
+def deck_name(candidate: tuple[float | None, int, int | None]) -> str:
+    factor, per_feature, texels = candidate
     cloud = "auto" if factor is None else f"x {factor:g}"
-    return f"deck cloud step {cloud}, haze {per_feature} steps per feature"
+    sun = "shadow map" if texels is None else ("exact depth per step" if texels == 0 else f"shadow map {texels}")
+    return f"deck cloud step {cloud}, haze {per_feature} steps per feature, {sun}"
 
 
 def pass_layer(scene, values: dict, width: int, height: int, device: str, key: str, repeats: int = REPEATS):
@@ -113,11 +118,12 @@ def compare(layer, reference, covered: np.ndarray) -> tuple[float, float, float]
     return error, bias, dt
 
 
-def measure_member(scene, member: dict, width: int, height: int, device: str) -> list[Measured]:
-    """Every candidate of the elements ``scene`` holds (fog, deck) against the finer quadrature."""
+def measure_member(scene, member: dict, width: int, height: int, device: str, elements=("fog", "deck")
+                   ) -> list[Measured]:
+    """Every candidate of the ``elements`` ``scene`` holds (fog, deck) against the finer quadrature."""
     covered = covered_pixels(scene, width, height, device)
     out = []
-    if scene.fogs:
+    if scene.fogs and "fog" in elements:
         reference, _ = pass_layer(scene, fog_settings(FOG_REFERENCE), width, height, device, "nodes", 1)
         for candidate in FOG_CANDIDATES:
             layer, seconds = pass_layer(scene, fog_settings(candidate), width, height, device, "nodes")
@@ -125,7 +131,7 @@ def measure_member(scene, member: dict, width: int, height: int, device: str) ->
             nodes, low, high = candidate
             out.append(Measured(member["name"], member["half"], f"fog {nodes} nodes, {low}..{high} pieces", error,
                                 bias, dt, seconds))
-    if scene.decks:
+    if scene.decks and "deck" in elements:
         finer = deck_settings(scene, DECK_REFERENCE, authored=True)
         reference, _ = pass_layer(scene, finer, width, height, device, "mode", 1)
         for candidate in DECK_CANDIDATES:
@@ -159,8 +165,9 @@ def choose(measured: list[Measured], prefix: str, tolerance: float = TOLERANCE) 
     return {"chosen": chosen, "tolerance": tolerance, "within_tolerance": bool(fit), "candidates": table}
 
 
-def run(family_dir: str | Path, device: str = "cpu", log=print) -> dict:
-    """Measure every candidate on every member of the family at ``family_dir`` and choose (JSON-ready dict)."""
+def run(family_dir: str | Path, device: str = "cpu", log=print, elements=("fog", "deck")) -> dict:
+    """Measure every candidate on every member of the family at ``family_dir`` holding one of ``elements`` and
+    choose (JSON-ready dict)."""
     from warpsky.usd.stage import StageReader
 
     family_dir = Path(family_dir)
@@ -169,12 +176,14 @@ def run(family_dir: str | Path, device: str = "cpu", log=print) -> dict:
     measured = []
     for member in family["members"]:
         scene = StageReader(str(family_dir / f"{member['name']}.usda")).scene_at(None)
-        rows = measure_member(scene, member, width, height, device)
+        if not ((scene.fogs and "fog" in elements) or (scene.decks and "deck" in elements)):
+            continue
+        rows = measure_member(scene, member, width, height, device, elements)
         for m in rows:
             log(f"{m.member:16s} {m.half:4s} {m.candidate:32s} error {m.error:.2e} bias {m.bias:+.2e} "
                 f"dT {m.transmittance_error:.1e} {m.seconds * 1e3:8.2f} ms")
         measured += rows
     return {"family": str(family_dir), "generator": family.get("generator"), "seed": family.get("seed"),
             "image_size": [width, height], "device": device,
-            "fog": choose(measured, "fog"), "deck": choose(measured, "deck"),
+            **{element: choose(measured, element) for element in elements},
             "rows": [m.__dict__ for m in measured]}

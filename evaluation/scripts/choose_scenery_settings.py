@@ -2,7 +2,7 @@
 report the choice on the test half (``evaluation.scenery_settings``'s docstring says how).
 
 Run:  python evaluation/scripts/choose_scenery_settings.py [--family data/scenery_family_settings] [--count 48]
-      [--out docs/scenery_family/settings_choice.json]
+      [--only deck] [--out docs/scenery_family/settings_choice.json]
 
 The family is written first when its directory holds no ``family.json`` (as
 ``evaluation/scripts/make_scenery_family.py``
@@ -30,6 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=2029, help="seed of a family written here (default 2029)")
     parser.add_argument("--count", type=int, default=48, help="members of a family written here (default 48)")
     parser.add_argument("--device", default="cpu", help="device (default cpu)")
+    parser.add_argument("--only", choices=("fog", "deck"), default=None, help="measure one element's members only")
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "scenery_family" / "settings_choice.json",
                         help="JSON written (default docs/scenery_family/settings_choice.json)")
     args = parser.parse_args(argv)
@@ -40,11 +41,12 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     if not (args.family / "family.json").exists():
         make_scenery_family(args.family, seed=args.seed, count=args.count, log=print)
-    result = run(args.family, device=args.device)
+    elements = ("fog", "deck") if args.only is None else (args.only,)
+    result = run(args.family, device=args.device, elements=elements)
     result["seconds"] = time.perf_counter() - started
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")
-    for element in ("fog", "deck"):
+    for element in elements:
         choice = result[element]
         test = choice["candidates"][choice["chosen"]]["test"]
         print(f"{element}: {choice['chosen']} (tune worst <= {choice['tolerance']:g}: {choice['within_tolerance']}); "
