@@ -11,12 +11,13 @@ length of the sun ray from (q, P). Along a view ray o + t v the point q moves on
 q - c = t (v_xz - (v_y / sun_y) sun_xz) with c = q(o), at the rate ``r`` = |v_xz - (v_y / sun_y) sun_xz| per metre.
 
 The map is a stack of square levels centred on c (a clipmap): level k has N x N texels of edge s_0 2^k, and a point
-is read, bilinearly, from the finest level whose square holds it with a texel to spare. s_0 is the haze march's
-shortest step in q (the deck's shortest shadow feature over ``haze_steps_per_feature``), so near the camera the map
-resolves what the per-step march resolved. At a distance t along a ray a texel of the level in use is about
+is read, bilinearly, from the finest level whose square holds it with a texel to spare. s_0 is a quarter of the haze
+march's shortest step in q (the deck's shortest shadow feature over ``haze_steps_per_feature``), so near the camera
+a read is as good as the exact depth at the step. At a distance t along a ray a texel of the level in use is about
 2 t r / N wide in q, where the pixel's own footprint is about t r times its angle: with N = 2 / (pixel angle) a texel
-is about a pixel's footprint wide, and details finer than that are not resolved; the march's step grows with the
-texel (a step per texel), so a ray takes O(N log(range)) steps instead of O(range / s_0).
+is about a pixel's footprint wide, and details finer than that are not resolved; once a texel is longer than the
+shortest step the march's step grows with it (a step per texel), so a ray takes O(N log(range)) steps instead of
+O(range / s_0).
 
 The map holds transmittance (per channel), not optical depth, so that where a texel spans several shadow features
 its bilinear blend is a mean transmittance rather than the transmittance of a mean depth. Points outside every level,
