@@ -92,3 +92,26 @@ def test_a_failed_frame_keeps_the_finished_ones(tmp_path, monkeypatch):
 def test_bad_arguments_exit_2_naming_them(tmp_path, capsys, args, message):
     assert main(["simulate", *SMALL, *args, "--out", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_frame_records_each_species_water_and_its_extinction_agrees(tmp_path):
+    """The stage records the cloud's peak water content and total water per frame; the peak agrees with the
+    written extinction grid's peak through beta = 3 W / (2 rho_w r_e) (droplets of 10 um), and the total with one
+    cell of 1 km x 1 km x 500 m holding it."""
+    from warpsky.media.voxels.fields import load_field
+    from warpsky.simulate.frames import FrameWriter, weather_state
+    from warpsky.simulate.sounding import base_state, weisman_klemp
+    from warpsky.usd.stage import StageReader
+
+    shape = (10, 8, 12)
+    base = base_state(weisman_klemp(), shape[1], 500.0)
+    fields = {"theta": np.broadcast_to(base.theta[None, :, None], shape).copy(),
+              "vapour": np.broadcast_to(base.vapour[None, :, None], shape).copy(),
+              "cloud": np.zeros(shape), "rain": np.zeros(shape),
+              "velocity": np.zeros((*shape, 3), np.float32)}
+    fields["cloud"][5, 3, 7] = 1.0e-3
+    FrameWriter(tmp_path / "f", tmp_path / "f.usda", 60.0).write(weather_state(fields, base, (1000.0, 500.0), 60.0))
+    beta = float(load_field(tmp_path / "f" / "cloud.0001.nvdb").values.max())
+    peak = beta * 2.0 * 1000.0 * 10.0e-6 / 3.0
+    (cloud,) = [m for m in StageReader(str(tmp_path / "f.usda")).read_media(1.0) if m.species == "cloud"]
+    np.testing.assert_allclose(cloud.water, [peak, peak * 1000.0 * 1000.0 * 500.0], rtol=1e-5)

@@ -338,3 +338,27 @@ def test_options_change_the_optics_and_bad_values_exit_2(tmp_path, capsys):
                          (["--ice-radius", "-1"], "--ice-radius"), (["--graupel-density", "0"], "--graupel")):
         code, _, err = run_cli(["import-weather", path, "--out", tmp_path / "o", *bad], capsys)
         assert code == 2 and message in err and err.strip().count("\n") == 0, err
+
+
+def test_info_lists_each_species_water_as_the_import_recorded_it(tmp_path, capsys):
+    """The imported stage records each species' peak water content and total water (graupel with snow, as it
+    renders), and ``warpsky info`` prints them: mixing ratio x dry-air density, summed over cells of 1 km x 1 km x
+    500 m."""
+    shape = (1, 6, 5, 5)
+    qc, qr, qs, qg = (np.zeros(shape) for _ in range(4))
+    qc[0, 2, 1, 3], qc[0, 3, 1, 3] = 1.2e-3, 0.4e-3
+    qr[0, 0, 2, 2] = 2.0e-3
+    qs[0, 4, 0, 0], qg[0, 4, 0, 0] = 5.0e-4, 8.0e-4
+    path = _uniform_cm1(tmp_path, fields={"qc": qc, "qr": qr, "qs": qs, "qg": qg})
+    stage_path, _ = _import(tmp_path, capsys, path)
+    from warpsky.usd.stage import StageReader
+
+    rho, cell = _air_density(9.0e4, 300.0, 0.01), 1000.0 * 1000.0 * 500.0
+    water = {m.species: m.water for m in StageReader(str(stage_path)).read_media(None)}
+    np.testing.assert_allclose(water["cloud"], [1.2e-3 * rho, 1.6e-3 * rho * cell], rtol=1e-6)
+    np.testing.assert_allclose(water["rain"], [2.0e-3 * rho, 2.0e-3 * rho * cell], rtol=1e-6)
+    np.testing.assert_allclose(water["snow"], [1.3e-3 * rho, 1.3e-3 * rho * cell], rtol=1e-6)
+    code, out, err = run_cli(["info", stage_path, "--res", "32x32"], capsys)
+    assert code == 0, err
+    assert out.count("water content: peak") == 3
+    assert f"water content: peak {1.2e-3 * rho * 1e3:.3g} g/m³, {1.6e-3 * rho * cell / 1e3:.4g} t in all" in out

@@ -112,6 +112,10 @@ def cmd_info(args) -> int:
             f"{float(medium.density.max()):g}, albedo {_fmt3(medium.albedo)}, "
             + (f"{medium.species} phase table" if medium.species else repr(medium.phase))
         )
+        if medium.water is not None:
+            peak, total = medium.water
+            out.append(f"            water content: peak {peak * 1e3:.3g} g/m³, {total / 1e3:.4g} t in all (as its "
+                       "writer recorded it)")
         if medium.ice is not None and medium.ice.orientation != "random":
             ice = medium.ice
             out.append(f"            oriented ice: {ice.fraction:.3g} of the crystals {ice.habit}s falling as "

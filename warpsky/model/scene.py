@@ -170,6 +170,9 @@ class VoxelMedium:
         ice: How an ice field's crystals are oriented (:class:`IceCrystals`), or None (random orientation).
         velocity_source: The file of the Volume's velocity field ("" without one), which moves the density within
             a motion-blurred frame; a batch's resume hash includes it.
+        water: (peak water content [kg/m³], total water [kg]) of the field at this time as its writer recorded it
+            (``float warpsky:water:peak`` and ``double warpsky:water:total`` on the field, which ``warpsky simulate``
+            and ``warpsky import-weather`` author), or None; ``warpsky info`` prints it.
     """
 
     name: str
@@ -184,6 +187,7 @@ class VoxelMedium:
     detail: DetailSpec | None = None
     ice: IceCrystals | None = None
     velocity_source: str = ""
+    water: tuple[float, float] | None = None
 
     def __post_init__(self):
         if self.ice is not None and self.species != "ice":

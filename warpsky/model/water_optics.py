@@ -213,3 +213,20 @@ def species_extinction(contents: dict[str, np.ndarray], radii: dict[str, np.ndar
         beta = extinction(kind, content, radii.get(name), numbers.get(name))
         out[kind.species] = out[kind.species] + beta if kind.species in out else beta
     return out
+
+
+def species_water(contents: dict[str, np.ndarray], cell_volume: float,
+                  hydrometeors: dict[str, Hydrometeor] | None = None) -> dict[str, tuple[float, float]]:
+    """(peak water content [kg/m³], total water [kg]) per warpsky species, from water contents [kg/m³] per
+    hydrometeor name on cells of ``cell_volume`` [m³]; hydrometeors rendered as the same species (graupel and snow)
+    add, as their extinctions do in :func:`species_extinction`."""
+    table = HYDROMETEORS if hydrometeors is None else hydrometeors
+    summed: dict[str, np.ndarray] = {}
+    for name, content in contents.items():
+        if name not in table:
+            raise SceneError(f"unknown hydrometeor {name!r}; known: {', '.join(table)}")
+        species = table[name].species
+        content = np.asarray(content, dtype=np.float64)
+        summed[species] = summed[species] + content if species in summed else content
+    return {species: (float(grid.max(initial=0.0)), float(grid.sum() * cell_volume))
+            for species, grid in summed.items()}

@@ -27,7 +27,7 @@ import numpy as np
 
 from warpsky.core.errors import OutputError
 from warpsky.core.files import atomic_write
-from warpsky.model.water_optics import dry_air_density, water_content
+from warpsky.model.water_optics import dry_air_density, species_water, water_content
 from warpsky.simulate.shot import Shaft, author_shot, find_shaft, shot_sun
 from warpsky.usd.weather.weather_state import SPECIES_ORDER, WeatherState
 
@@ -112,6 +112,7 @@ class FrameWriter:
     shafts: list[Shaft] = field(default_factory=list)
     peaks: dict[str, float] = field(default_factory=dict)
     box: tuple[np.ndarray, np.ndarray] | None = None
+    water: list[dict[str, tuple[float, float]]] = field(default_factory=list)
 
     def write(self, state: WeatherState) -> dict[str, Path]:
         """The frame's grids, then the stage with every frame so far; the files written."""
@@ -133,6 +134,7 @@ class FrameWriter:
             lower, upper = np.minimum(lower, self.box[0]), np.maximum(upper, self.box[1])
         self.box = (lower, upper) if float(sum(g.max() for g in beta.values())) > 0.0 else self.box
         self.grids.append(files)
+        self.water.append(species_water(state.water, float(np.prod(state.spacing))))
         self.shafts.append(find_shaft(beta, state.origin, state.spacing))
         self._write_stage(state)
         return files
@@ -149,7 +151,7 @@ class FrameWriter:
         tmp = self.stage.with_name(f".{self.stage.stem}.tmp.usda")
         try:
             author_stage(tmp, [state], self.grids, codes, 1.0 / self.seconds_per_frame, framing=box, sun=self.sun,
-                         resolution=self.resolution, doc=doc)
+                         resolution=self.resolution, doc=doc, water=self.water)
             author_shot(tmp, self.shafts, codes, self.sun)
             os.replace(tmp, self.stage)
         except OSError as exc:

@@ -141,7 +141,7 @@ class VolumeReading(StagePrims):
                 media.append(VoxelMedium(
                     f"{path}:{name}" if species else path, values, volume_world @ local_from_index, scale,
                     albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi, detail,
-                    ice, self._velocity_source(fields, tc),
+                    ice, self._velocity_source(fields, tc), self._water(field_prim, tc),
                 ))
             except SceneError as exc:
                 raise SceneError(f"Volume {path}: {exc}") from None
@@ -184,6 +184,13 @@ class VolumeReading(StagePrims):
         if velocity.size == 0:
             return values, local_from_index
         return advected_grid(values, local_from_index, velocity * np.float32(scale), vel_from_index, seconds)
+
+    def _water(self, field_prim, tc) -> tuple[float, float] | None:
+        """(peak [kg/m³], total [kg]) a field's writer recorded (``warpsky:water:peak``, ``warpsky:water:total``),
+        or None."""
+        peak = self._float_attr(field_prim, "warpsky:water:peak", tc, math.nan)
+        total = self._float_attr(field_prim, "warpsky:water:total", tc, math.nan)
+        return None if math.isnan(peak) or math.isnan(total) else (peak, total)
 
     def _velocity_source(self, fields: dict, tc) -> str:
         """The resolved file of the Volume's velocity field at ``tc`` ("" without one or when it does not resolve)."""

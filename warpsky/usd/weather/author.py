@@ -4,7 +4,8 @@ The stage (``upAxis = "Z"``, metres: x east, y north, z up, the models' own axes
 
 - ``/World/Weather``: a Volume with ``field:cloud``, ``field:rain``, ``field:ice``, ``field:snow`` (those with water
   at some time), each an OpenVDBAsset whose grid is the species' extinction coefficient [1/m]
-  (``warpsky:extinctionScale = 1``; :mod:`warpsky.model.water_optics` converts the water), and ``field:velocity``
+  (``warpsky:extinctionScale = 1``; :mod:`warpsky.model.water_optics` converts the water; ``warpsky:water:peak``
+  [kg/m³] and ``warpsky:water:total`` [kg], time-sampled, record the water it holds), and ``field:velocity``
   (a Vec3f grid [m/s]) when the files give the wind: the velocity blur of a frame rendered with an open shutter.
   Several times become time samples of every ``filePath`` (time code 1 at the first time, one time code per
   shortest interval between times, ``timeCodesPerSecond`` = 1 / that interval: a time-lapse of model seconds);
@@ -28,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from warpsky.core.errors import OutputError
+from warpsky.model.water_optics import species_water
 from warpsky.usd.weather.weather_state import SPECIES_ORDER, WeatherState
 from warpsky.usd.weather.weather_usd import author_stage
 
@@ -144,8 +146,9 @@ def write_weather_stage(states: list[WeatherState], out: Path, *, name: str = "w
     grids, peaks, betas = write_grids(states, out / name, hydrometeors)
     stage_path = out / f"{name}.usda"
     codes, per_second = time_codes([s.time for s in states])
+    water = [species_water(s.water, float(np.prod(s.spacing)), hydrometeors) for s in states]
     author_stage(stage_path, states, grids, codes, per_second, framing=framing(states, betas), sun=sun,
-                 resolution=resolution, doc=_documentation(states, peaks, sources or []))
+                 resolution=resolution, doc=_documentation(states, peaks, sources or []), water=water)
     return ImportedWeather(stage_path, grids, peaks, [s.time for s in states])
 
 

@@ -40,8 +40,10 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
 
 def author_stage(path: Path, states: list[WeatherState], grids: list[dict[str, Path]], codes: list[float],
                  per_second: float, *, framing, sun: tuple[float, float], resolution: tuple[int, int],
-                 doc: str) -> Path:
-    """Write the stage at ``path`` referencing ``grids`` (per state: field -> file) at time ``codes``."""
+                 doc: str, water: list[dict[str, tuple[float, float]]] | None = None) -> Path:
+    """Write the stage at ``path`` referencing ``grids`` (per state: field -> file) at time ``codes``; ``water``
+    (per code: species -> (peak [kg/m³], total [kg]), :func:`~warpsky.model.water_optics.species_water`) is
+    authored on each species' field as ``warpsky:water:peak`` and ``warpsky:water:total``."""
     from pxr import Sdf, Usd, UsdGeom
 
     stage = Usd.Stage.CreateInMemory()
@@ -55,7 +57,7 @@ def author_stage(path: Path, states: list[WeatherState], grids: list[dict[str, P
     world = UsdGeom.Xform.Define(stage, "/World")
     stage.SetDefaultPrim(world.GetPrim())
     ground = min(float(s.terrain.height.min()) if s.terrain is not None else 0.0 for s in states)
-    _volume(stage, path, grids, codes)
+    _volume(stage, path, grids, codes, water)
     _camera(stage, framing, ground)
     _sun(stage, sun)
     atmosphere = stage.DefinePrim("/World/Atmosphere", "Scope")
@@ -71,8 +73,9 @@ def author_stage(path: Path, states: list[WeatherState], grids: list[dict[str, P
     return path
 
 
-def _volume(stage, path: Path, grids: list[dict[str, Path]], codes: list[float]) -> None:
-    """/World/Weather: one OpenVDBAsset per species (and the velocity), filePath time-sampled."""
+def _volume(stage, path: Path, grids: list[dict[str, Path]], codes: list[float], water=None) -> None:
+    """/World/Weather: one OpenVDBAsset per species (and the velocity), filePath time-sampled (and each species'
+    water, when given)."""
     from pxr import Sdf, UsdVol
 
     volume = UsdVol.Volume.Define(stage, "/World/Weather")
@@ -88,6 +91,12 @@ def _volume(stage, path: Path, grids: list[dict[str, Path]], codes: list[float])
         else:
             asset.CreateFieldDataTypeAttr("float")
             asset.GetPrim().CreateAttribute("warpsky:extinctionScale", Sdf.ValueTypeNames.Float).Set(1.0)
+            if water is not None:
+                peak = asset.GetPrim().CreateAttribute("warpsky:water:peak", Sdf.ValueTypeNames.Float)
+                total = asset.GetPrim().CreateAttribute("warpsky:water:total", Sdf.ValueTypeNames.Double)
+                for code, amounts in zip(codes, water, strict=True):
+                    peak.Set(amounts.get(field, (0.0, 0.0))[0], code)
+                    total.Set(amounts.get(field, (0.0, 0.0))[1], code)
         volume.CreateFieldRelationship(field, asset.GetPath())
 
 
