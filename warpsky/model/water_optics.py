@@ -189,6 +189,13 @@ def extinction(hydrometeor: Hydrometeor, content: np.ndarray, effective_radius: 
     return np.where(n > 0.0, two_moment, beta)
 
 
+def _hydrometeor(table: dict[str, Hydrometeor], name: str) -> Hydrometeor:
+    """``table``'s category ``name``, or a SceneError naming the known ones."""
+    if name not in table:
+        raise SceneError(f"unknown hydrometeor {name!r}; known: {', '.join(table)}")
+    return table[name]
+
+
 def species_extinction(contents: dict[str, np.ndarray], radii: dict[str, np.ndarray] | None = None,
                        hydrometeors: dict[str, Hydrometeor] | None = None,
                        numbers: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
@@ -207,9 +214,7 @@ def species_extinction(contents: dict[str, np.ndarray], radii: dict[str, np.ndar
     radii, numbers = radii or {}, numbers or {}
     out: dict[str, np.ndarray] = {}
     for name, content in contents.items():
-        if name not in table:
-            raise SceneError(f"unknown hydrometeor {name!r}; known: {', '.join(table)}")
-        kind = table[name]
+        kind = _hydrometeor(table, name)
         beta = extinction(kind, content, radii.get(name), numbers.get(name))
         out[kind.species] = out[kind.species] + beta if kind.species in out else beta
     return out
@@ -223,9 +228,7 @@ def species_water(contents: dict[str, np.ndarray], cell_volume: float,
     table = HYDROMETEORS if hydrometeors is None else hydrometeors
     summed: dict[str, np.ndarray] = {}
     for name, content in contents.items():
-        if name not in table:
-            raise SceneError(f"unknown hydrometeor {name!r}; known: {', '.join(table)}")
-        species = table[name].species
+        species = _hydrometeor(table, name).species
         content = np.asarray(content, dtype=np.float64)
         summed[species] = summed[species] + content if species in summed else content
     return {species: (float(grid.max(initial=0.0)), float(grid.sum() * cell_volume))

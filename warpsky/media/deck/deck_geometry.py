@@ -294,6 +294,19 @@ def eye_polynomial(clouds: CloudDeck, eye_xz: np.ndarray) -> np.ndarray:
     return np.array([value, cx + 2 * cxx * ex + cxz * ez, cz + cxz * ex + 2 * czz * ez, cxx, cxz, czz])
 
 
+def wave_table(clouds: CloudDeck, about_xz, time_s: float) -> np.ndarray:
+    """(waves, 4) float64 rows (kx, kz [rad/m], amplitude [m], phase [rad]) of ``clouds``' waves at ``time_s`` [s],
+    their phases taken about world (x, z) ``about_xz`` [m] (so that offsets from that point enter the sines small);
+    one row of zeros without waves."""
+    k = np.asarray(clouds.wave_vectors, dtype=np.float64).reshape(-1, 2)
+    if not len(k):
+        return np.zeros((1, 4))
+    ex, ez = float(about_xz[0]) - clouds.origin[0], float(about_xz[1]) - clouds.origin[1]
+    phases = np.mod(np.asarray(clouds.phases) + k[:, 0] * ex + k[:, 1] * ez - np.asarray(clouds.speeds) * time_s,
+                    2.0 * math.pi)
+    return np.column_stack([k, clouds.amplitudes, phases])
+
+
 def deck_struct(clouds: CloudDeck, camera_position, time_s: float, device, *,
                        max_length: float = 1.0e6) -> HeightField:
     """Kernel view of ``clouds`` at ``time_s`` [s] seen from ``camera_position`` (world [m], float64); sun rays
@@ -301,15 +314,11 @@ def deck_struct(clouds: CloudDeck, camera_position, time_s: float, device, *,
     :func:`feature_length`, crossings bisected to 1e-3 of that."""
     eye = np.asarray(camera_position, dtype=np.float64)
     poly = eye_polynomial(clouds, eye[[0, 2]])
-    k = clouds.wave_vectors
-    ex, ez = eye[0] - clouds.origin[0], eye[2] - clouds.origin[1]
-    phases = np.mod(clouds.phases + k[:, 0] * ex + k[:, 1] * ez - clouds.speeds * time_s, 2.0 * math.pi)
-    waves = np.column_stack([k, clouds.amplitudes, phases]) if len(k) else np.zeros((1, 4))
     out = HeightField()
     out.poly_linear = wp.vec3(*poly[:3].tolist())
     out.poly_quadratic = wp.vec3(*poly[3:].tolist())
-    out.waves = wp.array(waves.astype(np.float32), dtype=wp.vec4, device=device)
-    out.wave_count = int(len(k))
+    out.waves = wp.array(wave_table(clouds, eye[[0, 2]], time_s).astype(np.float32), dtype=wp.vec4, device=device)
+    out.wave_count = int(len(clouds.wave_vectors))
     out.cap = float(min(clouds.pattern_cap, 1.0e30))
     out.mean = float(clouds.mean_altitude - eye[1])
     out.rounding = float(clouds.rounding)

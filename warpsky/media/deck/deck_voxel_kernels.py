@@ -68,20 +68,15 @@ def deck_fractions_kernel(c: DeckColumns, out: wp.array3d(dtype=float), row_offs
 def deck_columns(clouds, grid, time_s: float, supersample: int, device) -> DeckColumns:
     """The kernel's view of ``clouds`` at ``time_s`` [s] over ``grid`` (a
     :class:`~warpsky.media.stratiform.stratiform_voxels.ColumnGrid`), the pattern re-expanded about its centre."""
-    from warpsky.media.deck.deck_geometry import eye_polynomial
+    from warpsky.media.deck.deck_geometry import eye_polynomial, wave_table
 
     nx, ny, nz = grid.shape
     s = int(supersample)
     centre = np.array([grid.origin[0] + 0.5 * nx * grid.width[0], grid.origin[1] + 0.5 * nz * grid.width[1]])
-    k = np.asarray(clouds.wave_vectors, dtype=np.float64).reshape(-1, 2)
-    cx, cz = centre[0] - clouds.origin[0], centre[1] - clouds.origin[1]
-    phases = np.mod(np.asarray(clouds.phases) + k[:, 0] * cx + k[:, 1] * cz - np.asarray(clouds.speeds) * time_s,
-                    2.0 * np.pi)
-    waves = np.column_stack([k, clouds.amplitudes, phases]).reshape(-1) if len(k) else np.zeros(4)
     c = DeckColumns()
     c.poly = wp.array(eye_polynomial(clouds, centre).astype(np.float64), dtype=wp.float64, device=device)
-    c.waves = wp.array(waves.astype(np.float64), dtype=wp.float64, device=device)
-    c.wave_count = int(len(k))
+    c.waves = wp.array(wave_table(clouds, centre, time_s).reshape(-1), dtype=wp.float64, device=device)
+    c.wave_count = int(len(clouds.wave_vectors))
     c.cap = wp.float64(min(clouds.pattern_cap, 1.0e300))
     c.rounding = wp.float64(clouds.rounding)
     c.bottom_depth = wp.float64(clouds.bottom_depth)

@@ -95,8 +95,9 @@ def _volume(stage, path: Path, grids: list[dict[str, Path]], codes: list[float],
                 peak = asset.GetPrim().CreateAttribute("warpsky:water:peak", Sdf.ValueTypeNames.Float)
                 total = asset.GetPrim().CreateAttribute("warpsky:water:total", Sdf.ValueTypeNames.Double)
                 for code, amounts in zip(codes, water, strict=True):
-                    peak.Set(amounts.get(field, (0.0, 0.0))[0], code)
-                    total.Set(amounts.get(field, (0.0, 0.0))[1], code)
+                    most, whole = amounts.get(field, (0.0, 0.0))
+                    peak.Set(most, code)
+                    total.Set(whole, code)
         volume.CreateFieldRelationship(field, asset.GetPath())
 
 
