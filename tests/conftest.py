@@ -159,6 +159,15 @@ def homogeneous_npy(tmp_path) -> Path:
     return path
 
 
+def image_sum_sigma(variance: np.ndarray) -> float:
+    """Standard deviation of an RGB image's sum from its per-pixel, per-channel variances: pixels are independent,
+    but a path carries all three channels, so they are taken as fully correlated (exact for a grey medium, whose
+    channels are equal, and an upper bound otherwise). Summing the variances instead understates it by up to
+    sqrt(3): over 40 seeds the image sum's spread was 1.7x what the plain sum of variances claimed."""
+    sigma = np.sqrt(np.maximum(np.asarray(variance, dtype=np.float64), 0.0))
+    return float(np.sqrt((sigma.sum(axis=-1) ** 2).sum()))
+
+
 def render_layer(stage_path: Path, device: str, width: int, height: int, *, time=None, **settings):
     """Render a stage with the single-scattering technique; returns (scene, layer)."""
     from warpsky.render.plan import make_plan
