@@ -10,7 +10,7 @@ import pytest
 from warpsky.simulate.solver import CloudSolver, SimulationSettings
 from warpsky.simulate.sounding import weisman_klemp
 
-G, RD, RV, CP, LV, P0 = 9.81, 287.04, 461.5, 1005.7, 2.501e6, 1.0e5
+G, RD, RV, CP, LV, LF, P0 = 9.81, 287.04, 461.5, 1005.7, 2.501e6, 3.337e5, 1.0e5
 EPS = RD / RV
 #: Condensate that counts as cloud [kg/kg].
 CLOUDY = 1.0e-5
@@ -50,19 +50,22 @@ def environment(sounding, top=20000.0, dz=10.0):
 
 def equilibrium_level(sounding) -> float:
     """Height [m] of the highest level where the surface parcel, lifted pseudo-adiabatically (its condensate
-    dropped), is warmer in θ_v than the environment."""
+    dropped), is warmer in θ_v than the environment. What condenses at temperature T releases L_v + f L_f, f the
+    frozen share (1 below -20 C, 0 above 0 C, linear between; deposition where it is all ice), as the solver's
+    adjustment does: condensate formed cold is ice."""
     z, _, _, theta_v_env, exner = environment(sounding)
     theta, vapour = sounding.surface_theta, sounding.surface_vapour
     buoyant = np.zeros(len(z), bool)
     for n in range(len(z)):
         p, t = P0 * exner[n] ** (CP / RD), theta * exner[n]
+        latent = LV + LF * np.clip((273.15 - t) / 20.0, 0.0, 1.0)
         if vapour > saturation(t, p):
             condensed = 0.0
             for _ in range(6):  # Newton on q_v - δ = q_s(T + L δ / c_p)
-                tt = t + LV / CP * condensed
+                tt = t + latent / CP * condensed
                 qs = saturation(tt, p)
-                condensed += (vapour - condensed - qs) / (1 + LV / CP * qs * 17.67 * 243.5 / (tt - 29.65) ** 2)
-            theta += LV / (CP * exner[n]) * condensed
+                condensed += (vapour - condensed - qs) / (1 + latent / CP * qs * 17.67 * 243.5 / (tt - 29.65) ** 2)
+            theta += latent / (CP * exner[n]) * condensed
             vapour -= condensed
         buoyant[n] = theta * (1 + vapour / EPS) / (1 + vapour) > theta_v_env[n]
     return float(z[np.nonzero(buoyant)[0].max()])
@@ -89,7 +92,8 @@ def cloudy_levels(fields) -> np.ndarray:
 
 def test_parcel_theory_of_the_sounding():
     """The independent references themselves: Weisman & Klemp's surface parcel condenses near 1 km and is buoyant
-    up to about 11.5 km (their CAPE of about 2200 J/kg tops out under the 12 km tropopause)."""
+    up to about 12 km (their CAPE of about 2200 J/kg tops out under the 12 km tropopause: 11.5 km without the
+    fusion heat, 11.96 km with it)."""
     assert 900.0 < bolton_lcl(weisman_klemp()) < 1100.0
     assert 10500.0 < equilibrium_level(weisman_klemp()) < 12000.0
 

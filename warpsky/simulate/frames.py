@@ -9,7 +9,8 @@ z up; ``upAxis = "Z"``): its z is north. The water becomes extinction through
 
 The solver has one condensate and one precipitation category; the frames split both by temperature: condensate
 is droplets above 0 C and ice below -20 C, linearly between (the partition of the ice-phase mixed layer in,
-e.g., Lord et al. 1984's saturation adjustment), and precipitation is rain or snow by the same weights.
+e.g., Lord et al. 1984's saturation adjustment), and precipitation is rain or snow by the same weights. The
+solver's fall speeds, cold rates and latent heat use the same partition (:func:`.kernels_water.frozen_share`).
 
 Each grid is written to a temporary file and renamed, and the stage is written (the same way) after each frame
 with every frame so far: a run stopped part way leaves a stage of the frames it finished. The stage's default
@@ -146,7 +147,7 @@ class FrameWriter:
         box = self.box or (state.origin, state.origin + state.spacing * (np.array(state.shape) - 1))
         peaks = ", ".join(f"{k} {v:.3g} 1/m" for k, v in self.peaks.items())
         doc = (f"warpsky simulate: {len(self.grids)} frame(s), {self.seconds_per_frame:g} s of storm life apart "
-               f"(anelastic cloud solver with Kessler warm rain; extinction by warpsky.model.water_optics; peaks: "
+               f"(anelastic cloud solver with Kessler rain and snow; extinction by warpsky.model.water_optics; peaks: "
                f"{peaks}).")
         tmp = self.stage.with_name(f".{self.stage.stem}.tmp.usda")
         try:

@@ -1,10 +1,11 @@
 """The cloud solver: the state on the device and one time step of it (Harris et al. 2003's loop, anelastic and with
-Kessler microphysics).
+Kessler microphysics and a temperature-partitioned ice phase).
 
 A step of ``dt`` seconds: carry θ, q_v, q_c and q_r by conservative fluxes (:mod:`.kernels_transport`) and the
 velocity semi-Lagrangian (:mod:`.kernels_flow`); add
-buoyancy and vorticity confinement and damp in the sponge; project (:mod:`.pressure`); then Kessler warm rain,
-saturation adjustment and the rain's fall (:mod:`.kernels_water`).
+buoyancy and vorticity confinement and damp in the sponge; project (:mod:`.pressure`); then Kessler rain (with the cold
+rates of cloud ice), saturation adjustment (with the heat of deposition where it is cold) and the precipitation's
+fall, rain's or snow's by temperature (:mod:`.kernels_water`).
 """
 
 from __future__ import annotations
