@@ -7,7 +7,7 @@ anvil is ice cloud spreading at and below the tropopause much wider than the upd
 mid band's (ratio > 2 by 30-40 minutes).
 
 Run:  python evaluation/scripts/storm_anvil.py [--grid 128x128x64] [--dx 500] [--dy 250] [--frames 48]
-          [--minutes 40] [--every 6] [--json out/anvil/run.json]
+          [--minutes 40] [--every 6] [--sponge 3000] [--json out/anvil/run.json]
 
 The stepping is ``warpsky simulate``'s: ``--frames`` equal intervals over ``--minutes``, each run by
 ``CloudSolver.run`` (so the figures are those of the frames a default run writes).
@@ -70,6 +70,7 @@ def main(argv=None) -> int:
     parser.add_argument("--grid", default="128x128x64", help="NXxNZxNY columns and levels (warpsky simulate's)")
     parser.add_argument("--dx", type=float, default=500.0)
     parser.add_argument("--dy", type=float, default=250.0)
+    parser.add_argument("--sponge", type=float, default=None, help="sponge depth [m] (default: the solver's)")
     parser.add_argument("--frames", type=int, default=48)
     parser.add_argument("--minutes", type=float, default=40.0)
     parser.add_argument("--every", type=int, default=6, help="report every this many frames (and the last)")
@@ -83,10 +84,12 @@ def main(argv=None) -> int:
 
     wp.config.quiet = True
     nx, nz, ny = (int(v) for v in args.grid.lower().split("x"))
-    settings = SimulationSettings(nx=nx, ny=ny, nz=nz, dx=args.dx, dy=args.dy)
+    sponge = {} if args.sponge is None else {"sponge_depth": args.sponge}
+    settings = SimulationSettings(nx=nx, ny=ny, nz=nz, dx=args.dx, dy=args.dy, **sponge)
     solver = CloudSolver(weisman_klemp(), settings, "cpu")
     started = time.perf_counter()
-    print(f"grid {nx}x{nz}x{ny}, dx {args.dx:g} m, dy {args.dy:g} m, lid {settings.height / 1000:g} km; areas "
+    print(f"grid {nx}x{nz}x{ny}, dx {args.dx:g} m, dy {args.dy:g} m, lid {settings.height / 1000:g} km, sponge from "
+          f"{(settings.height - settings.sponge_depth) / 1000:g} km; areas "
           f"[km^2] of condensate > {THRESHOLD * 1000:g} g/kg", flush=True)
     print(" min   low 2-4  mid 5-7  anvil 9-12  top 12+  anvil/mid  top km  w max  precip>5km g/kg", flush=True)
     reports = []
