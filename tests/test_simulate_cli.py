@@ -29,10 +29,13 @@ def test_simulate_writes_frames_and_a_stage_that_renders(tmp_path, capsys):
     assert "/World/Weather:cloud" in info and "RainbowCam" in info
 
 
-def test_a_frame_holds_the_solvers_wind_on_meteorological_axes_around_the_media(tmp_path):
+@pytest.mark.parametrize("speed", [(0.0, 0.0), (4.0, -2.0)])
+def test_a_frame_holds_the_solvers_wind_on_meteorological_axes_around_the_media(tmp_path, speed):
     """The solver's (x, up, z) fields become the stage's (east, north, up) grids: a cloud blob at solver cell
     (5, 3, 7) is at east 5, north 7, level 3 in the cloud grid, and the velocity file holds (u, v, w) = the solver's
-    (x, z, up) components within 2 cells of the blob and nothing far from it (the sparse velocity grid)."""
+    (x, z, up) components within 2 cells of the blob and nothing far from it (the sparse velocity grid). On a grid
+    moving at (u, v) along (x, z) the frame at t = 60 s lies (60 u, 60 v) further on and its wind is the solver's
+    plus (u, v)."""
     from warpsky.media.voxels.fields import load_field, load_vector_field
     from warpsky.simulate.frames import FrameWriter, weather_state
     from warpsky.simulate.sounding import base_state, weisman_klemp
@@ -44,16 +47,18 @@ def test_a_frame_holds_the_solvers_wind_on_meteorological_axes_around_the_media(
               "cloud": np.zeros(shape), "rain": np.zeros(shape)}
     fields["cloud"][5, 3, 7] = 1.0e-3
     fields["velocity"] = np.broadcast_to(np.array([1.0, 2.0, 3.0], np.float32), (*shape, 3)).copy()
-    state = weather_state(fields, base, (1000.0, 500.0), 60.0)
+    state = weather_state(fields, base, (1000.0, 500.0), 60.0, speed)
     FrameWriter(tmp_path / "f", tmp_path / "f.usda", 60.0).write(state)
     cloud = load_field(tmp_path / "f" / "cloud.0001.nvdb")
     lit = np.argwhere(cloud.values > 0.0)
     assert len(lit) == 1
     centre = cloud.local_from_index @ np.r_[lit[0], 1.0]
-    np.testing.assert_allclose(centre[:3], [500.0, 1500.0, 1750.0])  # east 5.5 - 5 km, north 7.5 - 6 km, 3.5 levels
+    moved = [60.0 * speed[0], 60.0 * speed[1], 0.0]
+    np.testing.assert_allclose(centre[:3], np.add([500.0, 1500.0, 1750.0], moved))  # east 5.5 - 5, north 7.5 - 6 km
     velocity = load_vector_field(tmp_path / "f" / "velocity.0001.nvdb")
     moving = np.argwhere(np.linalg.norm(velocity.values, axis=-1) > 0.0)
-    np.testing.assert_allclose(velocity.values[tuple(moving.T)], np.tile([1.0, 3.0, 2.0], (len(moving), 1)))
+    wind = [1.0 + speed[0], 3.0 + speed[1], 2.0]
+    np.testing.assert_allclose(velocity.values[tuple(moving.T)], np.tile(wind, (len(moving), 1)), rtol=1e-6)
     spread = np.abs(moving - lit[0]).max(axis=0)
     np.testing.assert_array_equal(spread, [2, 2, 2])
 
@@ -88,7 +93,8 @@ def test_a_failed_frame_keeps_the_finished_ones(tmp_path, monkeypatch):
 @pytest.mark.parametrize("args, message", [(["--grid", "12x12"], "--grid takes"),
                                            (["--grid", "4x12x12"], "at least 8 cells"),
                                            (["--frames", "0"], "--frames must be"),
-                                           (["--dz", "2000"], "the sounding ends at")])
+                                           (["--dz", "2000"], "the sounding ends at"),
+                                           (["--domain-speed", "10"], "--domain-speed takes U,V")])
 def test_bad_arguments_exit_2_naming_them(tmp_path, capsys, args, message):
     assert main(["simulate", *SMALL, *args, "--out", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err

@@ -88,7 +88,8 @@ def test_a_run_repeats_bit_for_bit_for_its_seed(monkeypatch):
 
 
 @pytest.mark.parametrize("bad, message", [({"nx": 4}, "at least 8"), ({"dx": 1.0}, "dx must be"),
-                                          ({"time_step": 0.0}, "time step"), ({"tolerance": 2.0}, "tolerance")])
+                                          ({"time_step": 0.0}, "time step"), ({"tolerance": 2.0}, "tolerance"),
+                                          ({"domain_speed": (1.0, float("nan"))}, "domain's speed")])
 def test_settings_refuse_bad_values(bad, message):
     from warpsky.core.errors import UsageError
 
@@ -109,3 +110,19 @@ def test_kernels_compile_to_sm_90_ptx(tmp_path):
         text = next(p for p in paths if p.endswith(".ptx"))
         assert ".target sm_90" in open(text).read()
     wp.synchronize()
+
+
+def test_the_grid_moves_with_the_mean_wind_of_the_lowest_6_km():
+    """Weisman & Klemp's u = 15 tanh(z / 3 km): its mean over 0-6 km is 15 (3/6) ln cosh 2 = 9.9375 m/s (the
+    solver's 24 levels of 250 m, a midpoint rule, within 0.01), and the solver takes the environment's wind less
+    it, so the sponge relaxes to the relative wind."""
+    settings = SimulationSettings(nx=8, ny=32, nz=8, dx=1000.0, dy=250.0)
+    solver = CloudSolver(weisman_klemp(), settings, "cpu")
+    assert solver.domain_speed[0] == pytest.approx(7.5 * np.log(np.cosh(2.0)), abs=0.01)
+    assert solver.domain_speed[1] == 0.0
+    heights = (np.arange(32) + 0.5) * 250.0
+    np.testing.assert_allclose(solver.base.wind_u, 15.0 * np.tanh(heights / 3000.0) - solver.domain_speed[0],
+                               atol=0.05)
+    still = CloudSolver(weisman_klemp(), SimulationSettings(nx=8, ny=32, nz=8, dx=1000.0, dy=250.0,
+                                                            domain_speed=(0.0, 0.0)), "cpu")
+    np.testing.assert_allclose(still.base.wind_u - solver.base.wind_u, solver.domain_speed[0], atol=1e-9)

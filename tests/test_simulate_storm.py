@@ -109,13 +109,28 @@ def test_cloud_base_is_at_the_lifting_condensation_level(storm):
 
 
 def test_tower_top_reaches_the_equilibrium_level(storm):
-    """The tower's highest top (the centre of the highest cloudy level, over the samples) lies within 1 km of the
-    surface parcel's equilibrium level, and it got there growing (under 6 km at 9 minutes)."""
+    """The tower's top (the centre of the highest cloudy level) once it stands, the median over the last three
+    samples (21-27 minutes), lies within 1 km of the surface parcel's equilibrium level, and it got there growing
+    (under 6 km at 9 minutes). A top overshoots the level it is buoyant to by its updraft's momentum: on the moving
+    grid one sample's top reached 1.3 km above it (13.25 km at 21 minutes), a fixed grid's 0.8 km."""
     solver, samples = storm
     tops = [(cloudy_levels(f).max() + 0.5) * solver.settings.dy if len(cloudy_levels(f)) else 0.0 for f in samples]
     level = equilibrium_level(weisman_klemp())
-    assert abs(max(tops) - level) <= 1000.0, (tops, level)
+    assert abs(float(np.median(tops[-3:])) - level) <= 1000.0, (tops, level)
     assert tops[3] < 6000.0
+
+
+def test_anvil_spreads_at_the_equilibrium_level(storm):
+    """At 27 minutes the cloud is widest, above 6 km, within 1 km of the surface parcel's equilibrium level: the
+    updraft's air spreads where it stops being buoyant. (On a grid that does not move with the storm, which then
+    crosses its 24 km periodic domain in 27 minutes, it spread at 9.25-10.25 km, 1.7-2.7 km under the level.)"""
+    solver, samples = storm
+    cloudy = samples[-1]["cloud"] > CLOUDY
+    heights = (np.arange(cloudy.shape[1]) + 0.5) * solver.settings.dy
+    area = np.where(heights > 6000.0, cloudy.sum(axis=(0, 2)), -1)
+    assert area.max() > 0
+    widest = float(heights[int(np.argmax(area))])
+    assert abs(widest - equilibrium_level(weisman_klemp())) <= 1000.0, widest
 
 
 def test_total_water_is_conserved(storm):

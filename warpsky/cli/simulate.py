@@ -37,6 +37,16 @@ def _grid(text: str) -> tuple[int, int, int]:
     return nx, ny, nz
 
 
+def _speed(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        u, v = (float(value) for value in text.split(","))
+    except ValueError:
+        raise UsageError(f"--domain-speed takes U,V in m/s (e.g. 10,0), got {text!r}") from None
+    return u, v
+
+
 def add_parser(sub) -> None:
     import argparse
 
@@ -54,6 +64,10 @@ def add_parser(sub) -> None:
     cmd.add_argument("--minutes", type=float, default=40.0, help="minutes of storm life to simulate (default 40)")
     cmd.add_argument("--time-step", type=float, default=10.0, metavar="S", help="longest time step [s] (default 10)")
     cmd.add_argument("--seed", type=int, default=1, help="seed of the bubble's small random perturbation")
+    cmd.add_argument("--domain-speed", default=None, metavar="U,V",
+                     help="the grid's motion [m/s] along x and y: the solver takes the wind relative to it and the "
+                     "frames move with it, so the storm stays in the periodic domain (default: the mean wind of "
+                     "the lowest 6 km; 0,0 keeps the grid still)")
     cmd.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder for the stage and its grids")
     cmd.add_argument("--name", default="storm", help="stage name: DIR/NAME.usda and DIR/NAME/ (default storm)")
     cmd.add_argument("--device", default="auto", help="cpu, cuda, cuda:N or auto (default: CUDA when present)")
@@ -68,7 +82,7 @@ def cmd_simulate(args) -> int:
 
     nx, ny, nz = _grid(args.grid)
     settings = SimulationSettings(nx=nx, ny=ny, nz=nz, dx=args.dx, dy=args.dz, time_step=args.time_step,
-                                  seed=args.seed)
+                                  seed=args.seed, domain_speed=_speed(args.domain_speed))
     sounding = read_sounding(args.sounding) if args.sounding else weisman_klemp()
     if sounding.height[-1] < settings.height:
         raise UsageError(f"the sounding ends at {sounding.height[-1]:g} m, under the grid's top "

@@ -46,9 +46,11 @@ def ice_fraction(temperature: np.ndarray) -> np.ndarray:
     return np.clip((ALL_LIQUID - temperature) / (ALL_LIQUID - ALL_ICE), 0.0, 1.0)
 
 
-def weather_state(fields: dict[str, np.ndarray], base, spacing: tuple[float, float], time: float) -> WeatherState:
+def weather_state(fields: dict[str, np.ndarray], base, spacing: tuple[float, float], time: float,
+                  domain_speed: tuple[float, float] = (0.0, 0.0)) -> WeatherState:
     """One frame of the solver (``CloudSolver.fields()``, its ``base`` state, (dx, dy) [m]) as a WeatherState
-    (water contents [kg/m^3] on meteorological axes)."""
+    (water contents [kg/m^3] on meteorological axes), where a grid moving at ``domain_speed`` (u, v) [m/s] along
+    the solver's +x and +z has moved to by ``time`` [s], with that speed added to its wind."""
     dx, dy = spacing
     nx, ny, nz = fields["theta"].shape
     pressure = base.pressure[None, :, None]
@@ -63,8 +65,9 @@ def weather_state(fields: dict[str, np.ndarray], base, spacing: tuple[float, flo
     def met(grid):  # (x, up, z) -> (x, north, up)
         return np.ascontiguousarray(np.swapaxes(grid, 1, 2))
 
-    velocity = fields["velocity"][..., [0, 2, 1]]
-    origin = ((0.5 - 0.5 * nx) * dx, (0.5 - 0.5 * nz) * dx, 0.5 * dy)
+    u, v = domain_speed
+    velocity = fields["velocity"][..., [0, 2, 1]] + np.array([u, v, 0.0], dtype=np.float32)
+    origin = ((0.5 - 0.5 * nx) * dx + u * time, (0.5 - 0.5 * nz) * dx + v * time, 0.5 * dy)
     return WeatherState(source="warpsky simulate", time=float(time), label=f"t={time:.0f}s", origin=origin,
                         spacing=(dx, dx, dy), water={name: met(grid) for name, grid in contents.items()},
                         velocity=met(velocity).astype(np.float32))

@@ -50,6 +50,8 @@ def simulate(sounding: Sounding, settings: SimulationSettings, *, frames: int, m
         solver = CloudSolver(sounding, settings, device)
         writer = FrameWriter(out / name, out / f"{name}.usda", seconds_per_frame)
         water_start = solver.water_total()
+        progress(f"simulate: the grid moves at {solver.domain_speed[0]:.1f}, {solver.domain_speed[1]:.1f} m/s "
+                 "(along x, along y) with the storm")
         last_line = [time.perf_counter()]
 
         def report(s: CloudSolver) -> None:
@@ -63,7 +65,8 @@ def simulate(sounding: Sounding, settings: SimulationSettings, *, frames: int, m
         for frame in range(1, frames + 1):
             solver.run(seconds_per_frame, callback=report)
             fields = solver.fields()
-            writer.write(weather_state(fields, solver.base, (settings.dx, settings.dy), solver.time))
+            writer.write(weather_state(fields, solver.base, (settings.dx, settings.dy), solver.time,
+                                       solver.domain_speed))
             top = _cloud_top(fields, settings.dy)
             progress(f"simulate: frame {frame}/{frames} at {solver.time / 60.0:.1f} min written "
                      f"(cloud top {top / 1000.0:.1f} km, {format_seconds(time.perf_counter() - started)})")
