@@ -11,9 +11,10 @@ DESCRIPTION = """\
 Simulate a thunderstorm cell and write it for rendering: an anelastic cloud solver in Warp kernels (on a MAC grid:
 semi-Lagrangian velocity, conservative flux transport of heat and water, buoyancy with condensate loading, vorticity
 confinement, a pressure projection by preconditioned conjugate gradients, a sponge under the lid; after Harris et
-al. 2003) with Kessler rain (snow falling slowly and cloud ice converting slowly where it is cold) and
-saturation adjustment with the heat of deposition aloft, started from a sounding (CM1's input_sounding format; default: Weisman & Klemp 1982, 15 m/s
-of shear) and a warm bubble (+2 K, 10 km x 1.4 km radii). Lateral boundaries are periodic.
+al. 2003) with Kessler rain (snow falling slowly and cloud ice converting slowly where it is cold) and saturation
+adjustment with the heat of deposition aloft, started from a sounding (CM1's input_sounding format; default:
+Weisman & Klemp 1982, 15 m/s of shear) and a warm bubble (+2 K, 10 km x 1.4 km radii). Lateral boundaries are
+periodic, and the grid moves with the storm (--domain-speed).
 
 Writes DIR/NAME/<field>.<frame>.nvdb (cloud, rain, ice, snow extinction [1/m] from warpsky.model.water_optics,
 condensate above the freezing level partitioned into ice by temperature; velocity [m/s] for motion blur), the stage
