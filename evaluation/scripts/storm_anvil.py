@@ -41,10 +41,9 @@ def condensate(fields: dict, base) -> np.ndarray:
     return fields["cloud"] + fields["rain"] * ice_fraction(temperature)
 
 
-def band_areas(fields: dict, base, dx: float, dy: float) -> dict[str, float]:
-    """Area [km^2] of the columns with condensate above :data:`THRESHOLD` somewhere in each band (levels whose
-    centres lie in it)."""
-    q = condensate(fields, base)
+def band_areas(q: np.ndarray, dx: float, dy: float) -> dict[str, float]:
+    """Area [km^2] of the columns with condensate ``q`` (:func:`condensate`) above :data:`THRESHOLD` somewhere in
+    each band (levels whose centres lie in it)."""
     heights = (np.arange(q.shape[1]) + 0.5) * dy / 1000.0
     areas = {}
     for name, (low, high) in BANDS.items():
@@ -56,8 +55,8 @@ def band_areas(fields: dict, base, dx: float, dy: float) -> dict[str, float]:
 
 def summary(fields: dict, base, dx: float, dy: float) -> dict:
     """Band areas, the anvil/mid ratio, the cloud top [km] and the largest updraft [m/s]."""
-    areas = band_areas(fields, base, dx, dy)
     q = condensate(fields, base)
+    areas = band_areas(q, dx, dy)
     levels = np.nonzero(q.max(axis=(0, 2)) > THRESHOLD)[0]
     return {"areas": areas, "ratio": areas["anvil"] / areas["mid"] if areas["mid"] > 0.0 else float("nan"),
             "top_km": float((levels.max() + 1) * dy / 1000.0) if len(levels) else 0.0,

@@ -29,11 +29,10 @@ import numpy as np
 from warpsky.core.errors import OutputError
 from warpsky.core.files import atomic_write
 from warpsky.model.water_optics import dry_air_density, species_water, water_content
+from warpsky.simulate.kernels_water import ALL_ICE, ALL_LIQUID
 from warpsky.simulate.shot import Shaft, author_shot, find_shaft, shot_sun
 from warpsky.usd.weather.weather_state import SPECIES_ORDER, WeatherState
 
-#: Temperatures [K] of the condensate's partition: all liquid above the first, all ice below the second.
-ALL_LIQUID, ALL_ICE = 273.15, 253.15
 #: The velocity is written only this many cells around the media (what motion blur moves), which keeps its grids
 #: sparse: the environment's wind fills the whole domain (a dense 128 x 128 x 64 grid is 12 MB per frame).
 VELOCITY_MARGIN = 2
@@ -42,7 +41,8 @@ FIELDS = (*SPECIES_ORDER, "velocity")
 
 
 def ice_fraction(temperature: np.ndarray) -> np.ndarray:
-    """The share of condensate and precipitation that is ice at ``temperature`` [K] (module docstring)."""
+    """The share of condensate and precipitation that is ice at ``temperature`` [K] (module docstring): the
+    solver's :func:`.kernels_water.frozen_share` on the host, between the same temperatures."""
     return np.clip((ALL_LIQUID - temperature) / (ALL_LIQUID - ALL_ICE), 0.0, 1.0)
 
 
