@@ -11,7 +11,7 @@ one untimed frame per size (warm kernel and table caches).
 
 Run:  python evaluation/benchmarks/bench_frame_error.py [--stage usd_scenes/cumulus.usda]
           [--sizes 384x256,1920x1080] [--budgets 2,5,10,20] [--reference-spp 1024] [--crop-pixels 80]
-          [--json out/bench_frame_error.json]
+          [--set radiance_cache=1] [--json out/bench_frame_error.json]
 The references are cached under $WARPSKY_CACHE/reference (by stage file, size, crop, samples, seed and version).
 No pass/fail.
 """
@@ -79,9 +79,10 @@ def reference_crop(stage: str, size: tuple[int, int], bounds, spp: int, seed: in
     return out
 
 
-def hybrid_row(stage: str, size: tuple[int, int], bounds, reference: dict, budget: float | None) -> dict:
-    """One whole hybrid frame, measured on the crop ``bounds``."""
-    settings = {} if budget is None else {"time_budget": str(budget)}
+def hybrid_row(stage: str, size: tuple[int, int], bounds, reference: dict, budget: float | None,
+               fixed: dict | None = None) -> dict:
+    """One whole hybrid frame (with the settings ``fixed``), measured on the crop ``bounds``."""
+    settings = dict(fixed or {}) if budget is None else {**(fixed or {}), "time_budget": str(budget)}
     started = time.perf_counter()
     image = render_stage(stage, resolution=size, settings=settings)
     call = time.perf_counter() - started
@@ -105,8 +106,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--budgets", default="2,5,10,20", help="time budgets [s]; the default target is added")
     parser.add_argument("--reference-spp", type=int, default=1024)
     parser.add_argument("--crop-pixels", type=int, default=80, help="crop edge [px] at every size")
+    parser.add_argument("--set", dest="fixed", action="append", default=[], metavar="NAME=VALUE",
+                        help="a hybrid setting for every frame (repeatable), e.g. radiance_cache=1")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
+    fixed = dict(item.split("=", 1) for item in args.fixed)
     centre = cloud_centre(args.stage)
     rows = []
     print(f"{'size':>10} {'budget':>7} {'render':>8} {'call':>8} {'march':>7} {'spp':>5} {'ms':>3} {'stopped by':>12} "
@@ -115,9 +119,9 @@ def main(argv: list[str] | None = None) -> int:
         size = tuple(int(v) for v in text.lower().split("x"))
         bounds = crop_bounds(centre, *size, args.crop_pixels)
         reference = reference_crop(args.stage, size, bounds, args.reference_spp)
-        render_stage(args.stage, resolution=size, settings={"time_budget": "1"})  # warm: compiles, tables
+        render_stage(args.stage, resolution=size, settings={**fixed, "time_budget": "1"})  # warm: compiles, tables
         for budget in [float(b) for b in args.budgets.split(",") if b] + [None]:
-            row = hybrid_row(args.stage, size, bounds, reference, budget)
+            row = hybrid_row(args.stage, size, bounds, reference, budget, fixed)
             rows.append(row | {"reference_seconds": float(reference["seconds"])})
             print(f"{row['size']:>10} {('-' if budget is None else f'{budget:g} s'):>7} {row['render']:8.2f} "
                   f"{row['call']:8.2f} {row['march']:7.2f} {row['spp']!s:>5} {row['ms_scale']!s:>3} "
