@@ -6,7 +6,16 @@ import builtins
 
 import numpy as np
 import pytest
-from conftest import StageSpec, add_field, image_sum_sigma, look_rotation, path_traced, render_layer, write_stage
+from conftest import (
+    StageSpec,
+    add_atmosphere,
+    add_field,
+    image_sum_sigma,
+    look_rotation,
+    path_traced,
+    render_layer,
+    write_stage,
+)
 
 from warpsky.core.errors import UsageError
 from warpsky.render.plan import make_plan
@@ -318,7 +327,6 @@ def test_hybrid_frame_with_air_matches_the_path_tracer(box, device):
     whose first event is in the air end there) against the path tracer's, which traces everything: the sky
     pixels within 2.5 % + 4 sigma, the cloud's within 3 % + 4 sigma (the table's error, not double counting:
     the air's multiple scattering counted twice puts the sky 5-50 % high)."""
-    from conftest import add_atmosphere
 
     from warpsky.passes.composite import composite
     from warpsky.passes.frame import render_layers
@@ -344,3 +352,28 @@ def test_hybrid_frame_with_air_matches_the_path_tracer(box, device):
         b = traced.rgba[..., :3][mask].mean(axis=0)
         sigma = np.sqrt(variance[mask].sum(axis=0)) / mask.sum()
         assert np.all(np.abs(a - b) < tolerance * b + 4.0 * sigma), (a / b, sigma / b)
+
+
+
+def test_camera_rays_that_meet_no_medium_trace_no_paths(box, device):
+    """A multiple-scattering path along a camera ray that misses every medium's box and the ground, through air
+    whose own light a table holds, can gather nothing (it would end at its first air event or reach sea level): those
+    pixels are not tracked at all (no tentative collisions through the air), while every pixel whose ray crosses
+    the box is, and only those carry light."""
+    import warp as wp
+
+    from warpsky.core import device_buffers
+    from warpsky.techniques.hybrid.hybrid import BUFFER_NAME
+
+    stage = add_atmosphere(box(camera_position=(3.0, 4.0, 60.0), albedo=0.95, phase="hg", g=0.6), altitude=100.0)
+    layer = hybrid(stage, device, 24, spp=8, target_error=0, denoise=0, **STEP)
+    steps = sum(device_buffers.reusable(f"{BUFFER_NAME}:half{h}:counters", (24, 24), wp.vec4i, device).numpy()[..., 0]
+                for h in (0, 1))
+    covered = layer.transmittance.mean(axis=-1) < 1.0
+    near = covered.copy()  # a ray grazing the box's edge may cross it with a transmittance of 1 in float32
+    for axis in (0, 1):
+        for shift in (1, -1):
+            near |= np.roll(covered, shift, axis=axis)
+    assert 0 < covered.sum() < near.sum() < covered.size
+    assert steps[covered].all() and not steps[~near].any()
+    assert not layer.aovs["multiple_scatter"][~near].any() and layer.aovs["multiple_scatter"][covered].any()

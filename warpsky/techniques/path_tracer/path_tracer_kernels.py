@@ -28,7 +28,7 @@ from warpsky.light.sun import Sun
 from warpsky.media.air.medium import Air, altitude, as_analytic, no_air, top_exit, vertical
 from warpsky.media.air.mixture_kernels import air_optical_depth
 from warpsky.media.air.round_earth_kernels import ray_depth
-from warpsky.media.voxels.voxel import VoxelMedia
+from warpsky.media.voxels.voxel import VoxelMedia, media_span
 from warpsky.model.camera_rays import PinholeCamera, primary_ray
 from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.surfaces.mesh import SurfaceHit, SurfaceMeshes, no_hit
@@ -257,6 +257,22 @@ def path_function(has_tables: bool, has_detail: bool = False, has_meshes: bool =
     return trace_path
 
 
+@wp.func
+def carries_nothing(media: VoxelMedia, air: Air, settings: PathSettings, origin: wp.vec3, view: wp.vec3,
+                    first: RayEnd) -> bool:
+    """Whether a multiple-scattering path (``settings.multiple_only``) along this camera ray gathers no light
+    whatever its random draws: the ray meets no medium's box before ``first`` and does not end on the ground, and
+    the air is absent or a table holds its light (the path would end at its first air event). Such a path escapes
+    to space, a black sea level or an opaque surface with nothing (a camera ray that escapes sees neither the
+    dome nor the sun's disk here: the composite draws them), so the tracker need not fly it through the air."""
+    if settings.multiple_only == 0 or first.surface == SURFACE_GROUND:
+        return False
+    if air.enabled != 0 and settings.air_by_table == 0:
+        return False
+    span = media_span(media, origin, view, 0.0, first.t)
+    return span[1] <= span[0]
+
+
 @functools.cache
 def sample_function(has_tables: bool, has_detail: bool = False, has_meshes: bool = False, has_fog: bool = False):
     """The function that runs one path of a pixel (:class:`SampleResult`), specialised like the kernels (a scene
@@ -309,6 +325,9 @@ def sample_function(has_tables: bool, has_detail: bool = False, has_meshes: bool
                                               fog_view_transmittance(majorants.fog, origin, view, first.t))
             steps = tr.steps
             tracked = 1
+        if wp.static(not has_meshes and not has_fog):
+            if carries_nothing(media, air, settings, origin, view, first):
+                return out
         path = trace_path(media, majorants, cut, phase_tables, air, sun, ground, dome, surfaces, settings,
                           sun_reaches(sun, air), start_path(origin, view, state, steps), first, first_hit)
         if path.hit != 0:
