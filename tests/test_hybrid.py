@@ -377,3 +377,23 @@ def test_camera_rays_that_meet_no_medium_trace_no_paths(box, device):
     assert 0 < covered.sum() < near.sum() < covered.size
     assert steps[covered].all() and not steps[~near].any()
     assert not layer.aovs["multiple_scatter"][~near].any() and layer.aovs["multiple_scatter"][covered].any()
+
+
+def test_pixels_outside_the_estimate_stop_at_uncovered_spp(box, device):
+    """Once every pixel has ``uncovered_spp`` paths, only the pixels the error estimate covers get more: the frame
+    counts exactly that many paths, and the light of those pixels (here the sky's, with the air's multiple
+    scattering traced) stays an unbiased mean of their own paths (z-test against a frame where every pixel gets
+    all of them)."""
+    stage = add_atmosphere(box(ground=(-12.0, 0.5), albedo=0.95, phase="hg", g=0.6), altitude=100.0,
+                           multipleScattering=False)  # the paths carry the air's light: the sky is lit
+    capped = hybrid(stage, device, 16, spp=32, uncovered_spp=4, target_error=0, denoise=0, seed=3, **STEP)
+    every = hybrid(stage, device, 16, spp=32, uncovered_spp=32, target_error=0, denoise=0, seed=5, **STEP)
+    covered = (1.0 - capped.transmittance) @ np.array([0.2126, 0.7152, 0.0722]) > 0.01
+    assert 0 < covered.sum() < covered.size
+    assert capped.stats["paths"] == 32 * covered.sum() + 4 * (~covered).sum()
+    assert every.stats["paths"] == 32 * covered.size
+    lit = ~covered & (every.aovs["multiple_scatter"].mean(axis=-1) > 0.0)
+    assert lit.sum() > 20
+    variance = (capped.aovs["variance"] + every.aovs["variance"])[lit]
+    z = (capped.aovs["multiple_scatter"] - every.aovs["multiple_scatter"])[lit] / np.sqrt(variance)
+    assert np.max(np.abs(z)) < 5.0

@@ -115,6 +115,10 @@ class HybridSettings(Settings):
                                  "(its diffraction peak) as not scattered (delta-M; see the path tracer's setting); "
                                  "0 = exact. 3 was chosen on the thick validation family's tune half (0, 3, 5): "
                                  "worst net error at a 1 s budget 0.89 -> 0.20, median bias -10% -> 0%")
+    uncovered_spp: int = setting(16, range=">= 1", help="paths per pixel after which the pixels the error estimate "
+                                 "does not cover (the ground, the sky; coverage below 1%) get no more, so the rest "
+                                 "of the frame's paths go where the target is measured; not used when the paths "
+                                 "trace fog, decks or meshes; >= spp: every pixel alike")
     ms_scale: int = setting(1, unit="pixel", range="1..8", help="trace multiple scattering on pixels this many "
                             "times larger (box-filtered), upsampled with the exact coverage as guide")
     step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering eye-ray step",
@@ -340,6 +344,9 @@ class MultipleScattering:
         shape = (self.tracing.height, self.tracing.width)
         self.halves = [pixel_sums(shape, device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
         self.counts = [0, 0]
+        self.scenery = scenery
+        self.pixel_counts = [np.zeros(shape, np.float32) for _ in (0, 1)]  # paths per film pixel and half
+        self.active: wp.array | None = None  # the covered film pixels, once uncovered ones get no more paths
 
     def run(self, single: ImageLayer, started: float) -> tuple[np.ndarray, np.ndarray, dict]:
         """(denoised multiple scattering, variance of its noisy mean, stats), given the single-scattering layer."""
@@ -365,7 +372,9 @@ class MultipleScattering:
             count = min(per_pass, s.spp - done)
             half = passes % 2
             launched = time.perf_counter()
-            self.tracing.launch(self.halves[half], done, count)  # path indices, hence streams, never repeat
+            active = self.active_pixels(covered, done)
+            self.tracing.launch(self.halves[half], done, count, active)  # path indices, hence streams, never repeat
+            self.pixel_counts[half] += count if active is None else count * covered
             if budget is not None:
                 wp.synchronize_device(self.device)
                 budget.pass_seconds = time.perf_counter() - launched
@@ -407,10 +416,20 @@ class MultipleScattering:
                  "target_error": s.target_error, "denoise_seconds": denoise_seconds,
                  "sanitised_values": sanitised, "tracking_steps": film.stats["tracking_steps"],
                  "scatter_events": film.stats["scatter_events"], "shadow_steps": film.stats["shadow_steps"],
-                 "capped_paths": film.stats["capped_paths"], "paths": done * mean.shape[0] * mean.shape[1],
+                 "capped_paths": film.stats["capped_paths"], "paths": film.stats["paths"],
                  "ms_scale": self.scale,
                  "warnings": warnings}
         return image, variance, stats
+
+    def active_pixels(self, covered: np.ndarray, done: int) -> wp.array | None:
+        """The film pixels the next pass runs paths in: all of them (None) until each has ``uncovered_spp`` paths
+        (or in a frame whose paths trace scenery, whose light the error estimate counts), then only the pixels the
+        error estimate covers."""
+        if self.scenery or done < int(self.settings.uncovered_spp) or covered.all():
+            return None
+        if self.active is None:
+            self.active = wp.array(covered.astype(np.uint8), dtype=wp.uint8, device=self.device)
+        return self.active
 
     def rescale(self, scale: int) -> None:
         """Trace the paths on pixels ``scale`` times the frame's from now on (before any pass ran)."""
@@ -418,16 +437,17 @@ class MultipleScattering:
         self.scale = scale
         shape = (self.tracing.height, self.tracing.width)
         self.halves = [pixel_sums(shape, self.device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
+        self.pixel_counts = [np.zeros(shape, np.float32) for _ in (0, 1)]
 
     def half_mean(self, half: int) -> np.ndarray:
         """Mean radiance of ``half``'s paths (a download: the error estimate needs it on the host)."""
         radiance = device_buffers.download(f"{BUFFER_NAME}:radiance_sum", self.halves[half].radiance_sum)
-        return radiance / max(self.counts[half], 1)
+        return radiance / np.maximum(self.pixel_counts[half], 1)[..., None]
 
     def film(self) -> ImageLayer:
         """Both halves' paths as the path tracer reports its own: their mean, the variance of that mean
         (``aovs["variance"]``) and the tracking counters (``stats``)."""
-        return sums_layer(self.halves, sum(self.counts), far=0.0, name=BUFFER_NAME)
+        return sums_layer(self.halves, self.pixel_counts[0] + self.pixel_counts[1], far=0.0, name=BUFFER_NAME)
 
     def estimate(self, single: np.ndarray, coverage: np.ndarray, covered: np.ndarray) -> float:
         """Estimated relative RMSE of the frame over ``covered`` pixels (0 when nothing is covered)."""

@@ -329,13 +329,13 @@ class PathTracing:
         out._launch_buffers()
         return out
 
-    def launch(self, sums: PixelSums, first_sample: int, count: int) -> None:
-        """Add paths ``first_sample .. first_sample + count - 1`` of every pixel to ``sums`` (asynchronous on
-        GPUs)."""
+    def launch(self, sums: PixelSums, first_sample: int, count: int, active: wp.array | None = None) -> None:
+        """Add paths ``first_sample .. first_sample + count - 1`` of every pixel (of the pixels ``active``, uint8 per
+        film pixel, marks) to ``sums`` (asynchronous on GPUs)."""
         if not self.samples_per_launch:
             launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only,
                                    forward_cut=self.forward_cut, air_by_table=self.air_by_table,
-                                   first_end=self.first_end)
+                                   first_end=self.first_end, active=active)
             launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums, None], self.device)
             return
         end = first_sample + count
@@ -343,7 +343,7 @@ class PathTracing:
             chunk = min(self.samples_per_launch, end - first_sample)
             launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only,
                                    forward_cut=self.forward_cut, air_by_table=self.air_by_table,
-                                   first_end=self.first_end)
+                                   first_end=self.first_end, active=active)
             launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, sums, self.samples],
                         self.device)
             launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
@@ -419,10 +419,10 @@ def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> Pi
 
 def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int, *,
                   multiple_only: bool = False, forward_cut: bool = False, air_by_table: bool = False,
-                  first_end: tuple[float, float] | None = None) -> PathSettings:
+                  first_end: tuple[float, float] | None = None, active: wp.array | None = None) -> PathSettings:
     """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``; with
     ``air_by_table`` a path whose first event is the air's ends there (:func:`~warpsky.techniques.path_tracer.
-    events.media_first_function`)."""
+    events.media_first_function`); with ``active`` (uint8 per film pixel) only the pixels it marks run paths."""
     out = PathSettings()
     out.environment = wp.vec3(float(settings.environment))
     out.seed = int(settings.seed)
@@ -435,6 +435,9 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     out.forward_cut = int(forward_cut)
     out.air_by_table = int(air_by_table)
     out.first_end_low, out.first_end_high = (1.0, -1.0) if first_end is None else (float(v) for v in first_end)
+    out.masked = int(active is not None)
+    if active is not None:
+        out.active = active
     return out
 
 
@@ -457,31 +460,35 @@ def per_sample_launches(device: str, pixels: int, samples_per_pass: int) -> int:
     return max(1, min(int(samples_per_pass), GPU_LAUNCH_THREADS // max(pixels, 1)))
 
 
-def sums_layer(sums: list[PixelSums], spp: int, far: float, *, name: str = "path_tracer") -> ImageLayer:
-    """The layer of ``spp`` paths per pixel accumulated in ``sums`` (one per stream): mean radiance, mean
-    transmittance, mean depth of first events (``far`` where none), the variance of the pixel mean as an AOV, and
-    the tracking counters. One download per field and sums, through :func:`warpsky.core.device_buffers.download`
-    (pinned staging kept under ``name:field``)."""
+def sums_layer(sums: list[PixelSums], spp, far: float, *, name: str = "path_tracer") -> ImageLayer:
+    """The layer of ``spp`` paths per pixel (an int, or per pixel an (H, W) array) accumulated in ``sums`` (one per
+    stream): mean radiance, mean transmittance, mean depth of first events (``far`` where none), the variance of
+    the pixel mean as an AOV, and the tracking counters. One download per field and sums, through
+    :func:`warpsky.core.device_buffers.download` (pinned staging kept under ``name:field``)."""
     def total_of(field):
         return sum(device_buffers.download(f"{name}:{field}", getattr(s, field)).astype(np.float64) for s in sums)
 
     total = total_of("radiance_sum")
     squares = total_of("radiance_sq")
-    mean = total / spp
-    variance = np.maximum(squares / spp - mean**2, 0.0) / max(spp - 1, 1)  # of the mean
+    count = np.asarray(spp, dtype=np.float64)
+    if count.ndim == 2:
+        count = count[..., None]
+    n = np.maximum(count, 1.0)
+    mean = total / n
+    variance = np.maximum(squares / n - mean**2, 0.0) / np.maximum(n - 1.0, 1.0)  # of the mean
     depth = total_of("depth_sum")
     depth_mean = np.where(depth[..., 1] > 0, depth[..., 0] / np.maximum(depth[..., 1], 1), np.float32(far))
     count_values = sum(device_buffers.download(f"{name}:counters", s.counters) for s in sums)
     return ImageLayer(
         mean.astype(np.float32),
-        (total_of("transmittance_sum") / spp).astype(np.float32),
+        (total_of("transmittance_sum") / n).astype(np.float32),
         depth_mean.astype(np.float32),
         stats={
             "tracking_steps": int(count_values[..., 0].sum()),
             "capped_paths": int(count_values[..., 1].sum()),
             "scatter_events": int(count_values[..., 2].sum()),
             "shadow_steps": int(count_values[..., 3].sum()),
-            "paths": int(spp) * count_values.shape[0] * count_values.shape[1],
+            "paths": int(np.broadcast_to(count[..., 0] if count.ndim else count, count_values.shape[:2]).sum()),
         },
         aovs={"variance": variance.astype(np.float32)},
     )

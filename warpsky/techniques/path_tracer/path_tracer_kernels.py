@@ -84,6 +84,8 @@ class PathSettings:
     air_by_table: int  # 1: paths whose first event is the air's end there (a table holds the air's own light)
     first_end_low: float  # a camera ray's event at a camera-relative altitude in [low, high] ends its path there
     first_end_high: float  # (another pass draws what lies there: the stratiform layers); low > high: none
+    masked: int  # 1: only pixels whose ``active`` entry is non-zero run paths in this launch
+    active: wp.array2d(dtype=wp.uint8)  # per film pixel (read only with ``masked``)
 
 
 @wp.struct
@@ -357,7 +359,8 @@ def path_trace_kernel(has_tables: bool, has_detail: bool = False, has_meshes: bo
                       has_fog: bool = False) -> wp.Kernel:
     """The progressive path tracer in both launch shapes (one kernel per scene kind, hence one CUDA module, for
     frames of any size). With ``samples`` empty (None), one thread per pixel runs the launch's
-    ``settings.sample_count`` paths in path order into ``sums``. Otherwise one thread per (path, pixel): a launch
+    ``settings.sample_count`` paths in path order into ``sums`` (with ``settings.masked``, only the pixels it marks
+    active). Otherwise one thread per (path, pixel): a launch
     over a frame of H rows covers ``sample_count`` x H rows, row r running path r // H of pixel row r % H into
     ``samples[r]`` (``sums`` untouched); :func:`sum_samples_kernel` then adds them. Only ``has_meshes`` kernels
     read ``surfaces`` (the meshes' BVH); the others are given an empty one (:func:`~warpsky.surfaces.mesh.
@@ -393,6 +396,11 @@ def path_trace_kernel(has_tables: bool, has_detail: bool = False, has_meshes: bo
         if keep:
             count = 1
         counts = wp.vec4i(0, 0, 0, 0)
+        if settings.masked != 0:
+            if settings.active[pixel_row, col] == wp.uint8(0):
+                if keep:
+                    samples[row, col] = SampleResult()  # sum_samples adds nothing for it
+                return
         for s in range(count):
             sample = pixel_sample(media, majorants, cut, phase_tables, air, sun, cam, ground, dome, surfaces,
                                   settings, pixel_row, col, settings.first_sample + path + s)
