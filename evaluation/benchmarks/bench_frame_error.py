@@ -11,7 +11,7 @@ one untimed frame per size (warm kernel and table caches).
 
 Run:  python evaluation/benchmarks/bench_frame_error.py [--stage usd_scenes/cumulus.usda]
           [--sizes 384x256,1920x1080] [--budgets 2,5,10,20] [--reference-spp 1024] [--crop-pixels 80]
-          [--set radiance_cache=1] [--json out/bench_frame_error.json]
+          [--set uncovered_spp=256] [--json out/bench_frame_error.json]
 The references are cached under $WARPSKY_CACHE/reference (by stage file, size, crop, samples, seed and version).
 No pass/fail.
 """
@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 from evaluation.error_vs_time import error_metrics, frame_plan, render_frame_radiance  # noqa: E402
 from evaluation.family import covered_pixels  # noqa: E402
 from warpsky.api import render_stage  # noqa: E402
+from warpsky.cli.options import setting_arg  # noqa: E402
 from warpsky.core.files import atomic_write, cache_dir  # noqa: E402
 from warpsky.core.version import __version__  # noqa: E402
 from warpsky.render.overscan import overscanned  # noqa: E402
@@ -106,11 +107,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--budgets", default="2,5,10,20", help="time budgets [s]; the default target is added")
     parser.add_argument("--reference-spp", type=int, default=1024)
     parser.add_argument("--crop-pixels", type=int, default=80, help="crop edge [px] at every size")
-    parser.add_argument("--set", dest="fixed", action="append", default=[], metavar="NAME=VALUE",
-                        help="a hybrid setting for every frame (repeatable), e.g. radiance_cache=1")
+    parser.add_argument("--set", dest="fixed", type=setting_arg, action="append", default=[], metavar="NAME=VALUE",
+                        help="a hybrid setting for every frame (repeatable), e.g. uncovered_spp=256")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
-    fixed = dict(item.split("=", 1) for item in args.fixed)
+    fixed = dict(args.fixed)
     centre = cloud_centre(args.stage)
     rows = []
     print(f"{'size':>10} {'budget':>7} {'render':>8} {'call':>8} {'march':>7} {'spp':>5} {'ms':>3} {'stopped by':>12} "

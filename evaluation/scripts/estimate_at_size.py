@@ -30,6 +30,7 @@ sys.path.insert(0, str(ROOT))
 from evaluation.benchmarks.bench_frame_error import cloud_centre, crop_bounds, reference_crop  # noqa: E402
 from evaluation.error_vs_time import error_metrics  # noqa: E402
 from warpsky.api import render_stage  # noqa: E402
+from warpsky.cli.options import setting_arg  # noqa: E402
 from warpsky.techniques.hybrid.hybrid import ESTIMATE_CALIBRATION  # noqa: E402
 
 
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--reference-spp", type=int, default=1024)
     parser.add_argument("--spp", default="16,64", help="paths per pixel of the hybrid frames")
     parser.add_argument("--only", default=None, help="comma-separated member names")
-    parser.add_argument("--set", dest="fixed", action="append", default=[], metavar="NAME=VALUE",
+    parser.add_argument("--set", dest="fixed", type=setting_arg, action="append", default=[], metavar="NAME=VALUE",
                         help="a hybrid setting for every frame (repeatable)")
     parser.add_argument("--target", type=float, default=None, help="render each member once to this error target "
                         "(at most the last --spp paths per pixel) instead of at each --spp")
@@ -77,12 +78,11 @@ def main(argv: list[str] | None = None) -> int:
     size = tuple(int(v) for v in args.size.lower().split("x"))
     spps = [int(v) for v in args.spp.split(",")]
     family = json.loads((args.family / "family.json").read_text())
-    rows = []
+    rows, fixed = [], dict(args.fixed)
     for member in family["members"]:
         if (args.half != "all" and member["half"] != args.half) or (
                 args.only and member["name"] not in args.only.split(",")):
             continue
-        fixed = dict(item.split("=", 1) for item in args.fixed)
         for row in member_rows(str(args.family / member["stage"]), size, args.crop, args.reference_spp, spps,
                                fixed, args.target):
             rows.append({"member": member["name"], **row})

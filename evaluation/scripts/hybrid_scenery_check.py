@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from warpsky.cli.options import setting_arg
 from warpsky.core.numerics import LUMINANCE_WEIGHTS
 from warpsky.model.fog import AnalyticFog, ConstantTerm
 from warpsky.model.scene import Camera, Ground, Scene, Sun
@@ -62,11 +63,12 @@ def main() -> None:
     parser.add_argument("--res", type=int, nargs=2, default=None, help="width height (32 32 for the slab, else 96 64)")
     parser.add_argument("--technique", default="hybrid")
     parser.add_argument("--reference-spp", type=int, default=2048)
-    parser.add_argument("--set", action="append", default=[], help="NAME=VALUE for the technique under test")
+    parser.add_argument("--set", type=setting_arg, action="append", default=[],
+                        help="NAME=VALUE for the technique under test")
     args = parser.parse_args()
     scene = slab_scene() if args.stage == "slab" else StageReader(args.stage).scene_at(None)
     res = tuple(args.res) if args.res else ((32, 32) if args.stage == "slab" else (96, 64))
-    settings = dict(item.split("=", 1) for item in args.set)
+    settings = dict(args.set)
     image, seconds = luminance_frame(scene, args.technique, settings, res)
     reference, ref_seconds = luminance_frame(scene, "path_tracer", {"spp": str(args.reference_spp)}, res)
     print(f"{args.technique} {seconds:.1f} s, path_tracer ({args.reference_spp} spp) {ref_seconds:.1f} s")

@@ -118,7 +118,8 @@ def _size(text: str) -> int:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _setting(text: str) -> tuple[str, str]:
+def setting_arg(text: str) -> tuple[str, str]:
+    """argparse type of ``--set NAME=VALUE``: the (name, value) pair, both stripped."""
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
     key, value = text.split("=", 1)
@@ -160,7 +161,7 @@ def add_render_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="auto", help="auto (cuda when present), cpu, cuda or cuda:N")
     parser.add_argument("--technique", default=DEFAULT_TECHNIQUE, type=technique_arg, choices=technique_names(),
                         help=f"rendering technique (default: {DEFAULT_TECHNIQUE})")
-    parser.add_argument("--set", dest="settings", type=_setting, action="append", default=[], metavar="NAME=VALUE",
+    parser.add_argument("--set", dest="settings", type=setting_arg, action="append", default=[], metavar="NAME=VALUE",
                         help="technique or pass setting, repeatable (see --help-settings)")
     parser.add_argument("--spp", type=int, metavar="N", help="path_tracer: samples per pixel; hybrid: most "
                         "multiple-scattering paths per pixel (= --set spp=N)")
