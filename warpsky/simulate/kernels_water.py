@@ -160,6 +160,14 @@ def fall_speed(column: Column, rain: float, temperature: float, j: int) -> float
     return wp.lerp(liquid, frozen, frozen_share(temperature)) * thinning
 
 
+@wp.func
+def falling_flux(column: Column, water: Water, i: int, j: int, k: int) -> float:
+    """Downward mass flux ρ q_r V [kg/(m^2 s)] of the precipitation in cell (i, j, k), V its :func:`fall_speed` at
+    the cell's temperature."""
+    rain = water.rain[i, j, k]
+    return column.density[j] * rain * fall_speed(column, rain, water.theta[i, j, k] * column.exner[j], j)
+
+
 @wp.kernel
 def sediment(grid: Grid, column: Column, water: Water, fallen: wp.array2d(dtype=float), dt: float, substeps: int,
              x_offset: int):
@@ -172,15 +180,12 @@ def sediment(grid: Grid, column: Column, water: Water, fallen: wp.array2d(dtype=
     step = dt / float(substeps)
     for _ in range(substeps):
         # bottom-up: each level loses its own flux and gains the one from above, read before it changes
-        here = water.rain[i, 0, k]
-        out_here = column.density[0] * here * fall_speed(column, here, water.theta[i, 0, k] * column.exner[0], 0)
+        out_here = falling_flux(column, water, i, 0, k)
         fallen[i, k] = fallen[i, k] + step * out_here
         for j in range(grid.ny):
             out_above = float(0.0)
             if j + 1 < grid.ny:
-                above = water.rain[i, j + 1, k]
-                temperature = water.theta[i, j + 1, k] * column.exner[j + 1]
-                out_above = column.density[j + 1] * above * fall_speed(column, above, temperature, j + 1)
+                out_above = falling_flux(column, water, i, j + 1, k)
             change = step * (out_above - out_here) / (column.density[j] * grid.dy)
             water.rain[i, j, k] = water.rain[i, j, k] + change
             out_here = out_above
