@@ -13,7 +13,7 @@
 set -euo pipefail
 out=.gpu-payload/extras; mkdir -p "$out"; work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
 py=${PYTHON:-.venv/bin/python}
-"$py" - "$work/ptx.list" <<'PY'
+"$py" - "$work/ptx.list" "$work/cache" <<'PY'
 import os, sys
 import warp as wp
 wp.config.quiet = True
@@ -23,10 +23,10 @@ for index, module in enumerate(kernel_modules()):
     ptx = [p for p in compile_ptx(index, None, 90) if p.endswith(".ptx")]
     folders += [os.path.relpath(os.path.dirname(p), wp.config.kernel_cache_dir) for p in ptx]
 open(sys.argv[1], "w").write("\n".join(folders))
+open(sys.argv[2], "w").write(wp.config.kernel_cache_dir)
 print(f"{len(folders)} modules' sm_90 PTX")
 PY
-cache=$("$py" -c "import warp as wp; wp.config.quiet = True; wp.init(); print(wp.config.kernel_cache_dir)" 2>/dev/null | tail -1)
-tar -C "$cache" -cf - $(cat "$work/ptx.list") | xz -T2 -6 > "$out/ptx.tar.xz"
+tar -C "$(cat "$work/cache")" -cf - $(cat "$work/ptx.list") | xz -T2 -6 > "$out/ptx.tar.xz"
 version=$("$py" -c "import importlib.metadata as m; print(m.version('pyoidn'))")
 python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
   --platform manylinux2014_x86_64 --platform manylinux_2_17_x86_64 -d "$work/whl" "pyoidn==$version" cffi pycparser
