@@ -343,7 +343,6 @@ class MultipleScattering:
                                    first_end=first_end)
         shape = (self.tracing.height, self.tracing.width)
         self.halves = [pixel_sums(shape, device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
-        self.counts = [0, 0]
         self.scenery = scenery
         self.pixel_counts = [np.zeros(shape, np.float32) for _ in (0, 1)]  # paths per film pixel and half
         self.active: wp.array | None = None  # the covered film pixels, once uncovered ones get no more paths
@@ -378,7 +377,6 @@ class MultipleScattering:
             if budget is not None:
                 wp.synchronize_device(self.device)
                 budget.pass_seconds = time.perf_counter() - launched
-            self.counts[half] += count
             done += count
             passes += 1
             if s.target_error > 0.0 and passes == check_at:
@@ -405,7 +403,7 @@ class MultipleScattering:
             variance = bilinear_upsample(variance, self.scale, height, width)
         if s.target_error > 0.0 and stop != "target":
             if estimated_at != passes:  # paths were added since the last estimate (or there was none)
-                estimate = self.estimate(single_radiance, coverage, covered) if min(self.counts) > 0 else math.inf
+                estimate = self.estimate(single_radiance, coverage, covered) if passes >= 2 else math.inf
             if estimate <= s.target_error:
                 stop = "target"  # reached with the last paths, before the next scheduled check
             else:
