@@ -106,7 +106,17 @@ class PhaseSample:
     direction: wp.vec3
     weight: wp.vec3  # combined phase / sampling pdf, per channel (divided by the heroes' mean path density)
     ratio: wp.vec3  # the path's direction densities with each channel as hero, over their largest
+    density: float  # the density [1/sr] the direction was drawn with (over the heroes, weighted by ``ratio``)
     state: wp.uint32
+
+
+@wp.struct
+class MixtureDensity:
+    """The mixture's phase toward a direction and the density the path's sampling draws it with."""
+
+    phase: wp.vec3  # Riley Eq. 6 [1/sr], oriented ice's terms included
+    density: float  # [1/sr]: with tables, the heroes' densities weighted by the path's ratios, over their mean
+    ratio: wp.vec3  # the path's ratios after this direction (with tables; unchanged without)
 
 
 @wp.struct
@@ -205,10 +215,52 @@ def chosen_medium(media: VoxelMedia, point: MediaPoint, air_weight: float, targe
 
 @functools.cache
 def mixture_functions(has_tables: bool):
-    """``(mixture_phase, sample_mixture)`` over the media at a point plus the air's components (zero
-    scattering for none), specialised on whether any medium uses a phase table."""
+    """``(mixture_phase, sample_mixture, mixture_density)`` over the media at a point plus the air's components
+    (zero scattering for none), specialised on whether any medium uses a phase table."""
 
     mixture_phase = mixture_phase_function(has_tables)
+
+    @wp.func
+    def mixture_density(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, air_s: AirPart, d: wp.vec3,
+                        direction: wp.vec3, ratio: wp.vec3) -> MixtureDensity:
+        """The mixture's phase from ``d`` into ``direction`` and the density with which :func:`sample_mixture` draws
+        it: the components' densities weighted by their mean scattering (with tables, each channel's as hero
+        weighted by the path's ``ratio`` and divided by their mean, the balance heuristic's combined density), so
+        ``phase / density`` is the sample's weight."""
+        theta = scattering_angle(d, direction)
+        out = MixtureDensity()
+        out.ratio = ratio
+        out.density = 0.0
+        total = mean3(part_total(air_s))
+        for m in range(media.count):
+            total += mean3(media.grids[m].scattering) * point.density[m]
+        if wp.static(has_tables):
+            pdf3 = wp.vec3(part_pdf(air_s, wp.cos(theta)))
+            for m in range(media.count):
+                grid = media.grids[m]
+                w = mean3(grid.scattering) * point.density[m]
+                if w > 0.0:
+                    pdf3 += medium_pdf3(tables.cdf, grid.phase_kind, grid.phase_g, theta) * w
+            out.phase = mixture_phase(media, point, tables.values, air_s, theta)
+            if tables.continuation.count > 0:
+                terms = continuation_terms(media, point, tables, d, direction, theta)
+                pdf3 += terms.pdf
+                out.phase += per_unit_scattering(point, air_s, terms.phase)
+            path_pdf = wp.cw_mul(ratio, wp.max(pdf3, wp.vec3(0.0)) / wp.max(total, 1.0e-30))
+            mixed = mean3(path_pdf)
+            if mixed > 0.0:
+                out.density = mixed / mean3(ratio)
+                out.ratio = path_pdf / wp.max(wp.max(path_pdf[0], path_pdf[1]), path_pdf[2])
+        else:
+            pdf = part_pdf(air_s, wp.cos(theta))
+            for m in range(media.count):
+                grid = media.grids[m]
+                w = mean3(grid.scattering) * point.density[m]
+                if w > 0.0:
+                    pdf += w * phase_pdf(grid.phase_kind, grid.phase_g, wp.cos(theta))
+            out.density = pdf / wp.max(total, 1.0e-30)
+            out.phase = mixture_phase(media, point, tables.values, air_s, theta)
+        return out
 
     @wp.func
     def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, air_s: AirPart, d: wp.vec3,
@@ -244,36 +296,13 @@ def mixture_functions(has_tables: bool):
             if oriented >= 0:  # oriented ice: its table for light arriving along d (six more draws)
                 source, state = directional_sample(tables.continuation, oriented, d, state)
                 out.direction = source
-        theta = scattering_angle(d, out.direction)
         out.state = state
+        found = mixture_density(media, point, tables, air_s, d, out.direction, ratio)
+        out.ratio = found.ratio
+        out.density = found.density
         out.weight = wp.vec3(0.0)
-        if wp.static(has_tables):
-            pdf3 = wp.vec3(part_pdf(air_s, wp.cos(theta)))
-            for m in range(media.count):
-                grid = media.grids[m]
-                w = mean3(grid.scattering) * point.density[m]
-                if w > 0.0:
-                    pdf3 += medium_pdf3(tables.cdf, grid.phase_kind, grid.phase_g, theta) * w
-            phase = mixture_phase(media, point, tables.values, air_s, theta)
-            if tables.continuation.count > 0:
-                terms = continuation_terms(media, point, tables, d, out.direction, theta)
-                pdf3 += terms.pdf
-                phase += per_unit_scattering(point, air_s, terms.phase)
-            path_pdf = wp.cw_mul(ratio, wp.max(pdf3, wp.vec3(0.0)) / wp.max(total, 1.0e-30))
-            mixed = mean3(path_pdf)
-            if mixed > 0.0:
-                out.weight = wp.max(phase, wp.vec3(0.0)) * (mean3(ratio) / mixed)
-                out.ratio = path_pdf / wp.max(wp.max(path_pdf[0], path_pdf[1]), path_pdf[2])
-        else:
-            pdf = part_pdf(air_s, wp.cos(theta))
-            for m in range(media.count):
-                grid = media.grids[m]
-                w = mean3(grid.scattering) * point.density[m]
-                if w > 0.0:
-                    pdf += w * phase_pdf(grid.phase_kind, grid.phase_g, wp.cos(theta))
-            pdf = pdf / wp.max(total, 1.0e-30)
-            if pdf > 0.0:
-                out.weight = wp.max(mixture_phase(media, point, tables.values, air_s, theta), wp.vec3(0.0)) / pdf
+        if found.density > 0.0:
+            out.weight = wp.max(found.phase, wp.vec3(0.0)) / found.density
         return out
 
-    return mixture_phase, sample_mixture
+    return mixture_phase, sample_mixture, mixture_density

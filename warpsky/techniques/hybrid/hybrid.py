@@ -65,6 +65,7 @@ from warpsky.techniques.path_tracer.path_tracer import (
     sums_layer,
 )
 from warpsky.techniques.path_tracer.stratiform_media import layer_voxel_memory
+from warpsky.techniques.path_tracer.sun_lobe import AUTO_LOBE, lobe_asymmetry
 from warpsky.techniques.single_scatter.single_scatter import SingleScatter, SingleScatterSettings, march_work
 from warpsky.techniques.technique import Technique
 
@@ -115,6 +116,9 @@ class HybridSettings(Settings):
                                  "(its diffraction peak) as not scattered (delta-M; see the path tracer's setting); "
                                  "0 = exact. 3 was chosen on the thick validation family's tune half (0, 3, 5): "
                                  "worst net error at a 1 s budget 0.89 -> 0.20, median bias -10% -> 0%")
+    sun_lobe: float | None = setting(None, range="[-1, 0.99]", auto=AUTO_LOBE, help="g of the paths' sun lobe "
+                                     "(see the path tracer's setting); -1 = none. On the demo cumulus (g 0.85, lit "
+                                     "from the side) it cut the paths' variance 2.6x for 1.3-1.5x their time")
     uncovered_spp: int = setting(16, range=">= 1", help="paths per pixel after which the pixels the error estimate "
                                  "does not cover (the ground, the sky; coverage below 1%) get no more, so the rest "
                                  "of the frame's paths go where the target is measured; not used when the paths "
@@ -145,8 +149,8 @@ class HybridSettings(Settings):
                                   majorant_block=self.majorant_block, samples_per_pass=self.samples_per_pass,
                                   pixel_jitter=self.ms_scale > 1, similarity_order=self.similarity_order,
                                   bake_detail=self.bake_detail, forward_cut=self.forward_cut,
-                                  deck_extent=self.deck_extent, deck_voxel_width=self.deck_voxel_width,
-                                  deck_voxel=self.deck_voxel)
+                                  sun_lobe=self.sun_lobe, deck_extent=self.deck_extent,
+                                  deck_voxel_width=self.deck_voxel_width, deck_voxel=self.deck_voxel)
 
 
 class Hybrid(Technique):
@@ -180,7 +184,7 @@ class Hybrid(Technique):
         march = SingleScatter(s.single_scatter(), device=self.device).resolved_settings(scene)
         per_pass = s.samples_per_pass or (2 if is_cpu(self.device) else 16)
         return dataclasses.replace(s, step_length=march.step_length, shadow_step_length=march.shadow_step_length,
-                                   samples_per_pass=min(per_pass, s.spp))
+                                   samples_per_pass=min(per_pass, s.spp), sun_lobe=lobe_asymmetry(scene, s.sun_lobe))
 
     #: Bytes per pixel of the multiple-scattering film on the host: float64 sums, squares, mean and variance of
     #: both halves (128), the float32 mean and variance (24), the denoiser's input, guide and output for the

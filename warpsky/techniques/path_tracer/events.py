@@ -2,7 +2,8 @@
 
 At a scattering point the path takes next-event estimation toward the sunlight (the light of the disk's visible
 part, :mod:`warpsky.light.sun`; ratio-tracked transmittance times the media's mixed phase) and samples a
-new direction from that mixture. On the Lambertian ground it takes the sun through the media, then a
+new direction from that mixture; where the sun lobe also reaches the event (:mod:`~warpsky.techniques.path_tracer.
+sun_lobe`), it keeps its balance-heuristic share of that sunlight. On the Lambertian ground it takes the sun through the media, then a
 cosine-weighted bounce. A path that leaves every medium gains the uniform environment and the dome (after a
 bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black sea level.
 
@@ -28,11 +29,10 @@ from warpsky.media.air.medium import (
     part_phase,
     part_total,
     scaled_part,
-    sea_level_distance,
     vertical,
 )
 from warpsky.media.phase_mixture import mixture_functions, oriented_correction_function
-from warpsky.media.voxels.voxel import VoxelMedia, media_functions
+from warpsky.media.voxels.voxel import MediaPoint, VoxelMedia, media_functions
 from warpsky.optics.kernels import medium_phase, scattering_angle
 from warpsky.optics.phase import hg_sample_cos, isotropic_sample_cos, phase_hg
 from warpsky.optics.phase_sampling import PhaseTables, rotate_about
@@ -43,29 +43,18 @@ from warpsky.techniques.path_tracer.planet import (
     air_to_sun,
     cosine_about,
     cosine_up,
-    floor_hit,
     ground_cosine,
     ground_point,
 )
+from warpsky.techniques.path_tracer.ray_ends import UNBOUNDED
 from warpsky.techniques.path_tracer.tracking import Transmittance, reduced_with_air, tracking_functions
 
 oriented_mixture_correction = oriented_correction_function(medium_phase)[1]
 
-#: What ends a ray before the far distance: nothing, the ground plane, sea level (the air's floor), an opaque
-#: surface another pass draws behind the media (a mesh: the camera ray ends there, the path with nothing more), or a
-#: mesh the path tracer traces itself (:mod:`~warpsky.techniques.path_tracer.surface_hits`: a Lambertian bounce).
-SURFACE_NONE = wp.constant(0)
-SURFACE_GROUND = wp.constant(1)
-SURFACE_SEA = wp.constant(2)
-SURFACE_OPAQUE = wp.constant(3)
-SURFACE_MESH = wp.constant(4)
-#: "No end": flights after the first bounce and rays toward the sun run this far [m].
-UNBOUNDED = wp.constant(1.0e30)
-#: A ground plane at sea level and sea level itself are one surface: distances within this relative difference
-#: (rounding of two formulas) count as a tie, which the ground wins.
-SURFACE_TIE = wp.constant(1.0e-5)
 #: Russian roulette starts once a path has bounced this often.
 ROULETTE_BOUNCE = wp.constant(3)
+#: ``PathState.lobe_g`` of a path that takes no sun lobe (sun_lobe.py).
+NO_LOBE = wp.constant(-1.0)
 
 
 @wp.func
@@ -78,12 +67,6 @@ def reduced_mixture(air_s: AirPart, media_part: wp.vec3, total: wp.vec3, cos_the
         if total[c] > 0.0:
             out[c] = (air_phase[c] + media_part[c] / (4.0 * wp.pi)) / total[c]
     return out
-
-
-@wp.struct
-class RayEnd:
-    t: float  # distance [m] at which the ray ends
-    surface: int  # SURFACE_* that ends it
 
 
 @wp.struct
@@ -104,6 +87,8 @@ class PathState:
     first_t: float  # where the first flight ended [m from the near plane]
     hero: int  # the colour channel whose phase tables the path samples (green without tables)
     ratio: wp.vec3  # the path's direction densities with each channel as hero, over their largest
+    lobe_g: float  # the sun lobe's Henyey-Greenstein g (sun_lobe.py); NO_LOBE: the path takes none
+    lobe_pdf: float  # the density [1/sr] its direction was drawn with, where the sun lobe shares the next sunlight
 
 
 @wp.func
@@ -118,6 +103,8 @@ def start_path(origin: wp.vec3, direction: wp.vec3, state: wp.uint32, steps: int
     out.steps = steps
     out.shadow_steps = 0
     out.events = 0
+    out.lobe_g = NO_LOBE
+    out.lobe_pdf = 0.0
     out.alive = 1
     out.capped = 0
     out.hit = 0
@@ -125,25 +112,6 @@ def start_path(origin: wp.vec3, direction: wp.vec3, state: wp.uint32, steps: int
     out.hero = 1
     out.ratio = wp.vec3(1.0)
     return out
-
-
-@wp.func
-def reaches_ground(ground: Ground, origin: wp.vec3, d: wp.vec3) -> bool:
-    return d[1] < 0.0 and origin[1] > ground.offset
-
-
-@wp.func
-def ground_distance(ground: Ground, origin: wp.vec3, d: wp.vec3) -> float:
-    """Distance [m] along ``d`` to the ground plane (for rays that reach it)."""
-    return (ground.offset - origin[1]) / d[1]
-
-
-@wp.func
-def floor_surface(air: Air) -> int:
-    """What a round earth's floor is: the ground (the scene's plane at or above sea level) or a black sea level."""
-    if air.floor_ground != 0:
-        return SURFACE_GROUND
-    return SURFACE_SEA
 
 
 @wp.func
@@ -190,73 +158,6 @@ def roulette(path: PathState, bounce: int) -> PathState:
             else:
                 out.alive = 0
             out.state = state
-    return out
-
-
-@wp.func
-def round_end(air: Air, ground: Ground, origin: wp.vec3, d: wp.vec3, t_end: float) -> RayEnd:
-    """Where a ray ends on a round earth: at ``t_end``, else at the floor's sphere where it is nearer."""
-    out = RayEnd()
-    out.t = t_end
-    out.surface = SURFACE_NONE
-    t_floor = floor_hit(air, origin, d)
-    if t_floor >= 0.0 and t_floor < t_end:
-        out.t = t_floor
-        out.surface = SURFACE_SEA
-        if ground.enabled != 0:
-            out.surface = floor_surface(air)
-    return out
-
-
-@wp.func
-def primary_end(air: Air, ground: Ground, origin: wp.vec3, view: wp.vec3, t_end: float) -> RayEnd:
-    """Where a camera ray from the near plane ends: the far plane at ``t_end``, else sea level, else the
-    ground (the nearer wins; a ground at sea level wins within ``SURFACE_TIE`` of the distance); on a round
-    earth the floor's sphere."""
-    if air.enabled != 0 and air.round != 0:
-        return round_end(air, ground, origin, view, t_end)
-    out = RayEnd()
-    out.t = t_end
-    out.surface = SURFACE_NONE
-    if air.enabled != 0 and view[1] < 0.0:
-        t_sea = sea_level_distance(air, origin, view)
-        if t_sea < out.t:
-            out.t = t_sea
-            out.surface = SURFACE_SEA
-    if ground.enabled != 0:
-        if reaches_ground(ground, origin, view):
-            tg = ground_distance(ground, origin, view)
-            if tg < out.t or (out.surface == SURFACE_SEA and tg <= out.t * (1.0 + SURFACE_TIE)):
-                out.t = tg
-                out.surface = SURFACE_GROUND
-    return out
-
-
-@wp.func
-def flight_end(air: Air, ground: Ground, origin: wp.vec3, d: wp.vec3, bounce: int, first: RayEnd) -> RayEnd:
-    """Where the flight of bounce ``bounce`` ends: the camera ray's end ``first`` for bounce 0, else the ground
-    (or no end), then sea level where it is nearer (within ``SURFACE_TIE`` the ground); on a round earth the
-    camera ray's end, else the floor's sphere (or no end)."""
-    if air.enabled != 0 and air.round != 0:
-        if bounce == 0:
-            return first
-        return round_end(air, ground, origin, d, UNBOUNDED)
-    out = RayEnd()
-    out.t = first.t
-    out.surface = SURFACE_NONE
-    if bounce > 0:
-        out.t = UNBOUNDED
-        if ground.enabled != 0:
-            if reaches_ground(ground, origin, d):
-                out.t = ground_distance(ground, origin, d)
-                out.surface = SURFACE_GROUND
-    elif first.surface == SURFACE_GROUND or first.surface == SURFACE_OPAQUE:
-        out.surface = first.surface
-    if air.enabled != 0 and d[1] < 0.0:
-        t_sea = sea_level_distance(air, origin, d)
-        if t_sea < out.t * (1.0 - SURFACE_TIE):
-            out.t = t_sea  # the air ends at a black sea level (no ground plane above it here)
-            out.surface = SURFACE_SEA
     return out
 
 
@@ -405,14 +306,63 @@ def fog_event_function(has_detail: bool, has_fog: bool):
     return fog_scatter_event
 
 
+@wp.struct
+class Sunlight:
+    """The sunlight a scattering sends back along a path per unit throughput, the shadow ray's steps and the
+    advanced random state."""
+
+    value: wp.vec3
+    steps: int
+    state: wp.uint32
+
+
+@wp.func
+def direction_share(path: PathState, sun: Sun) -> float:
+    """The share of the sunlight at a path's scattering event that its own direction carries: 1, or where the sun
+    lobe (sun_lobe.py) also draws that direction at the previous event, the balance heuristic's
+    ``lobe_pdf / (lobe_pdf + lobe density)``."""
+    if path.lobe_pdf <= 0.0:
+        return 1.0
+    return path.lobe_pdf / (path.lobe_pdf + phase_hg(wp.dot(sun.direction, path.direction), path.lobe_g))
+
+
+@functools.cache
+def sunlight_function(has_tables: bool, has_detail: bool, has_fog: bool = False):
+    """``event_sunlight(media, majorants, tables, air, sun, point, air_s, p, direction, state) -> Sunlight``:
+    the sunlight a scattering at ``p`` (the media's ``point``, the air's ``air_s``) sends back along a path that
+    arrived along ``direction``, per unit throughput: the sun's irradiance, its ratio-tracked transmittance and the
+    mixture's phase (oriented ice's included), with the shadow ray's steps and the advanced state."""
+    transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
+    mixture_phase = mixture_functions(has_tables)[0]
+
+    @wp.func
+    def event_sunlight(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
+                       point: MediaPoint, air_s: AirPart, p: wp.vec3, direction: wp.vec3,
+                       state: wp.uint32) -> Sunlight:
+        tr = transmittance_to_sun(media, majorants, air, sun, p, state, 0)
+        out = Sunlight()
+        out.steps = tr.steps
+        out.state = tr.state
+        theta = scattering_angle(sun.direction, direction)
+        phase = mixture_phase(media, point, tables.values, air_s, theta)
+        if wp.static(has_tables):  # oriented crystals are ice, a tabulated species: their sunlit phase
+            phase += oriented_mixture_correction(media, point, tables.values, tables.oriented, air_s, direction,
+                                                 theta)
+        out.value = wp.cw_mul(phase, wp.cw_mul(sun.irradiance, tr.value))
+        return out
+
+    return event_sunlight
+
+
 @functools.cache
 def event_functions(has_tables: bool, has_detail: bool, has_fog: bool = False):
     """``(scatter_event, reduced_scatter_event, ground_event)``, specialised on tabulated species, animated detail
     and analytic fog."""
     sample_media = media_functions(has_detail)
     transmittance_to_sun = sun_transmittance_function(has_detail, has_fog)
-    mixture_phase, sample_mixture = mixture_functions(has_tables)
+    sample_mixture = mixture_functions(has_tables)[1]
     fog_scatter_event = fog_event_function(has_detail, has_fog)
+    event_sunlight = sunlight_function(has_tables, has_detail, has_fog)
 
     @wp.func
     def scatter_event(media: VoxelMedia, majorants: Majorants, tables: PhaseTables, air: Air, sun: Sun,
@@ -430,23 +380,20 @@ def event_functions(has_tables: bool, has_detail: bool, has_fog: bool = False):
             if pick.body >= 0:
                 return fog_scatter_event(media, majorants, air, sun, sun_on, out, p, pick.g)
         if sun_on:
-            tr_sun = transmittance_to_sun(media, majorants, air, sun, p, out.state, 0)
-            out.state = tr_sun.state
-            out.steps = out.steps + tr_sun.steps
-            out.shadow_steps = out.shadow_steps + tr_sun.steps
-            theta = scattering_angle(sun.direction, out.direction)
-            phase = mixture_phase(media, point, tables.values, air_s, theta)
-            if wp.static(has_tables):  # oriented crystals are ice, a tabulated species: their sunlit phase
-                phase += oriented_mixture_correction(media, point, tables.values, tables.oriented, air_s,
-                                                     out.direction, theta)
-            out.radiance = out.radiance + wp.cw_mul(wp.cw_mul(out.throughput, phase),
-                                                    wp.cw_mul(sun.irradiance, tr_sun.value))
+            light = event_sunlight(media, majorants, tables, air, sun, point, air_s, p, out.direction, out.state)
+            out.state = light.state
+            out.steps = out.steps + light.steps
+            out.shadow_steps = out.shadow_steps + light.steps
+            out.radiance = out.radiance + wp.cw_mul(out.throughput, light.value) * direction_share(out, sun)
         ps = sample_mixture(media, point, tables, air_s, out.direction, out.hero, out.ratio, out.state)
         out.state = ps.state
         out.ratio = ps.ratio
         out.throughput = wp.cw_mul(out.throughput, ps.weight)
         out.direction = ps.direction
         out.origin = p
+        out.lobe_pdf = 0.0
+        if out.lobe_g != NO_LOBE:
+            out.lobe_pdf = ps.density
         return out
 
     @wp.func

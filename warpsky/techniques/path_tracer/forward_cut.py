@@ -41,9 +41,9 @@ from warpsky.optics.multiple import forward_cut
 from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.optics.tables import phase_table
 from warpsky.surfaces.plane import Ground
-from warpsky.techniques.path_tracer.events import UNBOUNDED
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.planet import air_to_sun, ground_cosine
+from warpsky.techniques.path_tracer.ray_ends import UNBOUNDED
 from warpsky.techniques.path_tracer.tracking import ROULETTE_TRANSMITTANCE, media_sums, next_collision, positive
 
 

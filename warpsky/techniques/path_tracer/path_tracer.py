@@ -56,6 +56,7 @@ from warpsky.techniques.path_tracer.stratiform_media import (
     stratiform_voxel_features,
     with_stratiform_as_media,
 )
+from warpsky.techniques.path_tracer.sun_lobe import AUTO_LOBE, NO_LOBE, lobe_asymmetry
 from warpsky.techniques.path_tracer.surface_hits import traced_meshes
 from warpsky.techniques.single_scatter.single_scatter import MEDIA_CACHE
 from warpsky.techniques.technique import Technique
@@ -85,6 +86,9 @@ class PathTracerSettings(Settings):
                                  "peak) as not scattered: sigma_s (1 - f), the phase flattened below the cut "
                                  "(delta-M). Removes the heavy tail of next-event estimation in thick Mie clouds; "
                                  "biased by the peak's angular spread; 0 = exact")
+    sun_lobe: float | None = setting(-1.0, range="[-1, 0.99]", auto=AUTO_LOBE, help="g of a lobe around the sun "
+                                     "from which each event also draws a way to the next, sharing its sunlight by "
+                                     "the balance heuristic (sun_lobe.py; unbiased); -1 = none")
     majorant_block: int | None = setting(None, unit="voxel", range=">= 1", auto="per medium, 8 down to 2 voxels so "
                                          "that a cell edge holds at most 6 optical depths at the densest point",
                                          help="edge of the coarse majorant cells; a huge value gives one global "
@@ -268,6 +272,7 @@ class PathTracing:
         if settings.bake_detail and any(m.has_detail for m in scene.media):
             media_list, cache = baked_media(scene.media, scene.time_s, camera.position, device), BAKED_CACHE
         self.forward_cut = cuts(scene, float(settings.forward_cut))
+        self.lobe_g = lobe_asymmetry(scene, settings.sun_lobe, meshes=meshes, fog=fog)
         with wp.ScopedDevice(device):
             phase = build_tables(species).phase if species else None
             cut = cut_tables(species, phase, float(settings.forward_cut)) if self.forward_cut else None
@@ -335,7 +340,7 @@ class PathTracing:
         if not self.samples_per_launch:
             launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only,
                                    forward_cut=self.forward_cut, air_by_table=self.air_by_table,
-                                   first_end=self.first_end, active=active)
+                                   first_end=self.first_end, active=active, lobe_g=self.lobe_g)
             launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums, None], self.device)
             return
         end = first_sample + count
@@ -343,7 +348,7 @@ class PathTracing:
             chunk = min(self.samples_per_launch, end - first_sample)
             launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only,
                                    forward_cut=self.forward_cut, air_by_table=self.air_by_table,
-                                   first_end=self.first_end, active=active)
+                                   first_end=self.first_end, active=active, lobe_g=self.lobe_g)
             launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, sums, self.samples],
                         self.device)
             launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
@@ -419,10 +424,12 @@ def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> Pi
 
 def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int, *,
                   multiple_only: bool = False, forward_cut: bool = False, air_by_table: bool = False,
-                  first_end: tuple[float, float] | None = None, active: wp.array | None = None) -> PathSettings:
+                  first_end: tuple[float, float] | None = None, active: wp.array | None = None,
+                  lobe_g: float = NO_LOBE) -> PathSettings:
     """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``; with
     ``air_by_table`` a path whose first event is the air's ends there (:func:`~warpsky.techniques.path_tracer.
-    events.media_first_function`); with ``active`` (uint8 per film pixel) only the pixels it marks run paths."""
+    events.media_first_function`); with ``active`` (uint8 per film pixel) only the pixels it marks run paths;
+    ``lobe_g`` is the sun lobe's g (:func:`~warpsky.techniques.path_tracer.sun_lobe.lobe_asymmetry`)."""
     out = PathSettings()
     out.environment = wp.vec3(float(settings.environment))
     out.seed = int(settings.seed)
@@ -433,6 +440,7 @@ def path_settings(settings: PathTracerSettings, first_sample: int, sample_count:
     out.multiple_only = int(multiple_only)
     out.similarity_order = int(settings.similarity_order)
     out.forward_cut = int(forward_cut)
+    out.sun_lobe_g = float(lobe_g)
     out.air_by_table = int(air_by_table)
     out.first_end_low, out.first_end_high = (1.0, -1.0) if first_end is None else (float(v) for v in first_end)
     out.masked = int(active is not None)

@@ -34,20 +34,11 @@ from warpsky.optics.phase_sampling import PhaseTables
 from warpsky.surfaces.mesh import SurfaceHit, SurfaceMeshes, no_hit
 from warpsky.surfaces.plane import Ground
 from warpsky.techniques.path_tracer.events import (
-    SURFACE_GROUND,
-    SURFACE_MESH,
-    SURFACE_NONE,
-    SURFACE_OPAQUE,
-    SURFACE_SEA,
-    UNBOUNDED,
     PathState,
-    RayEnd,
     escaped_dome,
     escaped_radiance,
     event_functions,
-    flight_end,
     media_first_function,
-    primary_end,
     roulette,
     start_path,
     sun_reaches,
@@ -56,6 +47,18 @@ from warpsky.techniques.path_tracer.fog_media import fog_sun_transmittance, fog_
 from warpsky.techniques.path_tracer.forward_cut import CutMedia, peak_light_function
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.planet import ground_point
+from warpsky.techniques.path_tracer.ray_ends import (
+    SURFACE_GROUND,
+    SURFACE_MESH,
+    SURFACE_NONE,
+    SURFACE_OPAQUE,
+    SURFACE_SEA,
+    UNBOUNDED,
+    RayEnd,
+    flight_end,
+    primary_end,
+)
+from warpsky.techniques.path_tracer.sun_lobe import sun_lobe_function
 from warpsky.techniques.path_tracer.surface_hits import (
     camera_mesh_end,
     mesh_event_function,
@@ -84,6 +87,7 @@ class PathSettings:
     air_by_table: int  # 1: paths whose first event is the air's end there (a table holds the air's own light)
     first_end_low: float  # a camera ray's event at a camera-relative altitude in [low, high] ends its path there
     first_end_high: float  # (another pass draws what lies there: the stratiform layers); low > high: none
+    sun_lobe_g: float  # the sun lobe's g (sun_lobe.py); NO_LOBE: none (kernels with meshes or fog take none)
     masked: int  # 1: only pixels whose ``active`` entry is non-zero run paths in this launch
     active: wp.array2d(dtype=wp.uint8)  # per film pixel (read only with ``masked``)
 
@@ -157,6 +161,31 @@ def first_event_function(has_tables: bool, has_detail: bool, has_fog: bool = Fal
     return first_event
 
 
+@wp.func
+def lobe_reaches(settings: PathSettings, sun_on: bool, bounce: int) -> bool:
+    """Whether the event after flight ``bounce`` takes the sunlight the sun lobe shares: the sun is up, the path
+    may still scatter there and the event is not one after high-order similarity."""
+    if not sun_on or bounce >= settings.max_bounces:
+        return False
+    return settings.similarity_order <= 0 or bounce < settings.similarity_order
+
+
+@wp.func
+def next_media(media: VoxelMedia, cut: CutMedia, settings: PathSettings) -> VoxelMedia:
+    """The media of every flight after the first: the cut ones with ``settings.forward_cut``."""
+    if settings.forward_cut != 0:
+        return cut.media
+    return media
+
+
+@wp.func
+def next_majorants(majorants: Majorants, cut: CutMedia, settings: PathSettings) -> Majorants:
+    """The majorants of :func:`next_media`."""
+    if settings.forward_cut != 0:
+        return cut.majorants
+    return majorants
+
+
 @functools.cache
 def path_function(has_tables: bool, has_detail: bool = False, has_meshes: bool = False, has_fog: bool = False):
     """``trace_path(...) -> PathState``, one path from its camera ray (one loop carrying state), specialised like
@@ -168,6 +197,7 @@ def path_function(has_tables: bool, has_detail: bool = False, has_meshes: bool =
     scatter_event, reduced_scatter_event, ground_event = event_functions(has_tables, has_detail, has_fog)
     media_first = media_first_function(has_detail, has_fog)
     first_event = first_event_function(has_tables, has_detail, has_fog)
+    sun_lobe_light = sun_lobe_function(has_tables, has_detail)
 
     @wp.func
     def trace_path(media: VoxelMedia, majorants: Majorants, cut: CutMedia, phase_tables: PhaseTables, air: Air,
@@ -246,12 +276,28 @@ def path_function(has_tables: bool, has_detail: bool = False, has_meshes: bool =
                 if reduced != 0:
                     path = reduced_scatter_event(here, bounds, air, sun, lit, path, p)
                 else:
+                    arrived = path
                     path = scatter_event(here, bounds, phase_tables, air, sun, lit, path, p, air_weight)
+                    if wp.static(not has_meshes and not has_fog):
+                        if path.lobe_pdf > 0.0:  # the sun lobe's share of the next event's sunlight
+                            if not lobe_reaches(settings, sun_on, bounce + 1):
+                                path.lobe_pdf = 0.0
+                            else:
+                                lobe = sun_lobe_light(here, next_media(media, cut, settings),
+                                                      next_majorants(majorants, cut, settings), phase_tables, air,
+                                                      sun, ground, arrived, p, air_weight, bounce + 1, first,
+                                                      path.state)
+                                path.radiance = path.radiance + lobe.radiance
+                                path.steps = path.steps + lobe.steps
+                                path.shadow_steps = path.shadow_steps + lobe.shadow_steps
+                                path.state = lobe.state
             elif end.surface == SURFACE_MESH:
                 if wp.static(has_meshes):
                     path = mesh_event(here, bounds, air, sun, surfaces, lit, path, p, stop.hit, reduced)
             else:
                 path = ground_event(here, bounds, air, sun, ground, lit, path, p, reduced)
+            if flight.scattered == 0 or reduced != 0:
+                path.lobe_pdf = 0.0  # a bounce's or a reduced event's direction shares no sunlight
             bounce += 1
             path = roulette(path, bounce)
         return path
@@ -330,8 +376,11 @@ def sample_function(has_tables: bool, has_detail: bool = False, has_meshes: bool
         if wp.static(not has_meshes and not has_fog):
             if carries_nothing(media, air, settings, origin, view, first):
                 return out
+        start = start_path(origin, view, state, steps)
+        if wp.static(not has_meshes and not has_fog):
+            start.lobe_g = settings.sun_lobe_g
         path = trace_path(media, majorants, cut, phase_tables, air, sun, ground, dome, surfaces, settings,
-                          sun_reaches(sun, air), start_path(origin, view, state, steps), first, first_hit)
+                          sun_reaches(sun, air), start, first, first_hit)
         if path.hit != 0:
             out.depth = wp.vec2((ray.t_near + path.first_t) * ray.cos_axis, 1.0)
         out.radiance = path.radiance

@@ -40,15 +40,10 @@ from warpsky.surfaces.mesh import (
     off_surface,
 )
 from warpsky.surfaces.plane import Ground
-from warpsky.techniques.path_tracer.events import (
-    SURFACE_MESH,
-    UNBOUNDED,
-    PathState,
-    RayEnd,
-    sun_transmittance_function,
-)
+from warpsky.techniques.path_tracer.events import PathState, sun_transmittance_function
 from warpsky.techniques.path_tracer.majorants import Majorants
 from warpsky.techniques.path_tracer.planet import cosine_about, ground_point
+from warpsky.techniques.path_tracer.ray_ends import SURFACE_MESH, UNBOUNDED, RayEnd
 
 
 @wp.struct
