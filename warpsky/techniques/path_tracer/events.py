@@ -3,8 +3,8 @@
 At a scattering point the path takes next-event estimation toward the sunlight (the light of the disk's visible
 part, :mod:`warpsky.light.sun`; ratio-tracked transmittance times the media's mixed phase) and samples a
 new direction from that mixture; where the sun lobe also reaches the event (:mod:`~warpsky.techniques.path_tracer.
-sun_lobe`), it keeps its balance-heuristic share of that sunlight. On the Lambertian ground it takes the sun through the media, then a
-cosine-weighted bounce. A path that leaves every medium gains the uniform environment and the dome (after a
+sun_lobe`), it keeps its balance-heuristic share of that sunlight. On the Lambertian ground it takes the sun
+through the media, then a cosine-weighted bounce. A path that leaves every medium gains the uniform environment and the dome (after a
 bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black sea level.
 
 On a round earth (``air.round``) the air ends below at its floor's sphere: the ground plane, when the scene has one
