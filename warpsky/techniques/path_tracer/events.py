@@ -4,8 +4,9 @@ At a scattering point the path takes next-event estimation toward the sunlight (
 part, :mod:`warpsky.light.sun`; ratio-tracked transmittance times the media's mixed phase) and samples a
 new direction from that mixture; where the sun lobe also reaches the event (:mod:`~warpsky.techniques.path_tracer.
 sun_lobe`), it keeps its balance-heuristic share of that sunlight. On the Lambertian ground it takes the sun
-through the media, then a cosine-weighted bounce. A path that leaves every medium gains the uniform environment and the dome (after a
-bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black sea level.
+through the media, then a cosine-weighted bounce. A path that leaves every medium gains the uniform environment
+and the dome (after a bounce) or, with air, the sun's disk seen directly; with air a downward path ends at a black
+sea level.
 
 On a round earth (``air.round``) the air ends below at its floor's sphere: the ground plane, when the scene has one
 at or above sea level, is that sphere (its albedo, the local vertical its normal), else it is a black sea level; a
