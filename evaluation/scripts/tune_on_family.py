@@ -78,6 +78,18 @@ def summary(rows: list[dict]) -> dict:
             "median_seconds": float(np.median([r["seconds"] for r in rows]))}
 
 
+def grid_value(text: str):
+    """A ``--grid`` or ``--set`` value: a whole number, a number, or a word (``auto``) passed on as it is."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("technique")
@@ -104,10 +116,10 @@ def main(argv=None) -> int:
     fixed = {}
     for item in args.fixed:
         key, _, value = item.partition("=")
-        fixed[key] = float(value) if any(c in value for c in ".e") or value.startswith("-") else int(value)
+        fixed[key] = grid_value(value)
     results = []
     for text in values.split(","):
-        value = float(text) if any(c in text for c in ".e") else int(text)
+        value = grid_value(text)
         settings = {**fixed, name: value}
         print(f"{args.technique} {settings}")
         rows = measure(args.technique, settings, args.family, args.half, args.res, args.res, args.device,
