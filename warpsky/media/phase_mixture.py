@@ -116,6 +116,7 @@ class MixtureDensity:
 
     phase: wp.vec3  # Riley Eq. 6 [1/sr], oriented ice's terms included
     density: float  # [1/sr]: with tables, the heroes' densities weighted by the path's ratios, over their mean
+    inverse: float  # with tables, 1 / density as the sample's weight takes it: the ratios' mean over their mixture
     ratio: wp.vec3  # the path's ratios after this direction (with tables; unchanged without)
 
 
@@ -231,6 +232,7 @@ def mixture_functions(has_tables: bool):
         out = MixtureDensity()
         out.ratio = ratio
         out.density = 0.0
+        out.inverse = 0.0
         total = mean3(part_total(air_s))
         for m in range(media.count):
             total += mean3(media.grids[m].scattering) * point.density[m]
@@ -250,6 +252,7 @@ def mixture_functions(has_tables: bool):
             mixed = mean3(path_pdf)
             if mixed > 0.0:
                 out.density = mixed / mean3(ratio)
+                out.inverse = mean3(ratio) / mixed
                 out.ratio = path_pdf / wp.max(wp.max(path_pdf[0], path_pdf[1]), path_pdf[2])
         else:
             pdf = part_pdf(air_s, wp.cos(theta))
@@ -302,7 +305,10 @@ def mixture_functions(has_tables: bool):
         out.density = found.density
         out.weight = wp.vec3(0.0)
         if found.density > 0.0:
-            out.weight = wp.max(found.phase, wp.vec3(0.0)) / found.density
+            if wp.static(has_tables):
+                out.weight = wp.max(found.phase, wp.vec3(0.0)) * found.inverse
+            else:
+                out.weight = wp.max(found.phase, wp.vec3(0.0)) / found.density
         return out
 
     return mixture_phase, sample_mixture, mixture_density

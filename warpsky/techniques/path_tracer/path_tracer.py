@@ -56,7 +56,7 @@ from warpsky.techniques.path_tracer.stratiform_media import (
     stratiform_voxel_features,
     with_stratiform_as_media,
 )
-from warpsky.techniques.path_tracer.sun_lobe import AUTO_LOBE, NO_LOBE, lobe_asymmetry
+from warpsky.techniques.path_tracer.sun_lobe import AUTO_LOBE, lobe_asymmetry
 from warpsky.techniques.path_tracer.surface_hits import traced_meshes
 from warpsky.techniques.single_scatter.single_scatter import MEDIA_CACHE
 from warpsky.techniques.technique import Technique
@@ -266,7 +266,7 @@ class PathTracing:
         self.width, self.height = width, height
         self.multiple_only = multiple_only
         self.camera = camera
-        self.first_end = None if first_end is None else tuple(v - float(camera.position[1]) for v in first_end)
+        self.first_end = None if first_end is None else tuple(float(v) - float(camera.position[1]) for v in first_end)
         species = scene.species
         media_list, cache = scene.media, MEDIA_CACHE
         if settings.bake_detail and any(m.has_detail for m in scene.media):
@@ -334,21 +334,33 @@ class PathTracing:
         out._launch_buffers()
         return out
 
+    def _launch_settings(self, first_sample: int, count: int, active: wp.array | None) -> PathSettings:
+        """Kernel settings of one launch: ``count`` paths per pixel from path index ``first_sample``, of the pixels
+        ``active`` marks (uint8 per film pixel; None: all)."""
+        out, settings = PathSettings(), self.settings
+        out.environment = wp.vec3(float(settings.environment))
+        out.seed, out.pixel_jitter = int(settings.seed), int(settings.pixel_jitter)
+        out.first_sample, out.sample_count = int(first_sample), int(count)
+        out.max_bounces, out.similarity_order = int(settings.max_bounces), int(settings.similarity_order)
+        out.multiple_only, out.forward_cut = int(self.multiple_only), int(self.forward_cut)
+        out.sun_lobe_g, out.air_by_table = float(self.lobe_g), int(self.air_by_table)
+        out.first_end_low, out.first_end_high = (1.0, -1.0) if self.first_end is None else self.first_end
+        out.masked = int(active is not None)
+        if active is not None:
+            out.active = active
+        return out
+
     def launch(self, sums: PixelSums, first_sample: int, count: int, active: wp.array | None = None) -> None:
         """Add paths ``first_sample .. first_sample + count - 1`` of every pixel (of the pixels ``active``, uint8 per
         film pixel, marks) to ``sums`` (asynchronous on GPUs)."""
         if not self.samples_per_launch:
-            launch = path_settings(self.settings, first_sample, count, multiple_only=self.multiple_only,
-                                   forward_cut=self.forward_cut, air_by_table=self.air_by_table,
-                                   first_end=self.first_end, active=active, lobe_g=self.lobe_g)
+            launch = self._launch_settings(first_sample, count, active)
             launch_rows(self.kernel, self.height, self.width, [*self.fixed, launch, sums, None], self.device)
             return
         end = first_sample + count
         while first_sample < end:
             chunk = min(self.samples_per_launch, end - first_sample)
-            launch = path_settings(self.settings, first_sample, chunk, multiple_only=self.multiple_only,
-                                   forward_cut=self.forward_cut, air_by_table=self.air_by_table,
-                                   first_end=self.first_end, active=active, lobe_g=self.lobe_g)
+            launch = self._launch_settings(first_sample, chunk, active)
             launch_rows(self.kernel, chunk * self.height, self.width, [*self.fixed, launch, sums, self.samples],
                         self.device)
             launch_rows(sum_samples_kernel(), self.height, self.width, [self.samples, chunk, sums], self.device)
@@ -419,33 +431,6 @@ def pixel_sums(shape: tuple[int, int], device, *, name: str | None = None) -> Pi
             array = device_buffers.reusable(f"{name}:{field}", shape, dtype, device)
             array.zero_()
         setattr(out, field, array)
-    return out
-
-
-def path_settings(settings: PathTracerSettings, first_sample: int, sample_count: int, *,
-                  multiple_only: bool = False, forward_cut: bool = False, air_by_table: bool = False,
-                  first_end: tuple[float, float] | None = None, active: wp.array | None = None,
-                  lobe_g: float = NO_LOBE) -> PathSettings:
-    """Kernel settings of one launch: ``sample_count`` paths per pixel from path index ``first_sample``; with
-    ``air_by_table`` a path whose first event is the air's ends there (:func:`~warpsky.techniques.path_tracer.
-    events.media_first_function`); with ``active`` (uint8 per film pixel) only the pixels it marks run paths;
-    ``lobe_g`` is the sun lobe's g (:func:`~warpsky.techniques.path_tracer.sun_lobe.lobe_asymmetry`)."""
-    out = PathSettings()
-    out.environment = wp.vec3(float(settings.environment))
-    out.seed = int(settings.seed)
-    out.pixel_jitter = int(settings.pixel_jitter)
-    out.first_sample = int(first_sample)
-    out.sample_count = int(sample_count)
-    out.max_bounces = int(settings.max_bounces)
-    out.multiple_only = int(multiple_only)
-    out.similarity_order = int(settings.similarity_order)
-    out.forward_cut = int(forward_cut)
-    out.sun_lobe_g = float(lobe_g)
-    out.air_by_table = int(air_by_table)
-    out.first_end_low, out.first_end_high = (1.0, -1.0) if first_end is None else (float(v) for v in first_end)
-    out.masked = int(active is not None)
-    if active is not None:
-        out.active = active
     return out
 
 
