@@ -215,9 +215,9 @@ def chosen_medium(media: VoxelMedia, point: MediaPoint, air_weight: float, targe
 
 
 @functools.cache
-def mixture_functions(has_tables: bool):
-    """``(mixture_phase, sample_mixture, mixture_density)`` over the media at a point plus the air's components
-    (zero scattering for none), specialised on whether any medium uses a phase table."""
+def mixture_density_function(has_tables: bool):
+    """``mixture_density(media, point, tables, air_s, d, direction, ratio) -> MixtureDensity`` (see
+    :func:`mixture_functions`)."""
 
     mixture_phase = mixture_phase_function(has_tables)
 
@@ -264,6 +264,17 @@ def mixture_functions(has_tables: bool):
             out.density = pdf / wp.max(total, 1.0e-30)
             out.phase = mixture_phase(media, point, tables.values, air_s, theta)
         return out
+
+    return mixture_density
+
+
+@functools.cache
+def mixture_functions(has_tables: bool):
+    """``(mixture_phase, sample_mixture, mixture_density)`` over the media at a point plus the air's components
+    (zero scattering for none), specialised on whether any medium uses a phase table."""
+
+    mixture_phase = mixture_phase_function(has_tables)
+    mixture_density = mixture_density_function(has_tables)
 
     @wp.func
     def sample_mixture(media: VoxelMedia, point: MediaPoint, tables: PhaseTables, air_s: AirPart, d: wp.vec3,
