@@ -191,8 +191,9 @@ class Hybrid(Technique):
     #: estimate's two halves (72) and Open Image Denoise's own buffers (about 256, measured).
     COARSE_HOST_BYTES = 480
     #: Bytes per frame pixel on the host besides the single-scattering layer: coverage, the multiple-scattering
-    #: image and variance, upsampled, divided by the front air's transmittance (96), the layer's sum (12).
-    FINE_HOST_BYTES = 108
+    #: image and variance, upsampled, divided by the front air's transmittance (96), the layer's sum (12), and on a
+    #: coarser film the estimate's two halves upsampled, the upsampling's temporaries and their spread (72).
+    FINE_HOST_BYTES = 180
 
     def memory_estimate(self, scene: Scene, width: int, height: int) -> MemoryEstimate:
         """Bytes a frame allocates: the single-scattering march's, two halves of :class:`PixelSums` on the
@@ -364,7 +365,6 @@ class MultipleScattering:
         film_pixels = self.tracing.width * self.tracing.height
         fine_coverage = np.clip(1.0 - single.transmittance, 0.0, 1.0)
         coverage = block_mean(fine_coverage, self.scale) if self.scale > 1 else fine_coverage
-        single_radiance = block_mean(single.radiance, self.scale) if self.scale > 1 else single.radiance
         covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
         per_pass, done, passes, check_at, estimated_at = int(s.samples_per_pass), 0, 0, 2, 0
         estimate, stop = math.inf, "spp"
@@ -385,7 +385,7 @@ class MultipleScattering:
             passes += 1
             if s.target_error > 0.0 and passes == check_at:
                 checked = time.perf_counter()
-                estimate, estimated_at = self.estimate(single_radiance, coverage, covered), passes
+                estimate, estimated_at = self.estimate(single.radiance, fine_coverage, coverage), passes
                 timed_denoise(budget, 0.5 * (time.perf_counter() - checked) if s.denoise else 0.0, film_pixels)
                 if estimate <= s.target_error:
                     stop = "target"
@@ -407,7 +407,7 @@ class MultipleScattering:
             variance = bilinear_upsample(variance, self.scale, height, width)
         if s.target_error > 0.0 and stop != "target":
             if estimated_at != passes:  # paths were added since the last estimate (or there was none)
-                estimate = self.estimate(single_radiance, coverage, covered) if passes >= 2 else math.inf
+                estimate = self.estimate(single.radiance, fine_coverage, coverage) if passes >= 2 else math.inf
             if estimate <= s.target_error:
                 stop = "target"  # reached with the last paths, before the next scheduled check
             else:
@@ -451,8 +451,11 @@ class MultipleScattering:
         (``aovs["variance"]``) and the tracking counters (``stats``)."""
         return sums_layer(self.halves, self.pixel_counts[0] + self.pixel_counts[1], far=0.0, name=BUFFER_NAME)
 
-    def estimate(self, single: np.ndarray, coverage: np.ndarray, covered: np.ndarray) -> float:
-        """Estimated relative RMSE of the frame over ``covered`` pixels (0 when nothing is covered)."""
+    def estimate(self, single: np.ndarray, fine_coverage: np.ndarray, coverage: np.ndarray) -> float:
+        """Estimated relative RMSE of the frame over its covered pixels (0 when nothing is covered), measured on the
+        frame's own pixels: on a coarser film (``coverage`` its block means of ``fine_coverage``) the two halves
+        are upsampled as the frame's image is, which averages part of the film's noise away."""
+        covered = fine_coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
         if not covered.any():
             return 0.0
         a, b = self.half_mean(0), self.half_mean(1)
@@ -460,9 +463,14 @@ class MultipleScattering:
             radius, device = self.settings.mean_radius, self.device
             a = denoise(a, coverage, radius=radius, device=device).image
             b = denoise(b, coverage, radius=radius, device=device).image
+        a, b = (guided_upsample(half, fine_coverage, self.scale) for half in (a, b))
+        if self.settings.denoise:
             spread = 0.5 * (a - b) * ESTIMATE_CALIBRATION
         else:
-            spread = np.sqrt(self.film().aovs["variance"])
+            variance = self.film().aovs["variance"]
+            if self.scale > 1:
+                variance = bilinear_upsample(variance, self.scale, *fine_coverage.shape[:2])
+            spread = np.sqrt(variance)
         level = float((single[covered] + 0.5 * (a[covered] + b[covered])).mean())
         if level <= 0.0:
             return 0.0
