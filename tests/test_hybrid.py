@@ -397,3 +397,12 @@ def test_pixels_outside_the_estimate_stop_at_uncovered_spp(box, device):
     variance = (capped.aovs["variance"] + every.aovs["variance"])[lit]
     z = (capped.aovs["multiple_scatter"] - every.aovs["multiple_scatter"])[lit] / np.sqrt(variance)
     assert np.max(np.abs(z)) < 5.0
+
+
+def test_the_automatic_film_keeps_480_pixels_along_the_longer_side():
+    from warpsky.techniques.hybrid.budget import paths_film_scale
+
+    sizes = {(384, 256): 1, (959, 540): 1, (1280, 720): 2, (1920, 1080): 4, (1080, 1920): 4, (3840, 2160): 8,
+             (8192, 4096): 8}
+    assert {size: paths_film_scale(None, *size) for size in sizes} == sizes
+    assert paths_film_scale(3, 1920, 1080) == 3  # asked

@@ -38,6 +38,20 @@ FIRST_PASSES_SHARE = 0.6
 #: Film scales the paths may fall back on under a budget (pixels this many times larger).
 SCALES = (1, 2, 4, 8)
 
+#: What ``ms_scale`` auto means, as the settings print it.
+AUTO_FILM = ("the coarsest of 1, 2, 4 and 8 whose film keeps at least 480 pixels along the frame's longer side (1 "
+             "below 960: on the demo cumulus at 384x256 1x1 pixels measured best, at 1920x1080 4x4 ones: 27 s to "
+             "2.6% against 43 s to 3.9%)")
+#: Under ``ms_scale`` auto the paths' film keeps at least this many pixels along the frame's longer side.
+AUTO_FILM_PIXELS = 480
+
+
+def paths_film_scale(asked: int | None, width: int, height: int) -> int:
+    """The paths' film scale of a ``width`` x ``height`` frame: ``asked``, or with None :data:`AUTO_FILM`."""
+    if asked is not None:
+        return int(asked)
+    return max((scale for scale in SCALES if max(width, height) >= AUTO_FILM_PIXELS * scale), default=1)
+
 
 @dataclass
 class PathBudget:

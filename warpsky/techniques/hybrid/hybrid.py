@@ -44,7 +44,14 @@ from warpsky.model.scene import Scene
 from warpsky.optics.oriented_sampling import oriented_table_bytes
 from warpsky.passes.media import SceneryFrame, scenery_traceable
 from warpsky.passes.sky.front import front_air_transmittance
-from warpsky.techniques.hybrid.budget import PathBudget, coverage_scale_warning, film_scale, timed_denoise
+from warpsky.techniques.hybrid.budget import (
+    AUTO_FILM,
+    PathBudget,
+    coverage_scale_warning,
+    film_scale,
+    paths_film_scale,
+    timed_denoise,
+)
 from warpsky.techniques.hybrid.denoise import (
     bilinear_upsample,
     block_mean,
@@ -123,8 +130,9 @@ class HybridSettings(Settings):
                                  "does not cover (the ground, the sky; coverage below 1%) get no more, so the rest "
                                  "of the frame's paths go where the target is measured; not used when the paths "
                                  "trace fog, decks or meshes; >= spp: every pixel alike")
-    ms_scale: int = setting(1, unit="pixel", range="1..8", help="trace multiple scattering on pixels this many "
-                            "times larger (box-filtered), upsampled with the exact coverage as guide")
+    ms_scale: int | None = setting(None, unit="pixel", range="1..8", auto=AUTO_FILM, help="trace multiple "
+                                   "scattering on pixels this many times larger (box-filtered), upsampled with the "
+                                   "exact coverage as guide")
     step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering eye-ray step",
                                         auto="0.5 x the smallest voxel edge")
     shadow_step_length: float | None = setting(None, unit="m", range="> 0", help="single-scattering shadow step",
@@ -147,7 +155,7 @@ class HybridSettings(Settings):
     def path_tracer(self) -> PathTracerSettings:
         return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,
                                   majorant_block=self.majorant_block, samples_per_pass=self.samples_per_pass,
-                                  pixel_jitter=self.ms_scale > 1, similarity_order=self.similarity_order,
+                                  pixel_jitter=(self.ms_scale or 1) > 1, similarity_order=self.similarity_order,
                                   bake_detail=self.bake_detail, forward_cut=self.forward_cut,
                                   sun_lobe=self.sun_lobe, deck_extent=self.deck_extent,
                                   deck_voxel_width=self.deck_voxel_width, deck_voxel=self.deck_voxel)
@@ -204,7 +212,7 @@ class Hybrid(Technique):
         estimate = SingleScatter(s.single_scatter(), device=self.device).memory_estimate(scene, width, height)
         if not (s.multiple_scattering and (scene.media or self.scenery_paths(scene))):
             return estimate
-        scale = int(s.ms_scale)
+        scale = paths_film_scale(s.ms_scale, width, height)
         coarse = -(-width // scale) * -(-height // scale)
         paths = path_tracing_memory(scene, 2 * coarse, s.majorant_block, self.device, int(s.samples_per_pass),
                                     film_pixels=coarse, bake_detail=bool(s.bake_detail))
@@ -230,7 +238,7 @@ class Hybrid(Technique):
         s = self.settings_for(scene)
         items = march_work(scene, width * height, float(s.step_length), float(s.shadow_step_length))
         if s.multiple_scattering and (scene.media or self.scenery_paths(scene)) and s.time_budget is None:
-            scale = int(s.ms_scale)
+            scale = paths_film_scale(s.ms_scale, width, height)
             items.append(path_work(s.path_tracer(), -(-width // scale) * -(-height // scale)))
         return items
 
@@ -334,13 +342,14 @@ class MultipleScattering:
                  scenery: bool = False, first_end: tuple[float, float] | None = None):
         self.settings = settings
         self.device = device
-        self.scale = int(settings.ms_scale)
+        self.scale = paths_film_scale(settings.ms_scale, width, height)
         # With air, paths are traced through it from the sun at the top of the atmosphere: they carry skylight on
         # the media and the light between air, media and ground. The air's own light, single and multiple
         # scattering, is the sky pass's: a path whose first event is in the air ends there (air_by_table), unless
         # the atmosphere turns the table off (then the paths carry the air's multiple scattering as before).
         atmosphere = scene.atmosphere
-        self.tracing = PathTracing(above_air(scene), width, height, settings.path_tracer(), device,
+        paths = dataclasses.replace(settings.path_tracer(), pixel_jitter=self.scale > 1)
+        self.tracing = PathTracing(above_air(scene), width, height, paths, device,
                                    air=atmosphere is not None, multiple_only=True, scale=self.scale,
                                    buffer_name=BUFFER_NAME,
                                    air_by_table=atmosphere is not None and atmosphere.multiple_scattering,
