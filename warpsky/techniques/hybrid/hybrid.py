@@ -155,7 +155,7 @@ class HybridSettings(Settings):
     def path_tracer(self) -> PathTracerSettings:
         return PathTracerSettings(spp=self.spp, seed=self.seed, max_bounces=self.max_bounces,
                                   majorant_block=self.majorant_block, samples_per_pass=self.samples_per_pass,
-                                  pixel_jitter=(self.ms_scale or 1) > 1, similarity_order=self.similarity_order,
+                                  similarity_order=self.similarity_order,
                                   bake_detail=self.bake_detail, forward_cut=self.forward_cut,
                                   sun_lobe=self.sun_lobe, deck_extent=self.deck_extent,
                                   deck_voxel_width=self.deck_voxel_width, deck_voxel=self.deck_voxel)
@@ -348,8 +348,7 @@ class MultipleScattering:
         # scattering, is the sky pass's: a path whose first event is in the air ends there (air_by_table), unless
         # the atmosphere turns the table off (then the paths carry the air's multiple scattering as before).
         atmosphere = scene.atmosphere
-        paths = dataclasses.replace(settings.path_tracer(), pixel_jitter=self.scale > 1)
-        self.tracing = PathTracing(above_air(scene), width, height, paths, device,
+        self.tracing = PathTracing(above_air(scene), width, height, settings.path_tracer(), device,
                                    air=atmosphere is not None, multiple_only=True, scale=self.scale,
                                    buffer_name=BUFFER_NAME,
                                    air_by_table=atmosphere is not None and atmosphere.multiple_scattering,

@@ -255,7 +255,8 @@ class PathTracing:
                  air: bool = True, multiple_only: bool = False, scale: int = 1, buffer_name: str = "path_tracer",
                  per_sample: bool | None = None, air_by_table: bool = False, meshes: bool = False,
                  fog: bool = False, first_end: tuple[float, float] | None = None):
-        self.settings = settings
+        # a coarser film's pixel is box-filtered, as the frame's pixels it covers average it
+        self.settings = dataclasses.replace(settings, pixel_jitter=settings.pixel_jitter or scale > 1)
         self.air_by_table = bool(air_by_table and air)
         self.device = device
         camera = scene.camera.conformed(width, height)
