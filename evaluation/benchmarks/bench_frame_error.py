@@ -59,17 +59,21 @@ def crop_bounds(centre: tuple[float, float], width: int, height: int, pixels: in
     return x0, y0, x0 + pixels - 1, y0 + pixels - 1
 
 
-def reference_crop(stage: str, size: tuple[int, int], bounds, spp: int, seed: int = 7) -> dict:
-    """The path tracer's crop (radiance, variance of the mean, covered pixels, seconds), cached: the crop rendered
-    alone, through the camera's film back cut to it (:func:`warpsky.render.overscan.overscanned`), so its pixels
-    are the frame's."""
-    key = hashlib.sha256(json.dumps([Path(stage).read_bytes().hex(), size, bounds, spp, seed, __version__]).encode())
+def reference_crop(stage: str, size: tuple[int, int], bounds, spp: int, seed: int = 7,
+                   time_code: float | None = None) -> dict:
+    """The path tracer's crop (radiance, variance of the mean, covered pixels, seconds) at ``time_code`` (None: the
+    stage's earliest), cached: the crop rendered alone, through the camera's film back cut to it
+    (:func:`warpsky.render.overscan.overscanned`), so its pixels are the frame's."""
+    identity = [Path(stage).read_bytes().hex(), size, bounds, spp, seed, __version__]
+    if time_code is not None:
+        identity.append(float(time_code))
+    key = hashlib.sha256(json.dumps(identity).encode())
     path = cache_dir() / "reference" / f"frame_crop_{key.hexdigest()[:20]}.npz"
     if path.is_file():
         with np.load(path) as data:
             return dict(data)
     started = time.perf_counter()
-    scene = StageReader(stage).scene_at(None)
+    scene = StageReader(stage).scene_at(time_code)
     plan, cropped = overscanned(frame_plan(scene, "path_tracer", {"spp": spp, "seed": seed}, *size, "cpu"), scene,
                                 bounds)
     radiance, _, aovs, _ = render_frame_radiance(plan, cropped)

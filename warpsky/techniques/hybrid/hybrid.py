@@ -59,6 +59,7 @@ from warpsky.techniques.hybrid.denoise import (
     guided_upsample,
     require_denoiser,
 )
+from warpsky.techniques.hybrid.history import keep_frame, warm_start
 from warpsky.techniques.hybrid.scenery import paths_scene, scenery_guide
 from warpsky.techniques.path_tracer.deck_media import deck_plan, deck_voxel_memory
 from warpsky.techniques.path_tracer.forward_cut import check_cut_settings, cut_feature
@@ -130,6 +131,10 @@ class HybridSettings(Settings):
                                  "does not cover (the ground, the sky; coverage below 1%) get no more, so the rest "
                                  "of the frame's paths go where the target is measured; not used when the paths "
                                  "trace fog, decks or meshes; >= spp: every pixel alike")
+    temporal: float = setting(0.0, range="[0, 1)", help="reuse the previous frame's paths in frames rendered one "
+                              "after another in one process (same camera, size and settings), each frame's weighted "
+                              "by this factor per frame of age, dropped where the single scattering or the coverage "
+                              "changed; 0 = every frame alone")
     ms_scale: int | None = setting(None, unit="pixel", range="1..8", auto=AUTO_FILM, help="trace multiple "
                                    "scattering on pixels this many times larger (box-filtered), upsampled with the "
                                    "exact coverage as guide")
@@ -356,6 +361,7 @@ class MultipleScattering:
                                    first_end=first_end)
         shape = (self.tracing.height, self.tracing.width)
         self.halves = [pixel_sums(shape, device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
+        self.shot = (scene, width, height)
         self.scenery = scenery
         self.pixel_counts = [np.zeros(shape, np.float32) for _ in (0, 1)]  # paths per film pixel and half
         self.active: wp.array | None = None  # the covered film pixels, once uncovered ones get no more paths
@@ -374,6 +380,7 @@ class MultipleScattering:
         fine_coverage = np.clip(1.0 - single.transmittance, 0.0, 1.0)
         coverage = block_mean(fine_coverage, self.scale) if self.scale > 1 else fine_coverage
         covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
+        first = warm_start(self, single.radiance, fine_coverage) if s.temporal > 0.0 else 0
         per_pass, done, passes, check_at, estimated_at = int(s.samples_per_pass), 0, 0, 2, 0
         estimate, stop = math.inf, "spp"
         while done < s.spp:
@@ -384,7 +391,7 @@ class MultipleScattering:
             half = passes % 2
             launched = time.perf_counter()
             active = self.active_pixels(covered, done)
-            self.tracing.launch(self.halves[half], done, count, active)  # path indices, hence streams, never repeat
+            self.tracing.launch(self.halves[half], first + done, count, active)  # indices, hence streams, never repeat
             self.pixel_counts[half] += count if active is None else count * covered
             if budget is not None:
                 wp.synchronize_device(self.device)
@@ -403,6 +410,8 @@ class MultipleScattering:
                             + (f", estimated error {estimate:.1%} (target {s.target_error:.1%})"
                                if math.isfinite(estimate) else ""))
         wp.synchronize_device(self.device)
+        if s.temporal > 0.0:
+            keep_frame(self, single.radiance, fine_coverage, first + done)
         film = self.film()
         mean, variance = film.radiance, film.aovs["variance"]
         image, denoise_seconds, sanitised, warnings = mean, 0.0, 0, coverage_scale_warning(self.scale, asked)
