@@ -74,24 +74,70 @@ def test_without_reuse_no_history_is_kept(puff, device):
 
 
 def test_the_history_is_dropped_where_the_frame_changed():
-    """Pixels whose single scattering changed by more than the tolerance (and their margin) keep nothing; a
+    """Pixels whose single scattering changed by more than the tolerance (5% here; and their margin) keep nothing; a
     change in the coverage alone drops them too; the rest keep the weight."""
     single = np.full((20, 30, 3), 2.0, np.float32)
     coverage = np.full((20, 30, 3), 0.5, np.float32)
     kept = history.ShotHistory((), [], [], single, coverage, 0)
     moved = single.copy()
-    moved[5, 7] *= 1.0 + 2.0 * history.CHANGE_TOLERANCE
+    moved[5, 7] *= 1.1
     thinner = coverage.copy()
     thinner[15, 25] -= 2.0 * history.COVERAGE_TOLERANCE
-    weights = history.kept_weights(kept, moved, thinner, 1, 0.8)
+    weights = history.kept_weights(kept, moved, thinner, 1, 0.8, 0.05)
     margin = history.CHANGE_MARGIN
     dropped = np.zeros((20, 30), bool)
     dropped[5 - margin:5 + margin + 1, 7 - margin:7 + margin + 1] = True
     dropped[15 - margin:15 + margin + 1, 25 - margin:25 + margin + 1] = True
     assert np.array_equal(weights == 0.0, dropped)
     assert np.all(weights[~dropped] == np.float32(0.8))
-    small = single * (1.0 + 0.5 * history.CHANGE_TOLERANCE)
-    assert np.all(history.kept_weights(kept, small, coverage, 1, 0.8) == np.float32(0.8))
+    small = single * 1.025
+    assert np.all(history.kept_weights(kept, small, coverage, 1, 0.8, 0.05) == np.float32(0.8))
+    assert np.all(history.kept_weights(kept, moved, coverage, 1, 0.8, 0.2) == np.float32(0.8))  # a looser tolerance
     # on a film of 4x4-pixel blocks a block with one changed pixel is dropped, with its margin of blocks
-    coarse = history.kept_weights(kept, moved, coverage, 4, 0.8)
+    coarse = history.kept_weights(kept, moved, coverage, 4, 0.8, 0.05)
     assert coarse.shape == (5, 8) and coarse[1, 1] == 0.0 and coarse[4, 7] == np.float32(0.8)
+
+
+def test_a_batchs_second_frame_starts_from_the_first_and_says_so_in_its_header(tmp_path, homogeneous_npy, capsys):
+    """``warpsky render --frames 1:2 --set temporal=0.5``: frames rendered one after another in the process; the
+    second's header records the first frame's paths it started from, the first's none."""
+    from conftest import run_cli
+
+    from warpsky.output.exr import read_exr
+
+    stage = write_stage(tmp_path / "s.usda", StageSpec(volume_file=homogeneous_npy, camera_position=(0, 0, 40)))
+    out = tmp_path / "out" / "f.####.exr"
+    code, _, _ = run_cli(["render", stage, out, "--frames", "1:2", "--res", "16", "--device", "cpu", "--spp", "8",
+                          "--set", "target_error=0", "--set", "temporal=0.5"], capsys)
+    assert code == 0
+    first, second = (read_exr(tmp_path / "out" / f"f.000{frame}.exr").metadata for frame in (1, 2))
+    assert first["reusedSpp"] == 0.0
+    assert second["reusedSpp"] == pytest.approx(0.5 * 8, rel=1e-6)  # a static scene: every pixel kept
+
+
+def test_a_slow_drift_is_measured_against_the_frames_the_history_holds():
+    """Frames whose single scattering grows 4% a frame: each is within the tolerance of the frame before, but the
+    third differs by more than it from the path-weighted mean of the two frames the history holds, so it starts
+    afresh."""
+    from types import SimpleNamespace
+
+    from warpsky.techniques.path_tracer.path_tracer import pixel_sums
+
+    shape = (6, 6)
+    scene = SimpleNamespace(camera="camera", sun="sun", extra_suns=(), dome=None)
+    paths = SimpleNamespace(shot=(scene, 6, 6), scale=1, device="cpu", settings=SimpleNamespace(temporal=0.5, temporal_tolerance=0.05))
+    coverage = np.full(shape + (3,), 0.9, np.float32)
+    kept = []
+    for frame, level in enumerate((1.0, 1.04, 1.08)):
+        paths.halves = [pixel_sums(shape, "cpu") for _ in (0, 1)]
+        paths.pixel_counts = [np.zeros(shape, np.float32) for _ in (0, 1)]
+        single = np.full(shape + (3,), level, np.float32)
+        first = history.warm_start(paths, single, coverage)
+        kept.append(paths.reused_spp)
+        for half in (0, 1):  # this frame's own 4 paths per pixel and half
+            paths.pixel_counts[half] += 4.0
+        history.keep_frame(paths, single, coverage, first + 8)
+        if frame == 1:  # the history's frames, weighted as their paths: 4 of frame 1's, 8 of frame 2's
+            assert history._last.single[0, 0, 0] == pytest.approx((4.0 * 1.0 + 8.0 * 1.04) / 12.0, rel=1e-6)
+    assert kept == [0.0, 4.0, 0.0]
+    assert 1.08 / 1.04 - 1.0 < 0.05  # the frame before alone would have been kept

@@ -23,7 +23,8 @@ from warpsky.render.options import RenderOptions
 from warpsky.render.planned import PlannedFrame
 
 #: Figures of a Monte Carlo render that go into the EXR header (camelCase) and the batch log, where present.
-QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths", "paths")
+QUALITY_STATS = ("spp", "passes", "stopped_by", "error_estimate", "target_error", "capped_paths", "paths",
+                 "reused_spp")
 
 #: Fraction of a frame's Monte Carlo paths stopped at ``max_bounces`` above which the render warns: their light is
 #: missing from the image (a bias that more samples do not remove).

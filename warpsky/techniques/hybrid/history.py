@@ -9,11 +9,12 @@ of the frame k before it (at most 1 / (1 - lambda) frames' worth). The new paths
 so their random streams never repeat the history's.
 
 The history is dropped per pixel where the frame changed: where the noise-free single scattering or the coverage
-1 - T of the march differ from the previous frame's by more than :data:`CHANGE_TOLERANCE` (relative) or
-:data:`COVERAGE_TOLERANCE`, widened by :data:`CHANGE_MARGIN` film pixels (multiple scattering reaches past the
-pixels whose density changed). What it keeps is a lag: the mean of the last frames' light where it changed by less
-than that. The error estimate sees the halves' noise (history included), not the lag. A different camera, size,
-film or device starts afresh, and a frame rendered alone (or first) is exactly the frame without reuse.
+1 - T of the march differ by more than the setting ``temporal_tolerance`` (relative) or :data:`COVERAGE_TOLERANCE` from those
+of the frames the history holds (their mean, each frame weighted as its paths are, so a slow drift is caught once
+it adds up), widened by :data:`CHANGE_MARGIN` film pixels (multiple scattering reaches past the pixels whose density
+changed). What it keeps is a lag: the light of the last frames where their single scattering differed by less than
+that. The error estimate sees the halves' noise (history included), not the lag. A different camera, size, film,
+light or device starts afresh, and a frame rendered first or alone is exactly the frame without reuse.
 """
 
 from __future__ import annotations
@@ -25,9 +26,6 @@ import numpy as np
 from warpsky.core import device_buffers
 from warpsky.core.numerics import LUMINANCE_WEIGHTS
 
-#: Relative change of a pixel's single scattering (luminance, against the mean of the two frames') above which its
-#: history is dropped.
-CHANGE_TOLERANCE = 0.05
 #: Change of a pixel's coverage (luminance) above which its history is dropped.
 COVERAGE_TOLERANCE = 0.02
 #: Film pixels around a changed pixel whose history is dropped too.
@@ -41,8 +39,8 @@ class ShotHistory:
     key: tuple
     sums: list[dict[str, np.ndarray]]  # per half: the path sums' fields (host copies)
     counts: list[np.ndarray]  # per half: paths per film pixel (weighted)
-    single: np.ndarray  # (H, W, 3) the frame's single scattering
-    coverage: np.ndarray  # (H, W, 3) the frame's coverage 1 - T
+    single: np.ndarray  # (H, W, 3) the single scattering of the frames in the sums, weighted as their paths
+    coverage: np.ndarray  # (H, W, 3) their coverage 1 - T, weighted alike
     paths: int  # path indices per pixel the shot has used: the next frame's paths start here
 
 
@@ -53,7 +51,7 @@ def shot_key(scene, width: int, height: int, scale: int, device: str, settings) 
     """What must be equal for one frame to reuse another's paths: the camera, the image and its film, the device,
     the lights and the settings (the seed, the stopping rule and the reuse weight aside)."""
     fixed = {k: v for k, v in vars(settings).items()
-             if k not in ("seed", "spp", "target_error", "time_budget", "temporal")}
+             if k not in ("seed", "spp", "target_error", "time_budget", "temporal", "temporal_tolerance")}
     lights = (repr(scene.sun), repr(scene.extra_suns), repr(scene.dome))
     return (repr(scene.camera), lights, width, height, scale, str(device), repr(sorted(fixed.items())))
 
@@ -70,13 +68,14 @@ def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
     return out
 
 
-def kept_weights(history: ShotHistory, single: np.ndarray, coverage: np.ndarray, scale: int,
-                 weight: float) -> np.ndarray:
-    """Per film pixel, the factor on the history's sums: ``weight`` where the frame did not change, 0 where it
-    did (see the module docstring)."""
+def kept_weights(history: ShotHistory, single: np.ndarray, coverage: np.ndarray, scale: int, weight: float,
+                 tolerance: float) -> np.ndarray:
+    """Per film pixel, the factor on the history's sums: ``weight`` where the frame did not change, 0 where its
+    single scattering changed by more than ``tolerance`` (relative, against the mean of the two) or its coverage
+    by more than :data:`COVERAGE_TOLERANCE` (see the module docstring)."""
     s_new, s_old = single @ LUMINANCE_WEIGHTS, history.single @ LUMINANCE_WEIGHTS
     level = np.maximum(0.5 * (s_new + s_old), 1e-6 * max(float(s_new.max()), 1e-30))
-    changed = (np.abs(s_new - s_old) > CHANGE_TOLERANCE * level) | (
+    changed = (np.abs(s_new - s_old) > tolerance * level) | (
         np.abs((coverage - history.coverage) @ LUMINANCE_WEIGHTS) > COVERAGE_TOLERANCE)
     if scale > 1:
         height, width = changed.shape
@@ -113,25 +112,44 @@ STAGING_NAME = "hybrid:history"
 def warm_start(paths, single: np.ndarray, coverage: np.ndarray) -> int:
     """Start ``paths`` (a :class:`~warpsky.techniques.hybrid.hybrid.MultipleScattering` before its first pass) from
     the previous frame of its shot, if any: its halves' sums and path counts weighted by :func:`kept_weights`.
-    Returns the path index the frame's own paths start at (0 without a history)."""
+    Returns the path index the frame's own paths start at (0 without a history); ``paths.reused_spp`` is the
+    weighted paths per film pixel it carries over (mean over the film)."""
     scene, width, height = paths.shot
     paths.history_key = shot_key(scene, width, height, paths.scale, paths.device, paths.settings)
     history = take(paths.history_key)
+    paths.reused_spp = 0.0
     if history is None:
         return 0
-    weights = kept_weights(history, single, coverage, paths.scale, float(paths.settings.temporal))
+    settings = paths.settings
+    weights = kept_weights(history, single, coverage, paths.scale, float(settings.temporal),
+                           float(settings.temporal_tolerance))
+    paths.carried = (history.counts[0] + history.counts[1]) * weights
     for half in (0, 1):
         for field in KEPT_FIELDS:
             kept = history.sums[half][field]
             kept = kept * weights.reshape(weights.shape + (1,) * (kept.ndim - 2))
             getattr(paths.halves[half], field).assign(kept.astype(np.float32))
         paths.pixel_counts[half] += history.counts[half] * weights
+    paths.reused_spp = float(np.mean(paths.carried))
     return history.paths
 
 
+def fine(film: np.ndarray, scale: int, height: int, width: int) -> np.ndarray:
+    """Per film pixel values repeated over the (H, W) frame pixels each covers."""
+    return np.repeat(np.repeat(film, scale, axis=0), scale, axis=1)[:height, :width]
+
+
 def keep_frame(paths, single: np.ndarray, coverage: np.ndarray, next_path: int) -> None:
-    """Keep ``paths``' halves for the next frame of its shot (host copies of their sums and counts)."""
+    """Keep ``paths``' halves for the next frame of its shot (host copies of their sums and counts), with the
+    single scattering and coverage of the frames they hold, each frame's weighted as its paths are."""
     sums = [{field: np.array(device_buffers.download(f"{STAGING_NAME}:{field}", getattr(paths.halves[half], field)))
              for field in KEPT_FIELDS} for half in (0, 1)]
-    keep(ShotHistory(paths.history_key, sums, [count.copy() for count in paths.pixel_counts], single.copy(),
-                     coverage.copy(), next_path))
+    history = take(paths.history_key)
+    if history is not None and float(paths.carried.max()) > 0.0:
+        height, width = single.shape[:2]
+        total = fine(paths.pixel_counts[0] + paths.pixel_counts[1], paths.scale, height, width)[..., None]
+        old = fine(paths.carried, paths.scale, height, width)[..., None] / np.maximum(total, 1e-30)
+        single = old * history.single + (1.0 - old) * single
+        coverage = old * history.coverage + (1.0 - old) * coverage
+    keep(ShotHistory(paths.history_key, sums, [count.copy() for count in paths.pixel_counts],
+                     np.array(single, np.float32), np.array(coverage, np.float32), next_path))

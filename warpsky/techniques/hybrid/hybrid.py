@@ -135,6 +135,9 @@ class HybridSettings(Settings):
                               "after another in one process (same camera, size and settings), each frame's weighted "
                               "by this factor per frame of age, dropped where the single scattering or the coverage "
                               "changed; 0 = every frame alone")
+    temporal_tolerance: float = setting(0.05, range="> 0", help="relative change of a pixel's single scattering "
+                                        "beyond which temporal reuse drops its history: smaller, less lag; larger, "
+                                        "less noise")
     ms_scale: int | None = setting(None, unit="pixel", range="1..8", auto=AUTO_FILM, help="trace multiple "
                                    "scattering on pixels this many times larger (box-filtered), upsampled with the "
                                    "exact coverage as guide")
@@ -436,8 +439,8 @@ class MultipleScattering:
                  "sanitised_values": sanitised, "tracking_steps": film.stats["tracking_steps"],
                  "scatter_events": film.stats["scatter_events"], "shadow_steps": film.stats["shadow_steps"],
                  "capped_paths": film.stats["capped_paths"], "paths": film.stats["paths"],
-                 "ms_scale": self.scale,
-                 "warnings": warnings}
+                 "ms_scale": self.scale, "warnings": warnings,
+                 **({"reused_spp": round(self.reused_spp, 2)} if s.temporal > 0.0 else {})}
         return image, variance, stats
 
     def active_pixels(self, covered: np.ndarray, done: int) -> wp.array | None:
