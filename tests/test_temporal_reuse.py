@@ -125,7 +125,8 @@ def test_a_slow_drift_is_measured_against_the_frames_the_history_holds():
 
     shape = (6, 6)
     scene = SimpleNamespace(camera="camera", sun="sun", extra_suns=(), dome=None)
-    paths = SimpleNamespace(shot=(scene, 6, 6), scale=1, device="cpu", settings=SimpleNamespace(temporal=0.5, temporal_tolerance=0.05))
+    settings = SimpleNamespace(temporal=0.5, temporal_tolerance=0.05)
+    paths = SimpleNamespace(shot=(scene, 6, 6), scale=1, device="cpu", settings=settings)
     coverage = np.full(shape + (3,), 0.9, np.float32)
     kept = []
     for frame, level in enumerate((1.0, 1.04, 1.08)):

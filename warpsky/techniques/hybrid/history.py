@@ -9,12 +9,12 @@ of the frame k before it (at most 1 / (1 - lambda) frames' worth). The new paths
 so their random streams never repeat the history's.
 
 The history is dropped per pixel where the frame changed: where the noise-free single scattering or the coverage
-1 - T of the march differ by more than the setting ``temporal_tolerance`` (relative) or :data:`COVERAGE_TOLERANCE` from those
-of the frames the history holds (their mean, each frame weighted as its paths are, so a slow drift is caught once
-it adds up), widened by :data:`CHANGE_MARGIN` film pixels (multiple scattering reaches past the pixels whose density
-changed). What it keeps is a lag: the light of the last frames where their single scattering differed by less than
-that. The error estimate sees the halves' noise (history included), not the lag. A different camera, size, film,
-light or device starts afresh, and a frame rendered first or alone is exactly the frame without reuse.
+1 - T of the march differ by more than the setting ``temporal_tolerance`` (relative) or :data:`COVERAGE_TOLERANCE`
+from those of the frames the history holds (their mean, each frame weighted as its paths are, so a slow drift is
+caught once it adds up), widened by :data:`CHANGE_MARGIN` film pixels (multiple scattering reaches past the pixels
+whose density changed). What it keeps is a lag: the light of the last frames where their single scattering differed
+by less than that. The error estimate sees the halves' noise (history included), not the lag. A different camera,
+size, film, light or device starts afresh, and a frame rendered first or alone is exactly the frame without reuse.
 """
 
 from __future__ import annotations
