@@ -15,17 +15,22 @@ from warpsky.techniques.hybrid import history
 from warpsky.usd.stage import StageReader
 
 
-@pytest.fixture
-def puff(tmp_path):
-    """A 16^3 Gaussian puff of optical depth ~8 across its core, camera along -z, sun from the side."""
+def puff_scene(tmp_path, extinction_scale: float = 0.4):
+    """A 16^3 Gaussian puff of optical depth ~8 across its core (at the default scale), camera along -z, sun from
+    the side."""
     axis = (np.arange(16) + 0.5) / 16 - 0.5
     x, y, z = np.meshgrid(axis, axis, axis, indexing="ij")
     grid = tmp_path / "puff.npy"
     np.save(grid, np.exp(-(x**2 + y**2 + z**2) / 0.06).astype(np.float32))
-    spec = StageSpec(volume_file=grid, extinction_scale=0.4, camera_position=(0.0, 0.0, 32.0),
+    spec = StageSpec(volume_file=grid, extinction_scale=extinction_scale, camera_position=(0.0, 0.0, 32.0),
                      camera_rotation=look_rotation((0.0, 0.0, -1.0)), sun_direction=(1.0, 0.15, 0.05),
                      phase="hg", g=0.85)
-    return StageReader(write_stage(tmp_path / "puff.usda", spec)).scene_at(None)
+    return StageReader(write_stage(tmp_path / f"puff_{extinction_scale}.usda", spec)).scene_at(None)
+
+
+@pytest.fixture
+def puff(tmp_path):
+    return puff_scene(tmp_path)
 
 
 def hybrid(scene, device, size, **settings):
@@ -57,6 +62,24 @@ def test_a_static_frame_keeps_its_light_and_carries_the_previous_frames_variance
     ratio = second.aovs["variance"][lit].sum() / first.aovs["variance"][lit].sum()
     assert 0.4 < ratio < 0.6  # 512 paths' worth against 256 (the same streams never repeat)
     assert not np.array_equal(first.aovs["multiple_scatter"], second.aovs["multiple_scatter"])
+
+
+def test_a_cut_to_a_denser_cloud_drops_the_history_where_it_changed(puff, tmp_path, device):
+    """Frame 2 is a cloud 2.5 times as dense under the same camera: every pixel it covers starts afresh, so the frame
+    matches the denser cloud rendered alone within noise (and not the first cloud's light)."""
+    hybrid(puff, device, 12, spp=256, seed=1, temporal=0.99)
+    dense = puff_scene(tmp_path, extinction_scale=1.0)
+    after = hybrid(dense, device, 12, spp=256, seed=1, temporal=0.99)
+    alone = hybrid(dense, device, 12, spp=256, seed=2)
+    variance = after.aovs["variance"] + alone.aovs["variance"]
+    lit = variance > 0.0
+    difference = after.aovs["multiple_scatter"] - alone.aovs["multiple_scatter"]
+    assert np.max(np.abs(difference[lit] / np.sqrt(variance[lit]))) < 5.0
+    assert abs(difference.sum() / image_sum_sigma(variance)) < 4.0
+    first = hybrid(puff, device, 12, spp=256, seed=3)  # the light the history held differs from the dense cloud's
+    changed = first.aovs["variance"] + alone.aovs["variance"]
+    assert abs((first.aovs["multiple_scatter"] - alone.aovs["multiple_scatter"]).sum()) > 10.0 * image_sum_sigma(
+        changed)
 
 
 def test_another_shot_starts_afresh(puff, device):
