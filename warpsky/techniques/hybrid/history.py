@@ -30,6 +30,11 @@ from warpsky.core.numerics import LUMINANCE_WEIGHTS
 COVERAGE_TOLERANCE = 0.02
 #: Film pixels around a changed pixel whose history is dropped too.
 CHANGE_MARGIN = 2
+#: Host bytes of a kept history per film pixel and per frame pixel, counting the previous frame's still held while
+#: the next is kept: 2 x (both halves' sums, 2 x 44, and counts, 2 x 4) and 2 x (single scattering and coverage,
+#: float32 RGB).
+HISTORY_FILM_BYTES = 192
+HISTORY_PIXEL_BYTES = 48
 
 
 @dataclass

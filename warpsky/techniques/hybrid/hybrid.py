@@ -59,7 +59,7 @@ from warpsky.techniques.hybrid.denoise import (
     guided_upsample,
     require_denoiser,
 )
-from warpsky.techniques.hybrid.history import keep_frame, warm_start
+from warpsky.techniques.hybrid.history import HISTORY_FILM_BYTES, HISTORY_PIXEL_BYTES, keep_frame, warm_start
 from warpsky.techniques.hybrid.scenery import paths_scene, scenery_guide
 from warpsky.techniques.path_tracer.deck_media import deck_plan, deck_voxel_memory
 from warpsky.techniques.path_tracer.forward_cut import check_cut_settings, cut_feature
@@ -232,6 +232,8 @@ class Hybrid(Technique):
         if slices:
             estimate.add("oriented ice tables", host=slices + continuation, device=slices + continuation)
         estimate.add("multiple scattering", host=coarse * self.COARSE_HOST_BYTES + pixels * self.FINE_HOST_BYTES)
+        if s.temporal > 0.0:
+            estimate.add("temporal history", host=coarse * HISTORY_FILM_BYTES + pixels * HISTORY_PIXEL_BYTES)
         if scene.decks and self.scenery_paths(scene):
             estimate.merge(deck_voxel_memory(scene, s.path_tracer(), width, height, time_budget=s.time_budget))
         if scene.stratiform_layers and self.scenery_paths(scene):  # the layers its paths trace, voxelised
