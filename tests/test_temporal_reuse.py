@@ -156,11 +156,11 @@ def test_a_slow_drift_is_measured_against_the_frames_the_history_holds():
         paths.halves = [pixel_sums(shape, "cpu") for _ in (0, 1)]
         paths.pixel_counts = [np.zeros(shape, np.float32) for _ in (0, 1)]
         single = np.full(shape + (3,), level, np.float32)
-        first = history.warm_start(paths, single, coverage)
-        kept.append(paths.reused_spp)
+        reuse = history.warm_start(paths, single, coverage)
+        kept.append(reuse.stats()["reused_spp"])
         for half in (0, 1):  # this frame's own 4 paths per pixel and half
             paths.pixel_counts[half] += 4.0
-        history.keep_frame(paths, single, coverage, first + 8)
+        history.keep_frame(paths, reuse, single, coverage, reuse.first + 8)
         if frame == 1:  # the history's frames, weighted as their paths: 4 of frame 1's, 8 of frame 2's
             assert history._last.single[0, 0, 0] == pytest.approx((4.0 * 1.0 + 8.0 * 1.04) / 12.0, rel=1e-6)
     assert kept == [0.0, 4.0, 0.0]

@@ -25,6 +25,7 @@ import numpy as np
 
 from warpsky.core import device_buffers
 from warpsky.core.numerics import LUMINANCE_WEIGHTS
+from warpsky.techniques.hybrid.denoise import block_mean, box_sum
 
 #: Change of a pixel's coverage (luminance) above which its history is dropped.
 COVERAGE_TOLERANCE = 0.02
@@ -61,18 +62,6 @@ def shot_key(scene, width: int, height: int, scale: int, device: str, settings) 
     return (repr(scene.camera), lights, width, height, scale, str(device), repr(sorted(fixed.items())))
 
 
-def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
-    """``mask`` (H, W, bool) grown by ``radius`` pixels (a square; nothing wraps around the edges)."""
-    height, width = mask.shape
-    padded = np.zeros((height + 2 * radius, width + 2 * radius), bool)
-    padded[radius:radius + height, radius:radius + width] = mask
-    out = np.zeros_like(mask)
-    for dy in range(2 * radius + 1):
-        for dx in range(2 * radius + 1):
-            out |= padded[dy:dy + height, dx:dx + width]
-    return out
-
-
 def kept_weights(history: ShotHistory, single: np.ndarray, coverage: np.ndarray, scale: int, weight: float,
                  tolerance: float) -> np.ndarray:
     """Per film pixel, the factor on the history's sums: ``weight`` where the frame did not change, 0 where its
@@ -82,13 +71,9 @@ def kept_weights(history: ShotHistory, single: np.ndarray, coverage: np.ndarray,
     level = np.maximum(0.5 * (s_new + s_old), 1e-6 * max(float(s_new.max()), 1e-30))
     changed = (np.abs(s_new - s_old) > tolerance * level) | (
         np.abs((coverage - history.coverage) @ LUMINANCE_WEIGHTS) > COVERAGE_TOLERANCE)
-    if scale > 1:
-        height, width = changed.shape
-        rows, cols = -(-height // scale), -(-width // scale)
-        padded = np.zeros((rows * scale, cols * scale), bool)
-        padded[:height, :width] = changed
-        changed = padded.reshape(rows, scale, cols, scale).any(axis=(1, 3))
-    changed = dilate(changed, CHANGE_MARGIN)
+    if scale > 1:  # a film pixel changed where any of its frame pixels did
+        changed = block_mean(changed[..., None].astype(np.float32), scale)[..., 0] > 0.0
+    changed = box_sum(changed, CHANGE_MARGIN) > 0.0  # and within the margin of one that did (clipped at the edges)
     return np.where(changed, 0.0, weight).astype(np.float32)
 
 
@@ -114,29 +99,43 @@ KEPT_FIELDS = ("radiance_sum", "radiance_sq", "transmittance_sum", "depth_sum")
 STAGING_NAME = "hybrid:history"
 
 
-def warm_start(paths, single: np.ndarray, coverage: np.ndarray) -> int:
+@dataclass
+class Reuse:
+    """What a frame took from its shot's history (:func:`warm_start`), for :func:`keep_frame`."""
+
+    key: tuple | None  # the shot (None: reuse is off)
+    history: ShotHistory | None  # the history it started from (None: it started afresh)
+    carried: np.ndarray | None  # per film pixel, the history's weighted paths it kept (both halves)
+    first: int  # the path index the frame's own paths start at
+
+    def stats(self) -> dict:
+        """``reused_spp`` (the kept paths per film pixel, mean over the film) when reuse is on."""
+        if self.key is None:
+            return {}
+        return {"reused_spp": round(float(np.mean(self.carried)), 2) if self.carried is not None else 0.0}
+
+
+def warm_start(paths, single: np.ndarray, coverage: np.ndarray) -> Reuse:
     """Start ``paths`` (a :class:`~warpsky.techniques.hybrid.hybrid.MultipleScattering` before its first pass) from
-    the previous frame of its shot, if any: its halves' sums and path counts weighted by :func:`kept_weights`.
-    Returns the path index the frame's own paths start at (0 without a history); ``paths.reused_spp`` is the
-    weighted paths per film pixel it carries over (mean over the film)."""
-    scene, width, height = paths.shot
-    paths.history_key = shot_key(scene, width, height, paths.scale, paths.device, paths.settings)
-    history = take(paths.history_key)
-    paths.reused_spp = 0.0
-    if history is None:
-        return 0
+    the previous frame of its shot, if reuse is on and there is one: its halves' sums and path counts weighted by
+    :func:`kept_weights`."""
     settings = paths.settings
+    if settings.temporal <= 0.0:
+        return Reuse(None, None, None, 0)
+    scene, width, height = paths.shot
+    key = shot_key(scene, width, height, paths.scale, paths.device, settings)
+    history = take(key)
+    if history is None:
+        return Reuse(key, None, None, 0)
     weights = kept_weights(history, single, coverage, paths.scale, float(settings.temporal),
                            float(settings.temporal_tolerance))
-    paths.carried = (history.counts[0] + history.counts[1]) * weights
     for half in (0, 1):
         for field in KEPT_FIELDS:
             kept = history.sums[half][field]
             kept = kept * weights.reshape(weights.shape + (1,) * (kept.ndim - 2))
             getattr(paths.halves[half], field).assign(kept.astype(np.float32))
         paths.pixel_counts[half] += history.counts[half] * weights
-    paths.reused_spp = float(np.mean(paths.carried))
-    return history.paths
+    return Reuse(key, history, (history.counts[0] + history.counts[1]) * weights, history.paths)
 
 
 def fine(film: np.ndarray, scale: int, height: int, width: int) -> np.ndarray:
@@ -144,17 +143,19 @@ def fine(film: np.ndarray, scale: int, height: int, width: int) -> np.ndarray:
     return np.repeat(np.repeat(film, scale, axis=0), scale, axis=1)[:height, :width]
 
 
-def keep_frame(paths, single: np.ndarray, coverage: np.ndarray, next_path: int) -> None:
+def keep_frame(paths, reuse: Reuse, single: np.ndarray, coverage: np.ndarray, next_path: int) -> None:
     """Keep ``paths``' halves for the next frame of its shot (host copies of their sums and counts), with the
-    single scattering and coverage of the frames they hold, each frame's weighted as its paths are."""
+    single scattering and coverage of the frames they hold, each frame's weighted as its paths are; nothing when
+    reuse is off."""
+    if reuse.key is None:
+        return
     sums = [{field: np.array(device_buffers.download(f"{STAGING_NAME}:{field}", getattr(paths.halves[half], field)))
              for field in KEPT_FIELDS} for half in (0, 1)]
-    history = take(paths.history_key)
-    if history is not None and float(paths.carried.max()) > 0.0:
+    if reuse.history is not None and float(reuse.carried.max()) > 0.0:
         height, width = single.shape[:2]
         total = fine(paths.pixel_counts[0] + paths.pixel_counts[1], paths.scale, height, width)[..., None]
-        old = fine(paths.carried, paths.scale, height, width)[..., None] / np.maximum(total, 1e-30)
-        single = old * history.single + (1.0 - old) * single
-        coverage = old * history.coverage + (1.0 - old) * coverage
-    keep(ShotHistory(paths.history_key, sums, [count.copy() for count in paths.pixel_counts],
+        old = fine(reuse.carried, paths.scale, height, width)[..., None] / np.maximum(total, 1e-30)
+        single = old * reuse.history.single + (1.0 - old) * single
+        coverage = old * reuse.history.coverage + (1.0 - old) * coverage
+    keep(ShotHistory(reuse.key, sums, [count.copy() for count in paths.pixel_counts],
                      np.array(single, np.float32), np.array(coverage, np.float32), next_path))

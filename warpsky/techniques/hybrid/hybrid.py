@@ -385,7 +385,7 @@ class MultipleScattering:
         fine_coverage = np.clip(1.0 - single.transmittance, 0.0, 1.0)
         coverage = block_mean(fine_coverage, self.scale) if self.scale > 1 else fine_coverage
         covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
-        first = warm_start(self, single.radiance, fine_coverage) if s.temporal > 0.0 else 0
+        reuse = warm_start(self, single.radiance, fine_coverage)
         per_pass, done, passes, check_at, estimated_at = int(s.samples_per_pass), 0, 0, 2, 0
         estimate, stop = math.inf, "spp"
         while done < s.spp:
@@ -396,7 +396,8 @@ class MultipleScattering:
             half = passes % 2
             launched = time.perf_counter()
             active = self.active_pixels(covered, done)
-            self.tracing.launch(self.halves[half], first + done, count, active)  # indices, hence streams, never repeat
+            # path indices, hence streams, never repeat (a shot's reused paths' included)
+            self.tracing.launch(self.halves[half], reuse.first + done, count, active)
             self.pixel_counts[half] += count if active is None else count * covered
             if budget is not None:
                 wp.synchronize_device(self.device)
@@ -415,8 +416,7 @@ class MultipleScattering:
                             + (f", estimated error {estimate:.1%} (target {s.target_error:.1%})"
                                if math.isfinite(estimate) else ""))
         wp.synchronize_device(self.device)
-        if s.temporal > 0.0:
-            keep_frame(self, single.radiance, fine_coverage, first + done)
+        keep_frame(self, reuse, single.radiance, fine_coverage, reuse.first + done)
         film = self.film()
         mean, variance = film.radiance, film.aovs["variance"]
         image, denoise_seconds, sanitised, warnings = mean, 0.0, 0, coverage_scale_warning(self.scale, asked)
@@ -441,8 +441,7 @@ class MultipleScattering:
                  "sanitised_values": sanitised, "tracking_steps": film.stats["tracking_steps"],
                  "scatter_events": film.stats["scatter_events"], "shadow_steps": film.stats["shadow_steps"],
                  "capped_paths": film.stats["capped_paths"], "paths": film.stats["paths"],
-                 "ms_scale": self.scale, "warnings": warnings,
-                 **({"reused_spp": round(self.reused_spp, 2)} if s.temporal > 0.0 else {})}
+                 "ms_scale": self.scale, "warnings": warnings, **reuse.stats()}
         return image, variance, stats
 
     def active_pixels(self, covered: np.ndarray, done: int) -> wp.array | None:
