@@ -44,7 +44,7 @@ help:
 	@echo "make stratocumulus-anim - the 48-frame advected stratocumulus sequence to out/stratocumulus_anim/"
 	@echo "make storm-data         - the storm's per-frame NanoVDB fields in data/storm/"
 	@echo "make storm              - the simulated storm (make simulate-storm, cached by its inputs), 48 frames of"
-	@echo "                          two shots (rainbow, whole storm) at 256 wide with slicing, contact sheets, preview"
+	@echo "                          two shots (rainbow, storm from the side) at 256 wide with slicing, contact sheets, preview"
 	@echo "                          ($(TIMING_STORM) on 2 CPU cores once simulated and the optics tables cached)"
 	@echo "make simulate-storm     - grow the storm with the cloud solver (warpsky simulate: 128x128x64 cells, 48"
 	@echo "                          frames) to out/simulate/; redone when its options, STORM_SOUNDING or the solver"
@@ -154,7 +154,8 @@ stratocumulus-anim: $(STAMP) data/stratocumulus/.complete
 # The storm, grown by the cloud solver (warpsky simulate: 128x128x64 cells of 500 m x 250 m, 48 frames over 40
 # minutes), simulated once per sounding, options and solver source (the stamp's name holds the options' checksum),
 # then two shots rendered as batches (resumable: rerun to finish an interrupted one): the rainbow shot (the stage's
-# RainbowCam, sun at its back) and the whole storm (/World/Camera), a contact sheet per shot and a 3-D preview.
+# RainbowCam, sun at its back) and the storm from 30 km (/World/StormCam, following it), a contact sheet per shot
+# and a 3-D preview.
 # Slicing, because the default technique's storm frame still costs minutes on a CPU (STORM_TECHNIQUE=hybrid picks
 # it). STORM_WORKERS=0 renders in-process. STORM_SOUNDING=FILE grows it from a CM1 input_sounding.
 # The procedural storm (tools/make_storm.py, usd_scenes/storm.usda): make storm-data, make storm-procedural.
@@ -184,10 +185,10 @@ simulate-storm: $(STORM_SIM_STAMP)
 
 storm: $(STORM_SIM_STAMP)
 	$(VENV)/bin/warpsky render $(STORM_SIM)/storm.usda out/storm/rainbow.####.exr --res $(STORM_RES) $(STORM_BATCH)
-	$(VENV)/bin/warpsky render $(STORM_SIM)/storm.usda out/storm/whole.####.exr --camera /World/Camera \
+	$(VENV)/bin/warpsky render $(STORM_SIM)/storm.usda out/storm/side.####.exr --camera /World/StormCam \
 		--res $(STORM_RES) $(STORM_BATCH)
 	$(VENV)/bin/warpsky contact-sheet out/storm/rainbow.####.exr -o out/storm/rainbow_sheet.png
-	$(VENV)/bin/warpsky contact-sheet out/storm/whole.####.exr -o out/storm/whole_sheet.png
+	$(VENV)/bin/warpsky contact-sheet out/storm/side.####.exr -o out/storm/side_sheet.png
 	$(VENV)/bin/warpsky preview $(STORM_SIM)/storm.usda -o out/storm/preview.png --frame 40
 
 storm-procedural: $(STAMP) data/storm/.complete
@@ -217,7 +218,7 @@ sunbeams: $(STAMP) data/terrain.usda
 		--set deck.mode=max --time-budget 20
 
 # The gallery: one hero frame per shipped stage (tools/make_gallery.py runs each warpsky render command).
-gallery: $(STAMP) $(DATA)
+gallery: $(STAMP) $(DATA) $(STORM_SIM_STAMP)
 	$(PY) tools/make_gallery.py
 
 # bpy 5.0 pins Python 3.11 and numpy < 2 (.venv has numpy 2), and brings 1 GB of Blender: its own environment.

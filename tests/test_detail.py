@@ -104,6 +104,53 @@ def test_bad_detail_attributes_name_the_prim_and_attribute(tmp_path, attr, kind,
         StageReader(path).scene_at(1.0)
 
 
+def set_edge(path, edge: float, prim_path: str = "/World/Cloud/density"):
+    """Author ``warpsky:detail:edge`` [1/m] on ``prim_path`` of the stage at ``path``."""
+    from pxr import Sdf, Usd
+
+    stage = Usd.Stage.Open(str(path))
+    stage.GetPrimAtPath(prim_path).CreateAttribute("warpsky:detail:edge", Sdf.ValueTypeNames.Float).Set(edge)
+    stage.Save()
+    return path
+
+
+def test_the_edge_is_read_per_field_and_its_mistakes_are_named(tmp_path):
+    """``warpsky:detail:edge`` on a field prim joins the Volume's detail for that field; on the Volume, negative,
+    or without the Volume's detail it is refused with the prim and what to do."""
+    from pxr import Usd
+
+    path = set_edge(detail_stage(tmp_path), 0.01)
+    spec = StageReader(path).scene_at(7.0).media[0].detail
+    assert spec.edge == pytest.approx(0.01) and dataclasses.replace(spec, edge=0.0, name=SPEC.name) == SPEC
+    with pytest.raises(SceneError, match=r"/World/Cloud/density: warpsky:detail:edge must be a finite extinction"):
+        StageReader(set_edge(detail_stage(tmp_path, name="neg.usda"), -0.01)).scene_at(7.0)
+    with pytest.raises(SceneError, match=r"Volume /World/Cloud: warpsky:detail:edge goes on each field prim"):
+        StageReader(set_edge(detail_stage(tmp_path, name="vol.usda"), 0.01, "/World/Cloud")).scene_at(7.0)
+    off = set_edge(detail_stage(tmp_path, name="off.usda"), 0.01)
+    stage = Usd.Stage.Open(str(off))
+    stage.GetPrimAtPath("/World/Cloud").GetAttribute("warpsky:detail:amplitude").Set(0.0)
+    stage.Save()
+    with pytest.raises(SceneError, match=r"density.warpsky:detail:edge = 0.01.* needs the Volume's detail"):
+        StageReader(off).scene_at(7.0)
+
+
+def test_the_edge_takes_its_extinction_off_the_detailed_field(tmp_path, device):
+    """Baked on the same fine voxels, the field with an edge of 0.01 1/m (extinction 0.05 per unit: 0.2 in field
+    units) is the field without it less 0.2, floored at zero, voxel for voxel: the fringe clears, the peak stays."""
+    from warpsky.media.voxels.detail_bake import baked_media
+
+    fine = dataclasses.replace(SPEC, scale=6.0)
+    scene = StageReader(set_edge(detail_stage(tmp_path, fine), 0.01)).scene_at(7.0)
+    (medium,) = scene.media
+    plain = dataclasses.replace(medium, detail=dataclasses.replace(medium.detail, edge=0.0))
+    (with_edge,) = baked_media(scene.media, scene.time_s, scene.camera.position, device)
+    (without,) = baked_media((plain,), scene.time_s, scene.camera.position, device)
+    expected = np.maximum(without.density - 0.01 / 0.05, 0.0)
+    np.testing.assert_allclose(with_edge.density, expected, rtol=1e-5, atol=1e-6)
+    assert (without.density > 0.0).mean() > 2.0 * (with_edge.density > 0.0).mean()  # the fringe is most voxels
+    assert with_edge.density.max() > 0.5 * without.density.max()
+
+
 def test_amplitude_zero_is_bit_identical_to_no_detail(tmp_path, device):
     """Amplitude 0 on a Volume turns detail off; inside the has_detail kernels a medium of amplitude 0 keeps its
     coarse density exactly (a second, empty medium with detail selects those kernels)."""
@@ -186,14 +233,18 @@ def test_a_scene_100_km_from_the_origin_renders_the_same_detail(tmp_path, device
     np.testing.assert_allclose(far.transmittance, near.transmittance, rtol=0, atol=2e-3)
 
 
-def test_the_path_tracer_renders_detail_without_bias(tmp_path, device):
+@pytest.mark.parametrize("edge", [0.0, 0.01])
+def test_the_path_tracer_renders_detail_without_bias(tmp_path, device, edge):
     """With one bounce the path tracer estimates single scattering: through the detailed density (majorants scaled
     by the detail's bound 1 + 3a) it agrees with the single-scattering march of the same detailed field, and both
-    differ clearly from the coarse field."""
+    differ clearly from the coarse field (with an edge: from the detail without it)."""
     from warpsky.techniques.path_tracer.path_tracer import PathTracer, PathTracerSettings
 
-    scene = StageReader(detail_stage(tmp_path)).scene_at(7.0)
-    coarse = dataclasses.replace(scene, media=tuple(dataclasses.replace(m, detail=None) for m in scene.media))
+    stage = detail_stage(tmp_path)
+    scene = StageReader(set_edge(stage, edge) if edge > 0.0 else stage).scene_at(7.0)
+    coarse = dataclasses.replace(scene, media=tuple(
+        dataclasses.replace(m, detail=dataclasses.replace(m.detail, edge=0.0) if edge > 0.0 else None)
+        for m in scene.media))
     march = SingleScatter(SingleScatterSettings(step_length=0.5, shadow_step_length=1.0, min_transmittance=0.0),
                           device=device)
     reference, plain = march.render(scene, 12, 12), march.render(coarse, 12, 12)

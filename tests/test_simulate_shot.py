@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from warpsky.simulate import shot
 from warpsky.usd.weather.weather_usd import sun_direction
@@ -63,3 +64,43 @@ def test_the_shaft_is_the_rain_under_the_cloud():
     np.testing.assert_allclose(dry.centre, (2000.0, -1000.0))
     clear = shot.find_shaft({"cloud": np.zeros_like(cloud)}, origin, spacing)
     np.testing.assert_allclose(clear.centre, (0.0, 0.0))
+
+
+def test_the_storm_camera_follows_the_grid_and_the_fields_get_their_edges(tmp_path):
+    """Two frames of a grid moving east at 10 m/s: ``/World/StormCam`` stands the storm distance south of each
+    frame's grid middle at its eye height, looks north at the aim height over that middle and moves with the grid;
+    the cloud, ice and snow fields carry their edges (rain none) and the renderer reads them into the detail."""
+    from pxr import Gf, Usd, UsdGeom
+
+    from warpsky.simulate.frames import FrameWriter, weather_state
+    from warpsky.simulate.sounding import base_state, weisman_klemp
+    from warpsky.usd.stage import StageReader
+
+    shape = (10, 8, 12)
+    base = base_state(weisman_klemp(), shape[1], 500.0)
+    writer = FrameWriter(tmp_path / "f", tmp_path / "f.usda", 60.0)
+    for t in (60.0, 120.0):
+        fields = {"theta": np.broadcast_to(base.theta[None, :, None], shape).copy(),
+                  "vapour": np.broadcast_to(base.vapour[None, :, None], shape).copy(),
+                  "cloud": np.zeros(shape), "rain": np.zeros(shape),
+                  "velocity": np.zeros((*shape, 3), np.float32)}
+        fields["cloud"][4:7, 2:5, 5:8] = 1.0e-3
+        fields["rain"][4:7, 0:2, 5:8] = 1.0e-3
+        writer.write(weather_state(fields, base, (1000.0, 500.0), t, (10.0, 0.0)))
+    stage = Usd.Stage.Open(str(tmp_path / "f.usda"))
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/StormCam"))
+    assert cam and cam.GetFocalLengthAttr().Get() == shot.STORM_FOCAL_LENGTH
+    eyes = []
+    for code, middle in zip((1.0, 2.0), writer.middles, strict=True):
+        world = cam.GetLocalTransformation(code)
+        eye = np.array(world.ExtractTranslation())
+        look = np.array(world.TransformDir(Gf.Vec3d(0.0, 0.0, -1.0)))
+        np.testing.assert_allclose(eye, [middle[0], middle[1] - shot.STORM_DISTANCE, shot.STORM_EYE_HEIGHT],
+                                   atol=1e-6)
+        aim = np.array([0.0, shot.STORM_DISTANCE, shot.STORM_AIM - shot.STORM_EYE_HEIGHT])
+        assert angle(look, aim) < 1.0e-6
+        eyes.append(eye)
+    np.testing.assert_allclose(eyes[1] - eyes[0], [600.0, 0.0, 0.0], atol=1e-6)  # 60 s at 10 m/s
+    media = {m.species: m for m in StageReader(tmp_path / "f.usda").scene_at(2.0).media}
+    assert media["cloud"].detail.edge == pytest.approx(shot.EDGES["cloud"])
+    assert media["rain"].detail.edge == 0.0

@@ -1,4 +1,4 @@
-"""Render the hero frame of every shipped stage and write docs/gallery.md with the pictures.
+"""Render the hero frame of every shipped stage and of the simulated storm; write docs/gallery.md with them.
 
 Each shot is one ``warpsky render`` command (the default technique unless the stage needs another, said in the
 shot's note), run as a subprocess as a user would run it. The EXR goes to ``out/gallery/``, its PNG preview (the
@@ -41,14 +41,25 @@ class Shot:
     note: str
 
 
+#: The simulated storm's stage (``make simulate-storm`` writes it; ``make gallery`` runs that first).
+SIMULATED = "out/simulate/storm.usda"
+
 SHOTS = (
     Shot("cumulus", "cumulus.usda", 1, (), "The demo (`make demo`): a detailed cumulus congestus, the sun 35° up to "
          "the left, its shadow on the ground. Default technique (hybrid)."),
     Shot("cumulus_wind", "cumulus_wind.usda", 24, ("--res", "384"), "The demo cloud drifting in the wind with "
          "advected detail (`make cumulus-wind`, frame 24 of 48)."),
-    Shot("storm", "storm.usda", 40, ("--res", "384", "--technique", "slicing"), "The cumulonimbus time-lapse, "
-         "RainbowCam frame 40 (`make storm`). Slicing, as `make storm` renders it: hybrid takes minutes per frame "
-         "on a CPU here, and slicing is darker than the path tracer in clouds this thick (README, storm)."),
+    Shot("storm_simulated", SIMULATED, 40, ("--res", "384", "--time-budget", "60"), "The storm grown by the cloud "
+         "solver (`make simulate-storm`), frame 40 (33 minutes) from its rainbow shot: the rain shaft under the "
+         "base with the primary bow, the tower rising into the ice anvil overhead. Default technique under a "
+         "60 s budget: a storm frame's multiple scattering costs minutes on a CPU, so its estimate is above 5 %."),
+    Shot("storm_simulated_side", SIMULATED, 40, ("--res", "384", "--time-budget", "60", "--camera",
+                                                 "/World/StormCam"),
+         "The same frame from 30 km south (`/World/StormCam`, which follows the storm): the base, the tower and "
+         "the anvil spreading downwind at the tropopause. Default technique under a 60 s budget."),
+    Shot("storm", "storm.usda", 40, ("--res", "384", "--technique", "slicing"), "The procedural cumulonimbus "
+         "time-lapse (`make storm-procedural`), RainbowCam frame 40. Slicing, as `make storm` renders it: hybrid "
+         "takes minutes per frame on a CPU here, and slicing is darker than the path tracer in clouds this thick."),
     Shot("storm_anvil", "storm.usda", 46, ("--res", "384", "--technique", "slicing", "--camera", "/World/AnvilCam"),
          "The same storm from the AnvilCam, frame 46: the ice anvil spreading downwind. Slicing, as above."),
     Shot("stratocumulus", "stratocumulus.usda", 1, ("--res", "384"), "A stratocumulus deck over water, sand and "
@@ -69,7 +80,8 @@ SHOTS = (
 
 def command(shot: Shot, exr: Path) -> list[str]:
     """The ``warpsky render`` command line of ``shot`` writing ``exr`` (with ``####`` for the frame)."""
-    return ["warpsky", "render", f"usd_scenes/{shot.stage}", str(exr), "--frames", str(shot.frame), "--png",
+    stage = shot.stage if "/" in shot.stage else f"usd_scenes/{shot.stage}"
+    return ["warpsky", "render", stage, str(exr), "--frames", str(shot.frame), "--png",
             "--overwrite", *shot.args]
 
 

@@ -125,7 +125,7 @@ def cmd_info(args) -> int:
             d = medium.detail
             out.append(f"            advected detail: amplitude {d.amplitude:g}, scale {d.scale:g} m, wind "
                        f"{np.round(np.asarray(d.wind), 3).tolist()} m/s, curl {d.curl_speed:g} m/s, "
-                       f"period {d.period:g} s")
+                       f"period {d.period:g} s" + (f", edge {d.edge:g} 1/m" if d.edge > 0.0 else ""))
     out += _light_lines(scene)
     out += _render_spec_lines(spec, products)
     out += [f"composition {line}" for line in reader.composition_summary()]

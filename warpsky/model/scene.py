@@ -84,6 +84,19 @@ class DetailSpec:
                                                                        or two eddy turnover times, 8 scale / speed)
     ``int warpsky:detail:seed``         --         0       >= 0        seed of the noise and of the curl flow
     ==================================  ========== ======= =========== ================================================
+
+    One attribute sits on a field prim (``OpenVDBAsset``) instead, because the species differ:
+
+    ==================================  ========== ======= =========== ================================================
+    ``float warpsky:detail:edge``       1/m        0       >= 0        extinction taken off the detailed field,
+                                                                       floored at zero: ``max(0, beta f - edge)``
+    ==================================  ========== ======= =========== ================================================
+
+    A coarse grid blurs a liquid cloud's boundary over a voxel (a 500 m cell ramps from clear to cloudy), where real
+    droplets evaporate within seconds of leaving saturated air and the boundary is sharp. ``edge`` clears the thin
+    fringe below it, so the boundary becomes the level set ``beta f = edge``, which the noise moves in and out:
+    crisp, lumpy edges (turrets on a convective tower), the interior (``beta >> edge``) barely changed. Rain, whose
+    shafts have soft sides, keeps 0. It only lowers the density, so the bound ``1 + 3 amplitude`` holds.
     """
 
     amplitude: float = 0.0
@@ -92,6 +105,7 @@ class DetailSpec:
     curl_speed: float = 2.0
     period: float = 60.0
     seed: int = 0
+    edge: float = 0.0
     name: str = "detail"
 
     def __post_init__(self):
@@ -109,6 +123,8 @@ class DetailSpec:
         if isinstance(self.seed, bool) or int(self.seed) != self.seed or self.seed < 0:
             raise SceneError(f"{where}:seed must be an integer >= 0, got {self.seed!r}")
         object.__setattr__(self, "seed", int(self.seed))
+        if not (math.isfinite(self.edge) and self.edge >= 0.0):
+            raise SceneError(f"{where}:edge must be a finite extinction >= 0 [1/m], got {self.edge}")
 
     @property
     def active(self) -> bool:

@@ -114,6 +114,7 @@ class FrameWriter:
     sun: tuple[float, float] = field(default_factory=shot_sun)
     grids: list[dict[str, Path]] = field(default_factory=list)
     shafts: list[Shaft] = field(default_factory=list)
+    middles: list[tuple[float, float]] = field(default_factory=list)
     peaks: dict[str, float] = field(default_factory=dict)
     box: tuple[np.ndarray, np.ndarray] | None = None
     water: list[dict[str, tuple[float, float]]] = field(default_factory=list)
@@ -140,6 +141,8 @@ class FrameWriter:
         self.grids.append(files)
         self.water.append(species_water(state.water, float(np.prod(state.spacing))))
         self.shafts.append(find_shaft(beta, state.origin, state.spacing))
+        middle = state.origin + 0.5 * state.spacing * (np.array(state.shape) - 1)
+        self.middles.append((float(middle[0]), float(middle[1])))
         self._write_stage(state)
         return files
 
@@ -156,7 +159,7 @@ class FrameWriter:
         try:
             author_stage(tmp, [state], self.grids, codes, 1.0 / self.seconds_per_frame, framing=box, sun=self.sun,
                          resolution=self.resolution, doc=doc, water=self.water)
-            author_shot(tmp, self.shafts, codes, self.sun)
+            author_shot(tmp, self.shafts, codes, self.sun, middles=self.middles)
             os.replace(tmp, self.stage)
         except OSError as exc:
             raise OutputError(f"cannot write {self.stage}: {exc.strerror or exc}") from None

@@ -28,6 +28,7 @@ pxr is imported inside the methods (a heavy import).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 
@@ -137,10 +138,11 @@ class VolumeReading(StagePrims):
                 scale = scale * np.array(get_species(species).extinction_cross_section)
             albedo = self._float_attr(field_prim, "warpsky:albedo", tc, volume_albedo)
             ice = self._read_ice(field_prim, name, tc)
+            field_detail = self._field_detail(detail, field_prim, path, tc)
             try:
                 media.append(VoxelMedium(
                     f"{path}:{name}" if species else path, values, volume_world @ local_from_index, scale,
-                    albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi, detail,
+                    albedo, PhaseModel(PHASE_TOKENS[phase_token], g), grid.source, species, slicing_xi, field_detail,
                     ice, self._velocity_source(fields, tc), self._water(field_prim, tc),
                 ))
             except SceneError as exc:
@@ -273,6 +275,9 @@ class VolumeReading(StagePrims):
             return None
         known = {f"warpsky:detail:{n}" for n in ("amplitude", "scale", "wind", "curlSpeed", "period", "seed")}
         unknown = sorted(names - known)
+        if "warpsky:detail:edge" in unknown:
+            raise SceneError(f"Volume {path}: warpsky:detail:edge goes on each field prim (OpenVDBAsset), one "
+                             "extinction [1/m] per species, not on the Volume")
         if unknown:
             raise SceneError(f"Volume {path}: unknown attribute(s) {', '.join(unknown)}; known: "
                              f"{', '.join(sorted(known))}")
@@ -293,6 +298,16 @@ class VolumeReading(StagePrims):
             kwargs["wind"] = tuple((self.world_from_stage[:3, :3] / self.meters_per_unit @ vector).tolist())
         spec = DetailSpec(**kwargs)  # validates ranges; its SceneError names the Volume and the attribute
         return spec if spec.active else None
+
+    def _field_detail(self, detail: DetailSpec | None, field_prim, volume: str, tc) -> DetailSpec | None:
+        """The Volume's detail with the field's own ``warpsky:detail:edge`` [1/m] (see DetailSpec)."""
+        edge = self._float_attr(field_prim, "warpsky:detail:edge", tc, 0.0)
+        if edge == 0.0:
+            return detail
+        if detail is None:
+            raise SceneError(f"{field_prim.GetPath()}.warpsky:detail:edge = {edge:g} needs the Volume's detail: set "
+                             f"warpsky:detail:amplitude > 0 on {volume}")
+        return dataclasses.replace(detail, edge=edge, name=f"field {field_prim.GetPath()}")
 
     def _warn_extinction_unit(self, field_prim) -> None:
         """One warning per field of a stage whose unit is not the metre: warpsky reads extinction per metre

@@ -47,6 +47,7 @@ class MediumDetail:
 
     state: DetailState  # the advected noise, positions relative to the camera [m]
     amplitude: float
+    edge: float  # the spec's edge in field units (extinction [1/m] over the field's extinction per unit)
     source: int  # the first medium whose noise this one's is (fields of one Volume share it): evaluated once
 
 
@@ -63,18 +64,25 @@ def factor_of_z(amplitude: float, z: float) -> float:
 
 
 @wp.func
-def detail_factor(detail: MediumDetail, p: wp.vec3) -> float:
-    """Factor on the coarse density at ``p`` (camera-relative metres): :func:`factor_of_z` of the noise there."""
-    return factor_of_z(detail.amplitude, detail_z(detail, p))
+def value_of_z(detail: MediumDetail, value: float, z: float) -> float:
+    """The detailed field: the coarse ``value`` times :func:`factor_of_z`, less the edge, floored at zero
+    (never above ``value (1 + Z a)``)."""
+    return wp.max(0.0, value * factor_of_z(detail.amplitude, z) - detail.edge)
+
+
+@wp.func
+def detail_value(detail: MediumDetail, value: float, p: wp.vec3) -> float:
+    """The detailed field at ``p`` (camera-relative metres) from its coarse ``value`` there."""
+    return value_of_z(detail, value, detail_z(detail, p))
 
 
 @wp.func
 def detailed_value(value: float, details: wp.array(dtype=MediumDetail), m: int, p: wp.vec3) -> float:
-    """Medium ``m``'s coarse ``value`` at ``p`` (camera-relative metres) times its detail factor, if it has one."""
+    """Medium ``m``'s coarse ``value`` at ``p`` (camera-relative metres) with its detail, if it has one."""
     if value > 0.0:
         amplitude = details[m].amplitude
         if amplitude > 0.0:
-            return value * detail_factor(details[m], p)
+            return detail_value(details[m], value, p)
     return value
 
 
@@ -84,6 +92,15 @@ def detail_factor_bound(medium: VoxelMedium) -> float:
     if not medium.has_detail:
         return 1.0
     return 1.0 + float(DETAIL_Z_MAX) * float(medium.detail.amplitude)
+
+
+def edge_in_field_units(medium: VoxelMedium) -> float:
+    """The medium's ``warpsky:detail:edge`` [1/m] in its field's units: over its largest extinction per unit
+    (the edge clears the same fringe in every channel's field)."""
+    if not medium.has_detail or medium.detail.edge <= 0.0:
+        return 0.0
+    per_unit = float(np.max(medium.extinction_scale))
+    return float(medium.detail.edge) / per_unit if per_unit > 0.0 else 0.0
 
 
 def tile_size(spec: DetailSpec) -> float:
@@ -133,6 +150,7 @@ def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_positio
     for index, medium in enumerate(media):
         entry = MediumDetail()
         entry.amplitude = 0.0
+        entry.edge = 0.0
         entry.source = index
         spec = medium.detail
         if medium.has_detail:
@@ -145,6 +163,7 @@ def medium_details(media: tuple[VoxelMedium, ...], time_s: float, camera_positio
             state = states[id(detail)]
             entry.state = _with_origin(state, anchor - camera)
             entry.amplitude = float(spec.amplitude)
+            entry.edge = edge_in_field_units(medium)
             entry.source = sources.setdefault((id(detail), tuple(anchor.tolist())), index)
         out.append(entry)
     return out

@@ -18,7 +18,7 @@ import math
 import numpy as np
 import warp as wp
 
-from warpsky.media.voxels.detail import MediumDetail, detail_factor, medium_details
+from warpsky.media.voxels.detail import MediumDetail, detail_value, medium_details
 from warpsky.media.voxels.voxel import VoxelGrid, grid_value
 
 #: Most fine voxels per coarse voxel edge.
@@ -28,7 +28,7 @@ MAX_REFINEMENT = 4
 @wp.kernel
 def bake_kernel(values: wp.array(dtype=float), grid: VoxelGrid, detail: MediumDetail, refinement: int,
                 index_to_camera: wp.mat33, origin_from_camera: wp.vec3, out: wp.array3d(dtype=float)):
-    """Fine voxel (i, j, k): the coarse field at its centre times the detail factor there."""
+    """Fine voxel (i, j, k): the detailed field at its centre."""
     i, j, k = wp.tid()
     scale = 1.0 / float(refinement)
     shift = 0.5 * (scale - 1.0)
@@ -36,7 +36,7 @@ def bake_kernel(values: wp.array(dtype=float), grid: VoxelGrid, detail: MediumDe
     value = grid_value(values, grid, c)
     if value > 0.0:
         p = index_to_camera * c + origin_from_camera  # camera-relative metres
-        value = value * detail_factor(detail, p)
+        value = detail_value(detail, value, p)
     out[i, j, k] = value
 
 

@@ -21,7 +21,7 @@ from warpsky.core import device_buffers
 from warpsky.core.errors import ResourceError, UsageError
 from warpsky.core.numerics import trilinear_cell
 from warpsky.media.voxels.bricks import CoarseCells, cell_maxima, effective_block
-from warpsky.media.voxels.detail import MediumDetail, detail_z, factor_of_z, medium_details
+from warpsky.media.voxels.detail import MediumDetail, detail_z, medium_details, value_of_z
 from warpsky.model.scene import VoxelMedium
 from warpsky.optics.kernels import TABLE_KIND
 from warpsky.optics.tables import mean_cosine
@@ -199,7 +199,7 @@ def media_functions(has_detail: bool):
                         if evaluated[source] == 0:
                             noise[source] = detail_z(media.details[source], p)
                             evaluated[source] = 1
-                        value = value * factor_of_z(detail.amplitude, noise[source])
+                        value = value_of_z(detail, value, noise[source])
             if value > 0.0:
                 out.density[m] = value
                 out.extinction += grid.extinction * value
