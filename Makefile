@@ -161,6 +161,9 @@ stratocumulus-anim: $(STAMP) data/stratocumulus/.complete
 # The procedural storm (tools/make_storm.py, usd_scenes/storm.usda): make storm-data, make storm-procedural.
 STORM_WORKERS   ?= 2
 STORM_RES       ?= 256
+# Previews and contact sheets of the simulated storm at a fixed exposure (a white surface facing the sun at 1.4,
+# half a stop over it): the frame's own exposure lifts a storm's shaded anvil and base to pale grey.
+STORM_EXPOSURE  ?= 0.5
 STORM_TECHNIQUE ?= slicing
 STORM_BATCH      = --technique $(STORM_TECHNIQUE) $(if $(filter 0,$(STORM_WORKERS)),,--workers $(STORM_WORKERS))
 STORM_SOUNDING  ?=
@@ -184,9 +187,10 @@ $(STORM_SIM_STAMP): $(STAMP) $(STORM_SOUNDING) $(wildcard warpsky/simulate/*.py)
 simulate-storm: $(STORM_SIM_STAMP)
 
 storm: $(STORM_SIM_STAMP)
-	$(VENV)/bin/warpsky render $(STORM_SIM)/storm.usda out/storm/rainbow.####.exr --res $(STORM_RES) $(STORM_BATCH)
+	$(VENV)/bin/warpsky render $(STORM_SIM)/storm.usda out/storm/rainbow.####.exr --res $(STORM_RES) $(STORM_BATCH) \
+		--exposure $(STORM_EXPOSURE)
 	$(VENV)/bin/warpsky render $(STORM_SIM)/storm.usda out/storm/side.####.exr --camera /World/StormCam \
-		--res $(STORM_RES) $(STORM_BATCH)
+		--res $(STORM_RES) $(STORM_BATCH) --exposure $(STORM_EXPOSURE)
 	$(VENV)/bin/warpsky contact-sheet out/storm/rainbow.####.exr -o out/storm/rainbow_sheet.png
 	$(VENV)/bin/warpsky contact-sheet out/storm/side.####.exr -o out/storm/side_sheet.png
 	$(VENV)/bin/warpsky preview $(STORM_SIM)/storm.usda -o out/storm/preview.png --frame 40

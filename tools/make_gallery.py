@@ -49,17 +49,20 @@ SHOTS = (
          "the left, its shadow on the ground. Default technique (hybrid)."),
     Shot("cumulus_wind", "cumulus_wind.usda", 24, ("--res", "384"), "The demo cloud drifting in the wind with "
          "advected detail (`make cumulus-wind`, frame 24 of 48)."),
-    Shot("storm_simulated", SIMULATED, 40, ("--res", "384", "--time-budget", "60"), "The storm grown by the cloud "
-         "solver (`make simulate-storm`), frame 40 (33 minutes) from its rainbow shot: the rain shaft under the "
-         "base with the primary bow, the tower rising into the ice anvil overhead. Default technique under a "
-         "60 s budget: a storm frame's multiple scattering costs minutes on a CPU, so its estimate is above 5 %."),
-    Shot("storm_simulated_side", SIMULATED, 40, ("--res", "384", "--time-budget", "60", "--camera",
-                                                 "/World/StormCam"),
+    Shot("storm_simulated", SIMULATED, 40, ("--res", "384", "--time-budget", "60", "--exposure", "0.5"),
+         "The storm grown by the cloud solver (`make simulate-storm`), frame 40 (33 minutes) from its rainbow "
+         "shot: the rain shaft under the base with the primary bow, the tower rising into the ice anvil overhead. "
+         "Default technique under a 60 s budget: a storm frame's multiple scattering costs minutes on a CPU, so "
+         "its estimate is above 5 %. Exposure 0.5 (a white surface facing the sun at 1.4): the frame's own "
+         "exposure lifts the shaded anvil and base to pale grey."),
+    Shot("storm_simulated_side", SIMULATED, 40, ("--res", "384", "--time-budget", "60", "--exposure", "0.5",
+                                                 "--camera", "/World/StormCam"),
          "The same frame from 30 km south (`/World/StormCam`, which follows the storm): the base, the tower and "
-         "the anvil spreading downwind at the tropopause. Default technique under a 60 s budget."),
+         "the anvil spreading downwind at the tropopause. Default technique under a 60 s budget, exposure 0.5."),
     Shot("storm", "storm.usda", 40, ("--res", "384", "--technique", "slicing"), "The procedural cumulonimbus "
-         "time-lapse (`make storm-procedural`), RainbowCam frame 40. Slicing, as `make storm` renders it: hybrid "
-         "takes minutes per frame on a CPU here, and slicing is darker than the path tracer in clouds this thick."),
+         "time-lapse (`make storm-procedural`), RainbowCam frame 40. Slicing, as `make storm-procedural` renders "
+         "it: hybrid takes minutes per frame on a CPU here, and slicing is darker than the path tracer in clouds "
+         "this thick."),
     Shot("storm_anvil", "storm.usda", 46, ("--res", "384", "--technique", "slicing", "--camera", "/World/AnvilCam"),
          "The same storm from the AnvilCam, frame 46: the ice anvil spreading downwind. Slicing, as above."),
     Shot("stratocumulus", "stratocumulus.usda", 1, ("--res", "384"), "A stratocumulus deck over water, sand and "
@@ -142,8 +145,9 @@ def page(records: list[dict], *, machine: str) -> str:
     lines = ["# Gallery", "",
              "Every shipped stage's hero frame, rendered by `make gallery` (`tools/make_gallery.py`) on "
              f"{machine}. The pictures are the PNG previews warpsky writes next to each EXR (OpenColorIO's ACES 2.0 "
-             "SDR view, exposure from the frame's 99.5th-percentile luminance); the EXRs stay scene-linear in "
-             "`out/gallery/`. Times are the EXR header's render time and the whole command's wall time (stage "
+             "SDR view, exposure from the frame's 99.5th-percentile luminance unless the command sets one); the "
+             "EXRs stay scene-linear in `out/gallery/`. Times are the EXR header's render time and the whole "
+             "command's wall time (stage "
              "load and Warp's kernel cache included; the first run on a machine also compiles kernels and builds "
              "optics tables).", ""]
     for record in records:
