@@ -71,7 +71,8 @@ class PathTracerSettings(Settings):
     spp: int = setting(64, range=">= 1", help="samples (paths) per pixel")
     seed: int = setting(0, range=">= 0", help="random seed; a seed gives the same image on the same device")
     max_bounces: int = setting(1024, range=">= 1", help="hard cap on scattering events per path; capped paths are "
-                               "counted in the stats (capped_paths): their missing light is a bias")
+                               "counted in the stats (capped_paths): their missing light is a bias (raise it for "
+                               "references of storms and thick decks: hybrid's default is 16384)")
     bake_detail: bool = setting(False, help="1: trace the media's animated detail baked for the frame into a grid "
                                 "within a detail texel (one lookup per collision, majorants of the detailed density; "
                                 "a resampled field, not the procedural one); 0: the procedural detail at every "
