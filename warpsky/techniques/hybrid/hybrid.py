@@ -111,7 +111,7 @@ class HybridSettings(Settings):
                                "tune half: the correction raised the p90 error there)")
     max_bounces: int = setting(16384, range=">= 1", help="cap on scattering events per path; capped paths are "
                                "counted (capped_paths): their missing light is a bias (1024 lost 2.3 % of a storm "
-                               "frame's multiple scattering, 16384 under 0.1 %, for 22 % more time)")
+                               "frame's multiple scattering; 16384 left 17 of its 1,019 capped paths, 22 % slower)")
     majorant_block: int | None = setting(None, unit="voxel", range=">= 1", help="edge of the coarse majorant cells",
                                          auto="per medium, as the path tracer's")
     bake_detail: bool = setting(False, help="1: the multiple-scattering paths trace the media's animated detail baked "
