@@ -32,9 +32,9 @@ import numpy as np
 #: [deg] radius of the primary bow around the antisolar point (Descartes' minimum deviation for water, red 42.3,
 #: violet 40.6).
 RAINBOW_DEG = 42.0
-#: [deg] the sun's elevation: high enough that it cannot reach under the cloud base (the base lies in the tower's
-#: shadow and the anvil's underside is lit from below only), low enough that the bow's top (42 - 35 = 7 deg) stands
-#: over the horizon, above the shaft.
+#: [deg] the sun's elevation: high enough that the anvil shades its own underside (at 12 deg the light came in under
+#: it and the whole storm was front-lit and flat), low enough that the bow's top (42 - 35 = 7 deg) stands over the
+#: horizon, above the shaft.
 SUN_ELEVATION = 35.0
 #: [deg] azimuth (clockwise from north) of the view when the shaft is half a kilometre up at DISTANCE.
 VIEW_AZIMUTH = 0.0
