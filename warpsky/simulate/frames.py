@@ -159,7 +159,7 @@ class FrameWriter:
         try:
             author_stage(tmp, [state], self.grids, codes, 1.0 / self.seconds_per_frame, framing=box, sun=self.sun,
                          resolution=self.resolution, doc=doc, water=self.water)
-            author_shot(tmp, self.shafts, codes, self.sun, middles=self.middles)
+            author_shot(tmp, self.shafts, self.middles, codes, self.sun)
             os.replace(tmp, self.stage)
         except OSError as exc:
             raise OutputError(f"cannot write {self.stage}: {exc.strerror or exc}") from None

@@ -133,19 +133,18 @@ def _camera(stage, path: str, focal_length: float, poses) -> None:
         op.Set(look.GetInverse(), code)
 
 
-def author_shot(path, shafts: list[Shaft], codes: list[float], sun: tuple[float, float], ground: float = 0.0,
-                middles: list[tuple[float, float]] | None = None) -> None:
+def author_shot(path, shafts: list[Shaft], middles: list[tuple[float, float]], codes: list[float],
+                sun: tuple[float, float], ground: float = 0.0) -> None:
     """Add to the stage at ``path``: ``/World/RainbowCam`` (the render settings' camera) with a pose per time code
-    following ``shafts``, ``/World/StormCam`` following the grid's ``middles`` (when given), the detail on
-    ``/World/Weather`` and the edges on its fields."""
+    following ``shafts``, ``/World/StormCam`` following the grid's ``middles``, the detail on ``/World/Weather`` and
+    the edges on its fields."""
     from pxr import Gf, Sdf, Usd, UsdRender
 
     stage = Usd.Stage.Open(str(path))
     _camera(stage, "/World/RainbowCam", FOCAL_LENGTH,
             [(code, *shot_camera(shaft, sun, ground)) for code, shaft in zip(codes, shafts, strict=True)])
-    if middles is not None:
-        _camera(stage, "/World/StormCam", STORM_FOCAL_LENGTH,
-                [(code, *storm_camera(middle, ground)) for code, middle in zip(codes, middles, strict=True)])
+    _camera(stage, "/World/StormCam", STORM_FOCAL_LENGTH,
+            [(code, *storm_camera(middle, ground)) for code, middle in zip(codes, middles, strict=True)])
     prim = stage.GetPrimAtPath("/World/Weather")
     for name, kind, value in DETAIL:
         typed = Gf.Vec3f(*value) if kind == "Float3" else value
