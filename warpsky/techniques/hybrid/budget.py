@@ -12,11 +12,12 @@ A sub-frame of a frame with motion blur takes its share of what is left
 (:class:`~warpsky.core.deadline.FrameClock` ``parts_left``). The two first passes (one per half of the error
 estimate) always run. Where they would not fit, the paths run on a coarser film (:func:`film_scale`: pixels 2, 4 or
 8 times larger, as ``ms_scale``), chosen from the time a probe of one path per pixel on the coarsest film took; the
-frame then says so in a warning.
+frame then says so in a warning. Between error estimates the passes run to :func:`next_check`.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -116,3 +117,12 @@ def coverage_scale_warning(scale: int, asked: int) -> list[str]:
         return []
     return [f"hybrid traced multiple scattering on pixels {scale}x larger than the frame's (ms_scale = {scale}, "
             f"asked {asked}) to fit the time budget"]
+
+
+def next_check(passes: int, estimate: float, target: float) -> int:
+    """The (even) pass count at which to estimate the error again: where noise falling as 1/sqrt(paths) would meet
+    the target (10% beyond), at least two passes on and at most twice as many as now, so a few estimates suffice
+    and a wrong guess costs at most a doubling."""
+    wanted = passes * (estimate / target) ** 2 * 1.1 if math.isfinite(estimate) else 2 * passes
+    step = int(math.ceil(min(max(wanted, passes + 2), 2 * passes)))
+    return step + step % 2

@@ -17,8 +17,10 @@ their difference has about twice the variance of the denoised whole, so RMS(D(A)
 pixels, divided by the mean of the frame there, estimates the relative RMSE of the denoised frame's noise. It
 misses what the two halves share: the denoiser's blur and bias, and the rare bright paths neither half caught. On
 the tune halves of the thin and thick validation families (64 x 64, 1 s budget) it was 0.56 of the measured error
-(median; 0.36-0.98), so the estimate reported and stopped on is that figure times :data:`ESTIMATE_CALIBRATION`.
-Without denoising the estimate is the variance of each pixel's mean, uncalibrated.
+(median; 0.36-0.98), so the estimate reported and stopped on is that figure times :data:`ESTIMATE_CALIBRATION`,
+or, where larger, the denoised frame's noise plus the denoiser's bias as each half's raw paths measure it
+(:mod:`~warpsky.techniques.hybrid.estimate`): at high path counts the bias is most of the error. Without denoising
+the estimate is the variance of each pixel's mean, uncalibrated.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from warpsky.techniques.hybrid.budget import (
     PathBudget,
     coverage_scale_warning,
     film_scale,
+    next_check,
     paths_film_scale,
     timed_denoise,
 )
@@ -59,9 +62,10 @@ from warpsky.techniques.hybrid.denoise import (
     guided_upsample,
     require_denoiser,
 )
+from warpsky.techniques.hybrid.estimate import relative_rms, with_denoiser_bias
 from warpsky.techniques.hybrid.history import HISTORY_FILM_BYTES, HISTORY_PIXEL_BYTES, keep_frame, warm_start
-from warpsky.techniques.hybrid.scenery import paths_scene, scenery_guide
-from warpsky.techniques.path_tracer.deck_media import deck_plan, deck_voxel_memory
+from warpsky.techniques.hybrid.scenery import deck_paths_features, paths_scene, scenery_guide
+from warpsky.techniques.path_tracer.deck_media import deck_voxel_memory
 from warpsky.techniques.path_tracer.forward_cut import check_cut_settings, cut_feature
 from warpsky.techniques.path_tracer.path_tracer import (
     PathTracer,
@@ -313,29 +317,6 @@ class Hybrid(Technique):
                           warnings=stats.pop("warnings", []))
 
 
-def deck_paths_features(scene: Scene, settings: PathTracerSettings, width: int, height: int,
-                        features: dict[str, str], time_budget: float | None = None) -> dict[str, str]:
-    """``features`` with the height-field line saying that the paths trace the deck voxelised (square, voxels)
-    beside the deck pass's single scattering (in a frame of ``time_budget`` seconds, which caps the voxels)."""
-    clouds, grid, sub = deck_plan(scene, settings, width, height, time_budget=time_budget)
-    line = (f"; multiple scattering path traced by hybrid through the deck{' and haze' if clouds.haze else ''} "
-            f"voxelised over a square of half-size {0.5 * grid.width[0] * grid.shape[0]:.4g} m around the camera "
-            f"({grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} = {grid.voxels:,} voxels, {sub}x{sub} sub-columns); "
-            "the pass's ambient term left to the paths")
-    out = dict(features)
-    out["deck"] = features.get("deck", clouds.name) + line
-    return out
-
-
-def next_check(passes: int, estimate: float, target: float) -> int:
-    """The (even) pass count at which to estimate the error again: where noise falling as 1/sqrt(paths) would meet
-    the target (10% beyond), at least two passes on and at most twice as many as now, so a few estimates suffice
-    and a wrong guess costs at most a doubling."""
-    wanted = passes * (estimate / target) ** 2 * 1.1 if math.isfinite(estimate) else 2 * passes
-    step = int(math.ceil(min(max(wanted, passes + 2), 2 * passes)))
-    return step + step % 2
-
-
 def behind_front_air(scene: Scene, width: int, height: int, depth: np.ndarray, multiple: np.ndarray,
                      variance: np.ndarray, device: str) -> tuple[np.ndarray, np.ndarray]:
     """Multiple scattering traced through the air already carries the air between the camera and each event;
@@ -476,15 +457,17 @@ class MultipleScattering:
     def estimate(self, single: np.ndarray, fine_coverage: np.ndarray, coverage: np.ndarray) -> float:
         """Estimated relative RMSE of the frame over its covered pixels (0 when nothing is covered), measured on the
         frame's own pixels: on a coarser film (``coverage`` its block means of ``fine_coverage``) the two halves
-        are upsampled as the frame's image is, which averages part of the film's noise away."""
+        are upsampled as the frame's image is, which averages part of the film's noise away. Denoised, at least
+        the denoiser's bias where the halves measure it (:mod:`~warpsky.techniques.hybrid.estimate`, on the film)."""
         covered = fine_coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
         if not covered.any():
             return 0.0
-        a, b = self.half_mean(0), self.half_mean(1)
+        raw = (self.half_mean(0), self.half_mean(1))
+        a, b = raw
         if self.settings.denoise:
             radius, device = self.settings.mean_radius, self.device
-            a = denoise(a, coverage, radius=radius, device=device).image
-            b = denoise(b, coverage, radius=radius, device=device).image
+            a, b = (denoise(half, coverage, radius=radius, device=device).image for half in raw)
+        film_halves = (a, b)
         a, b = (guided_upsample(half, fine_coverage, self.scale) for half in (a, b))
         if self.settings.denoise:
             spread = 0.5 * (a - b) * ESTIMATE_CALIBRATION
@@ -496,4 +479,12 @@ class MultipleScattering:
         level = float((single[covered] + 0.5 * (a[covered] + b[covered])).mean())
         if level <= 0.0:
             return 0.0
-        return float(np.sqrt(np.mean(spread[covered].astype(np.float64) ** 2)) / level)
+        estimate = relative_rms(spread, covered, level)
+        if self.settings.denoise:
+            film_covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
+            film_single = block_mean(single, self.scale) if self.scale > 1 else single
+            film_level = float((film_single + 0.5 * (film_halves[0] + film_halves[1]))[film_covered].mean())
+            variances = tuple(sums_layer([self.halves[half]], self.pixel_counts[half], far=0.0,
+                                         name=BUFFER_NAME).aovs["variance"] for half in (0, 1))
+            estimate = max(estimate, with_denoiser_bias(raw, variances, film_halves, film_covered, film_level))
+        return estimate

@@ -39,7 +39,8 @@ from warpsky.model.scene import Scene
 from warpsky.passes.deck.deck import Deck
 from warpsky.passes.fog.fog import Fog
 from warpsky.passes.media import SceneryFrame
-from warpsky.techniques.path_tracer.deck_media import with_deck_as_media
+from warpsky.techniques.path_tracer.deck_media import deck_plan, with_deck_as_media
+from warpsky.techniques.path_tracer.path_tracer import PathTracerSettings
 from warpsky.techniques.path_tracer.stratiform_media import with_stratiform_as_media
 
 
@@ -107,3 +108,17 @@ def scenery_guide(scene: Scene, single: ImageLayer, device: str, around: Scenery
     if depth is not None:
         transmittance = np.where((depth < scene.camera.far)[..., None], 0.0, transmittance)
     return ImageLayer(radiance.astype(np.float32), transmittance.astype(np.float32), single.depth, single.stats)
+
+
+def deck_paths_features(scene: Scene, settings: PathTracerSettings, width: int, height: int,
+                        features: dict[str, str], time_budget: float | None = None) -> dict[str, str]:
+    """``features`` with the height-field line saying that the paths trace the deck voxelised (square, voxels)
+    beside the deck pass's single scattering (in a frame of ``time_budget`` seconds, which caps the voxels)."""
+    clouds, grid, sub = deck_plan(scene, settings, width, height, time_budget=time_budget)
+    line = (f"; multiple scattering path traced by hybrid through the deck{' and haze' if clouds.haze else ''} "
+            f"voxelised over a square of half-size {0.5 * grid.width[0] * grid.shape[0]:.4g} m around the camera "
+            f"({grid.shape[0]}x{grid.shape[1]}x{grid.shape[2]} = {grid.voxels:,} voxels, {sub}x{sub} sub-columns); "
+            "the pass's ambient term left to the paths")
+    out = dict(features)
+    out["deck"] = features.get("deck", clouds.name) + line
+    return out
