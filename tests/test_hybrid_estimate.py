@@ -108,3 +108,23 @@ def test_the_frames_estimate_sees_the_denoisers_blur(tmp_path, homogeneous_npy, 
     halves_only, same_error = frame_and_error()
     assert same_error == pytest.approx(error, rel=1e-6)
     assert halves_only < 0.5 * error
+
+
+def test_one_path_per_half_counts_no_bias(tmp_path, homogeneous_npy, monkeypatch):
+    """With one path per pixel in each half a half's variance is unknown (zero from one sample), which would count
+    all of its noise as bias: the bound is not taken then."""
+    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.3, camera_position=(3.0, 4.0, 42.0),
+                     camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.4, 0.8, 0.3))
+    scene = StageReader(write_stage(tmp_path / "box.usda", spec)).scene_at(None)
+    monkeypatch.setattr(hybrid_module, "denoise", blurring_denoiser)
+    called = []
+    monkeypatch.setattr(hybrid_module, "with_denoiser_bias", lambda *args: called.append(1) or 0.0)
+    plan = make_plan(scene, technique="hybrid", settings={"spp": "2", "samples_per_pass": "1",
+                                                          "target_error": "1e-4"}, resolution=(16, 16), device="cpu")
+    layer = plan.renderer.render(scene, 16, 16)
+    assert layer.stats["passes"] == 2 and math.isfinite(layer.stats["error_estimate"])
+    assert called == []
+    plan = make_plan(scene, technique="hybrid", settings={"spp": "4", "samples_per_pass": "2",
+                                                          "target_error": "1e-4"}, resolution=(16, 16), device="cpu")
+    plan.renderer.render(scene, 16, 16)
+    assert called  # two paths per half: taken

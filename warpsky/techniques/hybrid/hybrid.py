@@ -481,10 +481,18 @@ class MultipleScattering:
             return 0.0
         estimate = relative_rms(spread, covered, level)
         if self.settings.denoise:
-            film_covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
-            film_single = block_mean(single, self.scale) if self.scale > 1 else single
-            film_level = float((film_single + 0.5 * (film_halves[0] + film_halves[1]))[film_covered].mean())
-            variances = tuple(sums_layer([self.halves[half]], self.pixel_counts[half], far=0.0,
-                                         name=BUFFER_NAME).aovs["variance"] for half in (0, 1))
-            estimate = max(estimate, with_denoiser_bias(raw, variances, film_halves, film_covered, film_level))
+            estimate = max(estimate, self.bias_estimate(single, coverage, raw, film_halves))
         return estimate
+
+    def bias_estimate(self, single: np.ndarray, coverage: np.ndarray, raw: tuple, denoised: tuple) -> float:
+        """The denoised frame's relative RMSE, its noise and the denoiser's bias, on the film from the halves' raw
+        means and denoised images (:func:`~warpsky.techniques.hybrid.estimate.with_denoiser_bias`); 0 until every
+        measured pixel has two paths in each half (a half's variance needs two)."""
+        covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
+        if not covered.any() or min(float(count[covered].min()) for count in self.pixel_counts) < 2.0:
+            return 0.0
+        film_single = block_mean(single, self.scale) if self.scale > 1 else single
+        level = float((film_single + 0.5 * (denoised[0] + denoised[1]))[covered].mean())
+        variances = tuple(sums_layer([self.halves[half]], self.pixel_counts[half], far=0.0,
+                                     name=BUFFER_NAME).aovs["variance"] for half in (0, 1))
+        return with_denoiser_bias(raw, variances, denoised, covered, level)
