@@ -80,13 +80,17 @@ def blurring_denoiser(image, coverage, *, radius, quality="high", device="cpu"):
     return Denoised(box_blur(np.asarray(image, np.float64), 2).astype(np.float32), 0.0, 0)
 
 
+def box_scene(tmp_path, volume_file):
+    """A lit homogeneous box seen from above at an angle."""
+    spec = StageSpec(volume_file=volume_file, extinction_scale=0.3, camera_position=(3.0, 4.0, 42.0),
+                     camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.4, 0.8, 0.3))
+    return StageReader(write_stage(tmp_path / "box.usda", spec)).scene_at(None)
+
+
 def test_the_frames_estimate_sees_the_denoisers_blur(tmp_path, homogeneous_npy, monkeypatch):
     """A frame denoised by a 5 x 5 box blur at 2,048 paths per pixel: its estimate is within 30 % of its error
     against 16,384 undenoised paths; without the bias bound the halves alone put it below half of that."""
-    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.3, camera_position=(3.0, 4.0, 42.0),
-                     camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.4, 0.8, 0.3))
-    stage = write_stage(tmp_path / "box.usda", spec)
-    scene = StageReader(stage).scene_at(None)
+    scene = box_scene(tmp_path, homogeneous_npy)
 
     def render(**settings):
         plan = make_plan(scene, technique="hybrid", settings={k: str(v) for k, v in settings.items()},
@@ -113,9 +117,7 @@ def test_the_frames_estimate_sees_the_denoisers_blur(tmp_path, homogeneous_npy, 
 def test_one_path_per_half_counts_no_bias(tmp_path, homogeneous_npy, monkeypatch):
     """With one path per pixel in each half a half's variance is unknown (zero from one sample), which would count
     all of its noise as bias: the bound is not taken then."""
-    spec = StageSpec(volume_file=homogeneous_npy, extinction_scale=0.3, camera_position=(3.0, 4.0, 42.0),
-                     camera_rotation=look_rotation((-0.05, -0.06, -1.0)), sun_direction=(0.4, 0.8, 0.3))
-    scene = StageReader(write_stage(tmp_path / "box.usda", spec)).scene_at(None)
+    scene = box_scene(tmp_path, homogeneous_npy)
     monkeypatch.setattr(hybrid_module, "denoise", blurring_denoiser)
     called = []
     monkeypatch.setattr(hybrid_module, "with_denoiser_bias", lambda *args: called.append(1) or 0.0)

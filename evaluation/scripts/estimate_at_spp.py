@@ -68,13 +68,11 @@ def main(argv=None) -> int:
             layer, seconds = frame(scene, args.size, spp, seed)
             net = judge.metrics(layer.radiance)["net_rmse"]
             estimate = layer.stats["error_estimate"]
-            halves = ""
+            halves = " | "
             if args.halves_only:
                 old, _ = frame(scene, args.size, spp, seed, halves_only=True)
                 value = old.stats["error_estimate"]
                 halves = f"{value:.4f} | {value / net:.2f}"
-            else:
-                halves = " | "
             print(f"| {spp} | {seed} | {net:.4f} | {estimate:.4f} | {estimate / net:.2f} | {halves} | "
                   f"{seconds:.1f} |", flush=True)
     return 0

@@ -75,6 +75,7 @@ from warpsky.techniques.path_tracer.path_tracer import (
     path_work,
     pixel_sums,
     sums_layer,
+    variance_of_mean,
 )
 from warpsky.techniques.path_tracer.stratiform_media import layer_voxel_memory
 from warpsky.techniques.path_tracer.sun_lobe import AUTO_LOBE, lobe_asymmetry
@@ -444,10 +445,17 @@ class MultipleScattering:
         self.halves = [pixel_sums(shape, self.device, name=f"{BUFFER_NAME}:half{half}") for half in (0, 1)]
         self.pixel_counts = [np.zeros(shape, np.float32) for _ in (0, 1)]
 
-    def half_mean(self, half: int) -> np.ndarray:
-        """Mean radiance of ``half``'s paths (a download: the error estimate needs it on the host)."""
-        radiance = device_buffers.download(f"{BUFFER_NAME}:radiance_sum", self.halves[half].radiance_sum)
-        return radiance / np.maximum(self.pixel_counts[half], 1)[..., None]
+    def half_film(self, half: int, *, variance: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """Mean radiance of ``half``'s paths and, with ``variance``, the variance of that mean (downloads: the error
+        estimate needs them on the host)."""
+        sums, count = self.halves[half], self.pixel_counts[half]
+        radiance = device_buffers.download(f"{BUFFER_NAME}:radiance_sum", sums.radiance_sum)
+        mean = radiance / np.maximum(count, 1)[..., None]
+        if not variance:
+            return mean, None
+        total = radiance.astype(np.float64)
+        squares = device_buffers.download(f"{BUFFER_NAME}:radiance_sq", sums.radiance_sq).astype(np.float64)
+        return mean, variance_of_mean(total, squares, count.astype(np.float64)[..., None]).astype(np.float32)
 
     def film(self) -> ImageLayer:
         """Both halves' paths as the path tracer reports its own: their mean, the variance of that mean
@@ -462,7 +470,8 @@ class MultipleScattering:
         covered = fine_coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
         if not covered.any():
             return 0.0
-        raw = (self.half_mean(0), self.half_mean(1))
+        halves = [self.half_film(half, variance=self.settings.denoise) for half in (0, 1)]
+        raw = tuple(mean for mean, _ in halves)
         a, b = raw
         if self.settings.denoise:
             radius, device = self.settings.mean_radius, self.device
@@ -481,18 +490,17 @@ class MultipleScattering:
             return 0.0
         estimate = relative_rms(spread, covered, level)
         if self.settings.denoise:
-            estimate = max(estimate, self.bias_estimate(single, coverage, raw, film_halves))
+            estimate = max(estimate, self.bias_estimate(single, coverage, halves, film_halves))
         return estimate
 
-    def bias_estimate(self, single: np.ndarray, coverage: np.ndarray, raw: tuple, denoised: tuple) -> float:
-        """The denoised frame's relative RMSE, its noise and the denoiser's bias, on the film from the halves' raw
-        means and denoised images (:func:`~warpsky.techniques.hybrid.estimate.with_denoiser_bias`); 0 until every
-        measured pixel has two paths in each half (a half's variance needs two)."""
+    def bias_estimate(self, single: np.ndarray, coverage: np.ndarray, halves: list, denoised: tuple) -> float:
+        """The denoised frame's relative RMSE, its noise and the denoiser's bias, on the film from the halves' (raw
+        mean, variance of that mean) and denoised images (:func:`~warpsky.techniques.hybrid.estimate.
+        with_denoiser_bias`); 0 until every measured pixel has two paths in each half (a variance needs two)."""
         covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
         if not covered.any() or min(float(count[covered].min()) for count in self.pixel_counts) < 2.0:
             return 0.0
         film_single = block_mean(single, self.scale) if self.scale > 1 else single
         level = float((film_single + 0.5 * (denoised[0] + denoised[1]))[covered].mean())
-        variances = tuple(sums_layer([self.halves[half]], self.pixel_counts[half], far=0.0,
-                                     name=BUFFER_NAME).aovs["variance"] for half in (0, 1))
+        raw, variances = zip(*halves, strict=True)
         return with_denoiser_bias(raw, variances, denoised, covered, level)

@@ -455,6 +455,14 @@ def per_sample_launches(device: str, pixels: int, samples_per_pass: int) -> int:
     return max(1, min(int(samples_per_pass), GPU_LAUNCH_THREADS // max(pixels, 1)))
 
 
+def variance_of_mean(total: np.ndarray, squares: np.ndarray, count) -> np.ndarray:
+    """Per pixel, the variance of the mean of ``count`` paths (at least 1) from the sums of their radiance and of its
+    squares (float64; 0 where fewer than two paths)."""
+    n = np.maximum(count, 1.0)
+    mean = total / n
+    return np.maximum(squares / n - mean**2, 0.0) / np.maximum(n - 1.0, 1.0)
+
+
 def sums_layer(sums: list[PixelSums], spp, far: float, *, name: str = "path_tracer") -> ImageLayer:
     """The layer of ``spp`` paths per pixel (an int, or per pixel an (H, W) array) accumulated in ``sums`` (one per
     stream): mean radiance, mean transmittance, mean depth of first events (``far`` where none), the variance of
@@ -470,7 +478,7 @@ def sums_layer(sums: list[PixelSums], spp, far: float, *, name: str = "path_trac
         count = count[..., None]
     n = np.maximum(count, 1.0)
     mean = total / n
-    variance = np.maximum(squares / n - mean**2, 0.0) / np.maximum(n - 1.0, 1.0)  # of the mean
+    variance = variance_of_mean(total, squares, count)
     depth = total_of("depth_sum")
     depth_mean = np.where(depth[..., 1] > 0, depth[..., 0] / np.maximum(depth[..., 1], 1), np.float32(far))
     count_values = sum(device_buffers.download(f"{name}:counters", s.counters) for s in sums)
