@@ -9,6 +9,7 @@ import pytest
 from conftest import StageSpec, look_rotation, write_stage
 
 from warpsky.render.plan import make_plan
+from warpsky.techniques.hybrid import estimate as estimate_module
 from warpsky.techniques.hybrid import hybrid as hybrid_module
 from warpsky.techniques.hybrid.denoise import Denoised
 from warpsky.techniques.hybrid.estimate import with_denoiser_bias
@@ -108,7 +109,7 @@ def test_the_frames_estimate_sees_the_denoisers_blur(tmp_path, homogeneous_npy, 
 
     estimate, error = frame_and_error()
     assert estimate == pytest.approx(error, rel=0.3)
-    monkeypatch.setattr(hybrid_module, "with_denoiser_bias", lambda *args: 0.0)
+    monkeypatch.setattr(estimate_module, "with_denoiser_bias", lambda *args: 0.0)
     halves_only, same_error = frame_and_error()
     assert same_error == pytest.approx(error, rel=1e-6)
     assert halves_only < 0.5 * error
@@ -120,7 +121,7 @@ def test_one_path_per_half_counts_no_bias(tmp_path, homogeneous_npy, monkeypatch
     scene = box_scene(tmp_path, homogeneous_npy)
     monkeypatch.setattr(hybrid_module, "denoise", blurring_denoiser)
     called = []
-    monkeypatch.setattr(hybrid_module, "with_denoiser_bias", lambda *args: called.append(1) or 0.0)
+    monkeypatch.setattr(estimate_module, "with_denoiser_bias", lambda *args: called.append(1) or 0.0)
     plan = make_plan(scene, technique="hybrid", settings={"spp": "2", "samples_per_pass": "1",
                                                           "target_error": "1e-4"}, resolution=(16, 16), device="cpu")
     layer = plan.renderer.render(scene, 16, 16)

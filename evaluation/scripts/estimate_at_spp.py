@@ -26,11 +26,11 @@ sys.path.insert(0, str(ROOT))
 def frame(scene, size: int, spp: int, seed: int, halves_only: bool = False):
     """(layer, seconds) of one hybrid frame at exactly ``spp`` paths per pixel."""
     from warpsky.render.plan import make_plan
-    from warpsky.techniques.hybrid import hybrid
+    from warpsky.techniques.hybrid import estimate
 
-    bound = hybrid.with_denoiser_bias
+    bound = estimate.with_denoiser_bias
     if halves_only:
-        hybrid.with_denoiser_bias = lambda *args: 0.0
+        estimate.with_denoiser_bias = lambda *args: 0.0
     try:
         plan = make_plan(scene, technique="hybrid", settings={"spp": str(spp), "target_error": "1e-4",
                                                               "seed": str(seed)},
@@ -39,7 +39,7 @@ def frame(scene, size: int, spp: int, seed: int, halves_only: bool = False):
         layer = plan.renderer.render(scene, size, size)
         return layer, time.perf_counter() - started
     finally:
-        hybrid.with_denoiser_bias = bound
+        estimate.with_denoiser_bias = bound
 
 
 def main(argv=None) -> int:

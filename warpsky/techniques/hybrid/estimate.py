@@ -46,3 +46,15 @@ def with_denoiser_bias(raw: tuple[np.ndarray, np.ndarray], variance: tuple[np.nd
     standard_error = float(terms.std()) / math.sqrt(terms.size)
     counted = max(squared_bias - BIAS_STANDARD_ERRORS * standard_error, 0.0)
     return math.sqrt(half_noise / 2.0 + counted) / level
+
+
+def denoised_estimate(halves: list, denoised: tuple, single: np.ndarray, covered: np.ndarray, counts: list) -> float:
+    """:func:`with_denoiser_bias` on the paths' film: ``halves`` each half's (raw mean, variance of that mean),
+    ``denoised`` their denoised images, ``single`` the single scattering on the film (the frame's level),
+    ``covered`` the film pixels measured and ``counts`` each half's paths per film pixel; 0 until every measured
+    pixel has two paths in each half (a variance needs two)."""
+    if not covered.any() or min(float(count[covered].min()) for count in counts) < 2.0:
+        return 0.0
+    level = float((single + 0.5 * (denoised[0] + denoised[1]))[covered].mean())
+    raw, variances = zip(*halves, strict=True)
+    return with_denoiser_bias(raw, variances, denoised, covered, level)

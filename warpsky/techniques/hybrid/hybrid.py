@@ -62,7 +62,7 @@ from warpsky.techniques.hybrid.denoise import (
     guided_upsample,
     require_denoiser,
 )
-from warpsky.techniques.hybrid.estimate import relative_rms, with_denoiser_bias
+from warpsky.techniques.hybrid.estimate import denoised_estimate, relative_rms
 from warpsky.techniques.hybrid.history import HISTORY_FILM_BYTES, HISTORY_PIXEL_BYTES, keep_frame, warm_start
 from warpsky.techniques.hybrid.scenery import deck_paths_features, paths_scene, scenery_guide
 from warpsky.techniques.path_tracer.deck_media import deck_voxel_memory
@@ -489,18 +489,9 @@ class MultipleScattering:
         if level <= 0.0:
             return 0.0
         estimate = relative_rms(spread, covered, level)
-        if self.settings.denoise:
-            estimate = max(estimate, self.bias_estimate(single, coverage, halves, film_halves))
+        if self.settings.denoise:  # at least the denoiser's bias, measured on the film
+            film_single = block_mean(single, self.scale) if self.scale > 1 else single
+            film_covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
+            estimate = max(estimate, denoised_estimate(halves, film_halves, film_single, film_covered,
+                                                       self.pixel_counts))
         return estimate
-
-    def bias_estimate(self, single: np.ndarray, coverage: np.ndarray, halves: list, denoised: tuple) -> float:
-        """The denoised frame's relative RMSE, its noise and the denoiser's bias, on the film from the halves' (raw
-        mean, variance of that mean) and denoised images (:func:`~warpsky.techniques.hybrid.estimate.
-        with_denoiser_bias`); 0 until every measured pixel has two paths in each half (a variance needs two)."""
-        covered = coverage @ LUMINANCE_WEIGHTS > 1.0 - COVERED_BELOW
-        if not covered.any() or min(float(count[covered].min()) for count in self.pixel_counts) < 2.0:
-            return 0.0
-        film_single = block_mean(single, self.scale) if self.scale > 1 else single
-        level = float((film_single + 0.5 * (denoised[0] + denoised[1]))[covered].mean())
-        raw, variances = zip(*halves, strict=True)
-        return with_denoiser_bias(raw, variances, denoised, covered, level)
